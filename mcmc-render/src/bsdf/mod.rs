@@ -1,0 +1,60 @@
+//! Scattering functions (BSDFs) in a local shading frame whose +z axis is
+//! the shading normal.
+//!
+//! Conventions (shared by every BSDF and every integrator):
+//! - `wo` and `wi` are unit vectors pointing *away* from the surface, in the
+//!   local frame. `wo` is the direction the path arrived from (towards the
+//!   camera for camera paths), `wi` the sampled direction.
+//! - [`Bsdf::eval`] returns `f(wo, wi)` **without** the cosine factor.
+//! - [`BsdfSample::weight`] is `f · |cos θ_i| / pdf` (the throughput factor).
+//! - Delta lobes (smooth conductor, smooth dielectric) return `is_delta`
+//!   samples; for them `eval` and `pdf` return zero for any given pair.
+//! - The reverse pdf bidirectional methods need is `pdf(wi, wo, mode.flip())`.
+
+use crate::color::Rgb;
+use glam::Vec3;
+
+/// Whether the path carries radiance (traced from the camera) or importance
+/// (traced from a light). Non-symmetric scattering (refraction) differs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TransportMode {
+    /// Camera paths: radiance flows opposite to the tracing direction.
+    Radiance,
+    /// Light paths: importance flows opposite to the tracing direction.
+    Importance,
+}
+
+impl TransportMode {
+    /// The other mode.
+    pub fn flip(self) -> Self {
+        match self {
+            TransportMode::Radiance => TransportMode::Importance,
+            TransportMode::Importance => TransportMode::Radiance,
+        }
+    }
+}
+
+/// The result of importance sampling a BSDF.
+#[derive(Clone, Copy, Debug)]
+pub struct BsdfSample {
+    /// Sampled direction, local frame, unit length.
+    pub wi: Vec3,
+    /// `f · |cos θ_i| / pdf`.
+    pub weight: Rgb,
+    /// Solid-angle density of `wi` (for delta lobes: the discrete lobe probability).
+    pub pdf: f32,
+    /// True when the sampled lobe is a Dirac delta.
+    pub is_delta: bool,
+    /// Relative index of refraction along the sampled direction (1 for reflection).
+    pub eta: f32,
+}
+
+/// Cosine of the angle to the local normal.
+pub fn cos_theta(w: Vec3) -> f32 {
+    w.z
+}
+
+/// True when both directions are on the same side of the surface.
+pub fn same_hemisphere(a: Vec3, b: Vec3) -> bool {
+    a.z * b.z > 0.0
+}

@@ -1,0 +1,37 @@
+//! Orthonormal shading frames: BSDFs work in a local frame whose z axis is
+//! the shading normal.
+
+use glam::Vec3;
+
+/// An orthonormal basis (s, t, n) with `n` the shading normal.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Frame {
+    /// First tangent.
+    pub s: Vec3,
+    /// Second tangent.
+    pub t: Vec3,
+    /// Normal (local +z).
+    pub n: Vec3,
+}
+
+impl Frame {
+    /// Builds a frame around a unit normal (Duff et al. 2017, branchless).
+    pub fn from_normal(n: Vec3) -> Self {
+        let sign = 1.0f32.copysign(n.z);
+        let a = -1.0 / (sign + n.z);
+        let b = n.x * n.y * a;
+        let s = Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
+        let t = Vec3::new(b, sign + n.y * n.y * a, -n.y);
+        Frame { s, t, n }
+    }
+
+    /// World direction to local coordinates.
+    pub fn to_local(&self, v: Vec3) -> Vec3 {
+        Vec3::new(v.dot(self.s), v.dot(self.t), v.dot(self.n))
+    }
+
+    /// Local direction to world coordinates.
+    pub fn to_world(&self, v: Vec3) -> Vec3 {
+        self.s * v.x + self.t * v.y + self.n * v.z
+    }
+}

@@ -1,0 +1,53 @@
+//! The random-number seam: every sampling routine of the renderer draws its
+//! numbers through [`RandomSource`], so the same path sampler runs from an
+//! independent generator (Monte Carlo), from a primary-sample vector
+//! (PSSMLT/MMLT), or from a recorder (for inversion and replay).
+
+use rand::{Rng, RngExt};
+
+/// A source of uniform numbers in `[0, 1)`.
+///
+/// Implementations must return values strictly below one.
+pub trait RandomSource {
+    /// The next uniform number in `[0, 1)`.
+    fn next_1d(&mut self) -> f32;
+
+    /// Two uniform numbers, consumed in order (first `x`, then `y`).
+    fn next_2d(&mut self) -> (f32, f32) {
+        let x = self.next_1d();
+        let y = self.next_1d();
+        (x, y)
+    }
+}
+
+/// A [`RandomSource`] backed by an independent pseudo-random generator.
+pub struct IndependentSource<R> {
+    rng: R,
+}
+
+impl<R: Rng> IndependentSource<R> {
+    /// Wraps a generator.
+    pub fn new(rng: R) -> Self {
+        IndependentSource { rng }
+    }
+}
+
+/// Largest `f32` strictly below one.
+pub const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
+
+impl<R: Rng> RandomSource for IndependentSource<R> {
+    fn next_1d(&mut self) -> f32 {
+        // 24 random mantissa bits give every f32 multiple of 2^-24 in [0, 1).
+        let bits = self.rng.next_u32() >> 8;
+        (bits as f32 * (1.0 / 16_777_216.0)).min(ONE_MINUS_EPSILON)
+    }
+}
+
+/// Converts a `[0,1)` number from a primary-sample vector (f64) to the
+/// renderer's f32, keeping it strictly below one.
+pub fn to_unit_f32(u: f64) -> f32 {
+    (u as f32).min(ONE_MINUS_EPSILON)
+}
+
+#[allow(unused_imports)]
+use RngExt as _;

@@ -1,0 +1,1 @@
+//! Cross-crate and statistical tests live in this package's test targets.
