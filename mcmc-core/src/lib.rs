@@ -1,0 +1,1 @@
+//! `mcmc-core`: generic Markov chain Monte Carlo.
