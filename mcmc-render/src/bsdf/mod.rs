@@ -11,6 +11,9 @@
 //!   samples; for them `eval` and `pdf` return zero for any given pair.
 //! - The reverse pdf bidirectional methods need is `pdf(wi, wo, mode.flip())`.
 
+pub mod desc;
+pub use desc::{BsdfDesc, MicrofacetKind};
+
 use crate::color::Rgb;
 use glam::Vec3;
 
