@@ -1,0 +1,139 @@
+use super::{Kernel, Proposal};
+use crate::error::{Result, invalid};
+use crate::linalg::{add_lower_times, cholesky, log_normal_density};
+use crate::rng::{ChainRng, standard_normal};
+use crate::sample::Sample;
+
+#[derive(Clone, Debug)]
+enum Shape {
+    Isotropic(f64),
+    Diagonal(Vec<f64>),
+    Full { lower: Vec<f64>, log_det: f64 },
+}
+
+/// Gaussian random walk on `R^d`: `y = x + L z`, `z ~ N(0, I)`. Symmetric.
+///
+/// ```
+/// use mcmc_core::kernel::GaussianRandomWalk;
+/// let isotropic = GaussianRandomWalk::isotropic(0.5).unwrap();
+/// let full = GaussianRandomWalk::with_covariance(&[vec![1.0, 0.5], vec![0.5, 2.0]]).unwrap();
+/// # let _ = (isotropic, full);
+/// ```
+#[derive(Clone, Debug)]
+pub struct GaussianRandomWalk {
+    shape: Shape,
+    z: Vec<f64>,
+}
+
+impl GaussianRandomWalk {
+    /// Independent `N(0, σ²)` steps in every coordinate.
+    pub fn isotropic(sigma: f64) -> Result<Self> {
+        if !(sigma.is_finite() && sigma > 0.0) {
+            return Err(invalid(
+                "sigma",
+                format!("{sigma} must be finite and positive"),
+            ));
+        }
+        Ok(GaussianRandomWalk {
+            shape: Shape::Isotropic(sigma),
+            z: Vec::new(),
+        })
+    }
+
+    /// Independent `N(0, σ_i²)` steps per coordinate.
+    pub fn diagonal(sigmas: Vec<f64>) -> Result<Self> {
+        if sigmas.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+            return Err(invalid("sigmas", "every scale must be finite and positive"));
+        }
+        Ok(GaussianRandomWalk {
+            shape: Shape::Diagonal(sigmas),
+            z: Vec::new(),
+        })
+    }
+
+    /// Steps `N(0, Σ)` with a full covariance given as rows.
+    pub fn with_covariance(covariance: &[Vec<f64>]) -> Result<Self> {
+        let (lower, log_det) = cholesky(covariance)?;
+        Ok(GaussianRandomWalk {
+            shape: Shape::Full { lower, log_det },
+            z: Vec::new(),
+        })
+    }
+
+    /// Writes `current + step` into `out`.
+    pub(crate) fn step_into(&mut self, current: &[f64], out: &mut Vec<f64>, rng: &mut ChainRng) {
+        out.clear();
+        out.extend_from_slice(current);
+        match &self.shape {
+            Shape::Isotropic(s) => {
+                for o in out.iter_mut() {
+                    *o += s * standard_normal(rng);
+                }
+            }
+            Shape::Diagonal(s) => {
+                for (o, s) in out.iter_mut().zip(s) {
+                    *o += s * standard_normal(rng);
+                }
+            }
+            Shape::Full { lower, .. } => {
+                self.z.clear();
+                self.z
+                    .extend((0..current.len()).map(|_| standard_normal(rng)));
+                add_lower_times(lower, &self.z, out);
+            }
+        }
+    }
+
+    /// `ln q(from → to)`.
+    pub(crate) fn log_density(&self, from: &[f64], to: &[f64]) -> f64 {
+        const LN_SQRT_2PI: f64 = 0.918_938_533_204_672_7;
+        match &self.shape {
+            Shape::Isotropic(s) => from
+                .iter()
+                .zip(to)
+                .map(|(a, b)| {
+                    let z = (b - a) / s;
+                    -0.5 * z * z - s.ln() - LN_SQRT_2PI
+                })
+                .sum(),
+            Shape::Diagonal(s) => from
+                .iter()
+                .zip(to)
+                .zip(s)
+                .map(|((a, b), s)| {
+                    let z = (b - a) / s;
+                    -0.5 * z * z - s.ln() - LN_SQRT_2PI
+                })
+                .sum(),
+            Shape::Full { lower, log_det } => {
+                let diff: Vec<f64> = to.iter().zip(from).map(|(b, a)| b - a).collect();
+                log_normal_density(lower, *log_det, &diff, &mut Vec::new())
+            }
+        }
+    }
+}
+
+impl<P> Kernel<Vec<f64>, P> for GaussianRandomWalk {
+    #[inline]
+    fn propose(
+        &mut self,
+        current: &Sample<Vec<f64>, P>,
+        proposal: &mut Sample<Vec<f64>, P>,
+        rng: &mut ChainRng,
+    ) -> Proposal {
+        self.step_into(&current.state, &mut proposal.state, rng);
+        Proposal::symmetric(0)
+    }
+
+    fn log_proposal_density(&self, from: &Sample<Vec<f64>, P>, to: &Vec<f64>) -> Option<f64> {
+        Some(self.log_density(&from.state, to))
+    }
+
+    fn is_symmetric(&self) -> bool {
+        true
+    }
+
+    fn component_names(&self) -> Vec<String> {
+        vec!["gaussian random walk".into()]
+    }
+}
