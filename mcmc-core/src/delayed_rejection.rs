@@ -38,19 +38,28 @@ pub fn dr_log_acceptance(
     }
     let (log_a1_forward, _) = mh_log_acceptance(log_pi_x, log_pi_y1, log_q1_y1_x - log_q1_x_y1);
     let (log_a1_reverse, _) = mh_log_acceptance(log_pi_y2, log_pi_y1, log_q1_y1_y2 - log_q1_y2_y1);
-    let numerator = log_pi_y2 + log_q1_y2_y1 + log_q2_ratio + log1m_exp(log_a1_reverse);
-    let denominator = log_pi_x + log_q1_x_y1 + log1m_exp(log_a1_forward);
-    if numerator == f64::NEG_INFINITY || numerator.is_nan() {
+    let reverse_rejection = log1m_exp(log_a1_reverse);
+    let forward_rejection = log1m_exp(log_a1_forward);
+    if reverse_rejection == f64::NEG_INFINITY || forward_rejection == f64::NEG_INFINITY {
+        // α₁(y₂→y₁) = 1 makes the reverse path impossible; α₁(x→y₁) = 1 means
+        // the second stage is never reached.
         return f64::NEG_INFINITY;
     }
-    if denominator == f64::NEG_INFINITY {
-        return 0.0;
+    // Differences of like terms first: with ln π ≈ 1e300 an absolute sum
+    // would round the proposal densities away.
+    let d = (log_pi_y2 - log_pi_x)
+        + (log_q1_y2_y1 - log_q1_x_y1)
+        + log_q2_ratio
+        + (reverse_rejection - forward_rejection);
+    if d.is_nan() {
+        return f64::NEG_INFINITY;
     }
-    (numerator - denominator).min(0.0)
+    d.min(0.0)
 }
 
 /// Delayed rejection with a first kernel `K1` (which must provide its
 /// proposal density) and a second kernel `K2`.
+#[derive(Clone)]
 pub struct DelayedRejection<K1, K2, S, P = ()> {
     first: K1,
     second: K2,

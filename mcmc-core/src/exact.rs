@@ -11,8 +11,9 @@ use crate::delayed_rejection::dr_log_acceptance;
 use crate::error::{CoreError, Result, invalid};
 use crate::kernel::{Enumerated, Kernel};
 use crate::math::log_sum_exp;
+use crate::math::normalized_log_weights;
 use crate::mh::mh_log_acceptance;
-use crate::mtm::{Lambda, mtm_log_acceptance, mtm_log_weight};
+use crate::mtm::{Lambda, TryWeight, mtm_log_acceptance, mtm_selection_log_weights, mtm_weight};
 use crate::sample::Sample;
 
 /// A row-stochastic matrix, `P[x][y]` = probability of moving from `x` to `y`.
@@ -80,13 +81,13 @@ pub fn mtm_matrix<K: Kernel<usize>>(
 ) -> Result<TransitionMatrix> {
     let n = log_pi.len();
     let mut p = vec![vec![0.0; n]; n];
-    let weight = |from: usize, to: usize| -> Result<f64> {
+    let weight = |from: usize, to: usize| -> Result<TryWeight> {
         let (back, fwd) = match lambda {
             Lambda::One => (density(kernel, log_pi, to, from)?, 0.0),
             Lambda::InverseProposal => (0.0, 0.0),
             Lambda::InverseProduct => (0.0, density(kernel, log_pi, from, to)?),
         };
-        Ok(mtm_log_weight(lambda, log_pi[to], back, fwd))
+        Ok(mtm_weight(lambda, log_pi[to], back, fwd))
     };
     for x in 0..n {
         if log_pi[x] == f64::NEG_INFINITY {
@@ -95,16 +96,13 @@ pub fn mtm_matrix<K: Kernel<usize>>(
         let ex = outcomes(kernel, log_pi, x)?;
         for tuple in tuples(ex.len(), tries) {
             let prob: f64 = tuple.iter().map(|&i| ex[i].probability).product();
-            let forward: Vec<f64> = tuple
+            let forward: Vec<TryWeight> = tuple
                 .iter()
                 .map(|&i| weight(x, ex[i].state))
                 .collect::<Result<_>>()?;
-            let total = log_sum_exp(&forward);
-            if !total.is_finite() {
-                continue;
-            }
+            let selection = normalized_log_weights(&mtm_selection_log_weights(&forward));
             for (j, &i) in tuple.iter().enumerate() {
-                let select = (forward[j] - total).exp();
+                let select = selection[j];
                 if select == 0.0 {
                     continue;
                 }
@@ -112,7 +110,7 @@ pub fn mtm_matrix<K: Kernel<usize>>(
                 let ey = outcomes(kernel, log_pi, y)?;
                 for competitors in tuples(ey.len(), tries - 1) {
                     let pc: f64 = competitors.iter().map(|&c| ey[c].probability).product();
-                    let mut backward: Vec<f64> = competitors
+                    let mut backward: Vec<TryWeight> = competitors
                         .iter()
                         .map(|&c| weight(y, ey[c].state))
                         .collect::<Result<_>>()?;

@@ -40,23 +40,46 @@ pub fn log1m_exp(x: f64) -> f64 {
 }
 
 /// Index drawn with probability proportional to `exp(log_weights[i])`, from
-/// a uniform `u ∈ [0,1)`. `None` when every weight is zero.
+/// a uniform `u ∈ [0,1)`. `None` when every weight is zero (or any is NaN).
+///
+/// The weights are shifted by their maximum, never by their log-sum: with
+/// weights near ±1e300 a log-sum rounds the `ln Σ` term away.
 pub fn sample_log_categorical(log_weights: &[f64], u: f64) -> Option<usize> {
-    let total = log_sum_exp(log_weights);
-    if !total.is_finite() {
+    let m = log_weights
+        .iter()
+        .copied()
+        .fold(f64::NEG_INFINITY, f64::max);
+    if !m.is_finite() || log_weights.iter().any(|w| w.is_nan()) {
         return None;
     }
+    let total: f64 = log_weights.iter().map(|w| (w - m).exp()).sum();
+    let threshold = u * total;
     let mut acc = 0.0;
     let mut last = None;
-    for (i, lw) in log_weights.iter().enumerate() {
-        if *lw == f64::NEG_INFINITY {
+    for (i, w) in log_weights.iter().enumerate() {
+        if *w == f64::NEG_INFINITY {
             continue;
         }
-        acc += (lw - total).exp();
+        acc += (w - m).exp();
         last = Some(i);
-        if u < acc {
+        if threshold < acc {
             return Some(i);
         }
     }
     last
+}
+
+/// Probabilities proportional to `exp(log_weights)`, max-shifted (see
+/// [`sample_log_categorical`]). All zeros when every weight is zero.
+pub fn normalized_log_weights(log_weights: &[f64]) -> Vec<f64> {
+    let m = log_weights
+        .iter()
+        .copied()
+        .fold(f64::NEG_INFINITY, f64::max);
+    if !m.is_finite() {
+        return vec![0.0; log_weights.len()];
+    }
+    let e: Vec<f64> = log_weights.iter().map(|w| (w - m).exp()).collect();
+    let total: f64 = e.iter().sum();
+    e.into_iter().map(|v| v / total).collect()
 }

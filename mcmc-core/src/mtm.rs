@@ -44,44 +44,107 @@ pub enum Lambda {
     InverseProduct,
 }
 
-/// `ln ŵ(x → y)` from `ln π(y)`, `ln q(y→x)` and `ln q(x→y)` (the densities
-/// a choice does not use may be anything). A proposal whose density is NaN
-/// or `+∞` gets weight zero.
+/// One multiple-try weight `ŵ = π(y)·exp(log_q_term)`, kept as its two
+/// parts: sums of weights are formed relative to the largest `ln π` in the
+/// sum, so that with `ln π ≈ 1e300` the proposal-density terms are not
+/// rounded away.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TryWeight {
+    /// `ln π(y)` (`−∞` for zero or invalid densities).
+    pub log_pi: f64,
+    /// The `ln q` part of `ln ŵ` under the chosen [`Lambda`].
+    pub log_q_term: f64,
+}
+
+/// The weight `ŵ(x → y)` from `ln π(y)`, `ln q(y→x)` and `ln q(x→y)` (the
+/// densities a choice does not use may be anything). A proposal whose
+/// density is NaN or `+∞` gets weight zero.
 #[inline]
-pub fn mtm_log_weight(lambda: Lambda, log_pi_y: f64, log_q_back: f64, log_q_forward: f64) -> f64 {
-    if DensityClass::of(log_pi_y) == DensityClass::Invalid {
-        return f64::NEG_INFINITY;
-    }
-    let w = match lambda {
-        Lambda::One => log_pi_y + log_q_back,
-        Lambda::InverseProposal => log_pi_y,
-        Lambda::InverseProduct => log_pi_y - log_q_forward,
+pub fn mtm_weight(lambda: Lambda, log_pi_y: f64, log_q_back: f64, log_q_forward: f64) -> TryWeight {
+    let zero = TryWeight {
+        log_pi: f64::NEG_INFINITY,
+        log_q_term: 0.0,
     };
-    if w.is_nan() { f64::NEG_INFINITY } else { w }
+    if DensityClass::of(log_pi_y) != DensityClass::Finite {
+        return zero;
+    }
+    let log_q_term = match lambda {
+        Lambda::One => log_q_back,
+        Lambda::InverseProposal => 0.0,
+        Lambda::InverseProduct => -log_q_forward,
+    };
+    if log_q_term.is_nan() || log_q_term == f64::NEG_INFINITY {
+        return zero;
+    }
+    TryWeight {
+        log_pi: log_pi_y,
+        log_q_term,
+    }
+}
+
+/// `(r, s)` with `ln Σ ŵ_j = r + s`: `r` is the largest `ln π` of the sum.
+fn log_weight_sum(weights: &[TryWeight]) -> (f64, f64) {
+    let r = weights
+        .iter()
+        .map(|w| w.log_pi)
+        .fold(f64::NEG_INFINITY, f64::max);
+    if r == f64::NEG_INFINITY {
+        return (r, f64::NEG_INFINITY);
+    }
+    let terms: Vec<f64> = weights
+        .iter()
+        .map(|w| (w.log_pi - r) + w.log_q_term)
+        .collect();
+    (r, log_sum_exp(&terms))
+}
+
+/// Selection log-weights of the tries, shifted by a common constant (the
+/// largest `ln π`), for [`sample_log_categorical`].
+pub fn mtm_selection_log_weights(weights: &[TryWeight]) -> Vec<f64> {
+    let r = weights
+        .iter()
+        .map(|w| w.log_pi)
+        .fold(f64::NEG_INFINITY, f64::max);
+    weights
+        .iter()
+        .map(|w| {
+            if w.log_pi == f64::NEG_INFINITY {
+                f64::NEG_INFINITY
+            } else {
+                (w.log_pi - r) + w.log_q_term
+            }
+        })
+        .collect()
 }
 
 /// `ln α = min(0, ln Σ ŵ(x→y_j) − ln Σ ŵ(y→x*_j))`.
-pub fn mtm_log_acceptance(forward_log_weights: &[f64], backward_log_weights: &[f64]) -> f64 {
-    let f = log_sum_exp(forward_log_weights);
-    let b = log_sum_exp(backward_log_weights);
-    if f == f64::NEG_INFINITY || f.is_nan() || b.is_nan() {
+pub fn mtm_log_acceptance(forward: &[TryWeight], backward: &[TryWeight]) -> f64 {
+    let (rf, sf) = log_weight_sum(forward);
+    let (rb, sb) = log_weight_sum(backward);
+    if sf == f64::NEG_INFINITY || sf.is_nan() || sb.is_nan() {
         return f64::NEG_INFINITY;
     }
-    if b == f64::NEG_INFINITY {
+    if sb == f64::NEG_INFINITY {
         return 0.0;
     }
-    (f - b).min(0.0)
+    let d = (rf - rb) + (sf - sb);
+    if d.is_nan() {
+        f64::NEG_INFINITY
+    } else {
+        d.min(0.0)
+    }
 }
 
 /// Multiple-try Metropolis over any kernel.
+#[derive(Clone)]
 pub struct MultipleTry<K, S, P = ()> {
     kernel: K,
     tries: usize,
     lambda: Lambda,
     proposals: Vec<Sample<S, P>>,
     competitors: Vec<Sample<S, P>>,
-    forward: Vec<f64>,
-    backward: Vec<f64>,
+    forward: Vec<TryWeight>,
+    backward: Vec<TryWeight>,
 }
 
 impl<K: Kernel<S, P>, S, P> MultipleTry<K, S, P> {
@@ -116,14 +179,14 @@ impl<K: Kernel<S, P>, S, P> MultipleTry<K, S, P> {
         self.tries
     }
 
-    /// `ln ŵ(from → to)`; `None` when a needed density is missing.
-    fn weight(&self, from: &Sample<S, P>, to: &Sample<S, P>) -> Option<f64> {
+    /// `ŵ(from → to)`; `None` when a needed density is missing.
+    fn weight(&self, from: &Sample<S, P>, to: &Sample<S, P>) -> Option<TryWeight> {
         let (back, fwd) = match self.lambda {
             Lambda::One => (self.kernel.log_proposal_density(to, &from.state)?, 0.0),
             Lambda::InverseProposal => (0.0, 0.0),
             Lambda::InverseProduct => (0.0, self.kernel.log_proposal_density(from, &to.state)?),
         };
-        Some(mtm_log_weight(self.lambda, to.log_density, back, fwd))
+        Some(mtm_weight(self.lambda, to.log_density, back, fwd))
     }
 }
 
@@ -186,7 +249,8 @@ where
         }
 
         // 2. Select y ∝ ŵ.
-        let Some(sel) = sample_log_categorical(&self.forward, uniform(&mut chain.rng)) else {
+        let selection = mtm_selection_log_weights(&self.forward);
+        let Some(sel) = sample_log_categorical(&selection, uniform(&mut chain.rng)) else {
             // Every try had zero weight: nothing can be accepted.
             observer(&Transition {
                 current: &chain.current,
