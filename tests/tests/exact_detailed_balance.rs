@@ -95,7 +95,7 @@ fn state_dependent_mixture() -> Mixture<usize> {
             Box::new(symmetric()),
             Box::new(uniform5()),
         ],
-        |x: &usize| vec![1.0 + *x as f64, 0.5, if *x % 2 == 0 { 2.0 } else { 0.1 }],
+        |x: &usize| vec![1.0 + *x as f64, 0.5, if (*x).is_multiple_of(2) { 2.0 } else { 0.1 }],
     )
     .unwrap()
 }
@@ -208,9 +208,10 @@ fn delayed_rejection_is_reversible() {
 
 /// Empirical one-step transition frequencies from every state match the
 /// exact matrix. For `n` steps from `x`, the count of moves to `y` is
-/// Binomial(n, P_xy); we require |count/n − P_xy| ≤ 5·sqrt(P_xy(1−P_xy)/n)
-/// + 1e-9 for every entry (35 entries per matrix: a correct sampler fails
-/// an entry with probability ≈ 6e-7, so ≈ 2e-5 per matrix).
+/// Binomial(n, P_xy); we require `|count/n − P_xy| ≤ 5·sd + 1e-9` with
+/// `sd = sqrt(P_xy(1−P_xy)/n)` for every entry. With 25 entries per matrix a
+/// correct sampler fails an entry with probability ≈ 6e-7, so ≈ 2e-5 per
+/// matrix.
 fn empirical_matches<A: Algorithm<usize, ()> + Clone>(
     name: &str,
     log_pi: &[f64],
