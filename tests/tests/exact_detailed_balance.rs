@@ -95,7 +95,13 @@ fn state_dependent_mixture() -> Mixture<usize> {
             Box::new(symmetric()),
             Box::new(uniform5()),
         ],
-        |x: &usize| vec![1.0 + *x as f64, 0.5, if (*x).is_multiple_of(2) { 2.0 } else { 0.1 }],
+        |x: &usize| {
+            vec![
+                1.0 + *x as f64,
+                0.5,
+                if (*x).is_multiple_of(2) { 2.0 } else { 0.1 },
+            ]
+        },
     )
     .unwrap()
 }
