@@ -7,6 +7,9 @@
 //! those matrices: empirical one-step transition frequencies match `P`
 //! within their binomial standard errors.
 
+// Index loops over bins, coordinates and matrix entries read more clearly here.
+#![allow(clippy::needless_range_loop)]
+
 use mcmc_core::chain::{Algorithm, Chain};
 use mcmc_core::delayed_rejection::DelayedRejection;
 use mcmc_core::exact::{

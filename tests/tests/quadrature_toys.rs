@@ -8,6 +8,9 @@
 //!   chains with Veach start-up weights, and by importance-resampled
 //!   start-up with the bootstrap estimate `b*`.
 
+// Index loops over bins, coordinates and matrix entries read more clearly here.
+#![allow(clippy::needless_range_loop)]
+
 use mcmc_core::chain::Chain;
 use mcmc_core::kernel::{Independent, Kernel, Mixture, Proposal};
 use mcmc_core::mh::MetropolisHastings;
@@ -152,6 +155,9 @@ fn table_2_2_exact_values() {
     }
     assert!((r.iter().sum::<f64>() - B_EXACT).abs() < 1e-15);
 }
+
+/// The chain of the 20-pixel experiments.
+type ToyChain = Chain<Vec<f64>, (), MetropolisHastings<Mixture<Vec<f64>>, Vec<f64>>>;
 
 /// Histogram of the current state after every step, as fractions.
 fn histogram(
