@@ -160,11 +160,8 @@ fn table_2_2_exact_values() {
 type ToyChain = Chain<Vec<f64>, (), MetropolisHastings<Mixture<Vec<f64>>, Vec<f64>>>;
 
 /// Histogram of the current state after every step, as fractions.
-fn histogram(
-    chain: &mut Chain<Vec<f64>, (), MetropolisHastings<Mixture<Vec<f64>>, Vec<f64>>>,
-    steps: usize,
-) -> Vec<f64> {
-    let mut counts = vec![0u64; BINS];
+fn histogram(chain: &mut ToyChain, steps: usize) -> Vec<f64> {
+    let mut counts = [0u64; BINS];
     for _ in 0..steps {
         chain.step(&target);
         counts[((chain.state()[0] * BINS as f64) as usize).min(BINS - 1)] += 1;
