@@ -1,1 +1,2 @@
 //! `mcmc-core`: generic Markov chain Monte Carlo.
+pub mod diagnostics;
