@@ -14,6 +14,8 @@
 //! - [`startup`]: start-up bias elimination by importance resampling.
 //! - [`runner`]: many chains on rayon, bit-identical for any thread count.
 //! - [`exact`]: transition matrices on finite spaces for exact tests.
+//! - [`diagnostics`]: rank-normalised split R-hat, bulk and tail ESS, MCSE,
+//!   FFT autocorrelation (Vehtari et al. 2021, checked against ArviZ).
 //!
 //! ```
 //! use mcmc_core::prelude::*;
@@ -33,6 +35,7 @@
 
 pub mod chain;
 pub mod delayed_rejection;
+pub mod diagnostics;
 pub mod error;
 pub mod exact;
 pub mod expected;
