@@ -102,6 +102,7 @@ where
         let scratch = self.scratch.get_or_insert_with(|| chain.current.clone());
         let proposal = self.kernel.propose(&chain.current, scratch, &mut chain.rng);
         chain.stats.steps += 1;
+        // `outcome` is what the step ends as if the proposal is not accepted.
         let (log_alpha, outcome) = if proposal.failed {
             chain.stats.failed += 1;
             (f64::NEG_INFINITY, Outcome::Failed)
@@ -123,7 +124,7 @@ where
             };
             (log_alpha, outcome)
         };
-        let accepted = outcome == Outcome::Rejected && accept(log_alpha, &mut chain.rng);
+        let accepted = accept(log_alpha, &mut chain.rng);
         let alpha = log_alpha.exp();
         observer(&Transition {
             current: &chain.current,
