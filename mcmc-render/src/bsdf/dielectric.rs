@@ -146,7 +146,17 @@ impl RoughDielectric {
             self.distribution.g1(wo, hv.h),
             self.distribution.g1(wi, hv.h),
         );
-        let f = fresnel_dielectric(hv.wo_h, self.eta).r;
+        // Fresnel is symmetric across a refraction pair, but evaluated from
+        // the denser side it loses all precision near the critical angle
+        // (cos²θ_t cancels). For transmission, evaluate it from the outside,
+        // where it is well-conditioned; this also keeps f(wo, wi) and
+        // f(wi, wo) consistent.
+        let cos_fresnel = if hv.reflect || wo.z > 0.0 {
+            hv.wo_h
+        } else {
+            hv.wi_h
+        };
+        let f = fresnel_dielectric(cos_fresnel, self.eta).r;
         let (co, ci) = (wo.z.abs(), wi.z.abs());
         // Visible-normal density from the side of wo: G1(wo) |wo·h| D / |cos θ_o|.
         let pdf_m = g1o * hv.wo_h.abs() * d / co;

@@ -66,6 +66,8 @@ impl Bsdf {
     /// Builds the runtime BSDF for a scene description. Errors (one line,
     /// naming the parameter) for non-finite or out-of-range parameters and for
     /// a transmissive BSDF nested in `twosided` (which Mitsuba 3 refuses too).
+    /// An index-matched `roughdielectric` (int_ior == ext_ior) becomes the
+    /// smooth `dielectric`, which it equals exactly.
     pub fn from_desc(desc: &BsdfDesc) -> Result<Bsdf, String> {
         Ok(match desc {
             BsdfDesc::Diffuse { reflectance } => Bsdf::Diffuse(Diffuse {
@@ -120,19 +122,36 @@ impl Bsdf {
                 ext_ior,
                 specular_reflectance,
                 specular_transmittance,
-            } => Bsdf::RoughDielectric(RoughDielectric {
-                distribution: Microfacet::new(
+            } => {
+                let eta = relative_ior(*int_ior, *ext_ior)?;
+                let specular_reflectance =
+                    finite_rgb("specular_reflectance", *specular_reflectance)?;
+                let specular_transmittance =
+                    finite_rgb("specular_transmittance", *specular_transmittance)?;
+                let distribution = Microfacet::new(
                     *distribution,
                     roughness("alpha_u", *alpha_u)?,
                     roughness("alpha_v", *alpha_v)?,
-                ),
-                eta: relative_ior(*int_ior, *ext_ior)?,
-                specular_reflectance: finite_rgb("specular_reflectance", *specular_reflectance)?,
-                specular_transmittance: finite_rgb(
-                    "specular_transmittance",
-                    *specular_transmittance,
-                )?,
-            }),
+                );
+                if eta == 1.0 {
+                    // Index-matched: no microfacet reflects (F = 0) and every
+                    // microfacet refracts straight through, so the interface is
+                    // exactly the smooth one. Mitsuba 3 instead returns an
+                    // infinite pdf with weight G1 here; the delta form is exact.
+                    Bsdf::Dielectric(SmoothDielectric {
+                        eta,
+                        specular_reflectance,
+                        specular_transmittance,
+                    })
+                } else {
+                    Bsdf::RoughDielectric(RoughDielectric {
+                        distribution,
+                        eta,
+                        specular_reflectance,
+                        specular_transmittance,
+                    })
+                }
+            }
             BsdfDesc::TwoSided { inner } => match Bsdf::from_desc(inner)? {
                 Bsdf::Dielectric(_) | Bsdf::RoughDielectric(_) => {
                     return Err(
