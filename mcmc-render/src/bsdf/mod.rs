@@ -11,8 +11,16 @@
 //!   samples; for them `eval` and `pdf` return zero for any given pair.
 //! - The reverse pdf bidirectional methods need is `pdf(wi, wo, mode.flip())`.
 
+pub mod conductor;
 pub mod desc;
+pub mod dielectric;
+pub mod diffuse;
+pub mod fresnel;
+pub mod microfacet;
+pub mod model;
+pub mod special;
 pub use desc::{BsdfDesc, MicrofacetKind};
+pub use model::Bsdf;
 
 use crate::color::Rgb;
 use glam::Vec3;

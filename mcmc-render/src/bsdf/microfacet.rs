@@ -1,0 +1,295 @@
+//! Anisotropic Beckmann and GGX microfacet distributions with the separable
+//! Smith shadowing–masking term and visible-normal sampling.
+//!
+//! All directions are in the local shading frame (z = macro normal);
+//! `alpha_u` is the roughness along x (tangent), `alpha_v` along y.
+//!
+//! Shadowing uses the exact Smith Λ of each distribution. For Beckmann,
+//! Mitsuba 3 uses Walter's rational approximation of G1 (< 0.35 % relative
+//! error); the exact form is used here because visible-normal sampling is
+//! only normalised — its pdf only matches its samples — with the exact G1.
+
+use super::desc::MicrofacetKind;
+use super::special::{erfc, erfc_f32, erfinv};
+use glam::Vec3;
+use std::f32::consts::PI;
+
+/// Smallest roughness accepted; smaller values are clamped (as Mitsuba 3 does)
+/// so the distribution stays representable in f32.
+pub const MIN_ALPHA: f32 = 1e-4;
+
+/// A microfacet normal distribution.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Microfacet {
+    kind: MicrofacetKind,
+    alpha_u: f32,
+    alpha_v: f32,
+}
+
+impl Microfacet {
+    /// A distribution with the given roughnesses, clamped below at [`MIN_ALPHA`].
+    pub fn new(kind: MicrofacetKind, alpha_u: f32, alpha_v: f32) -> Self {
+        Microfacet {
+            kind,
+            alpha_u: alpha_u.max(MIN_ALPHA),
+            alpha_v: alpha_v.max(MIN_ALPHA),
+        }
+    }
+
+    /// The distribution family.
+    pub fn kind(&self) -> MicrofacetKind {
+        self.kind
+    }
+
+    /// Roughnesses (along x, along y) after clamping.
+    pub fn alpha(&self) -> (f32, f32) {
+        (self.alpha_u, self.alpha_v)
+    }
+
+    /// Normal distribution D(m), normalised so that ∫ D(m) cos θ_m dω_m = 1.
+    /// Zero for `m` in the lower hemisphere.
+    pub fn d(&self, m: Vec3) -> f32 {
+        if m.z <= 0.0 {
+            return 0.0;
+        }
+        let (au, av) = (self.alpha_u, self.alpha_v);
+        let xx = m.x * m.x / (au * au);
+        let yy = m.y * m.y / (av * av);
+        let zz = m.z * m.z;
+        match self.kind {
+            MicrofacetKind::Ggx => {
+                let s = xx + yy + zz;
+                1.0 / (PI * au * av * s * s)
+            }
+            MicrofacetKind::Beckmann => {
+                // exp(-tan²θ (cos²φ/αu² + sin²φ/αv²)) / (π αu αv cos⁴θ)
+                let e = (xx + yy) / zz;
+                if e > 80.0 {
+                    return 0.0;
+                }
+                (-e).exp() / (PI * au * av * zz * zz)
+            }
+        }
+    }
+
+    /// Smith's Λ(w) for direction `w` (independent of the microfacet normal).
+    fn lambda(&self, w: Vec3) -> f32 {
+        let xy_alpha2 = (self.alpha_u * w.x) * (self.alpha_u * w.x)
+            + (self.alpha_v * w.y) * (self.alpha_v * w.y);
+        if xy_alpha2 == 0.0 {
+            return 0.0;
+        }
+        let zz = w.z * w.z;
+        if zz == 0.0 {
+            return f32::INFINITY;
+        }
+        match self.kind {
+            MicrofacetKind::Ggx => {
+                // Λ = (√(1 + α² tan²θ) − 1) / 2, written without cancellation.
+                let a2t2 = xy_alpha2 / zz;
+                0.5 * a2t2 / (1.0 + (1.0 + a2t2).sqrt())
+            }
+            MicrofacetKind::Beckmann => {
+                // a = 1/(α tan θ); Λ = (e^{-a²}/(a√π) − erfc(a)) / 2.
+                let a = w.z.abs() / xy_alpha2.sqrt();
+                if a > 6.0 {
+                    return 0.0;
+                }
+                let l = 0.5 * ((-a * a).exp() / (a * PI.sqrt()) - erfc_f32(a));
+                l.max(0.0)
+            }
+        }
+    }
+
+    /// Smith's monodirectional shadowing G1(w, m): zero when `w` sees the back
+    /// of the microfacet (w·m and w·n of different signs).
+    pub fn g1(&self, w: Vec3, m: Vec3) -> f32 {
+        if w.dot(m) * w.z <= 0.0 {
+            return 0.0;
+        }
+        1.0 / (1.0 + self.lambda(w))
+    }
+
+    /// Separable Smith shadowing–masking G1(wo, m)·G1(wi, m), as Mitsuba 3.
+    pub fn g(&self, wo: Vec3, wi: Vec3, m: Vec3) -> f32 {
+        self.g1(wo, m) * self.g1(wi, m)
+    }
+
+    /// Density of visible normals seen from `w` (w.z > 0), per solid angle of m:
+    /// D_w(m) = G1(w, m) · max(0, w·m) · D(m) / w.z.
+    pub fn pdf_visible(&self, w: Vec3, m: Vec3) -> f32 {
+        if w.z <= 0.0 {
+            return 0.0;
+        }
+        let wm = w.dot(m);
+        if wm <= 0.0 {
+            return 0.0;
+        }
+        let d = self.d(m);
+        if d == 0.0 {
+            return 0.0;
+        }
+        self.g1(w, m) * wm * d / w.z
+    }
+
+    /// Samples a microfacet normal from the visible-normal distribution seen
+    /// from `w` (which must satisfy w.z > 0), consuming `u.0` then `u.1`.
+    ///
+    /// GGX: Heitz 2018, "Sampling the GGX distribution of visible normals".
+    /// Beckmann: stretch to the isotropic unit-roughness configuration,
+    /// sample the visible slope (Heitz & d'Eon 2014) with an exact inversion of
+    /// its marginal CDF by safeguarded Newton iteration, then unstretch.
+    pub fn sample_visible(&self, w: Vec3, u: (f32, f32)) -> Vec3 {
+        match self.kind {
+            MicrofacetKind::Ggx => self.sample_visible_ggx(w, u),
+            MicrofacetKind::Beckmann => self.sample_visible_beckmann(w, u),
+        }
+    }
+
+    fn sample_visible_ggx(&self, w: Vec3, u: (f32, f32)) -> Vec3 {
+        let (au, av) = (self.alpha_u, self.alpha_v);
+        let vh = Vec3::new(au * w.x, av * w.y, w.z).normalize();
+        let lensq = vh.x * vh.x + vh.y * vh.y;
+        let t1 = if lensq > 0.0 {
+            Vec3::new(-vh.y, vh.x, 0.0) / lensq.sqrt()
+        } else {
+            Vec3::X
+        };
+        let t2 = vh.cross(t1);
+        // Uniform point on the unit disk, then warped onto the projected
+        // (visible) half of the hemisphere.
+        let r = u.0.sqrt();
+        let (s, c) = (2.0 * PI * u.1).sin_cos();
+        let p1 = r * c;
+        let mut p2 = r * s;
+        let h = 0.5 * (1.0 + vh.z);
+        p2 = (1.0 - h) * (1.0 - p1 * p1).max(0.0).sqrt() + h * p2;
+        let pz = (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt();
+        let nh = p1 * t1 + p2 * t2 + pz * vh;
+        Vec3::new(au * nh.x, av * nh.y, nh.z.max(1e-7)).normalize()
+    }
+
+    fn sample_visible_beckmann(&self, w: Vec3, u: (f32, f32)) -> Vec3 {
+        let (au, av) = (self.alpha_u, self.alpha_v);
+        let ws = Vec3::new(au * w.x, av * w.y, w.z).normalize();
+        let sin_t = (ws.x * ws.x + ws.y * ws.y).sqrt();
+        let (cos_phi, sin_phi) = if sin_t > 0.0 {
+            (ws.x / sin_t, ws.y / sin_t)
+        } else {
+            (1.0, 0.0)
+        };
+        let sx = beckmann_visible_slope_x(ws.z as f64, sin_t as f64, u.0 as f64) as f32;
+        // The second slope is independent of the first: density e^{-y²}/√π.
+        let sy = erfinv(2.0 * u.1 - 1.0);
+        let tx = (cos_phi * sx - sin_phi * sy) * au;
+        let ty = (sin_phi * sx + cos_phi * sy) * av;
+        Vec3::new(-tx, -ty, 1.0).normalize()
+    }
+}
+
+/// Inverts the marginal CDF of the first visible slope of the unit isotropic
+/// Beckmann distribution seen under angle θ (given as cos θ, sin θ):
+/// density ∝ (cos θ − x sin θ) e^{-x²} on x < cot θ, whose primitive is
+/// F(x) = cos θ · (√π/2) · erfc(−x) + (sin θ / 2) · e^{-x²}.
+fn beckmann_visible_slope_x(cos_t: f64, sin_t: f64, u: f64) -> f64 {
+    const SQRT_PI_2: f64 = 0.886_226_925_452_758; // √π / 2
+    let cdf = |x: f64| cos_t * SQRT_PI_2 * erfc(-x) + 0.5 * sin_t * (-x * x).exp();
+    // Beyond ±6 the density is below e^{-36}: the bracket loses nothing.
+    let mut hi = if sin_t > 0.0 {
+        (cos_t / sin_t).min(6.0)
+    } else {
+        6.0
+    };
+    let mut lo = -6.0f64;
+    let target = u * cdf(hi);
+    // Start from the normal-incidence answer, which is exact when sin θ = 0.
+    let mut x = (erfinv((2.0 * u - 1.0) as f32) as f64).clamp(lo, hi);
+    for _ in 0..64 {
+        let f = cdf(x) - target;
+        if f > 0.0 {
+            hi = x;
+        } else {
+            lo = x;
+        }
+        let dens = (cos_t - x * sin_t) * (-x * x).exp();
+        let mut next = if dens > 0.0 { x - f / dens } else { f64::NAN };
+        // Newton leaving the bracket (or stalling) falls back to bisection.
+        if !(next > lo && next < hi) {
+            next = 0.5 * (lo + hi);
+        }
+        let step = (next - x).abs();
+        x = next;
+        // Newton converges quadratically: once a step is below 1e-6 the
+        // iterate is accurate far beyond the f32 the slope is returned in.
+        if step < 1e-6 || hi - lo < 1e-9 {
+            break;
+        }
+    }
+    x
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sph(theta: f32, phi: f32) -> Vec3 {
+        Vec3::new(
+            theta.sin() * phi.cos(),
+            theta.sin() * phi.sin(),
+            theta.cos(),
+        )
+    }
+
+    /// ∫ D(m) cos θ_m dω and ∫ D_w(m) dω by a fine midpoint rule in (θ, φ).
+    fn integrate(f: impl Fn(Vec3) -> f64) -> f64 {
+        let (nt, np) = (2000, 400);
+        let mut sum = 0.0;
+        for i in 0..nt {
+            let t = (i as f64 + 0.5) / nt as f64 * std::f64::consts::FRAC_PI_2;
+            for j in 0..np {
+                let p = (j as f64 + 0.5) / np as f64 * std::f64::consts::TAU;
+                sum += f(sph(t as f32, p as f32)) * t.sin();
+            }
+        }
+        sum * std::f64::consts::FRAC_PI_2 / nt as f64 * std::f64::consts::TAU / np as f64
+    }
+
+    #[test]
+    fn distributions_are_normalised_and_visible_normals_integrate_to_one() {
+        for kind in [MicrofacetKind::Beckmann, MicrofacetKind::Ggx] {
+            for (au, av) in [(0.3f32, 0.3f32), (0.5, 0.2), (1.0, 1.0)] {
+                let mf = Microfacet::new(kind, au, av);
+                let proj = integrate(|m| mf.d(m) as f64 * m.z as f64);
+                // Midpoint rule with 2000×400 cells on a smooth integrand: error ≪ 1e-3.
+                assert!(
+                    (proj - 1.0).abs() < 2e-3,
+                    "{kind:?} {au},{av}: ∫D cos = {proj}"
+                );
+                for theta in [0.0f32, 0.7, 1.3, 1.55] {
+                    let w = sph(theta, 0.4);
+                    let vis = integrate(|m| mf.pdf_visible(w, m) as f64);
+                    // Exact Smith G1 makes D_w a density; the tolerance covers the quadrature error.
+                    assert!(
+                        (vis - 1.0).abs() < 3e-3,
+                        "{kind:?} {au},{av} θ={theta}: ∫D_w = {vis}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn beckmann_slope_inversion_hits_the_target_cdf() {
+        for theta in [0.0f64, 0.3, 1.0, 1.5, 1.5706] {
+            let (s, c) = theta.sin_cos();
+            for i in 0..50 {
+                let u = (i as f64 + 0.5) / 50.0;
+                let x = beckmann_visible_slope_x(c, s, u);
+                let cdf = |x: f64| c * 0.886_226_925_452_758 * erfc(-x) + 0.5 * s * (-x * x).exp();
+                let hi = if s > 0.0 { c / s } else { 50.0 };
+                let got = cdf(x) / cdf(hi.min(6.0));
+                assert!((got - u).abs() < 1e-6, "θ={theta} u={u}: F(x)={got}");
+            }
+        }
+    }
+}
