@@ -13,6 +13,8 @@
 
 pub mod desc;
 pub use desc::{BsdfDesc, MicrofacetKind};
+mod placeholder;
+pub use placeholder::Bsdf;
 
 use crate::color::Rgb;
 use glam::Vec3;
