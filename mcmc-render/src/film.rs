@@ -1,0 +1,288 @@
+//! Films: pixel accumulation with the scene's reconstruction filter.
+//!
+//! Two accumulators share one film:
+//! - **samples** (camera-driven estimators such as path tracing): each
+//!   sample adds `f(x_j − p)·L` and `f(x_j − p)` to the pixels `j` the
+//!   filter reaches, and the pixel is the ratio (Mitsuba's weighted mean);
+//! - **splats** (light tracing, later BDPT/MLT): a contribution at `p`
+//!   adds `f(x_j − p) / Z_j · L`, where `Z_j = ∫_image f(x_j − q) dq`. The
+//!   developed value divides by the number of splatting paths per pixel.
+//!   With this `Z_j` both accumulators converge to the same image, border
+//!   pixels included.
+//!
+//! A film may cover a sub-rectangle of the image (a tile plus the filter
+//! margin) so that work units render into private films which are then
+//! added into the main film in a fixed order ([`Film::add_film`]): the
+//! result is independent of the number of threads.
+
+use crate::color::Rgb;
+use crate::scene::FilterKind;
+use glam::Vec2;
+use std::sync::Arc;
+
+/// A separable reconstruction filter with its border normalisation.
+#[derive(Clone, Debug)]
+pub struct Filter {
+    kind: FilterKind,
+    radius: f32,
+    alpha: f32,
+    bias: f32,
+    /// `Z` per column: ∫ over the image width of f(x_col − q).
+    norm_x: Vec<f32>,
+    /// `Z` per row.
+    norm_y: Vec<f32>,
+}
+
+impl Filter {
+    /// The filter for an image of the given size.
+    pub fn new(kind: FilterKind, width: u32, height: u32) -> Filter {
+        let (radius, alpha, bias) = match kind {
+            FilterKind::Box => (0.5, 0.0, 0.0),
+            FilterKind::Gaussian { stddev } => {
+                let radius = 4.0 * stddev;
+                let alpha = -1.0 / (2.0 * stddev * stddev);
+                (radius, alpha, (alpha * radius * radius).exp())
+            }
+        };
+        let mut f = Filter {
+            kind,
+            radius,
+            alpha,
+            bias,
+            norm_x: Vec::new(),
+            norm_y: Vec::new(),
+        };
+        f.norm_x = (0..width).map(|i| f.integral_1d(i, width)).collect();
+        f.norm_y = (0..height).map(|j| f.integral_1d(j, height)).collect();
+        f
+    }
+
+    /// Filter support radius in pixels.
+    pub fn radius(&self) -> f32 {
+        self.radius
+    }
+
+    /// 1D filter value.
+    pub fn eval_1d(&self, x: f32) -> f32 {
+        match self.kind {
+            FilterKind::Box => {
+                if x.abs() <= 0.5 {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+            FilterKind::Gaussian { .. } => ((self.alpha * x * x).exp() - self.bias).max(0.0),
+        }
+    }
+
+    /// ∫_0^n f(i + 0.5 − q) dq by the midpoint rule on 64 steps per pixel
+    /// (the filter is smooth, and exact for the box).
+    fn integral_1d(&self, i: u32, n: u32) -> f32 {
+        let c = i as f32 + 0.5;
+        let lo = (c - self.radius).max(0.0);
+        let hi = (c + self.radius).min(n as f32);
+        let steps = ((hi - lo) * 64.0).ceil().max(1.0) as usize;
+        let h = (hi - lo) / steps as f32;
+        let mut acc = 0.0f64;
+        for k in 0..steps {
+            acc += self.eval_1d(c - (lo + (k as f32 + 0.5) * h)) as f64;
+        }
+        (acc * h as f64) as f32
+    }
+}
+
+/// A rectangle of pixels with the two accumulators.
+#[derive(Clone, Debug)]
+pub struct Film {
+    /// Full image width.
+    pub width: u32,
+    /// Full image height.
+    pub height: u32,
+    /// First column this film covers.
+    pub x0: u32,
+    /// First row this film covers.
+    pub y0: u32,
+    /// Columns covered.
+    pub w: u32,
+    /// Rows covered.
+    pub h: u32,
+    filter: Arc<Filter>,
+    /// Σ f·L (rgb) and Σ f, per covered pixel.
+    samples: Vec<[f32; 4]>,
+    /// Σ f/Z·L per covered pixel.
+    splats: Vec<[f32; 3]>,
+}
+
+impl Film {
+    /// A film covering the whole image.
+    pub fn new(width: u32, height: u32, filter: Arc<Filter>) -> Film {
+        Film::sub(width, height, 0, 0, width, height, filter)
+    }
+
+    /// A film covering columns `x0..x0+w` and rows `y0..y0+h`.
+    pub fn sub(
+        width: u32,
+        height: u32,
+        x0: u32,
+        y0: u32,
+        w: u32,
+        h: u32,
+        filter: Arc<Filter>,
+    ) -> Film {
+        let n = (w * h) as usize;
+        Film {
+            width,
+            height,
+            x0,
+            y0,
+            w,
+            h,
+            filter,
+            samples: vec![[0.0; 4]; n],
+            splats: vec![[0.0; 3]; n],
+        }
+    }
+
+    /// The film for a tile `[tx0, tx1) × [ty0, ty1)` grown by the filter radius.
+    pub fn for_tile(
+        width: u32,
+        height: u32,
+        tx0: u32,
+        ty0: u32,
+        tx1: u32,
+        ty1: u32,
+        filter: Arc<Filter>,
+    ) -> Film {
+        let m = filter.radius().ceil() as u32;
+        let x0 = tx0.saturating_sub(m);
+        let y0 = ty0.saturating_sub(m);
+        let x1 = (tx1 + m).min(width);
+        let y1 = (ty1 + m).min(height);
+        Film::sub(width, height, x0, y0, x1 - x0, y1 - y0, filter)
+    }
+
+    /// Zeroes both accumulators.
+    pub fn clear(&mut self) {
+        self.samples.iter_mut().for_each(|p| *p = [0.0; 4]);
+        self.splats.iter_mut().for_each(|p| *p = [0.0; 3]);
+    }
+
+    /// Pixel range the filter at `p` reaches, clipped to this film.
+    fn footprint(&self, p: Vec2) -> Option<(u32, u32, u32, u32)> {
+        let r = self.filter.radius();
+        let lo_x = (p.x - 0.5 - r).ceil().max(self.x0 as f32);
+        let lo_y = (p.y - 0.5 - r).ceil().max(self.y0 as f32);
+        let hi_x = (p.x - 0.5 + r).floor().min((self.x0 + self.w) as f32 - 1.0);
+        let hi_y = (p.y - 0.5 + r).floor().min((self.y0 + self.h) as f32 - 1.0);
+        if !(lo_x <= hi_x && lo_y <= hi_y) {
+            return None;
+        }
+        Some((lo_x as u32, hi_x as u32, lo_y as u32, hi_y as u32))
+    }
+
+    /// Adds a camera sample at raster position `p` with radiance `l`.
+    /// Non-finite radiance is dropped (and should be counted by the caller).
+    pub fn add_sample(&mut self, p: Vec2, l: Rgb) {
+        if !l.is_finite() || !p.is_finite() {
+            return;
+        }
+        let Some((x0, x1, y0, y1)) = self.footprint(p) else {
+            return;
+        };
+        for y in y0..=y1 {
+            let wy = self.filter.eval_1d(y as f32 + 0.5 - p.y);
+            if wy == 0.0 {
+                continue;
+            }
+            for x in x0..=x1 {
+                let w = wy * self.filter.eval_1d(x as f32 + 0.5 - p.x);
+                if w == 0.0 {
+                    continue;
+                }
+                let i = ((y - self.y0) * self.w + (x - self.x0)) as usize;
+                let px = &mut self.samples[i];
+                px[0] += w * l.r;
+                px[1] += w * l.g;
+                px[2] += w * l.b;
+                px[3] += w;
+            }
+        }
+    }
+
+    /// Splats a contribution `l` at raster position `p`.
+    pub fn splat(&mut self, p: Vec2, l: Rgb) {
+        if !l.is_finite() || !p.is_finite() {
+            return;
+        }
+        let Some((x0, x1, y0, y1)) = self.footprint(p) else {
+            return;
+        };
+        for y in y0..=y1 {
+            let zy = self.filter.norm_y[y as usize];
+            let wy = self.filter.eval_1d(y as f32 + 0.5 - p.y);
+            if wy == 0.0 || zy <= 0.0 {
+                continue;
+            }
+            for x in x0..=x1 {
+                let zx = self.filter.norm_x[x as usize];
+                let wx = self.filter.eval_1d(x as f32 + 0.5 - p.x);
+                if wx == 0.0 || zx <= 0.0 {
+                    continue;
+                }
+                let w = wy * wx / (zy * zx);
+                let i = ((y - self.y0) * self.w + (x - self.x0)) as usize;
+                let px = &mut self.splats[i];
+                px[0] += w * l.r;
+                px[1] += w * l.g;
+                px[2] += w * l.b;
+            }
+        }
+    }
+
+    /// Adds another film's accumulators into this one (overlap only).
+    pub fn add_film(&mut self, other: &Film) {
+        for oy in 0..other.h {
+            let y = other.y0 + oy;
+            if y < self.y0 || y >= self.y0 + self.h {
+                continue;
+            }
+            for ox in 0..other.w {
+                let x = other.x0 + ox;
+                if x < self.x0 || x >= self.x0 + self.w {
+                    continue;
+                }
+                let i = ((y - self.y0) * self.w + (x - self.x0)) as usize;
+                let j = (oy * other.w + ox) as usize;
+                for c in 0..4 {
+                    self.samples[i][c] += other.samples[j][c];
+                }
+                for c in 0..3 {
+                    self.splats[i][c] += other.splats[j][c];
+                }
+            }
+        }
+    }
+
+    /// The image: weighted sample mean plus splats divided by
+    /// `splat_paths_per_pixel` (pass 0 when nothing splats). Row-major RGB.
+    pub fn develop(&self, splat_paths_per_pixel: f64) -> Vec<Rgb> {
+        let inv = if splat_paths_per_pixel > 0.0 {
+            (1.0 / splat_paths_per_pixel) as f32
+        } else {
+            0.0
+        };
+        self.samples
+            .iter()
+            .zip(&self.splats)
+            .map(|(s, p)| {
+                let mean = if s[3] > 0.0 {
+                    Rgb::new(s[0] / s[3], s[1] / s[3], s[2] / s[3])
+                } else {
+                    Rgb::BLACK
+                };
+                mean + Rgb::new(p[0], p[1], p[2]) * inv
+            })
+            .collect()
+    }
+}

@@ -1,0 +1,521 @@
+//! Scene geometry: triangles, analytic spheres and disks in one obvhs
+//! compressed wide BVH, with closest-hit and occlusion queries.
+//!
+//! Self-intersection is avoided the pbrt-v4 way, without any scene-scale
+//! epsilon: every hit point carries a conservative bound on its floating-
+//! point error, and rays leave a surface from a point pushed along the
+//! geometric normal just past that bound ([`offset_ray_origin`]).
+
+use glam::{Mat4, Vec3, Vec3A};
+use obvhs::BvhBuildParams;
+use obvhs::aabb::Aabb;
+use obvhs::cwbvh::CwBvh;
+use obvhs::ray::{Ray as BvhRay, RayHit};
+use std::time::{Duration, Instant};
+
+/// A ray with origin, unit direction and a maximum distance.
+#[derive(Clone, Copy, Debug)]
+pub struct Ray {
+    /// Origin.
+    pub o: Vec3,
+    /// Unit direction.
+    pub d: Vec3,
+    /// Smallest accepted hit distance.
+    pub tmin: f32,
+    /// Largest accepted hit distance.
+    pub tmax: f32,
+}
+
+impl Ray {
+    /// A ray from `o` along the unit direction `d`.
+    pub fn new(o: Vec3, d: Vec3) -> Self {
+        Ray {
+            o,
+            d,
+            tmin: 0.0,
+            tmax: f32::INFINITY,
+        }
+    }
+
+    /// Point at distance `t`.
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.o + self.d * t
+    }
+}
+
+/// `γ(n)` of pbrt: bound on the relative error of `n` floating-point operations.
+pub fn gamma(n: i32) -> f32 {
+    let e = f32::EPSILON * 0.5;
+    n as f32 * e / (1.0 - n as f32 * e)
+}
+
+/// pbrt-v4's `OffsetRayOrigin`: moves `p` along `n` by the error bound
+/// projected on the normal, to the side `w` leaves through, then rounds
+/// away from the surface so the new origin is provably off it.
+pub fn offset_ray_origin(p: Vec3, p_err: Vec3, n: Vec3, w: Vec3) -> Vec3 {
+    let d = n.abs().dot(p_err);
+    let mut offset = n * d;
+    if w.dot(n) < 0.0 {
+        offset = -offset;
+    }
+    let mut po = p + offset;
+    for i in 0..3 {
+        if offset[i] > 0.0 {
+            po[i] = po[i].next_up();
+        } else if offset[i] < 0.0 {
+            po[i] = po[i].next_down();
+        }
+    }
+    po
+}
+
+/// One primitive as stored in BVH order.
+#[derive(Clone, Copy, Debug)]
+enum Prim {
+    Triangle {
+        v0: Vec3,
+        e1: Vec3,
+        e2: Vec3,
+        shape: u32,
+        /// Index of the triangle in its mesh.
+        tri: u32,
+    },
+    Sphere {
+        center: Vec3,
+        radius: f32,
+        shape: u32,
+    },
+    Disk {
+        shape: u32,
+    },
+}
+
+/// A triangle mesh in world space, for shading-normal interpolation and
+/// emitter sampling.
+#[derive(Clone, Debug)]
+pub struct MeshData {
+    /// Positions.
+    pub positions: Vec<Vec3>,
+    /// Unit vertex normals (`None`: flat shading).
+    pub normals: Option<Vec<Vec3>>,
+    /// Triangles.
+    pub indices: Vec<[u32; 3]>,
+}
+
+/// The analytic surface a shape is made of.
+#[derive(Clone, Debug)]
+pub enum Surface {
+    /// Triangle mesh.
+    Mesh(MeshData),
+    /// Sphere.
+    Sphere {
+        /// Centre.
+        center: Vec3,
+        /// Radius.
+        radius: f32,
+    },
+    /// Mitsuba's disk: the unit disk in z = 0 mapped by `to_world`.
+    Disk {
+        /// Object to world.
+        to_world: Mat4,
+        /// World to object.
+        to_local: Mat4,
+        /// Unit world-space normal (of object +z).
+        normal: Vec3,
+    },
+}
+
+impl Surface {
+    /// Total surface area.
+    pub fn area(&self) -> f32 {
+        match self {
+            Surface::Mesh(m) => m.indices.iter().map(|t| triangle_area(m, t)).sum(),
+            Surface::Sphere { radius, .. } => 4.0 * std::f32::consts::PI * radius * radius,
+            Surface::Disk { to_world, .. } => {
+                std::f32::consts::PI
+                    * to_world
+                        .x_axis
+                        .truncate()
+                        .cross(to_world.y_axis.truncate())
+                        .length()
+            }
+        }
+    }
+}
+
+/// Area of one triangle of a mesh.
+pub fn triangle_area(m: &MeshData, t: &[u32; 3]) -> f32 {
+    let [a, b, c] = t.map(|i| m.positions[i as usize]);
+    0.5 * (b - a).cross(c - a).length()
+}
+
+/// A geometric shape with its orientation flag.
+#[derive(Clone, Debug)]
+pub struct GeoShape {
+    /// The surface.
+    pub surface: Surface,
+    /// Mitsuba's `flip_normals`.
+    pub flip_normals: bool,
+}
+
+/// A point on a surface with its local geometry.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfacePoint {
+    /// Position.
+    pub p: Vec3,
+    /// Conservative absolute error bound of `p`, per axis.
+    pub p_err: Vec3,
+    /// Unit geometric normal (oriented as the shape's normals, after `flip_normals`).
+    pub ng: Vec3,
+    /// Unit shading normal, on the same side as `ng`.
+    pub ns: Vec3,
+    /// Index of the shape.
+    pub shape: u32,
+}
+
+impl SurfacePoint {
+    /// Ray leaving this point in unit direction `d`.
+    pub fn spawn_ray(&self, d: Vec3) -> Ray {
+        Ray::new(offset_ray_origin(self.p, self.p_err, self.ng, d), d)
+    }
+
+    /// Origin for a segment leaving towards `target`.
+    pub fn spawn_origin(&self, target: Vec3) -> Vec3 {
+        offset_ray_origin(self.p, self.p_err, self.ng, target - self.p)
+    }
+}
+
+/// A closest-hit result: distance and where on which primitive.
+#[derive(Clone, Copy, Debug)]
+pub struct Hit {
+    /// Distance along the ray.
+    pub t: f32,
+    prim: u32,
+    u: f32,
+    v: f32,
+}
+
+/// Shapes plus their BVH.
+pub struct Geometry {
+    /// Shapes, indexed by shape id.
+    pub shapes: Vec<GeoShape>,
+    prims: Vec<Prim>,
+    bvh: CwBvh,
+    /// Wall-clock time of the BVH build.
+    pub build_time: Duration,
+    /// Total triangle count.
+    pub triangles: usize,
+}
+
+impl Geometry {
+    /// Builds the BVH over all shapes (parallel build through rayon).
+    pub fn build(shapes: Vec<GeoShape>) -> Geometry {
+        let mut prims = Vec::new();
+        let mut aabbs = Vec::new();
+        let mut triangles = 0;
+        for (s, shape) in shapes.iter().enumerate() {
+            let s = s as u32;
+            match &shape.surface {
+                Surface::Mesh(m) => {
+                    triangles += m.indices.len();
+                    for (i, t) in m.indices.iter().enumerate() {
+                        let [a, b, c] = t.map(|k| m.positions[k as usize]);
+                        let mut bb = Aabb::from_point(a.into());
+                        bb.extend(b.into()).extend(c.into());
+                        aabbs.push(bb);
+                        prims.push(Prim::Triangle {
+                            v0: a,
+                            e1: b - a,
+                            e2: c - a,
+                            shape: s,
+                            tri: i as u32,
+                        });
+                    }
+                }
+                Surface::Sphere { center, radius } => {
+                    let r = Vec3::splat(*radius);
+                    aabbs.push(Aabb::new((*center - r).into(), (*center + r).into()));
+                    prims.push(Prim::Sphere {
+                        center: *center,
+                        radius: *radius,
+                        shape: s,
+                    });
+                }
+                Surface::Disk { to_world, .. } => {
+                    let mut bb = Aabb::empty();
+                    for (x, y) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+                        bb.extend(to_world.transform_point3(Vec3::new(x, y, 0.0)).into());
+                    }
+                    aabbs.push(bb);
+                    prims.push(Prim::Disk { shape: s });
+                }
+            }
+        }
+        let start = Instant::now();
+        let mut core = Duration::default();
+        let bvh =
+            obvhs::cwbvh::builder::build_cwbvh(&aabbs, BvhBuildParams::medium_build(), &mut core);
+        // Store primitives in BVH order so leaves index them directly.
+        let prims: Vec<Prim> = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| prims[i as usize])
+            .collect();
+        Geometry {
+            shapes,
+            prims,
+            bvh,
+            build_time: start.elapsed(),
+            triangles,
+        }
+    }
+
+    /// Bytes used by the BVH nodes, the primitive array and the index array.
+    pub fn bvh_bytes(&self) -> usize {
+        std::mem::size_of_val(self.bvh.nodes.as_slice())
+            + std::mem::size_of_val(self.bvh.primitive_indices.as_slice())
+            + std::mem::size_of_val(self.prims.as_slice())
+    }
+
+    /// Number of primitives in the BVH.
+    pub fn primitive_count(&self) -> usize {
+        self.prims.len()
+    }
+
+    fn intersect_prim(
+        &self,
+        prim: &Prim,
+        o: Vec3,
+        d: Vec3,
+        tmin: f32,
+        tmax: f32,
+    ) -> (f32, f32, f32) {
+        const MISS: (f32, f32, f32) = (f32::INFINITY, 0.0, 0.0);
+        match *prim {
+            Prim::Triangle { v0, e1, e2, .. } => {
+                // Möller–Trumbore.
+                let pv = d.cross(e2);
+                let det = e1.dot(pv);
+                if det == 0.0 || !det.is_finite() {
+                    return MISS;
+                }
+                let inv = 1.0 / det;
+                let tv = o - v0;
+                let u = tv.dot(pv) * inv;
+                if !(0.0..=1.0).contains(&u) {
+                    return MISS;
+                }
+                let qv = tv.cross(e1);
+                let v = d.dot(qv) * inv;
+                if v < 0.0 || u + v > 1.0 {
+                    return MISS;
+                }
+                let t = e2.dot(qv) * inv;
+                if t > tmin && t < tmax {
+                    (t, u, v)
+                } else {
+                    MISS
+                }
+            }
+            Prim::Sphere { center, radius, .. } => {
+                // Hearn–Baker form: the discriminant from the perpendicular
+                // distance avoids cancellation for distant spheres.
+                let oc = o - center;
+                let b = oc.dot(d);
+                let perp = oc - d * b;
+                let disc = radius * radius - perp.length_squared();
+                if disc < 0.0 {
+                    return MISS;
+                }
+                let c = oc.length_squared() - radius * radius;
+                let sq = disc.sqrt();
+                let q = if b > 0.0 { -b - sq } else { -b + sq };
+                let (mut t0, mut t1) = (c / q, q);
+                if q == 0.0 {
+                    t0 = 0.0;
+                    t1 = 0.0;
+                }
+                if t0 > t1 {
+                    std::mem::swap(&mut t0, &mut t1);
+                }
+                if t0 > tmin && t0 < tmax {
+                    (t0, 0.0, 0.0)
+                } else if t1 > tmin && t1 < tmax {
+                    (t1, 0.0, 0.0)
+                } else {
+                    MISS
+                }
+            }
+            Prim::Disk { shape } => {
+                let Surface::Disk { to_local, .. } = &self.shapes[shape as usize].surface else {
+                    return MISS;
+                };
+                let lo = to_local.transform_point3(o);
+                let ld = to_local.transform_vector3(d);
+                if ld.z == 0.0 {
+                    return MISS;
+                }
+                let t = -lo.z / ld.z;
+                if !(t > tmin && t < tmax) {
+                    return MISS;
+                }
+                let x = lo.x + t * ld.x;
+                let y = lo.y + t * ld.y;
+                if x * x + y * y > 1.0 {
+                    return MISS;
+                }
+                (t, x, y)
+            }
+        }
+    }
+
+    /// Closest hit along `ray`, if any.
+    pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        let bray = BvhRay::new(Vec3A::from(ray.o), Vec3A::from(ray.d), ray.tmin, ray.tmax);
+        let mut hit = RayHit::none();
+        let mut uv = (0.0f32, 0.0f32);
+        let (o, d, tmin) = (ray.o, ray.d, ray.tmin);
+        let found = self.bvh.ray_traverse(bray, &mut hit, |r, id| {
+            let (t, u, v) = self.intersect_prim(&self.prims[id], o, d, tmin, r.tmax);
+            if t < r.tmax {
+                uv = (u, v);
+            }
+            t
+        });
+        found.then_some(Hit {
+            t: hit.t,
+            prim: hit.primitive_id,
+            u: uv.0,
+            v: uv.1,
+        })
+    }
+
+    /// True when something blocks `ray` strictly before `ray.tmax`.
+    pub fn occluded(&self, ray: &Ray) -> bool {
+        let bray = BvhRay::new(Vec3A::from(ray.o), Vec3A::from(ray.d), ray.tmin, ray.tmax);
+        let (o, d, tmin) = (ray.o, ray.d, ray.tmin);
+        !self.bvh.ray_traverse_miss(bray, |r, id| {
+            self.intersect_prim(&self.prims[id], o, d, tmin, r.tmax).0
+        })
+    }
+
+    /// True when the segment between two surface points (each offset off
+    /// its own surface) is unobstructed.
+    pub fn visible(&self, a: &SurfacePoint, b: &SurfacePoint) -> bool {
+        let pa = a.spawn_origin(b.p);
+        let pb = b.spawn_origin(pa);
+        self.segment_clear(pa, pb)
+    }
+
+    /// True when nothing lies strictly between the two points.
+    pub fn segment_clear(&self, from: Vec3, to: Vec3) -> bool {
+        let delta = to - from;
+        let dist = delta.length();
+        if !(dist > 0.0) || !dist.is_finite() {
+            return dist == 0.0;
+        }
+        let mut ray = Ray::new(from, delta / dist);
+        // Stop short of the target point by a relative margin (pbrt's
+        // ShadowEpsilon), so the far surface itself never counts as a blocker.
+        ray.tmax = dist * (1.0 - 1e-4);
+        !self.occluded(&ray)
+    }
+
+    /// The surface point of a hit, with its error bound and normals.
+    pub fn surface_point(&self, ray: &Ray, hit: &Hit) -> SurfacePoint {
+        match self.prims[hit.prim as usize] {
+            Prim::Triangle { shape, tri, .. } => {
+                self.triangle_point(shape, tri, 1.0 - hit.u - hit.v, hit.u, hit.v)
+            }
+            Prim::Sphere { shape, .. } => self.sphere_point(shape, ray.at(hit.t)),
+            Prim::Disk { shape } => self.disk_point(shape, hit.u, hit.v),
+        }
+    }
+
+    /// Point of a mesh triangle at barycentrics (b0, b1, b2).
+    pub fn triangle_point(&self, shape: u32, tri: u32, b0: f32, b1: f32, b2: f32) -> SurfacePoint {
+        let gs = &self.shapes[shape as usize];
+        let Surface::Mesh(m) = &gs.surface else {
+            unreachable!("triangle primitive on a non-mesh shape")
+        };
+        let idx = m.indices[tri as usize];
+        let [p0, p1, p2] = idx.map(|i| m.positions[i as usize]);
+        let p = p0 * b0 + p1 * b1 + p2 * b2;
+        let p_err = ((p0 * b0).abs() + (p1 * b1).abs() + (p2 * b2).abs()) * gamma(7);
+        let mut ng = (p1 - p0).cross(p2 - p0).normalize();
+        let mut ns = match &m.normals {
+            Some(n) => {
+                let [n0, n1, n2] = idx.map(|i| n[i as usize]);
+                (n0 * b0 + n1 * b1 + n2 * b2).try_normalize().unwrap_or(ng)
+            }
+            None => ng,
+        };
+        if m.normals.is_some() && ng.dot(ns) < 0.0 {
+            // Keep the geometric normal on the side the file's normals choose.
+            ng = -ng;
+        }
+        if gs.flip_normals {
+            ng = -ng;
+            ns = -ns;
+        }
+        SurfacePoint {
+            p,
+            p_err,
+            ng,
+            ns,
+            shape,
+        }
+    }
+
+    /// Point on a sphere near `p_guess` (reprojected onto the surface).
+    pub fn sphere_point(&self, shape: u32, p_guess: Vec3) -> SurfacePoint {
+        let gs = &self.shapes[shape as usize];
+        let Surface::Sphere { center, radius } = gs.surface else {
+            unreachable!("sphere primitive on a non-sphere shape")
+        };
+        let local = p_guess - center;
+        let len = local.length();
+        let local = if len > 0.0 {
+            local * (radius / len)
+        } else {
+            Vec3::new(0.0, 0.0, radius)
+        };
+        let p = center + local;
+        let p_err = local.abs() * gamma(5) + (center.abs() + local.abs()) * gamma(1);
+        let mut n = (local / radius).normalize();
+        if gs.flip_normals {
+            n = -n;
+        }
+        SurfacePoint {
+            p,
+            p_err,
+            ng: n,
+            ns: n,
+            shape,
+        }
+    }
+
+    /// Point on a disk at object-space (x, y).
+    pub fn disk_point(&self, shape: u32, x: f32, y: f32) -> SurfacePoint {
+        let gs = &self.shapes[shape as usize];
+        let Surface::Disk {
+            to_world, normal, ..
+        } = &gs.surface
+        else {
+            unreachable!("disk primitive on a non-disk shape")
+        };
+        let p = to_world.transform_point3(Vec3::new(x, y, 0.0));
+        let p_err = ((to_world.x_axis.truncate() * x).abs()
+            + (to_world.y_axis.truncate() * y).abs()
+            + to_world.w_axis.truncate().abs())
+            * gamma(4);
+        let n = if gs.flip_normals { -*normal } else { *normal };
+        SurfacePoint {
+            p,
+            p_err,
+            ng: n,
+            ns: n,
+            shape,
+        }
+    }
+}

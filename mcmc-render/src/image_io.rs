@@ -1,0 +1,62 @@
+//! Image files: linear EXR (the `exr` crate) and a tone-mapped sRGB PNG
+//! preview (the `png` crate).
+
+use crate::color::Rgb;
+use std::path::Path;
+
+/// Writes a linear-RGB EXR (32-bit float channels).
+pub fn write_exr(path: &Path, width: u32, height: u32, pixels: &[Rgb]) -> Result<(), String> {
+    let w = width as usize;
+    exr::prelude::write_rgb_file(path, w, height as usize, |x, y| {
+        let p = pixels[y * w + x];
+        (p.r, p.g, p.b)
+    })
+    .map_err(|e| format!("cannot write {}: {e}", path.display()))
+}
+
+/// Reads the first RGB(A) layer of an EXR file as linear RGB.
+pub fn read_exr(path: &Path) -> Result<(u32, u32, Vec<Rgb>), String> {
+    let image = exr::prelude::read_first_rgba_layer_from_file(
+        path,
+        |res, _| (res.width(), vec![Rgb::BLACK; res.width() * res.height()]),
+        |(w, px): &mut (usize, Vec<Rgb>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+            px[pos.y() * *w + pos.x()] = Rgb::new(r, g, b);
+        },
+    )
+    .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let size = image.layer_data.size;
+    let (_, pixels) = image.layer_data.channel_data.pixels;
+    Ok((size.width() as u32, size.height() as u32, pixels))
+}
+
+/// sRGB transfer function of a linear value clamped to [0, 1].
+fn srgb_encode(v: f32) -> u8 {
+    let v = if v.is_finite() {
+        v.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let s = if v <= 0.003_130_8 {
+        12.92 * v
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    };
+    (s * 255.0 + 0.5) as u8
+}
+
+/// Writes an 8-bit sRGB PNG preview (linear values clamped to [0, 1]).
+pub fn write_png(path: &Path, width: u32, height: u32, pixels: &[Rgb]) -> Result<(), String> {
+    let fail = |e: &dyn std::fmt::Display| format!("cannot write {}: {e}", path.display());
+    let file = std::fs::File::create(path).map_err(|e| fail(&e))?;
+    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), width, height);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+    let mut writer = enc.write_header().map_err(|e| fail(&e))?;
+    let data: Vec<u8> = pixels
+        .iter()
+        .flat_map(|p| [srgb_encode(p.r), srgb_encode(p.g), srgb_encode(p.b)])
+        .collect();
+    writer.write_image_data(&data).map_err(|e| fail(&e))?;
+    writer.finish().map_err(|e| fail(&e))
+}

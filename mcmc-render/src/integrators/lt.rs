@@ -1,0 +1,136 @@
+//! Light tracing: paths start on the emitters and every non-specular
+//! vertex is connected to the pinhole camera, splatting its contribution
+//! where the connection lands on the film. Depth semantics match
+//! [`super::pt`]: a connection closing a path of `k` segments is made only
+//! when `k ≤ max_depth`. Shading normals are handled with Veach's adjoint
+//! correction, since importance transport is not symmetric under them.
+
+use super::{FilmSink, Integrator, SampleDomain, SampleStats, rr_probability};
+use crate::bsdf::TransportMode;
+use crate::color::Rgb;
+use crate::frame::Frame;
+use crate::geometry::Ray;
+use crate::sampling::RandomSource;
+use crate::scene::Scene;
+use glam::Vec3;
+
+/// Light tracer settings.
+#[derive(Clone, Copy, Debug)]
+pub struct LightTracer {
+    /// Longest path in segments, camera connection included (`u32::MAX` = unbounded).
+    pub max_depth: u32,
+    /// Depth from which Russian roulette applies.
+    pub rr_depth: u32,
+}
+
+/// `|wo·ns| |wi·ng| / (|wo·ng| |wi·ns|)`: the factor that makes importance
+/// transport with shading normals adjoint to radiance transport.
+fn shading_correction(wo: Vec3, wi: Vec3, ng: Vec3, ns: Vec3) -> f32 {
+    let num = wo.dot(ns).abs() * wi.dot(ng).abs();
+    let den = wo.dot(ng).abs() * wi.dot(ns).abs();
+    if den > 0.0 { num / den } else { 0.0 }
+}
+
+impl Integrator for LightTracer {
+    fn name(&self) -> &'static str {
+        "lt"
+    }
+
+    fn domain(&self) -> SampleDomain {
+        SampleDomain::LightPaths
+    }
+
+    fn sample(
+        &self,
+        scene: &Scene,
+        _pixel: Option<(u32, u32)>,
+        source: &mut dyn RandomSource,
+        film: &mut dyn FilmSink,
+        stats: &mut SampleStats,
+    ) {
+        let geometry = &scene.geometry;
+        let camera = &scene.camera;
+        let u_sel = source.next_1d();
+        let u_pos = source.next_2d();
+        let u_dir = source.next_2d();
+        let Some(es) = scene.lights.sample_emission(geometry, u_sel, u_pos, u_dir) else {
+            return;
+        };
+        let mut splat = |p, c: Rgb, stats: &mut SampleStats| {
+            if c.is_finite() {
+                film.splat(p, c);
+            } else {
+                stats.nonfinite += 1;
+            }
+        };
+
+        // The emitter seen directly (a path of one segment).
+        if self.max_depth >= 1
+            && !es.is_delta
+            && let Some(cs) = camera.sample_wi(es.p.p)
+        {
+            let cos_l = es.p.ns.dot(cs.wi);
+            if cos_l > 0.0 && geometry.segment_clear(es.p.spawn_origin(cs.origin), cs.origin) {
+                let c = es.le * (cos_l / es.pdf_pos * cs.we / cs.pdf);
+                splat(cs.raster, c, stats);
+            }
+        }
+
+        let mut beta = es.weight;
+        let mut ray = if es.is_delta {
+            Ray::new(es.p.p, es.dir)
+        } else {
+            es.p.spawn_ray(es.dir)
+        };
+        // Segments from the light to the current vertex.
+        let mut depth: u32 = 1;
+        while let Some(its) = scene.intersect(&ray) {
+            let sp = its.sp;
+            let wo_world = -ray.d;
+            let bsdf = scene.bsdf(sp.shape);
+            let frame = Frame::from_normal(sp.ns);
+            let wo = frame.to_local(wo_world);
+
+            // Connect to the camera: a path of depth + 1 segments.
+            if depth.saturating_add(1) <= self.max_depth
+                && !bsdf.is_delta()
+                && let Some(cs) = camera.sample_wi(sp.p)
+            {
+                let wi = frame.to_local(cs.wi);
+                let f = bsdf.eval(wo, wi, TransportMode::Importance);
+                if !f.is_black() && geometry.segment_clear(sp.spawn_origin(cs.origin), cs.origin) {
+                    let corr = shading_correction(wo_world, cs.wi, sp.ng, sp.ns);
+                    let c = beta * f * (wi.z.abs() * corr * cs.we / cs.pdf);
+                    splat(cs.raster, c, stats);
+                }
+            }
+            if depth.saturating_add(1) >= self.max_depth {
+                break;
+            }
+
+            let u_lobe = source.next_1d();
+            let u_dir = source.next_2d();
+            let u_rr = source.next_1d();
+            let Some(bs) = bsdf.sample(wo, u_lobe, u_dir, TransportMode::Importance) else {
+                break;
+            };
+            if !(bs.pdf > 0.0) || bs.weight.is_black() {
+                break;
+            }
+            let wi_world = frame.to_world(bs.wi);
+            beta *= bs.weight * shading_correction(wo_world, wi_world, sp.ng, sp.ns);
+            ray = sp.spawn_ray(wi_world);
+            depth += 1;
+            if depth >= self.rr_depth {
+                let q = rr_probability(beta, 1.0);
+                if !(u_rr < q) {
+                    break;
+                }
+                beta = beta / q;
+            }
+            if beta.is_black() {
+                break;
+            }
+        }
+    }
+}

@@ -1,0 +1,102 @@
+//! Integrators, one file each, behind one per-sample interface so that the
+//! render driver (and later PSSMLT/MMLT, which replay a sample from a
+//! primary-sample vector) can run any of them.
+//!
+//! # Order in which random numbers are consumed
+//!
+//! Every number comes from the [`RandomSource`] passed to
+//! [`Integrator::sample`], in exactly this order. A fixed number of draws
+//! per vertex is consumed whether or not a technique applies (e.g. the
+//! light-sampling numbers at a specular vertex), so dimension `k` of a
+//! primary-sample vector always feeds the same decision.
+//!
+//! **Path tracing** ([`pt`]):
+//! 1. `next_2d`: position inside the pixel (x, then y).
+//! 2. For each surface vertex that is not the last one allowed by
+//!    `max_depth`, 7 numbers:
+//!    - `next_1d`: light selection (next-event estimation);
+//!    - `next_2d`: position on the light;
+//!    - `next_1d`: BSDF lobe choice;
+//!    - `next_2d`: BSDF direction;
+//!    - `next_1d`: Russian roulette (always drawn, used from `rr_depth` on).
+//!
+//! **Light tracing** ([`lt`]):
+//! 1. `next_1d`: light selection; `next_2d`: position on the light;
+//!    `next_2d`: emitted direction.
+//! 2. For each surface vertex from which the path may continue, 4 numbers:
+//!    - `next_1d`: BSDF lobe choice; `next_2d`: BSDF direction;
+//!    - `next_1d`: Russian roulette.
+//!
+//!    The connection to the pinhole camera uses no numbers.
+
+pub mod lt;
+pub mod pt;
+
+use crate::color::Rgb;
+use crate::film::Film;
+use crate::sampling::RandomSource;
+use crate::scene::Scene;
+use glam::Vec2;
+
+/// Where an integrator's contributions go.
+pub trait FilmSink {
+    /// A camera sample at raster position `p` (filter-weighted mean).
+    fn add_sample(&mut self, p: Vec2, l: Rgb);
+    /// A splat at raster position `p` (divided by paths per pixel at the end).
+    fn splat(&mut self, p: Vec2, l: Rgb);
+}
+
+impl FilmSink for Film {
+    fn add_sample(&mut self, p: Vec2, l: Rgb) {
+        Film::add_sample(self, p, l);
+    }
+    fn splat(&mut self, p: Vec2, l: Rgb) {
+        Film::splat(self, p, l);
+    }
+}
+
+/// How an integrator's samples are organised.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SampleDomain {
+    /// One sample per call for a given pixel (path tracing).
+    Pixels,
+    /// One light path per call, splatting anywhere (light tracing).
+    LightPaths,
+}
+
+/// Counters an integrator updates while sampling.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SampleStats {
+    /// Contributions dropped because they were NaN or infinite.
+    pub nonfinite: u64,
+}
+
+impl SampleStats {
+    /// Adds another set of counters.
+    pub fn merge(&mut self, o: &SampleStats) {
+        self.nonfinite += o.nonfinite;
+    }
+}
+
+/// A light-transport estimator, evaluated one sample at a time.
+pub trait Integrator: Send + Sync {
+    /// Short name (`pt`, `lt`).
+    fn name(&self) -> &'static str;
+    /// How samples are organised.
+    fn domain(&self) -> SampleDomain;
+    /// Draws one sample: for [`SampleDomain::Pixels`] `pixel` is the pixel
+    /// to estimate; for [`SampleDomain::LightPaths`] it is `None`.
+    fn sample(
+        &self,
+        scene: &Scene,
+        pixel: Option<(u32, u32)>,
+        source: &mut dyn RandomSource,
+        film: &mut dyn FilmSink,
+        stats: &mut SampleStats,
+    );
+}
+
+/// Mitsuba's Russian-roulette continuation probability.
+pub(crate) fn rr_probability(throughput: Rgb, eta_scale: f32) -> f32 {
+    (throughput.max_channel() * eta_scale).min(0.95)
+}

@@ -1,0 +1,359 @@
+//! Emitters: one-sided area lights on any shape and point lights, chosen
+//! in proportion to their power.
+//!
+//! Area lights are sampled uniformly by area (per-triangle area CDF for
+//! meshes); densities are converted to solid angle at the receiving point.
+
+use crate::color::Rgb;
+use crate::frame::Frame;
+use crate::geometry::{Geometry, Surface, SurfacePoint, triangle_area};
+use crate::scene::PointLightDesc;
+use crate::warp;
+use glam::{Vec2, Vec3};
+use std::f32::consts::PI;
+
+/// One emitter.
+#[derive(Clone, Debug)]
+pub enum Light {
+    /// Constant radiance leaving the normal side of a shape.
+    Area {
+        /// Shape index.
+        shape: u32,
+        /// Emitted radiance.
+        radiance: Rgb,
+        /// Shape area.
+        area: f32,
+        /// Normalised cumulative triangle areas (meshes only).
+        tri_cdf: Vec<f32>,
+    },
+    /// Isotropic point light.
+    Point {
+        /// Position.
+        position: Vec3,
+        /// Radiant intensity.
+        intensity: Rgb,
+    },
+}
+
+/// A light sample seen from a receiving point (next-event estimation).
+#[derive(Clone, Copy, Debug)]
+pub struct DirectSample {
+    /// The light point (for point lights: its position, zero error, normal towards the receiver).
+    pub p: SurfacePoint,
+    /// Unit direction from the receiver towards the light.
+    pub wi: Vec3,
+    /// Distance to the light point.
+    pub dist: f32,
+    /// Incident radiance (for point lights `I / d²`).
+    pub le: Rgb,
+    /// Solid-angle density at the receiver, including the selection
+    /// probability (for point lights: the selection probability alone).
+    pub pdf: f32,
+    /// True for point lights.
+    pub is_delta: bool,
+}
+
+/// A light-path origin for light tracing.
+#[derive(Clone, Copy, Debug)]
+pub struct EmissionSample {
+    /// The starting point.
+    pub p: SurfacePoint,
+    /// Unit direction of the first segment.
+    pub dir: Vec3,
+    /// `Le · cos / (p_select · p_area · p_dir)`, the initial throughput.
+    pub weight: Rgb,
+    /// Radiance along `dir` (area lights) or intensity (point lights),
+    /// before division by the densities.
+    pub le: Rgb,
+    /// True for point lights (their origin is a delta position).
+    pub is_delta: bool,
+    /// Density of the origin: selection probability times area density
+    /// (for point lights: the selection probability).
+    pub pdf_pos: f32,
+}
+
+/// All emitters and their selection distribution.
+#[derive(Clone, Debug, Default)]
+pub struct Lights {
+    /// The emitters.
+    pub lights: Vec<Light>,
+    pmf: Vec<f32>,
+    cdf: Vec<f32>,
+}
+
+impl Lights {
+    /// Builds emitters from `(shape, radiance)` pairs and point lights.
+    pub fn new(geometry: &Geometry, area: &[(u32, Rgb)], points: &[PointLightDesc]) -> Lights {
+        let mut lights = Vec::new();
+        for &(shape, radiance) in area {
+            let surface = &geometry.shapes[shape as usize].surface;
+            let tri_cdf = match surface {
+                Surface::Mesh(m) => {
+                    let mut acc = 0.0f64;
+                    let mut cdf: Vec<f32> = m
+                        .indices
+                        .iter()
+                        .map(|t| {
+                            acc += triangle_area(m, t) as f64;
+                            acc as f32
+                        })
+                        .collect();
+                    let total = acc as f32;
+                    cdf.iter_mut().for_each(|c| *c /= total);
+                    if let Some(last) = cdf.last_mut() {
+                        *last = 1.0;
+                    }
+                    cdf
+                }
+                _ => Vec::new(),
+            };
+            lights.push(Light::Area {
+                shape,
+                radiance,
+                area: surface.area(),
+                tri_cdf,
+            });
+        }
+        for p in points {
+            lights.push(Light::Point {
+                position: p.position,
+                intensity: p.intensity,
+            });
+        }
+        let power: Vec<f64> = lights
+            .iter()
+            .map(|l| match l {
+                Light::Area { radiance, area, .. } => {
+                    (PI * area * radiance.luminance()).max(0.0) as f64
+                }
+                Light::Point { intensity, .. } => {
+                    (4.0 * PI * intensity.luminance()).max(0.0) as f64
+                }
+            })
+            .collect();
+        let total: f64 = power.iter().sum();
+        let pmf: Vec<f32> = if total > 0.0 && total.is_finite() {
+            power.iter().map(|p| (p / total) as f32).collect()
+        } else {
+            vec![1.0 / lights.len().max(1) as f32; lights.len()]
+        };
+        let mut acc = 0.0f32;
+        let mut cdf: Vec<f32> = pmf
+            .iter()
+            .map(|p| {
+                acc += p;
+                acc
+            })
+            .collect();
+        if let Some(last) = cdf.last_mut() {
+            *last = 1.0;
+        }
+        Lights { lights, pmf, cdf }
+    }
+
+    /// True when the scene has no emitter.
+    pub fn is_empty(&self) -> bool {
+        self.lights.is_empty()
+    }
+
+    /// Probability of selecting light `i`.
+    pub fn pmf(&self, i: u32) -> f32 {
+        self.pmf[i as usize]
+    }
+
+    /// Picks a light with probability ∝ power; returns (index, pmf, `u` remapped to [0,1)).
+    pub fn select(&self, u: f32) -> Option<(u32, f32)> {
+        if self.lights.is_empty() {
+            return None;
+        }
+        let i = self
+            .cdf
+            .partition_point(|&c| c <= u)
+            .min(self.lights.len() - 1);
+        let p = self.pmf[i];
+        (p > 0.0).then_some((i as u32, p))
+    }
+
+    /// Uniform point on an area light; returns it with its area density.
+    fn sample_area_point(
+        &self,
+        geometry: &Geometry,
+        light: &Light,
+        u: (f32, f32),
+    ) -> Option<(SurfacePoint, f32)> {
+        let Light::Area {
+            shape,
+            area,
+            tri_cdf,
+            ..
+        } = light
+        else {
+            return None;
+        };
+        let sp = match &geometry.shapes[*shape as usize].surface {
+            Surface::Mesh(_) => {
+                let i = tri_cdf
+                    .partition_point(|&c| c <= u.0)
+                    .min(tri_cdf.len() - 1);
+                let lo = if i == 0 { 0.0 } else { tri_cdf[i - 1] };
+                let width = tri_cdf[i] - lo;
+                let u0 = if width > 0.0 {
+                    ((u.0 - lo) / width).clamp(0.0, crate::sampling::ONE_MINUS_EPSILON)
+                } else {
+                    0.5
+                };
+                let (b0, b1, b2) = warp::uniform_triangle((u0, u.1));
+                geometry.triangle_point(*shape, i as u32, b0, b1, b2)
+            }
+            Surface::Sphere { center, radius } => {
+                geometry.sphere_point(*shape, *center + warp::uniform_sphere(u) * *radius)
+            }
+            Surface::Disk { .. } => {
+                let d: Vec2 = warp::concentric_disk(u);
+                geometry.disk_point(*shape, d.x, d.y)
+            }
+        };
+        Some((sp, 1.0 / area))
+    }
+
+    /// Next-event estimation: a light point seen from `p`, with numbers
+    /// consumed as `u_sel` (light choice) then `u` (position).
+    pub fn sample_direct(
+        &self,
+        geometry: &Geometry,
+        p: Vec3,
+        u_sel: f32,
+        u: (f32, f32),
+    ) -> Option<DirectSample> {
+        let (i, pmf) = self.select(u_sel)?;
+        let light = &self.lights[i as usize];
+        match light {
+            Light::Point {
+                position,
+                intensity,
+            } => {
+                let delta = *position - p;
+                let dist2 = delta.length_squared();
+                if !(dist2 > 0.0) {
+                    return None;
+                }
+                let dist = dist2.sqrt();
+                let wi = delta / dist;
+                Some(DirectSample {
+                    p: SurfacePoint {
+                        p: *position,
+                        p_err: Vec3::ZERO,
+                        ng: -wi,
+                        ns: -wi,
+                        shape: u32::MAX,
+                    },
+                    wi,
+                    dist,
+                    le: *intensity / dist2,
+                    pdf: pmf,
+                    is_delta: true,
+                })
+            }
+            Light::Area { radiance, .. } => {
+                let (lp, pdf_area) = self.sample_area_point(geometry, light, u)?;
+                let delta = lp.p - p;
+                let dist2 = delta.length_squared();
+                if !(dist2 > 0.0) {
+                    return None;
+                }
+                let dist = dist2.sqrt();
+                let wi = delta / dist;
+                let cos_l = lp.ns.dot(-wi);
+                if cos_l <= 0.0 {
+                    return None;
+                }
+                let pdf = pmf * pdf_area * dist2 / cos_l;
+                if !(pdf > 0.0 && pdf.is_finite()) {
+                    return None;
+                }
+                Some(DirectSample {
+                    p: lp,
+                    wi,
+                    dist,
+                    le: *radiance,
+                    pdf,
+                    is_delta: false,
+                })
+            }
+        }
+    }
+
+    /// Solid-angle density with which [`Lights::sample_direct`] from `p`
+    /// produces the point `lp` of area light `i` (0 for the back side).
+    pub fn pdf_direct(&self, i: u32, p: Vec3, lp: &SurfacePoint) -> f32 {
+        let Light::Area { area, .. } = &self.lights[i as usize] else {
+            return 0.0;
+        };
+        let delta = lp.p - p;
+        let dist2 = delta.length_squared();
+        let cos_l = lp.ns.dot(-delta) / dist2.sqrt();
+        if cos_l <= 0.0 || !(dist2 > 0.0) {
+            return 0.0;
+        }
+        self.pmf[i as usize] * dist2 / (cos_l * area)
+    }
+
+    /// Radiance of area light `i` leaving `sp` towards unit `w`.
+    pub fn area_radiance(&self, i: u32, sp: &SurfacePoint, w: Vec3) -> Rgb {
+        match &self.lights[i as usize] {
+            Light::Area { radiance, .. } if sp.ns.dot(w) > 0.0 => *radiance,
+            _ => Rgb::BLACK,
+        }
+    }
+
+    /// Starts a light path: numbers consumed as `u_sel`, `u_pos`, `u_dir`.
+    pub fn sample_emission(
+        &self,
+        geometry: &Geometry,
+        u_sel: f32,
+        u_pos: (f32, f32),
+        u_dir: (f32, f32),
+    ) -> Option<EmissionSample> {
+        let (i, pmf) = self.select(u_sel)?;
+        let light = &self.lights[i as usize];
+        match light {
+            Light::Point {
+                position,
+                intensity,
+            } => {
+                let dir = warp::uniform_sphere(u_dir);
+                Some(EmissionSample {
+                    p: SurfacePoint {
+                        p: *position,
+                        p_err: Vec3::ZERO,
+                        ng: dir,
+                        ns: dir,
+                        shape: u32::MAX,
+                    },
+                    dir,
+                    weight: *intensity * (4.0 * PI / pmf),
+                    le: *intensity,
+                    is_delta: true,
+                    pdf_pos: pmf,
+                })
+            }
+            Light::Area { radiance, area, .. } => {
+                let (lp, _) = self.sample_area_point(geometry, light, u_pos)?;
+                let local = warp::cosine_hemisphere(u_dir);
+                if local.z <= 0.0 {
+                    return None;
+                }
+                let dir = Frame::from_normal(lp.ns).to_world(local);
+                // Le·cos / (pmf · (1/A) · cos/π) = Le·π·A / pmf.
+                Some(EmissionSample {
+                    p: lp,
+                    dir,
+                    weight: *radiance * (PI * area / pmf),
+                    le: *radiance,
+                    is_delta: false,
+                    pdf_pos: pmf / area,
+                })
+            }
+        }
+    }
+}

@@ -1,0 +1,277 @@
+//! The render driver: runs an integrator over the image in passes of work
+//! units on a rayon pool, with a sample or time budget and a stop flag.
+//!
+//! Determinism: the work of a pass is cut into units that do not depend on
+//! the thread count (image tiles for pixel-driven integrators, fixed chunks
+//! of light paths for splatting ones). Each unit seeds its own generator
+//! from `(seed, pass, unit)`, renders into a private film, and the unit
+//! films are added into the image in unit order. One seed therefore gives
+//! a bit-identical image on 1 or 8 threads.
+//!
+//! Stopping (Ctrl-C or the time budget) discards the pass in flight, so the
+//! result always holds whole passes and is normalised by what it holds.
+
+use crate::film::{Film, Filter};
+use crate::integrators::{Integrator, SampleDomain, SampleStats};
+use crate::sampling::IndependentSource;
+use crate::scene::Scene;
+use rand::SeedableRng;
+use rand_xoshiro::Xoshiro256PlusPlus;
+use rayon::prelude::*;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// Tile edge in pixels for pixel-driven integrators.
+const TILE: u32 = 32;
+/// Light-path chunks per pass for splatting integrators (fixed, so that the
+/// image does not depend on the thread count).
+const LIGHT_CHUNKS: usize = 8;
+
+/// What to render and for how long.
+#[derive(Clone, Debug)]
+pub struct RenderSettings {
+    /// Samples per pixel (light paths per pixel for light tracing).
+    /// `None` with a time budget means "until the budget is spent".
+    pub spp: Option<u32>,
+    /// Wall-clock budget.
+    pub time_budget: Option<Duration>,
+    /// Seed of every random stream.
+    pub seed: u64,
+}
+
+/// Notified while rendering (progress bars, previews).
+pub trait RenderObserver: Sync {
+    /// A work unit finished `samples` samples (called from worker threads).
+    fn unit_done(&self, _samples: u64) {}
+    /// A pass finished; `film` holds everything so far, developed with
+    /// [`RenderResult::paths_per_pixel`]-style normalisation `paths_per_pixel`.
+    fn pass_done(&self, _film: &Film, _spp_done: u64, _paths_per_pixel: f64) {}
+}
+
+/// An observer that ignores everything.
+pub struct NoObserver;
+impl RenderObserver for NoObserver {}
+
+/// The outcome of a render.
+#[derive(Clone, Debug)]
+pub struct RenderResult {
+    /// Accumulated film.
+    pub film: Film,
+    /// Completed samples per pixel.
+    pub spp_done: u64,
+    /// Total samples (camera samples or light paths).
+    pub samples: u64,
+    /// Splat normalisation: light paths per pixel (0 for pixel-driven integrators).
+    pub paths_per_pixel: f64,
+    /// Wall-clock seconds spent rendering.
+    pub seconds: f64,
+    /// True when stopped early (Ctrl-C or time budget) before the requested spp.
+    pub interrupted: bool,
+    /// Sampler counters.
+    pub stats: SampleStats,
+}
+
+impl RenderResult {
+    /// The developed image, row-major.
+    pub fn image(&self) -> Vec<crate::color::Rgb> {
+        self.film.develop(self.paths_per_pixel)
+    }
+}
+
+/// SplitMix64 finaliser: decorrelates seeds built from small integers.
+fn mix(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// The generator of one work unit.
+fn unit_source(seed: u64, pass: u64, unit: u64) -> IndependentSource<Xoshiro256PlusPlus> {
+    let s = mix(mix(mix(seed) ^ pass) ^ unit.wrapping_mul(0x2545_f491_4f6c_dd1d));
+    IndependentSource::new(Xoshiro256PlusPlus::seed_from_u64(s))
+}
+
+/// Samples per pixel of each pass: small first passes for quick previews,
+/// then at most `cap`; fixed by `total` alone (never by timing or threads).
+fn pass_schedule(pass: u64, cap: u32) -> u32 {
+    (1u32 << pass.min(8)).min(cap)
+}
+
+/// Renders `scene` with `integrator`. `stop` aborts (the pass in flight is discarded).
+pub fn render(
+    scene: &Scene,
+    integrator: &dyn Integrator,
+    settings: &RenderSettings,
+    stop: &AtomicBool,
+    observer: &dyn RenderObserver,
+) -> RenderResult {
+    let (width, height) = (scene.film.width, scene.film.height);
+    let filter = Arc::new(Filter::new(scene.film.filter, width, height));
+    let mut film = Film::new(width, height, filter.clone());
+    let start = Instant::now();
+    let deadline = settings.time_budget.map(|b| start + b);
+    let target = settings.spp.map(u64::from);
+    let pixels = width as u64 * height as u64;
+    let domain = integrator.domain();
+    let cap = match domain {
+        SampleDomain::Pixels => 16,
+        SampleDomain::LightPaths => 4,
+    };
+    let mut spp_done = 0u64;
+    let mut stats = SampleStats::default();
+    let mut interrupted = false;
+    let mut pass = 0u64;
+    let out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
+
+    // Tiles in scanline order.
+    let tiles: Vec<(u32, u32, u32, u32)> = (0..height.div_ceil(TILE))
+        .flat_map(|ty| {
+            (0..width.div_ceil(TILE)).map(move |tx| {
+                let x0 = tx * TILE;
+                let y0 = ty * TILE;
+                (x0, y0, (x0 + TILE).min(width), (y0 + TILE).min(height))
+            })
+        })
+        .collect();
+    let mut light_films: Vec<Film> = if domain == SampleDomain::LightPaths {
+        (0..LIGHT_CHUNKS)
+            .map(|_| Film::new(width, height, filter.clone()))
+            .collect()
+    } else {
+        Vec::new()
+    };
+
+    loop {
+        if let Some(t) = target
+            && spp_done >= t
+        {
+            break;
+        }
+        if stop.load(Ordering::Relaxed) || out_of_time() {
+            interrupted = target.is_none_or(|t| spp_done < t);
+            break;
+        }
+        let mut spp = pass_schedule(pass, cap);
+        if let Some(t) = target {
+            spp = spp.min((t - spp_done) as u32);
+        }
+        let aborted = AtomicBool::new(false);
+        let check_abort = || {
+            if stop.load(Ordering::Relaxed) || out_of_time() {
+                aborted.store(true, Ordering::Relaxed);
+            }
+            aborted.load(Ordering::Relaxed)
+        };
+        let seed = settings.seed;
+        let pass_stats: Vec<SampleStats> = match domain {
+            SampleDomain::Pixels => {
+                let results: Vec<(Film, SampleStats)> = tiles
+                    .par_iter()
+                    .enumerate()
+                    .map(|(i, &(x0, y0, x1, y1))| {
+                        let mut tile =
+                            Film::for_tile(width, height, x0, y0, x1, y1, filter.clone());
+                        let mut st = SampleStats::default();
+                        if check_abort() {
+                            return (tile, st);
+                        }
+                        let mut src = unit_source(seed, pass, i as u64);
+                        for y in y0..y1 {
+                            for x in x0..x1 {
+                                for _ in 0..spp {
+                                    integrator.sample(
+                                        scene,
+                                        Some((x, y)),
+                                        &mut src,
+                                        &mut tile,
+                                        &mut st,
+                                    );
+                                }
+                            }
+                        }
+                        observer.unit_done(((x1 - x0) * (y1 - y0)) as u64 * spp as u64);
+                        (tile, st)
+                    })
+                    .collect();
+                if aborted.load(Ordering::Relaxed) {
+                    Vec::new()
+                } else {
+                    results
+                        .into_iter()
+                        .map(|(tile, st)| {
+                            film.add_film(&tile);
+                            st
+                        })
+                        .collect()
+                }
+            }
+            SampleDomain::LightPaths => {
+                let paths = pixels * spp as u64;
+                let per = paths / LIGHT_CHUNKS as u64;
+                let extra = paths % LIGHT_CHUNKS as u64;
+                let results: Vec<SampleStats> = light_films
+                    .par_iter_mut()
+                    .enumerate()
+                    .map(|(i, f)| {
+                        f.clear();
+                        let mut st = SampleStats::default();
+                        let n = per + u64::from((i as u64) < extra);
+                        let mut src = unit_source(seed, pass, i as u64);
+                        let mut done = 0u64;
+                        while done < n {
+                            if check_abort() {
+                                return st;
+                            }
+                            let batch = (n - done).min(65_536);
+                            for _ in 0..batch {
+                                integrator.sample(scene, None, &mut src, f, &mut st);
+                            }
+                            done += batch;
+                            observer.unit_done(batch);
+                        }
+                        st
+                    })
+                    .collect();
+                if aborted.load(Ordering::Relaxed) {
+                    Vec::new()
+                } else {
+                    for f in &light_films {
+                        film.add_film(f);
+                    }
+                    results
+                }
+            }
+        };
+        if aborted.load(Ordering::Relaxed) {
+            interrupted = true;
+            break;
+        }
+        for st in &pass_stats {
+            stats.merge(st);
+        }
+        spp_done += spp as u64;
+        pass += 1;
+        let ppp = if domain == SampleDomain::LightPaths {
+            spp_done as f64
+        } else {
+            0.0
+        };
+        observer.pass_done(&film, spp_done, ppp);
+    }
+    let paths_per_pixel = if domain == SampleDomain::LightPaths {
+        spp_done as f64
+    } else {
+        0.0
+    };
+    RenderResult {
+        film,
+        spp_done,
+        samples: spp_done * pixels,
+        paths_per_pixel,
+        seconds: start.elapsed().as_secs_f64(),
+        interrupted,
+        stats,
+    }
+}

@@ -1,0 +1,359 @@
+//! Scenes: loading the Mitsuba 3 XML subset ([`xml`], [`loader`], [`mesh`])
+//! into a [`SceneDesc`], and building the runtime [`Scene`] (BVH, BSDFs,
+//! lights, camera) from it.
+
+pub mod loader;
+pub mod mesh;
+pub mod named;
+pub mod xml;
+
+use crate::bsdf::{Bsdf, BsdfDesc};
+use crate::camera::Camera;
+use crate::color::Rgb;
+use crate::geometry::{GeoShape, Geometry, Hit, MeshData, Ray, Surface, SurfacePoint};
+use crate::light::Lights;
+use glam::{Mat3, Mat4, Vec3};
+use std::collections::HashMap;
+use std::path::Path;
+
+/// Why a scene could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    /// A problem at a known place in a scene file.
+    #[error("{location}: {message}")]
+    At {
+        /// `file:line`.
+        location: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A file could not be read.
+    #[error("cannot read {path}: {message}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The system's reason.
+        message: String,
+    },
+    /// A problem with the scene as a whole.
+    #[error("{0}")]
+    Invalid(String),
+}
+
+/// Which image axis `fov` spans (Mitsuba's `fov_axis`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FovAxis {
+    /// Horizontal (default).
+    X,
+    /// Vertical.
+    Y,
+    /// Diagonal.
+    Diagonal,
+    /// The smaller of the two image dimensions.
+    Smaller,
+    /// The larger of the two image dimensions.
+    Larger,
+}
+
+/// The perspective sensor's parameters.
+#[derive(Clone, Debug)]
+pub struct CameraDesc {
+    /// Camera to world (looks down local +z, +y up).
+    pub to_world: Mat4,
+    /// Field of view in degrees.
+    pub fov_deg: f32,
+    /// Axis the field of view spans.
+    pub fov_axis: FovAxis,
+    /// Near clipping distance.
+    pub near_clip: f32,
+    /// Far clipping distance.
+    pub far_clip: f32,
+}
+
+impl Default for CameraDesc {
+    fn default() -> Self {
+        CameraDesc {
+            to_world: Mat4::IDENTITY,
+            fov_deg: 39.597_755,
+            fov_axis: FovAxis::X,
+            near_clip: 0.01,
+            far_clip: 10000.0,
+        }
+    }
+}
+
+/// Reconstruction filter.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum FilterKind {
+    /// Box of radius 0.5 pixel.
+    Box,
+    /// Windowed Gaussian cut at 4 standard deviations (Mitsuba's default, stddev 0.5).
+    Gaussian {
+        /// Standard deviation in pixels.
+        stddev: f32,
+    },
+}
+
+/// The film's parameters.
+#[derive(Clone, Debug)]
+pub struct FilmDesc {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Reconstruction filter.
+    pub filter: FilterKind,
+}
+
+impl Default for FilmDesc {
+    fn default() -> Self {
+        FilmDesc {
+            width: 768,
+            height: 576,
+            filter: FilterKind::Gaussian { stddev: 0.5 },
+        }
+    }
+}
+
+/// Path-integrator settings in Mitsuba's semantics.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct IntegratorDesc {
+    /// Longest path in segments (`u32::MAX` = unbounded; 1 = emitters
+    /// seen directly; 2 = direct lighting).
+    pub max_depth: u32,
+    /// Depth from which Russian roulette applies.
+    pub rr_depth: u32,
+}
+
+impl Default for IntegratorDesc {
+    fn default() -> Self {
+        IntegratorDesc {
+            max_depth: u32::MAX,
+            rr_depth: 5,
+        }
+    }
+}
+
+/// A point light.
+#[derive(Clone, Debug)]
+pub struct PointLightDesc {
+    /// World position.
+    pub position: Vec3,
+    /// Radiant intensity (W/sr per channel).
+    pub intensity: Rgb,
+}
+
+/// The geometry of a shape in world space.
+#[derive(Clone, Debug)]
+pub enum ShapeGeometry {
+    /// Triangle mesh (obj, ply, rectangle, cube).
+    Mesh(mesh::TriMesh),
+    /// Analytic sphere.
+    Sphere {
+        /// Centre.
+        center: Vec3,
+        /// Radius.
+        radius: f32,
+    },
+    /// Unit disk in z = 0 mapped by `to_world`.
+    Disk {
+        /// Object to world.
+        to_world: Mat4,
+    },
+}
+
+/// A shape with its material and optional area emission.
+#[derive(Clone, Debug)]
+pub struct ShapeDesc {
+    /// Mitsuba plugin name (`obj`, `sphere`, …).
+    pub kind: String,
+    /// World-space geometry.
+    pub geometry: ShapeGeometry,
+    /// Index into [`SceneDesc::bsdfs`].
+    pub bsdf: usize,
+    /// Area-emitter radiance, if the shape emits.
+    pub emission: Option<Rgb>,
+    /// Mitsuba's `flip_normals`.
+    pub flip_normals: bool,
+    /// `file:line` of the shape element.
+    pub location: String,
+}
+
+/// Everything a scene file describes, with Mitsuba's defaults filled in.
+#[derive(Clone, Debug, Default)]
+pub struct SceneDesc {
+    /// Shapes.
+    pub shapes: Vec<ShapeDesc>,
+    /// BSDFs (shapes refer to them by index).
+    pub bsdfs: Vec<BsdfDesc>,
+    /// Point lights.
+    pub point_lights: Vec<PointLightDesc>,
+    /// Camera.
+    pub camera: CameraDesc,
+    /// Film.
+    pub film: FilmDesc,
+    /// Integrator settings.
+    pub integrator: IntegratorDesc,
+    /// Samples per pixel (`independent` sampler's `sample_count`, default 4).
+    pub sample_count: u32,
+}
+
+/// Per-shape runtime data.
+#[derive(Clone, Debug)]
+pub struct ShapeInfo {
+    /// Index into [`Scene::bsdfs`].
+    pub bsdf: u32,
+    /// Index into the lights, when the shape emits.
+    pub light: Option<u32>,
+    /// Plugin name, for `info`.
+    pub kind: String,
+}
+
+/// A scene ready to render.
+pub struct Scene {
+    /// Geometry and BVH.
+    pub geometry: Geometry,
+    /// Per-shape data, indexed like [`Geometry::shapes`].
+    pub shapes: Vec<ShapeInfo>,
+    /// Runtime BSDFs.
+    pub bsdfs: Vec<Bsdf>,
+    /// Parsed BSDFs, for reporting.
+    pub bsdf_descs: Vec<BsdfDesc>,
+    /// Emitters and the light-selection distribution.
+    pub lights: Lights,
+    /// The camera.
+    pub camera: Camera,
+    /// Film settings.
+    pub film: FilmDesc,
+    /// Integrator settings.
+    pub integrator: IntegratorDesc,
+    /// Samples per pixel the file asks for.
+    pub sample_count: u32,
+    /// Zero-area triangles dropped while loading.
+    pub dropped_degenerate: usize,
+}
+
+/// A surface hit with everything shading needs.
+#[derive(Clone, Copy, Debug)]
+pub struct Interaction {
+    /// The point and its normals.
+    pub sp: SurfacePoint,
+    /// Distance from the ray origin.
+    pub t: f32,
+}
+
+impl Scene {
+    /// Loads a scene file. `defines` override `<default>` values.
+    pub fn load(path: &Path, defines: &HashMap<String, String>) -> Result<Scene, SceneError> {
+        let tree = xml::parse_file(path, defines)?;
+        let base = path.parent().unwrap_or_else(|| Path::new("."));
+        let desc = loader::Loader::new(base).load(&tree, &path.display().to_string())?;
+        Scene::build(desc)
+    }
+
+    /// Loads a scene from XML text; relative mesh paths resolve against `base_dir`.
+    pub fn load_str(text: &str, name: &Path, base_dir: &Path) -> Result<Scene, SceneError> {
+        let tree = xml::parse_str(text, name)?;
+        let desc = loader::Loader::new(base_dir).load(&tree, &name.display().to_string())?;
+        Scene::build(desc)
+    }
+
+    /// Builds the runtime scene (BSDFs, BVH, lights, camera).
+    pub fn build(desc: SceneDesc) -> Result<Scene, SceneError> {
+        let mut bsdfs = Vec::with_capacity(desc.bsdfs.len());
+        for d in &desc.bsdfs {
+            bsdfs.push(Bsdf::from_desc(d).map_err(SceneError::Invalid)?);
+        }
+        let mut geo_shapes = Vec::with_capacity(desc.shapes.len());
+        let mut shapes = Vec::with_capacity(desc.shapes.len());
+        let mut emitters = Vec::new();
+        let mut dropped = 0;
+        for (i, s) in desc.shapes.iter().enumerate() {
+            let surface = match &s.geometry {
+                ShapeGeometry::Mesh(m) => {
+                    dropped += m.dropped_degenerate;
+                    Surface::Mesh(MeshData {
+                        positions: m.positions.clone(),
+                        normals: m.normals.clone(),
+                        indices: m.indices.clone(),
+                    })
+                }
+                ShapeGeometry::Sphere { center, radius } => Surface::Sphere {
+                    center: *center,
+                    radius: *radius,
+                },
+                ShapeGeometry::Disk { to_world } => {
+                    let normal = (Mat3::from_mat4(*to_world).inverse().transpose() * Vec3::Z)
+                        .try_normalize()
+                        .ok_or_else(|| {
+                            SceneError::Invalid(format!(
+                                "{}: degenerate disk transform",
+                                s.location
+                            ))
+                        })?;
+                    Surface::Disk {
+                        to_world: *to_world,
+                        to_local: to_world.inverse(),
+                        normal,
+                    }
+                }
+            };
+            let light = s.emission.map(|radiance| {
+                emitters.push((i as u32, radiance));
+                (emitters.len() - 1) as u32
+            });
+            geo_shapes.push(GeoShape {
+                surface,
+                flip_normals: s.flip_normals,
+            });
+            shapes.push(ShapeInfo {
+                bsdf: s.bsdf as u32,
+                light,
+                kind: s.kind.clone(),
+            });
+        }
+        if desc.shapes.is_empty() && desc.point_lights.is_empty() {
+            return Err(SceneError::Invalid(
+                "the scene has no shapes and no lights".into(),
+            ));
+        }
+        let geometry = Geometry::build(geo_shapes);
+        let lights = Lights::new(&geometry, &emitters, &desc.point_lights);
+        let camera = Camera::new(&desc.camera, desc.film.width, desc.film.height)
+            .map_err(SceneError::Invalid)?;
+        Ok(Scene {
+            geometry,
+            shapes,
+            bsdfs,
+            bsdf_descs: desc.bsdfs,
+            lights,
+            camera,
+            film: desc.film,
+            integrator: desc.integrator,
+            sample_count: desc.sample_count.max(1),
+            dropped_degenerate: dropped,
+        })
+    }
+
+    /// Closest surface hit along `ray`.
+    pub fn intersect(&self, ray: &Ray) -> Option<Interaction> {
+        let hit: Hit = self.geometry.intersect(ray)?;
+        Some(Interaction {
+            sp: self.geometry.surface_point(ray, &hit),
+            t: hit.t,
+        })
+    }
+
+    /// The BSDF of a shape.
+    pub fn bsdf(&self, shape: u32) -> &Bsdf {
+        &self.bsdfs[self.shapes[shape as usize].bsdf as usize]
+    }
+
+    /// Radiance emitted from a surface point towards `w` (unit, pointing away).
+    pub fn emitted(&self, sp: &SurfacePoint, w: Vec3) -> Rgb {
+        match self.shapes[sp.shape as usize].light {
+            Some(l) => self.lights.area_radiance(l, sp, w),
+            None => Rgb::BLACK,
+        }
+    }
+}
