@@ -16,6 +16,7 @@ pub enum Bsdf {
     TwoSidedDiffuse(Rgb),
 }
 
+#[allow(clippy::only_used_in_recursion)] // `mode` mirrors the real BSDF interface
 impl Bsdf {
     /// A Lambertian BSDF.
     pub fn diffuse(reflectance: Rgb) -> Self {

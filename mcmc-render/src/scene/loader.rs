@@ -370,22 +370,23 @@ impl Loader {
         let mut props = Props::new(p);
         let width = props.int("width", 768)?;
         let height = props.int("height", 576)?;
-        // These two only choose the output container and channel layout,
-        // which this renderer fixes (linear RGB EXR); accept Mitsuba's
+        // These only choose the output container and channel layout, which
+        // this renderer fixes (linear float RGB EXR); accept Mitsuba's
         // values that match it and refuse the rest.
-        if let Some((s, loc)) = props.opt_string("file_format")? {
-            if s != "openexr" && s != "exr" {
+        for (name, allowed) in [
+            ("file_format", &["openexr", "exr"][..]),
+            ("pixel_format", &["rgb", "rgba"][..]),
+            ("component_format", &["float32"][..]),
+        ] {
+            if let Some((s, loc)) = props.opt_string(name)?
+                && !allowed.contains(&s.as_str())
+            {
                 return Err(err(
                     &loc,
-                    format!("unsupported file_format \"{s}\" (supported: openexr)"),
-                ));
-            }
-        }
-        if let Some((s, loc)) = props.opt_string("pixel_format")? {
-            if s != "rgb" && s != "rgba" {
-                return Err(err(
-                    &loc,
-                    format!("unsupported pixel_format \"{s}\" (supported: rgb, rgba)"),
+                    format!(
+                        "unsupported {name} \"{s}\" (supported: {})",
+                        allowed.join(", ")
+                    ),
                 ));
             }
         }
