@@ -415,8 +415,9 @@ impl Loader {
                     let mut props = Props::new(c);
                     let stddev = props.float("stddev", 0.5)?;
                     props.finish()?;
-                    if !(stddev > 0.0) {
-                        return Err(err(&c.loc, "stddev must be positive"));
+                    // The film keeps filter footprints at most 16 pixels wide.
+                    if !(stddev > 0.0 && stddev <= 1.875) {
+                        return Err(err(&c.loc, "stddev must be in (0, 1.875] pixels"));
                     }
                     filter = FilterKind::Gaussian { stddev };
                 }
