@@ -135,7 +135,8 @@ impl Microfacet {
     /// Samples a microfacet normal from the visible-normal distribution seen
     /// from `w` (which must satisfy w.z > 0), consuming `u.0` then `u.1`.
     ///
-    /// GGX: Heitz 2018, "Sampling the GGX distribution of visible normals".
+    /// GGX: Dupuy & Benyoub 2023 (spherical caps; the distribution of Heitz
+    /// 2018, "Sampling the GGX distribution of visible normals").
     /// Beckmann: stretch to the isotropic unit-roughness configuration,
     /// sample the visible slope (Heitz & d'Eon 2014) with an exact inversion of
     /// its marginal CDF by safeguarded Newton iteration, then unstretch.
@@ -147,26 +148,17 @@ impl Microfacet {
     }
 
     fn sample_visible_ggx(&self, w: Vec3, u: (f32, f32)) -> Vec3 {
+        // Dupuy & Benyoub 2023, "Sampling visible GGX normals with spherical
+        // caps": in the stretched (unit-roughness) configuration, the visible
+        // normals are h = c + w where c is uniform on the spherical cap
+        // z ≥ −w.z. Same distribution as Heitz 2018, no basis construction.
         let (au, av) = (self.alpha_u, self.alpha_v);
-        let vh = Vec3::new(au * w.x, av * w.y, w.z).normalize();
-        let lensq = vh.x * vh.x + vh.y * vh.y;
-        let t1 = if lensq > 0.0 {
-            Vec3::new(-vh.y, vh.x, 0.0) / lensq.sqrt()
-        } else {
-            Vec3::X
-        };
-        let t2 = vh.cross(t1);
-        // Uniform point on the unit disk, then warped onto the projected
-        // (visible) half of the hemisphere.
-        let r = u.0.sqrt();
-        let (s, c) = (2.0 * PI * u.1).sin_cos();
-        let p1 = r * c;
-        let mut p2 = r * s;
-        let h = 0.5 * (1.0 + vh.z);
-        p2 = (1.0 - h) * (1.0 - p1 * p1).max(0.0).sqrt() + h * p2;
-        let pz = (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt();
-        let nh = p1 * t1 + p2 * t2 + pz * vh;
-        Vec3::new(au * nh.x, av * nh.y, nh.z.max(1e-7)).normalize()
+        let ws = Vec3::new(au * w.x, av * w.y, w.z).normalize();
+        let (sp, cp) = (2.0 * PI * u.0).sin_cos();
+        let z = (1.0 - u.1) * (1.0 + ws.z) - ws.z;
+        let sin_t = (1.0 - z * z).max(0.0).sqrt();
+        let h = Vec3::new(sin_t * cp, sin_t * sp, z) + ws;
+        Vec3::new(au * h.x, av * h.y, h.z).normalize_or(Vec3::Z)
     }
 
     fn sample_visible_beckmann(&self, w: Vec3, u: (f32, f32)) -> Vec3 {
