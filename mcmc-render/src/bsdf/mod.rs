@@ -42,6 +42,7 @@ pub mod diffuse;
 pub mod fresnel;
 pub mod microfacet;
 pub mod model;
+pub mod regularize;
 pub mod special;
 pub use desc::{BsdfDesc, MicrofacetKind};
 pub use model::Bsdf;
