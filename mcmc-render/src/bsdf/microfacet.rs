@@ -10,7 +10,8 @@
 //! only normalised — its pdf only matches its samples — with the exact G1.
 
 use super::desc::MicrofacetKind;
-use super::special::{erfc_f32, erfc_scaled, erfinv};
+use super::special::{erfc, erfc_f32, erfc_scaled, erfinv};
+use crate::sampling::ONE_MINUS_EPSILON;
 use glam::Vec3;
 use std::f32::consts::PI;
 
@@ -177,12 +178,78 @@ impl Microfacet {
         let ty = (sin_phi * sx + cos_phi * sy) * av;
         Vec3::new(-tx, -ty, 1.0).normalize()
     }
+
+    /// Inverse of [`Microfacet::sample_visible`]: the `u` that samples the
+    /// normal `m` seen from `w` (w.z > 0), or `None` when `m` is not a
+    /// visible normal. Used to map a path back to its random numbers.
+    pub fn invert_visible(&self, w: Vec3, m: Vec3) -> Option<(f32, f32)> {
+        if w.z <= 0.0 || m.z <= 0.0 || w.dot(m) <= 0.0 {
+            return None;
+        }
+        let (au, av) = (self.alpha_u, self.alpha_v);
+        let ws = Vec3::new(au * w.x, av * w.y, w.z).normalize();
+        match self.kind {
+            MicrofacetKind::Ggx => {
+                // The stretched normal ĥ ∝ (m.x/αu, m.y/αv, m.z); the cap point
+                // c = t ĥ − ws with |c| = 1 is the reflection of ws about ĥ.
+                let h = Vec3::new(m.x / au, m.y / av, m.z).normalize();
+                let c = 2.0 * h.dot(ws) * h - ws;
+                let u1 = 1.0 - (c.z + ws.z) / (1.0 + ws.z);
+                let mut u0 = c.y.atan2(c.x) / (2.0 * PI);
+                if u0 < 0.0 {
+                    u0 += 1.0;
+                }
+                Some((
+                    u0.clamp(0.0, ONE_MINUS_EPSILON),
+                    u1.clamp(0.0, ONE_MINUS_EPSILON),
+                ))
+            }
+            MicrofacetKind::Beckmann => {
+                let sin_t = (ws.x * ws.x + ws.y * ws.y).sqrt();
+                let (cos_phi, sin_phi) = if sin_t > 0.0 {
+                    (ws.x / sin_t, ws.y / sin_t)
+                } else {
+                    (1.0, 0.0)
+                };
+                // Slopes of m, unstretched back to unit roughness, rotated back.
+                let (tx, ty) = (-m.x / m.z / au, -m.y / m.z / av);
+                let sx = cos_phi * tx + sin_phi * ty;
+                let sy = -sin_phi * tx + cos_phi * ty;
+                let (cos_t, sin_t) = (ws.z as f64, sin_t as f64);
+                let hi = beckmann_slope_hi(cos_t, sin_t);
+                let u0 = beckmann_slope_cdf(cos_t, sin_t, (sx as f64).min(hi))
+                    / beckmann_slope_cdf(cos_t, sin_t, hi);
+                // Second slope: CDF of e^{-y²}/√π is erfc(−y)/2.
+                let u1 = 0.5 * erfc(-(sy as f64));
+                Some((
+                    (u0 as f32).clamp(0.0, ONE_MINUS_EPSILON),
+                    (u1 as f32).clamp(0.0, ONE_MINUS_EPSILON),
+                ))
+            }
+        }
+    }
 }
 
 /// Inverts the marginal CDF of the first visible slope of the unit isotropic
 /// Beckmann distribution seen under angle θ (given as cos θ, sin θ):
 /// density ∝ (cos θ − x sin θ) e^{-x²} on x < cot θ, whose primitive is
 /// F(x) = cos θ · (√π/2) · erfc(−x) + (sin θ / 2) · e^{-x²}.
+/// Upper end of the visible-slope support, min(cot θ, 6): beyond ±6 the
+/// density is below e^{-36}, so the bracket loses nothing.
+fn beckmann_slope_hi(cos_t: f64, sin_t: f64) -> f64 {
+    if sin_t > 0.0 {
+        (cos_t / sin_t).min(6.0)
+    } else {
+        6.0
+    }
+}
+
+/// Unnormalised CDF F(x) of the first visible slope (see below).
+fn beckmann_slope_cdf(cos_t: f64, sin_t: f64, x: f64) -> f64 {
+    const SQRT_PI_2: f64 = 0.886_226_925_452_758; // √π / 2
+    cos_t * SQRT_PI_2 * erfc(-x) + 0.5 * sin_t * (-x * x).exp()
+}
+
 fn beckmann_visible_slope_x(cos_t: f64, sin_t: f64, u: f64) -> f64 {
     const SQRT_PI_2: f64 = 0.886_226_925_452_758; // √π / 2
     // F(x) with e = e^{-x²} supplied, so one iteration costs two `exp`s.
@@ -191,12 +258,7 @@ fn beckmann_visible_slope_x(cos_t: f64, sin_t: f64, u: f64) -> f64 {
         let erfc_neg_x = if x <= 0.0 { ec } else { 2.0 - ec };
         cos_t * SQRT_PI_2 * erfc_neg_x + 0.5 * sin_t * e
     };
-    // Beyond ±6 the density is below e^{-36}: the bracket loses nothing.
-    let mut hi = if sin_t > 0.0 {
-        (cos_t / sin_t).min(6.0)
-    } else {
-        6.0
-    };
+    let mut hi = beckmann_slope_hi(cos_t, sin_t);
     let mut lo = -6.0f64;
     let target = u * cdf_with(hi, (-hi * hi).exp());
     // Start from the normal-incidence answer, which is exact when sin θ = 0.
@@ -241,7 +303,6 @@ fn beckmann_visible_slope_x(cos_t: f64, sin_t: f64, u: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bsdf::special::erfc;
 
     fn sph(theta: f32, phi: f32) -> Vec3 {
         Vec3::new(

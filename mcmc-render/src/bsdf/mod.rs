@@ -40,6 +40,7 @@ pub mod desc;
 pub mod dielectric;
 pub mod diffuse;
 pub mod fresnel;
+pub mod invert;
 pub mod microfacet;
 pub mod model;
 pub mod regularize;
