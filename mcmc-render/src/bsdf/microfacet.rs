@@ -8,6 +8,8 @@
 //! Mitsuba 3 uses Walter's rational approximation of G1 (< 0.35 % relative
 //! error); the exact form is used here because visible-normal sampling is
 //! only normalised — its pdf only matches its samples — with the exact G1.
+//! (With the fit in the pdf, the chi-square test in `tests/bsdf_chi2.rs`
+//! rejects every grazing Beckmann case, at p-values down to 1e-138.)
 
 use super::desc::MicrofacetKind;
 use super::special::{erfc, erfc_f32, erfc_scaled, erfinv};

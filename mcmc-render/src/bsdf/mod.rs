@@ -30,6 +30,11 @@
 //! - an index-matched `roughdielectric` is built as the smooth `dielectric`
 //!   (which it equals; Mitsuba returns an infinite pdf there).
 //!
+//! Beyond eval/sample/pdf: [`Bsdf::eval_pdf`] (both at once, for MIS),
+//! [`Bsdf::invert`] (the random numbers that sample a given direction, for
+//! fused state spaces) and [`Bsdf::regularized`] (roughened copies, for
+//! path-space regularization and roughness tempering).
+//!
 //! Random numbers: [`Bsdf::sample`] takes `u_lobe` and `u = (u.0, u.1)` for
 //! every model (models ignore what they do not need). Integrators should draw
 //! all three at every bounce, `u_lobe` first, so that each bounce consumes a
