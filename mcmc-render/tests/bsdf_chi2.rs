@@ -100,6 +100,29 @@ fn rough_dielectric_cases() -> Vec<Case> {
     v
 }
 
+/// An interface whose inside is the *less* dense medium (int_ior < ext_ior,
+/// e.g. an air bubble in glass): total internal reflection from outside.
+fn inverted_dielectric_cases() -> Vec<Case> {
+    let mut v = Vec::new();
+    for kind in KINDS {
+        for t in [40.0f32, 75.0] {
+            for inside in [false, true] {
+                let mut wo = sph(t.to_radians(), 0.7);
+                if inside {
+                    wo.z = -wo.z;
+                }
+                v.push(Case {
+                    name: format!("roughdielectric η=1/1.5 {kind:?} α=0.3 θo={t} inside={inside}"),
+                    bsdf: build(&rough_dielectric(kind, (0.3, 0.3), 1.0 / 1.5)),
+                    wo,
+                    mode: TransportMode::Radiance,
+                });
+            }
+        }
+    }
+    v
+}
+
 fn twosided_cases() -> Vec<Case> {
     use mcmc_render::bsdf::{BsdfDesc, MicrofacetKind};
     let inner = rough_conductor(MicrofacetKind::Ggx, (0.3, 0.3));
@@ -134,6 +157,7 @@ fn total_cases() -> usize {
     diffuse_cases().len()
         + rough_conductor_cases().len()
         + rough_dielectric_cases().len()
+        + inverted_dielectric_cases().len()
         + twosided_cases().len()
 }
 
@@ -405,6 +429,11 @@ fn rough_conductor_sampling_matches_pdf() {
 #[test]
 fn rough_dielectric_sampling_matches_pdf() {
     check_all(rough_dielectric_cases(), 3000);
+}
+
+#[test]
+fn inverted_dielectric_sampling_matches_pdf() {
+    check_all(inverted_dielectric_cases(), 5000);
 }
 
 #[test]
