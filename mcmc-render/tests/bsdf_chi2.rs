@@ -268,7 +268,7 @@ fn run_case(case: &Case, seed: u64) -> f64 {
     let mut r = rng(seed);
     let mut observed = vec![0u64; NZ * NPHI + 1];
     let none_cell = NZ * NPHI;
-    for _ in 0..N_SAMPLES {
+    for i in 0..N_SAMPLES {
         let (ul, u) = draw(&mut r);
         let Some(s) = case.bsdf.sample(case.wo, ul, u, case.mode) else {
             observed[none_cell] += 1;
@@ -293,7 +293,7 @@ fn run_case(case: &Case, seed: u64) -> f64 {
             s.pdf
         );
         assert!(s.weight.is_finite(), "{}: weight {:?}", case.name, s.weight);
-        let pdf = case.bsdf.pdf(case.wo, wi, case.mode);
+        let (f, pdf) = case.bsdf.eval_pdf(case.wo, wi, case.mode);
         // `sample` evaluates its pdf from the final (wo, wi) pair through the
         // same code, so only the last-bit rounding of the weight division differs.
         assert!(
@@ -303,13 +303,15 @@ fn run_case(case: &Case, seed: u64) -> f64 {
             s.pdf,
             pdf
         );
-        let f = case.bsdf.eval(case.wo, wi, case.mode);
-        assert_eq!(
-            (f, pdf),
-            case.bsdf.eval_pdf(case.wo, wi, case.mode),
-            "{}",
-            case.name
-        );
+        // The separate entry points must agree with eval_pdf (checked on a
+        // subset: they are thin wrappers, and this halves the test's cost).
+        if i % 16 == 0 {
+            let separate = (
+                case.bsdf.eval(case.wo, wi, case.mode),
+                case.bsdf.pdf(case.wo, wi, case.mode),
+            );
+            assert_eq!(separate, (f, pdf), "{}", case.name);
+        }
         let expect = f * (wi.z.abs() / s.pdf);
         for (a, b) in s.weight.to_array().into_iter().zip(expect.to_array()) {
             assert!(
