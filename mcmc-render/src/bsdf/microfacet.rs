@@ -277,11 +277,12 @@ fn beckmann_visible_slope_x(cos_t: f64, sin_t: f64, u: f64) -> f64 {
         // F'' = (−s − 2x (c − x s)) e.
         let lin = cos_t - x * sin_t;
         let d1 = lin * e;
-        // Converged when the Newton distance |F − target| / F' to the root is
-        // below 1e-8 — far beyond the f32 the slope is returned in. (A small
+        // Converged when the Newton distance δ = |F − target| / F' to the root
+        // is below 1e-5: the Newton-corrected point is then within ~δ² ≈ 1e-10
+        // of the root, far beyond the f32 the slope is returned in. (A small
         // *step* is no test: where F' vanishes, Halley steps are tiny too.)
-        if d1 > 0.0 && f.abs() < 1e-8 * d1 {
-            break;
+        if d1 > 0.0 && f.abs() < 1e-5 * d1 {
+            return (x - f / d1).clamp(lo, hi);
         }
         let d2 = (-sin_t - 2.0 * x * lin) * e;
         let denom = 2.0 * d1 * d1 - f * d2;
