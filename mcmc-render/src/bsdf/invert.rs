@@ -4,7 +4,7 @@
 
 use super::Bsdf;
 use super::diffuse::cosine_hemisphere_to_square;
-use super::fresnel::{ConductorFresnel, fresnel_dielectric};
+use super::fresnel::fresnel_dielectric;
 use glam::Vec3;
 
 /// Random numbers that make [`Bsdf::sample`] return a given `wi`.
@@ -45,7 +45,10 @@ impl Bsdf {
                 })
             }
             Bsdf::Conductor(c) => {
-                if wo.z <= 0.0 || wi.z <= 0.0 || conductor_is_black(&c.fresnel, wo.z) {
+                if wo.z <= 0.0
+                    || wi.z <= 0.0
+                    || (c.specular_reflectance * c.fresnel.eval(wo.z)).is_black()
+                {
                     return None;
                 }
                 Some(SampleInverse {
@@ -118,9 +121,4 @@ impl Bsdf {
             }
         }
     }
-}
-
-/// A conductor reflecting nothing at this angle cannot have produced a path.
-fn conductor_is_black(f: &ConductorFresnel, cos: f32) -> bool {
-    f.eval(cos).is_black()
 }
