@@ -5,7 +5,8 @@ Only the render call is timed: the scene is loaded first, then `mi.render` is ca
 `--repeats` times (each a full image at the scene's spp) and every call is timed
 with a wall clock. Samples per call = width * height * spp. The process CPU time
 consumed during each call is reported too: cpu_seconds / wall_seconds is the number
-of cores Mitsuba actually kept busy (about 2 on a 2-core machine when nothing else runs).
+of cores Mitsuba actually kept busy (about 2 on a 2-core machine when nothing else runs),
+and samples per CPU-second is the throughput per busy core.
 The 1/5/15-minute load averages before and after are recorded, because on a shared
 machine other processes steal cycles and lower the figure.
 
@@ -147,6 +148,10 @@ def main() -> int:
         "samples_per_second": rates,
         "samples_per_second_median": statistics.median(rates),
         "samples_per_second_best": max(rates),
+        # Samples per CPU-second of the whole process: insensitive to how many cores other
+        # jobs left free, so comparable across runs on a busy machine (multiply by the
+        # thread count for what an idle machine would give if threads scale perfectly).
+        "samples_per_cpu_second_median": statistics.median(samples / c for c in cpus if c > 0),
     }
     if args.ours:
         our_rates = [o["samples_per_second"] for o in ours]

@@ -38,14 +38,19 @@ def main() -> int:
             )
         print()
     if speeds:
-        print("| report | scene | size | spp | max_depth | threads | busy cores | samples/s (median) | best |")
-        print("|---|---|---|---|---|---|---|---|---|")
+        print(
+            "| report | scene | size | spp | max_depth | threads | load avg (1 min) | busy cores | "
+            "samples/s (median) | best | samples per CPU-second |"
+        )
+        print("|---|---|---|---|---|---|---|---|---|---|---|")
         for name, r in speeds:
             busy = sorted(r["busy_cores"])[len(r["busy_cores"]) // 2]
             depth = r["integrator_repr"].split("max_depth = ")[1].split(",")[0] if "max_depth" in r["integrator_repr"] else "?"
             print(
                 f"| {name} | {os.path.basename(r['scene'])} | {r['width']}×{r['height']} | {r['spp']} | {depth} | "
-                f"{r['threads']} | {busy:.2f} | {r['samples_per_second_median']:,.0f} | {r['samples_per_second_best']:,.0f} |"
+                f"{r['threads']} | {r['loadavg_before'][0]:.1f} | {busy:.2f} | "
+                f"{r['samples_per_second_median']:,.0f} | {r['samples_per_second_best']:,.0f} | "
+                f"{r.get('samples_per_cpu_second_median', float('nan')):,.0f} |"
             )
     return 0
 
