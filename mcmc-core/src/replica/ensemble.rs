@@ -311,9 +311,10 @@ where
                 self.stats.move_changes += 1;
                 self.stats.touch(level);
             }
-            if !self.family.cross_densities_are_cheap() {
-                self.stats.evaluations += 1;
-            }
+            // ln π_{partner}(u) for the ratio, and the evaluation of the
+            // accepted stored state at its new level.
+            self.stats.evaluations +=
+                (!self.family.cross_densities_are_cheap()) as u64 + accepted as u64;
         }
     }
 }

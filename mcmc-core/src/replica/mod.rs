@@ -33,12 +33,12 @@
 //! [`EquiEnergySampler`] (Kou et al. 2006) and [`AdaptiveEquiEnergy`]
 //! (Schreck et al. 2013).
 
-//X mod adaptive_equi_energy;
+mod adaptive_equi_energy;
 //X pub mod combination;
 mod context;
 mod ensemble;
 mod equi_energy;
-//X mod equi_energy_sampler;
+mod equi_energy_sampler;
 mod even_odd;
 pub mod exact;
 mod family;
@@ -51,11 +51,11 @@ mod rings;
 //X pub mod schedule;
 mod stats;
 
-//X pub use adaptive_equi_energy::AdaptiveEquiEnergy;
+pub use adaptive_equi_energy::AdaptiveEquiEnergy;
 pub use context::{ExchangeContext, swap_log_acceptance};
 pub use ensemble::ReplicaExchange;
 pub use equi_energy::{EquiEnergyMove, equi_energy_pair_probabilities};
-//X pub use equi_energy_sampler::EquiEnergySampler;
+pub use equi_energy_sampler::EquiEnergySampler;
 pub use even_odd::EvenOdd;
 pub use family::{
     FlatPrior, FnFamily, LevelTarget, PowerFamily, ReplicaFamily, Tempered, TunableFamily,
