@@ -255,3 +255,40 @@ fn beta_zero_with_impossible_likelihood_stays_impossible() {
         }
     }
 }
+
+#[test]
+fn schedule_tuning_equalises_neighbour_rejection_and_reports_the_barrier() {
+    // A badly spaced ladder on the two-mode target: the rejection rates of
+    // the pairs differ widely before tuning and much less after.
+    let betas = vec![1.0, 0.9, 0.8, 0.7, 0.01, 0.001];
+    let spread = |acc: &[f64]| {
+        acc.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+            - acc.iter().copied().fold(f64::INFINITY, f64::min)
+    };
+    let family = PowerFamily::without_prior(two_modes as fn(&[f64]) -> f64, betas.clone()).unwrap();
+    let algs = betas
+        .iter()
+        .map(|b| MetropolisHastings::new(GaussianRandomWalk::isotropic(0.5 / b.sqrt()).unwrap()))
+        .collect();
+    let mut re: Ensemble =
+        ReplicaExchange::new(family, vec![vec![8.0]], algs, Box::new(EvenOdd::new()), 21).unwrap();
+    for _ in 0..4000 {
+        re.sweep();
+    }
+    let before = spread(&re.statistics().neighbour_acceptance());
+    let barrier = re.statistics().barrier().unwrap();
+    assert!(barrier.is_finite() && barrier > 0.0);
+    let update = re.tune_schedule(12).unwrap().unwrap();
+    assert_eq!(update.new[0], 1.0);
+    assert_eq!(*update.new.last().unwrap(), 0.001);
+    for _ in 0..4000 {
+        re.sweep();
+    }
+    let after = spread(&re.statistics().neighbour_acceptance());
+    eprintln!(
+        "acceptance spread {before:.3} → {after:.3}, Λ = {barrier:.3}, levels {:?}",
+        update.new
+    );
+    assert!(after < 0.5 * before, "spread {before} → {after}");
+    assert!(re.index_process().total_round_trips() > 0);
+}

@@ -34,7 +34,7 @@
 //! (Schreck et al. 2013).
 
 mod adaptive_equi_energy;
-//X pub mod combination;
+pub mod combination;
 mod context;
 mod ensemble;
 mod equi_energy;
@@ -48,7 +48,7 @@ mod is_swap;
 mod neighbour;
 pub mod permutation_dp;
 mod rings;
-//X pub mod schedule;
+pub mod schedule;
 mod stats;
 
 pub use adaptive_equi_energy::AdaptiveEquiEnergy;

@@ -264,3 +264,30 @@ impl IndexProcess {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_replica_going_up_and_down_completes_one_round_trip() {
+        let mut ip = IndexProcess::new(3);
+        ip.swap(0, 1);
+        ip.swap(1, 2);
+        assert_eq!(ip.level_of(0), 2);
+        assert_eq!(ip.total_round_trips(), 0);
+        ip.swap(1, 2);
+        assert_eq!(ip.total_round_trips(), 0);
+        ip.swap(0, 1);
+        assert_eq!(ip.level_of(0), 0);
+        assert_eq!(ip.round_trips()[0], 1);
+        // The same through a permutation: level i receives level source[i].
+        ip.permute(&[2, 0, 1]); // replica 0 goes to level 1… then to the top
+        ip.permute(&[2, 0, 1]);
+        assert_eq!(ip.level_of(0), 2);
+        ip.permute(&[1, 2, 0]);
+        ip.permute(&[1, 2, 0]);
+        assert_eq!(ip.level_of(0), 0);
+        assert_eq!(ip.round_trips()[0], 2);
+    }
+}
