@@ -292,3 +292,36 @@ fn schedule_tuning_equalises_neighbour_rejection_and_reports_the_barrier() {
     assert!(after < 0.5 * before, "spread {before} → {after}");
     assert!(re.index_process().total_round_trips() > 0);
 }
+
+#[test]
+fn a_move_built_for_another_ladder_is_refused() {
+    let family =
+        PowerFamily::without_prior(two_modes as fn(&[f64]) -> f64, vec![1.0, 0.5, 0.1]).unwrap();
+    let algs: Vec<Mh> = (0..3)
+        .map(|_| MetropolisHastings::new(GaussianRandomWalk::isotropic(1.0).unwrap()))
+        .collect();
+    let r = ReplicaExchange::new(
+        family,
+        vec![vec![8.0]],
+        algs,
+        Box::new(IsPermutation::new(5).unwrap()),
+        1,
+    );
+    let msg = r.err().expect("must refuse").to_string();
+    assert!(msg.contains("5 levels") && msg.contains("3"), "{msg}");
+    // A non-finite initial state is refused too.
+    let family = PowerFamily::without_prior(two_modes as fn(&[f64]) -> f64, vec![1.0]).unwrap();
+    let algs: Vec<Mh> = vec![MetropolisHastings::new(
+        GaussianRandomWalk::isotropic(1.0).unwrap(),
+    )];
+    assert!(
+        ReplicaExchange::new(
+            family,
+            vec![vec![f64::NAN]],
+            algs,
+            Box::new(EvenOdd::new()),
+            1
+        )
+        .is_err()
+    );
+}

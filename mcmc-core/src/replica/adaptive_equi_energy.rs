@@ -140,6 +140,16 @@ impl<S: Clone + Send + Sync, P: Clone> ExchangeMove<S, P> for AdaptiveEquiEnergy
         self.frozen = true;
     }
 
+    fn check_levels(&self, levels: usize) -> Result<()> {
+        if levels != self.stores.len() {
+            return Err(crate::error::invalid(
+                "exchange move",
+                format!("built for {} levels, used with {levels}", self.stores.len()),
+            ));
+        }
+        Ok(())
+    }
+
     fn memory_bytes(&self) -> usize {
         self.stores
             .iter()

@@ -108,6 +108,7 @@ where
                 ),
             ));
         }
+        exchange.check_levels(m)?;
         let mut chains = Vec::with_capacity(m);
         for (level, algorithm) in algorithms.iter().enumerate() {
             let state = initial[if initial.len() == 1 { 0 } else { level }].clone();

@@ -169,6 +169,16 @@ impl<S: Clone + Send + Sync, P: Clone> ExchangeMove<S, P> for EquiEnergySampler<
         self.rings.iter_mut().for_each(EnergyRings::freeze);
     }
 
+    fn check_levels(&self, levels: usize) -> Result<()> {
+        if levels != self.stores.len() {
+            return Err(crate::error::invalid(
+                "exchange move",
+                format!("built for {} levels, used with {levels}", self.stores.len()),
+            ));
+        }
+        Ok(())
+    }
+
     fn memory_bytes(&self) -> usize {
         self.stores
             .iter()

@@ -145,6 +145,12 @@ pub trait ExchangeMove<S, P>: Send + Sync {
     /// End of burn-in: stop adapting energy levels, start storing.
     fn freeze(&mut self) {}
 
+    /// Refuses an ensemble of `levels` levels when the move was built for
+    /// another number (called by [`ReplicaExchange::new`]).
+    fn check_levels(&self, _levels: usize) -> crate::Result<()> {
+        Ok(())
+    }
+
     /// Bytes held by the move (stores of past states, DP tables); heap data
     /// owned by the states themselves is not counted.
     fn memory_bytes(&self) -> usize {
