@@ -325,3 +325,26 @@ fn a_move_built_for_another_ladder_is_refused() {
         .is_err()
     );
 }
+
+#[test]
+fn the_observer_sees_exactly_level_one_transitions() {
+    for kind in MOVES {
+        let mut re = ensemble(kind, 4, 6);
+        let mut seen = 0usize;
+        let mut last = None;
+        for _ in 0..200 {
+            re.sweep_observed(&mut |t| {
+                seen += 1;
+                last = Some(t.current.state[0]);
+            });
+        }
+        // Level 0 mutates once per sweep (EES may replace a mutation by a
+        // jump, which is not reported).
+        if kind.ends_with("ees") {
+            assert!(seen <= 200, "{kind}: {seen}");
+        } else {
+            assert_eq!(seen, 200, "{kind}");
+        }
+        assert!(last.is_some());
+    }
+}

@@ -259,6 +259,10 @@ where
     }
 
     fn mutate_one(&mut self, level: usize, observer: &mut Observer<'_, S, F::Payload>) {
+        // Only level 0's transitions are reported.
+        let mut ignore = |_: &Transition<'_, S, F::Payload>| {};
+        let observer: &mut Observer<'_, S, F::Payload> =
+            if level == 0 { observer } else { &mut ignore };
         let jump = step_level(
             &self.family,
             &*self.exchange,
@@ -271,6 +275,14 @@ where
     }
 
     fn mutate_all(&mut self, observer: &mut Observer<'_, S, F::Payload>) {
+        if rayon::current_num_threads() <= 1 {
+            // No parallelism to gain: skip rayon's dispatch, which costs
+            // more than a cheap target's mutations. Same streams, same result.
+            for level in 0..self.levels() {
+                self.mutate_one(level, observer);
+            }
+            return;
+        }
         let family = &self.family;
         let exchange = &*self.exchange;
         let (first_chain, other_chains) = self.chains.split_at_mut(1);

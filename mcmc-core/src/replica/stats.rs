@@ -104,6 +104,13 @@ impl PairStatistics {
 }
 
 /// Everything an ensemble counts about its exchanges.
+///
+/// Pair counts mean "an exchange between levels `i` and `j` was attempted /
+/// accepted, with acceptance probability α". For importance-sampled
+/// permutations (always accepted) they count how often level `i` received
+/// the state of level `j` (`i = j`: kept its own); for IS swaps `(i, i)`
+/// counts identity choices; for equi-energy jumps `(j−1, j)` counts jumps of
+/// `c_{j−1}` to `c_j`'s store.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ReplicaStatistics {
     levels: usize,
