@@ -194,6 +194,9 @@ struct Banana;
 
 const B: f64 = 0.1;
 
+/// A named expectation with its exact value.
+type Check = (&'static str, f64, fn(&[f64]) -> f64);
+
 impl GradientTarget for Banana {
     fn dim(&self) -> usize {
         10
@@ -215,7 +218,7 @@ impl GradientTarget for Banana {
 fn banana_estimates_within_mcse() {
     let (draws, stats) = run_hmc(&Banana, &[0.0; 10], 1000, 2500, 4, 300, 6.0);
     // E y₁ = 0, E y₁² = 100, E y₂ = 0, E y₃ = 0, E y₃² = 1.
-    let checks: [(&str, f64, fn(&[f64]) -> f64); 5] = [
+    let checks: [Check; 5] = [
         ("y1", 0.0, |y| y[0]),
         ("y1^2", 100.0, |y| y[0] * y[0]),
         ("y2", 0.0, |y| y[1]),
