@@ -46,6 +46,7 @@ mod linalg;
 pub mod math;
 pub mod mh;
 pub mod mtm;
+pub mod replica;
 pub mod rng;
 pub mod runner;
 pub mod sample;
