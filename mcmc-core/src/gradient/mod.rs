@@ -8,11 +8,14 @@
 //! accept/reject and replica swaps, and a kernel never recomputes it at the
 //! current state. [`Tempered`] builds `ln π_β = β ln L + ln prior` for power
 //! families, so each replica level differentiates its own density.
+//! [`TemperedFamily`] is the replica family of such levels.
 //! [`FiniteDifference`] exists for tests only.
 
+mod family;
 mod finite_difference;
 mod tempered;
 
+pub use family::TemperedFamily;
 pub use finite_difference::{FiniteDifference, hessian_from_gradient};
 pub use tempered::Tempered;
 
