@@ -82,6 +82,8 @@ pub struct H2mc<G> {
     dim: usize,
     theta: f64,
     min_curvature: f64,
+    // Remaining warm-up steps and the warm-up θ (see `with_warmup`).
+    warmup: Option<(usize, f64)>,
     stats: GradientKernelStatistics,
     at_current: Option<(Vec<f64>, LocalGaussian)>,
     at_proposal: Option<(Vec<f64>, LocalGaussian)>,
@@ -100,6 +102,7 @@ impl<G: GradientTarget> H2mc<G> {
             dim,
             theta: tau * std::f64::consts::FRAC_PI_2,
             min_curvature: 1e-8,
+            warmup: None,
             stats: GradientKernelStatistics::default(),
             at_current: None,
             at_proposal: None,
@@ -114,6 +117,37 @@ impl<G: GradientTarget> H2mc<G> {
         }
         self.min_curvature = c;
         Ok(self)
+    }
+
+    /// Uses `τ = warmup_tau` for the first `iterations` steps, then the
+    /// constructor's τ. Far from the mode the local quadratic model is poor
+    /// and long moves (τ near 1) are almost always rejected; short ones
+    /// reach the bulk first. The switch happens after warm-up (or at
+    /// [`Kernel::freeze`]), so sampling is an exact Markov chain.
+    pub fn with_warmup(mut self, iterations: usize, warmup_tau: f64) -> Result<Self> {
+        if !(warmup_tau > 0.0 && warmup_tau <= 1.0) {
+            return Err(invalid(
+                "warmup_tau",
+                format!("{warmup_tau} must lie in (0, 1]"),
+            ));
+        }
+        if iterations > 0 {
+            self.warmup = Some((iterations, warmup_tau * std::f64::consts::FRAC_PI_2));
+        }
+        Ok(self)
+    }
+
+    /// The θ in use now.
+    fn current_theta(&self) -> f64 {
+        self.warmup.map_or(self.theta, |(_, t)| t)
+    }
+
+    fn end_warmup(&mut self) {
+        if self.warmup.take().is_some() {
+            // Cached proposals were built with the warm-up θ.
+            self.at_current = None;
+            self.at_proposal = None;
+        }
     }
 
     /// Gradient evaluations, invalid and outside-support proposals.
@@ -142,7 +176,7 @@ impl<G: GradientTarget> H2mc<G> {
         let max_abs = eig.eigenvalues.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         let floor = self.min_curvature.max(1e-10 * max_abs);
         let curv: Vec<f64> = eig.eigenvalues.iter().map(|l| l.abs().max(floor)).collect();
-        let (s, c) = self.theta.sin_cos();
+        let (s, c) = self.current_theta().sin_cos();
         let q = eig.eigenvectors;
         // mean = x + (1 − cos θ) Q diag(1/a) Qᵀ g
         let mut mean = x.to_vec();
@@ -280,6 +314,22 @@ impl<G: GradientTarget> Kernel<Vec<f64>, GradientPayload> for H2mc<G> {
         let mut h = vec![0.0; self.dim * self.dim];
         let (local, _) = self.local(&from.state, &from.payload.gradient, &mut h);
         local.map(|l| l.log_density(to))
+    }
+
+    fn observe(&mut self, observation: &super::StepObservation<'_, Vec<f64>>) {
+        if !observation.own {
+            return;
+        }
+        if let Some((left, _)) = &mut self.warmup {
+            *left -= 1;
+            if *left == 0 {
+                self.end_warmup();
+            }
+        }
+    }
+
+    fn freeze(&mut self) {
+        self.end_warmup();
     }
 
     fn component_names(&self) -> Vec<String> {
