@@ -61,6 +61,7 @@ fn main() -> Result<()> {
     });
 
     let mut all = Vec::new();
+    println!("(counts include warm-up)");
     println!("chain  step size  acceptance  divergences  gradient evaluations");
     for (c, r) in results.into_iter().enumerate() {
         let (kept, stats, step, acc) = r?;

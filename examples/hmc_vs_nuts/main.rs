@@ -5,6 +5,7 @@
 //! ```text
 //! cargo run --release --example hmc_vs_nuts -- --json
 //! cargo run --release --example hmc_vs_nuts -- --chains 4 --warmup 1000 --draws 1000
+//! cargo run --release --example hmc_vs_nuts -- --draws 10000 --samplers hmc,nuts-rs
 //! ```
 //!
 //! Every sampler runs `chains` chains one after the other on one thread,
@@ -67,6 +68,7 @@ struct Options {
     seed: u64,
     hmc_time: Option<f64>,
     h2mc_tau: f64,
+    samplers: Vec<String>,
 }
 
 fn parse() -> Result<Options, String> {
@@ -78,6 +80,9 @@ fn parse() -> Result<Options, String> {
         seed: 2026,
         hmc_time: None,
         h2mc_tau: 1.0,
+        samplers: ["hmc", "mala", "h2mc", "nuts-rs"]
+            .map(String::from)
+            .to_vec(),
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -111,6 +116,18 @@ fn parse() -> Result<Options, String> {
                         .map_err(|e| format!("--hmc-time: {e}"))?,
                 )
             }
+            "--samplers" => {
+                o.samplers = value("--samplers")?.split(',').map(String::from).collect();
+                if let Some(bad) = o
+                    .samplers
+                    .iter()
+                    .find(|s| !["hmc", "mala", "h2mc", "nuts-rs"].contains(&s.as_str()))
+                {
+                    return Err(format!(
+                        "--samplers: unknown sampler `{bad}` (hmc, mala, h2mc, nuts-rs)"
+                    ));
+                }
+            }
             "--h2mc-tau" => {
                 o.h2mc_tau = value("--h2mc-tau")?
                     .parse()
@@ -118,7 +135,7 @@ fn parse() -> Result<Options, String> {
             }
             other => {
                 return Err(format!(
-                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --hmc-time T, --h2mc-tau τ)"
+                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --hmc-time T, --h2mc-tau τ, --samplers a,b)"
                 ));
             }
         }
@@ -427,12 +444,27 @@ fn initial(d: usize, seed: u64, c: usize) -> Vec<f64> {
 /// All four samplers on one target.
 fn compare<G: GradientTarget + Clone>(name: &str, g: &G, time: f64, o: &Options) -> Vec<Run> {
     let w = o.warmup;
-    vec![
-        run_ours(name, "hmc", g, || hmc(g.clone(), time, w), o),
-        run_ours(name, "mala", g, || mala(g.clone(), w), o),
-        run_ours(name, "h2mc", g, || h2mc(g.clone(), o.h2mc_tau, w), o),
-        run_nuts(name, g, o).unwrap_or_else(|e| fail(&e)),
-    ]
+    let on = |s: &str| o.samplers.iter().any(|x| x == s);
+    let mut runs = Vec::new();
+    if on("hmc") {
+        runs.push(run_ours(name, "hmc", g, || hmc(g.clone(), time, w), o));
+    }
+    if on("mala") {
+        runs.push(run_ours(name, "mala", g, || mala(g.clone(), w), o));
+    }
+    if on("h2mc") {
+        runs.push(run_ours(
+            name,
+            "h2mc",
+            g,
+            || h2mc(g.clone(), o.h2mc_tau, w),
+            o,
+        ));
+    }
+    if on("nuts-rs") {
+        runs.push(run_nuts(name, g, o).unwrap_or_else(|e| fail(&e)));
+    }
+    runs
 }
 
 fn fail(e: &str) -> ! {
