@@ -104,6 +104,10 @@ pub struct Connection {
     /// True for `t = 1`: the contribution is a splat (normalised by the
     /// number of light subpaths per pixel), not part of the pixel's sample.
     pub splat: bool,
+    /// Light vertices of the technique.
+    pub s: usize,
+    /// Camera vertices of the technique (the path has `s + t − 1` segments).
+    pub t: usize,
 }
 
 /// Russian roulette setting for a walk: `Some(rr_depth)` or `None` (off,
@@ -404,6 +408,8 @@ pub fn connect(
         weight,
         raster,
         splat: t == 1,
+        s,
+        t,
     })
 }
 
