@@ -282,10 +282,16 @@ impl Geometry {
             *b = Aabb::new(mn.as_vec3().into(), mx.as_vec3().into());
         }
         let bvh_scale = bvh_scale as f32;
+        // Small scenes afford the slowest, best-quality build (it takes
+        // milliseconds there); large ones use obvhs's balanced preset.
+        let params = if aabbs.len() < 10_000 {
+            BvhBuildParams::very_slow_build()
+        } else {
+            BvhBuildParams::medium_build()
+        };
         let start = Instant::now();
         let mut core = Duration::default();
-        let bvh =
-            obvhs::cwbvh::builder::build_cwbvh(&aabbs, BvhBuildParams::medium_build(), &mut core);
+        let bvh = obvhs::cwbvh::builder::build_cwbvh(&aabbs, params, &mut core);
         // Store primitives in BVH order so leaves index them directly.
         let prims: Vec<Prim> = bvh
             .primitive_indices
