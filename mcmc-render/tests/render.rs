@@ -354,3 +354,69 @@ fn point_light_on_a_plane_matches_the_closed_form() {
         }
     }
 }
+
+/// Disk and sphere emitters (sampled by area from the path tracer, and as
+/// light-path origins by the light tracer) and a disk hit by rays: the two
+/// integrators must agree on the image mean within their noise.
+#[test]
+fn pt_and_lt_agree_with_disk_and_sphere_emitters() {
+    let scene = load(
+        r#"<scene version="3.0.0">
+    <integrator type="path"><integer name="max_depth" value="4"/></integrator>
+    <sensor type="perspective">
+        <float name="fov" value="50"/>
+        <transform name="to_world"><lookat origin="0,-3,2.5" target="0,0,0" up="0,0,1"/></transform>
+        <film type="hdrfilm"><integer name="width" value="24"/><integer name="height" value="18"/></film>
+    </sensor>
+    <shape type="rectangle">
+        <transform name="to_world"><scale value="3"/></transform>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0.6, 0.5, 0.4"/></bsdf>
+    </shape>
+    <shape type="disk">
+        <transform name="to_world">
+            <scale x="0.6" y="0.3" z="1"/><rotate x="1" angle="180"/><translate z="1.5"/>
+        </transform>
+        <emitter type="area"><rgb name="radiance" value="4, 4, 3"/></emitter>
+    </shape>
+    <shape type="disk">
+        <transform name="to_world"><scale value="0.5"/><translate x="0.8" y="0.4" z="0.3"/></transform>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0.2, 0.7, 0.3"/></bsdf>
+    </shape>
+    <shape type="sphere">
+        <point name="center" x="-1.2" y="2.5" z="0.8"/>
+        <float name="radius" value="0.25"/>
+        <emitter type="area"><rgb name="radiance" value="6, 2, 2"/></emitter>
+    </shape>
+    <shape type="cube">
+        <transform name="to_world"><scale value="0.3"/><translate x="-0.5" z="0.3"/></transform>
+    </shape>
+</scene>"#,
+    );
+    let it = scene.integrator;
+    let pt = PathTracer {
+        max_depth: it.max_depth,
+        rr_depth: it.rr_depth,
+    };
+    let lt = LightTracer {
+        max_depth: it.max_depth,
+        rr_depth: it.rr_depth,
+    };
+    let (mp, sp) = batched_mean(&scene, &pt, 64, 8);
+    let (ml, sl) = batched_mean(&scene, &lt, 256, 8);
+    for c in 0..3 {
+        let sigma = (sp[c] * sp[c] + sl[c] * sl[c]).sqrt();
+        assert!(
+            (ml[c] - mp[c]).abs() < 4.0 * sigma,
+            "channel {c}: pt {} ± {}, lt {} ± {}",
+            mp[c],
+            sp[c],
+            ml[c],
+            sl[c]
+        );
+        assert!(
+            4.0 * sigma < 0.03 * mp[c],
+            "channel {c}: noise too large ({sigma} vs {})",
+            mp[c]
+        );
+    }
+}
