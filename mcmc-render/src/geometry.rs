@@ -52,6 +52,7 @@ pub fn gamma(n: i32) -> f32 {
 /// pbrt-v4's `OffsetRayOrigin`: moves `p` along `n` by the error bound
 /// projected on the normal, to the side `w` leaves through, then rounds
 /// away from the surface so the new origin is provably off it.
+#[inline]
 pub fn offset_ray_origin(p: Vec3, p_err: Vec3, n: Vec3, w: Vec3) -> Vec3 {
     let d = n.abs().dot(p_err);
     let mut offset = n * d;
@@ -321,6 +322,7 @@ impl Geometry {
         self.prims.len()
     }
 
+    #[inline(always)]
     fn intersect_prim(
         &self,
         prim: &Prim,
