@@ -420,3 +420,62 @@ fn pt_and_lt_agree_with_disk_and_sphere_emitters() {
         );
     }
 }
+
+/// Next-event estimation towards a sphere light (cone sampling) estimates
+/// the irradiance of a point facing the sphere's centre exactly:
+/// `E = π L sin²θmax` (Lambertian sphere). Also from inside a sphere the
+/// area-sampling fallback must give `E = π L`.
+#[test]
+fn sphere_light_sampling_gives_the_analytic_irradiance() {
+    use mcmc_render::sampling::RandomSource;
+    struct Lcg(u64);
+    impl RandomSource for Lcg {
+        fn next_1d(&mut self) -> f32 {
+            self.0 = self
+                .0
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((self.0 >> 40) as f32) / (1u64 << 24) as f32
+        }
+    }
+    let scene = load(
+        r#"<scene version="3.0.0">
+    <sensor type="perspective"/>
+    <shape type="sphere">
+        <point name="center" x="0" y="0" z="3"/><float name="radius" value="0.5"/>
+        <emitter type="area"><rgb name="radiance" value="2"/></emitter>
+    </shape>
+</scene>"#,
+    );
+    let n = 200_000;
+    for (p, normal, expected) in [
+        // Outside: sin²θmax = (0.5/3)².
+        (
+            glam::Vec3::ZERO,
+            glam::Vec3::Z,
+            std::f64::consts::PI * 2.0 * (0.5f64 / 3.0).powi(2),
+        ),
+        // Inside (the sphere emits outwards, so nothing reaches an inner point).
+        (glam::Vec3::new(0.0, 0.1, 3.0), glam::Vec3::Z, 0.0),
+    ] {
+        let mut src = Lcg(9);
+        let mut sum = 0.0f64;
+        let mut sum2 = 0.0f64;
+        for _ in 0..n {
+            let u_sel = src.next_1d();
+            let u = src.next_2d();
+            let v = match scene.lights.sample_direct(&scene.geometry, p, u_sel, u) {
+                Some(ds) => (ds.le.r * ds.wi.dot(normal).max(0.0) / ds.pdf) as f64,
+                None => 0.0,
+            };
+            sum += v;
+            sum2 += v * v;
+        }
+        let mean = sum / n as f64;
+        let se = ((sum2 / n as f64 - mean * mean).max(0.0) / n as f64).sqrt();
+        assert!(
+            (mean - expected).abs() <= 4.0 * se + 1e-4 * expected.max(1e-6),
+            "E = {mean} ± {se}, expected {expected}"
+        );
+    }
+}
