@@ -33,6 +33,7 @@
 
 pub mod chain;
 pub mod delayed_rejection;
+pub mod diagnostics;
 pub mod error;
 pub mod exact;
 pub mod expected;
