@@ -120,7 +120,7 @@ pub(crate) fn check_probability(p: f64) -> Result<(), DiagnosticsError> {
     }
 }
 
-/// Basic ESS for the mean: [`ess_core`-style] Geyer ESS of the split chains, without rank
+/// Basic ESS for the mean: the Geyer ESS of the split chains, without rank
 /// normalisation (Vehtari et al. 2021 §3.2; `arviz.ess(method="mean")`,
 /// `posterior::ess_mean`). Valid as the ESS of the mean when the variance is finite;
 /// `mcse_mean` uses it.

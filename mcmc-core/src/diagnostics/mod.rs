@@ -3,6 +3,32 @@
 //! convergence of MCMC" (Bayesian Analysis 16(2)), as implemented by Stan, the R package
 //! `posterior` and ArviZ.
 //!
+//! # Example
+//!
+//! ```
+//! use mcmc_core::diagnostics::{self, SummaryTable};
+//!
+//! // Two chains of one scalar quantity (in practice: thousands of draws per chain).
+//! let chains = vec![
+//!     vec![0.1, -0.4, 0.3, 0.9, -1.2, 0.5, 0.0, -0.3],
+//!     vec![0.7, -0.1, -0.8, 0.2, 1.1, -0.6, 0.4, -0.2],
+//! ];
+//! let rhat = diagnostics::rank_normalized_split_rhat(&chains)?;
+//! let bulk = diagnostics::ess_bulk(&chains)?;
+//! let tail = diagnostics::ess_tail(&chains)?;
+//! let mcse = diagnostics::mcse_mean(&chains)?;
+//! assert!(rhat.is_finite() && bulk > 0.0 && tail > 0.0 && mcse > 0.0);
+//!
+//! // Several coordinates at once: chains × draws × coordinates.
+//! let draws: Vec<Vec<Vec<f64>>> = chains
+//!     .iter()
+//!     .map(|c| c.iter().map(|&x| vec![x, x * x]).collect())
+//!     .collect();
+//! let table = SummaryTable::with_names(diagnostics::summarize(&draws)?, ["x", "x^2"]);
+//! println!("{table}");
+//! # Ok::<(), diagnostics::DiagnosticsError>(())
+//! ```
+//!
 //! # Input
 //!
 //! Every estimator takes the draws of ONE scalar quantity as chains × draws: anything
@@ -37,6 +63,8 @@ mod draws;
 mod error;
 mod ess;
 mod mcse;
+#[cfg(test)]
+mod proptests;
 mod rank;
 mod rhat;
 mod summary;

@@ -10,20 +10,22 @@ const BLOM_OFFSET: f64 = 3.0 / 8.0;
 /// Ranks `1..=n` of `xs` in increasing order, ties given their average rank
 /// (`scipy.stats.rankdata(method="average")`). `xs` must hold no NaN.
 pub(crate) fn average_ranks(xs: &[f64]) -> Vec<f64> {
-    let mut order: Vec<usize> = (0..xs.len()).collect();
-    order.sort_unstable_by(|&a, &b| xs[a].total_cmp(&xs[b]));
+    // Sorting (value, index) pairs keeps the comparisons on contiguous memory, which is
+    // several times faster than sorting indices that point into `xs` for large inputs.
+    let mut order: Vec<(f64, usize)> = xs.iter().copied().zip(0..).collect();
+    order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
     let mut ranks = vec![0.0; xs.len()];
     let mut start = 0;
     while start < order.len() {
-        let value = xs[order[start]];
+        let value = order[start].0;
         let mut end = start + 1;
         // `==` (not total_cmp) so that -0.0 and 0.0 tie, as they do in numpy.
-        while end < order.len() && xs[order[end]] == value {
+        while end < order.len() && order[end].0 == value {
             end += 1;
         }
         // Ranks start+1 ..= end share their mean.
         let rank = (start + 1 + end) as f64 / 2.0;
-        for &i in &order[start..end] {
+        for &(_, i) in &order[start..end] {
             ranks[i] = rank;
         }
         start = end;
@@ -52,13 +54,15 @@ pub(crate) fn z_scale(m: &DrawMatrix) -> DrawMatrix {
 /// Median of the pooled draws (mean of the two middle order statistics when their number
 /// is even), as `numpy.median`.
 pub(crate) fn median(xs: &[f64]) -> f64 {
-    let mut sorted = xs.to_vec();
-    sorted.sort_unstable_by(f64::total_cmp);
-    let n = sorted.len();
+    let mut v = xs.to_vec();
+    let n = v.len();
+    let (below, &mut upper, _) = v.select_nth_unstable_by(n / 2, f64::total_cmp);
     if n % 2 == 1 {
-        sorted[n / 2]
+        upper
     } else {
-        (sorted[n / 2 - 1] + sorted[n / 2]) / 2.0
+        // The lower middle order statistic is the largest of the elements below.
+        let lower = below.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        (lower + upper) / 2.0
     }
 }
 

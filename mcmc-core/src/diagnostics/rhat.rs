@@ -73,8 +73,14 @@ pub fn rank_normalized_split_rhat<C: AsRef<[f64]>>(chains: &[C]) -> Result<f64, 
 /// [`rank_normalized_split_rhat`] of validated draws.
 pub(crate) fn rank_rhat_of(m: &DrawMatrix) -> f64 {
     let split = m.split();
-    let bulk = rhat_core(&z_scale(&split));
-    let tail = rhat_core(&z_scale(&fold(&split)));
+    rank_rhat_from_split(&split, &z_scale(&split))
+}
+
+/// [`rank_normalized_split_rhat`] from the split draws and their rank normalisation (which
+/// the bulk ESS also needs, so a summary computes it once).
+pub(crate) fn rank_rhat_from_split(split: &DrawMatrix, z_split: &DrawMatrix) -> f64 {
+    let bulk = rhat_core(z_split);
+    let tail = rhat_core(&z_scale(&fold(split)));
     bulk.max(tail)
 }
 

@@ -9,7 +9,7 @@ use super::draws::{DrawMatrix, MIN_DRAWS_SPLIT, mean, variance};
 use super::ess::{ess_core, ess_tail_of};
 use super::mcse::{mcse_mean_of, mcse_sd_of};
 use super::rank::{quantile_sorted, sorted, z_scale};
-use super::rhat::rank_rhat_of;
+use super::rhat::rank_rhat_from_split;
 
 /// Posterior summary and convergence diagnostics of one scalar quantity, pooled over chains.
 ///
@@ -43,6 +43,8 @@ pub struct Summary {
 impl Summary {
     fn of(m: &DrawMatrix) -> Self {
         let s = sorted(&m.data);
+        let split = m.split();
+        let z_split = z_scale(&split);
         Self {
             mean: mean(&m.data),
             sd: variance(&m.data, 1).sqrt(),
@@ -51,9 +53,9 @@ impl Summary {
             q5: quantile_sorted(&s, 0.05),
             q50: quantile_sorted(&s, 0.5),
             q95: quantile_sorted(&s, 0.95),
-            ess_bulk: ess_core(&z_scale(&m.split())),
+            ess_bulk: ess_core(&z_split),
             ess_tail: ess_tail_of(m, &s),
-            rhat: rank_rhat_of(m),
+            rhat: rank_rhat_from_split(&split, &z_split),
         }
     }
 }
