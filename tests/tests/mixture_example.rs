@@ -251,6 +251,12 @@ fn invalid_flags_exit_with_code_2() {
         &["--target", &t, "--chains", "4", "--evaluations", "20"],
         "--evaluations",
     );
+    // Every kept draw is stored for the diagnostics; a budget that would need
+    // more than 2 GB of draws is refused before any allocation.
+    expect_usage_error(
+        &["--target", &t, "--evaluations", "1000000000000"],
+        "memory",
+    );
 }
 
 #[test]
