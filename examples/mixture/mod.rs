@@ -23,7 +23,9 @@
 //!   is left unused so that chains have equal length), spends
 //!   `max(1, min(256, ⌊B/20⌋))` of it on start-up candidates and the rest on
 //!   steps costing 1 evaluation (MH) or `2k − 1` (MTM with `k` tries). The
-//!   report's `evaluations` is what was actually spent.
+//!   report's `evaluations` is what was actually spent. Every kept draw is
+//!   stored for the rank-based diagnostics, so runs that would keep more than
+//!   250 million coordinates (2 GB) are refused.
 //! - **Start points.** Start-up importance resampling per chain, see
 //!   [`startup`].
 //! - **Burn-in.** The first `⌊F · steps⌋` steps of each chain (`F = 1/3`

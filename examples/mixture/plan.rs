@@ -10,6 +10,9 @@ const MAX_STARTUP_CANDIDATES: u64 = 256;
 const STARTUP_SHARE: u64 = 20;
 /// The split diagnostics need at least 4 draws per chain.
 const MIN_DRAWS: u64 = 4;
+/// Most coordinates kept in memory over all chains (2 GB of `f64`): every
+/// post-burn-in draw is stored for the rank-based diagnostics.
+const MAX_STORED_VALUES: u64 = 250_000_000;
 
 /// Everything a run needs, validated against the target.
 #[derive(Clone, Debug, PartialEq)]
@@ -68,6 +71,15 @@ impl RunPlan {
             return Err(ExampleError::usage(format!(
                 "--evaluations {} over {} chains leaves {draws} draws per chain after start-up and burn-in; at least {MIN_DRAWS} are needed (raise --evaluations or lower --chains)",
                 args.evaluations, args.chains
+            )));
+        }
+        let stored = draws
+            .saturating_mul(args.chains)
+            .saturating_mul(mixture.dim() as u64);
+        if stored > MAX_STORED_VALUES {
+            return Err(ExampleError::usage(format!(
+                "--evaluations {} would keep {stored} coordinates of draws in memory; at most {MAX_STORED_VALUES} are allowed (lower --evaluations or raise --burn-in)",
+                args.evaluations
             )));
         }
         let too_big = |_| ExampleError::usage("--evaluations is too large for this machine");

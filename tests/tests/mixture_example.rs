@@ -251,6 +251,12 @@ fn invalid_flags_exit_with_code_2() {
         &["--target", &t, "--chains", "4", "--evaluations", "20"],
         "--evaluations",
     );
+    // Every kept draw is stored for the diagnostics; a budget that would need
+    // more than 2 GB of draws is refused before any allocation.
+    expect_usage_error(
+        &["--target", &t, "--evaluations", "1000000000000"],
+        "memory",
+    );
 }
 
 #[test]
@@ -311,4 +317,51 @@ fn invalid_target_files_exit_with_code_2() {
 fn help_is_printed_not_an_error() {
     let out = run_cli(["mixture", "--help"]).expect("help is a success");
     assert!(out.contains("--target") && out.contains("--evaluations"));
+}
+
+/// The mixture's log density against the Gaussian densities written out
+/// directly (no Cholesky, no log-sum-exp).
+#[test]
+fn mixture_log_density_matches_the_direct_formula() {
+    use mcmc_examples::mixture::GaussianMixture;
+    use std::f64::consts::PI;
+
+    let normal_1d =
+        |x: f64, m: f64, s: f64| (-0.5 * ((x - m) / s).powi(2)).exp() / (s * (2.0 * PI).sqrt());
+    let m = GaussianMixture::from_json(
+        r#"{"components":[{"weight":1,"mean":[-1],"sigma":0.5},{"weight":3,"mean":[2],"sigma":2}]}"#,
+    )
+    .unwrap();
+    for x in [-3.0, -1.0, 0.5, 2.0, 7.5] {
+        let direct = 0.25 * normal_1d(x, -1.0, 0.5) + 0.75 * normal_1d(x, 2.0, 2.0);
+        let got = m.log_density(&[x]);
+        assert!(
+            (got - direct.ln()).abs() < 1e-12,
+            "x = {x}: {got} vs {}",
+            direct.ln()
+        );
+    }
+    // Far in the tail the density underflows in linear space but not in log space:
+    // at x = 200 the wide component dominates by e^{-(198/2)²/2} vs e^{-(201/0.5)²/2}.
+    let far = m.log_density(&[200.0]);
+    let expected = 0.75f64.ln() - 0.5 * (198.0f64 / 2.0).powi(2) - (2.0 * (2.0 * PI).sqrt()).ln();
+    assert!((far - expected).abs() < 1e-9, "{far} vs {expected}");
+
+    // Full covariance Σ = [[2, 0.6], [0.6, 1]]: Σ⁻¹ = [[1, −0.6], [−0.6, 2]] / 1.64.
+    let m = GaussianMixture::from_json(
+        r#"{"components":[{"weight":2,"mean":[1,-1],"cov":[[2,0.6],[0.6,1]]}],"bounds":[[-5,5],[-4,4]]}"#,
+    )
+    .unwrap();
+    let det = 2.0 * 1.0 - 0.6 * 0.6;
+    for x in [[0.5, 0.3], [1.0, -1.0], [-4.0, 3.9], [5.0, -4.0]] {
+        let d = [x[0] - 1.0, x[1] + 1.0];
+        let q = (d[0] * d[0] * 1.0 - 2.0 * 0.6 * d[0] * d[1] + 2.0 * d[1] * d[1]) / det;
+        let direct = -0.5 * q - (2.0 * PI).ln() - 0.5 * det.ln();
+        let got = m.log_density(&x);
+        assert!((got - direct).abs() < 1e-12, "x = {x:?}: {got} vs {direct}");
+    }
+    // Outside the bounds (inclusive box) the density is zero.
+    assert_eq!(m.log_density(&[5.0 + 1e-9, 0.0]), f64::NEG_INFINITY);
+    assert_eq!(m.log_density(&[0.0, -4.5]), f64::NEG_INFINITY);
+    assert_eq!(m.nearest_component(&[0.0, 0.0]), 0);
 }
