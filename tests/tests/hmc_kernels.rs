@@ -616,8 +616,8 @@ fn dense_warmup_estimates_the_covariance() {
             lp
         }
     }
-    let cov: Vec<f64> = (0..16)
-        .map(|k| 0.9f64.powi((k / 4 - k % 4 as i32).abs()))
+    let cov: Vec<f64> = (0..16i32)
+        .map(|k| 0.9f64.powi((k / 4 - k % 4).abs()))
         .collect();
     let rows: Vec<Vec<f64>> = cov.chunks(4).map(|r| r.to_vec()).collect();
     let precision = Correlated(inverse(&rows));
