@@ -156,3 +156,24 @@ fn twenty_levels_work_and_more_than_the_limit_is_refused() {
     assert!(msg.contains("M = 30") && msg.contains("limit"), "{msg}");
     assert!(PermutationDp::new(200, DEFAULT_MAX_TABLE_BYTES).is_err());
 }
+
+#[test]
+fn the_brute_force_baseline_samples_the_same_distribution() {
+    // Same 5σ binomial bands as above, 40 000 draws at M = 4.
+    let m = 4;
+    let matrix: Vec<f64> = (0..16).map(|k| ((k * 7) % 5) as f64 - 2.0).collect();
+    let brute = brute_force_log_normalizer(m, &matrix);
+    let mut rng = stream_rng(12, 0);
+    let n = 40_000;
+    let mut counts = std::collections::HashMap::new();
+    for _ in 0..n {
+        *counts
+            .entry(brute_force_sample(m, &matrix, uniform(&mut rng)))
+            .or_insert(0usize) += 1;
+    }
+    for p in all_permutations(m) {
+        let q = (permutation_log_weight(m, &matrix, &p) - brute).exp();
+        let f = *counts.get(&p).unwrap_or(&0) as f64 / n as f64;
+        assert!((f - q).abs() <= 5.0 * (q * (1.0 - q) / n as f64).sqrt() + 1.0 / n as f64);
+    }
+}

@@ -108,6 +108,7 @@ where
                 ),
             ));
         }
+        exchange.check_levels(m)?;
         let mut chains = Vec::with_capacity(m);
         for (level, algorithm) in algorithms.iter().enumerate() {
             let state = initial[if initial.len() == 1 { 0 } else { level }].clone();
@@ -258,6 +259,10 @@ where
     }
 
     fn mutate_one(&mut self, level: usize, observer: &mut Observer<'_, S, F::Payload>) {
+        // Only level 0's transitions are reported.
+        let mut ignore = |_: &Transition<'_, S, F::Payload>| {};
+        let observer: &mut Observer<'_, S, F::Payload> =
+            if level == 0 { observer } else { &mut ignore };
         let jump = step_level(
             &self.family,
             &*self.exchange,
@@ -270,6 +275,14 @@ where
     }
 
     fn mutate_all(&mut self, observer: &mut Observer<'_, S, F::Payload>) {
+        if rayon::current_num_threads() <= 1 {
+            // No parallelism to gain: skip rayon's dispatch, which costs
+            // more than a cheap target's mutations. Same streams, same result.
+            for level in 0..self.levels() {
+                self.mutate_one(level, observer);
+            }
+            return;
+        }
         let family = &self.family;
         let exchange = &*self.exchange;
         let (first_chain, other_chains) = self.chains.split_at_mut(1);
@@ -311,9 +324,10 @@ where
                 self.stats.move_changes += 1;
                 self.stats.touch(level);
             }
-            if !self.family.cross_densities_are_cheap() {
-                self.stats.evaluations += 1;
-            }
+            // ln π_{partner}(u) for the ratio, and the evaluation of the
+            // accepted stored state at its new level.
+            self.stats.evaluations +=
+                (!self.family.cross_densities_are_cheap()) as u64 + accepted as u64;
         }
     }
 }

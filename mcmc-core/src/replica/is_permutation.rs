@@ -70,6 +70,16 @@ impl<S, P: Clone> ExchangeMove<S, P> for IsPermutation {
         }
     }
 
+    fn check_levels(&self, levels: usize) -> Result<()> {
+        if levels != self.dp.levels() {
+            return Err(crate::error::invalid(
+                "exchange move",
+                format!("built for {} levels, used with {levels}", self.dp.levels()),
+            ));
+        }
+        Ok(())
+    }
+
     fn memory_bytes(&self) -> usize {
         self.dp.memory_bytes()
     }

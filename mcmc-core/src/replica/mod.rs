@@ -33,12 +33,12 @@
 //! [`EquiEnergySampler`] (Kou et al. 2006) and [`AdaptiveEquiEnergy`]
 //! (Schreck et al. 2013).
 
-//X mod adaptive_equi_energy;
-//X pub mod combination;
+mod adaptive_equi_energy;
+pub mod combination;
 mod context;
 mod ensemble;
 mod equi_energy;
-//X mod equi_energy_sampler;
+mod equi_energy_sampler;
 mod even_odd;
 pub mod exact;
 mod family;
@@ -48,14 +48,14 @@ mod is_swap;
 mod neighbour;
 pub mod permutation_dp;
 mod rings;
-//X pub mod schedule;
+pub mod schedule;
 mod stats;
 
-//X pub use adaptive_equi_energy::AdaptiveEquiEnergy;
+pub use adaptive_equi_energy::AdaptiveEquiEnergy;
 pub use context::{ExchangeContext, swap_log_acceptance};
 pub use ensemble::ReplicaExchange;
 pub use equi_energy::{EquiEnergyMove, equi_energy_pair_probabilities};
-//X pub use equi_energy_sampler::EquiEnergySampler;
+pub use equi_energy_sampler::EquiEnergySampler;
 pub use even_odd::EvenOdd;
 pub use family::{
     FlatPrior, FnFamily, LevelTarget, PowerFamily, ReplicaFamily, Tempered, TunableFamily,
@@ -144,6 +144,12 @@ pub trait ExchangeMove<S, P>: Send + Sync {
 
     /// End of burn-in: stop adapting energy levels, start storing.
     fn freeze(&mut self) {}
+
+    /// Refuses an ensemble of `levels` levels when the move was built for
+    /// another number (called by [`ReplicaExchange::new`]).
+    fn check_levels(&self, _levels: usize) -> crate::Result<()> {
+        Ok(())
+    }
 
     /// Bytes held by the move (stores of past states, DP tables); heap data
     /// owned by the states themselves is not counted.

@@ -329,14 +329,50 @@ pub fn all_permutations(m: usize) -> Vec<Vec<usize>> {
     out
 }
 
-/// Draws one permutation by brute force: enumerate all `M!` weights and
-/// pick one by inverse CDF (the baseline the DP is benchmarked against).
+/// Draws one permutation by brute force: one pass over all `M!`
+/// permutations (generated in place, lexicographically) for the normaliser,
+/// a second to pick one by inverse CDF. The baseline the DP is benchmarked
+/// against; it allocates only the returned permutation.
 pub fn brute_force_sample(m: usize, log_matrix: &[f64], u: f64) -> Vec<usize> {
-    let perms = all_permutations(m);
-    let w: Vec<f64> = perms
-        .iter()
-        .map(|p| permutation_log_weight(m, log_matrix, p))
-        .collect();
-    let i = crate::math::sample_log_categorical(&w, u).unwrap_or(0);
-    perms[i].clone()
+    let mut p: Vec<usize> = (0..m).collect();
+    let mut max = f64::NEG_INFINITY;
+    for_each_permutation(&mut p, |p| {
+        max = max.max(permutation_log_weight(m, log_matrix, p));
+    });
+    if max == f64::NEG_INFINITY {
+        return (0..m).collect();
+    }
+    let mut total = 0.0;
+    for_each_permutation(&mut p, |p| {
+        total += (permutation_log_weight(m, log_matrix, p) - max).exp();
+    });
+    let target = u * total;
+    let mut acc = 0.0;
+    let mut chosen: Option<Vec<usize>> = None;
+    for_each_permutation(&mut p, |p| {
+        if chosen.is_none() {
+            let w = (permutation_log_weight(m, log_matrix, p) - max).exp();
+            acc += w;
+            if w > 0.0 && target < acc {
+                chosen = Some(p.to_vec());
+            }
+        }
+    });
+    chosen.unwrap_or_else(|| (0..m).collect())
+}
+
+/// Calls `f` on every permutation of `p` (which must start sorted; it is
+/// sorted again on return).
+fn for_each_permutation(p: &mut [usize], mut f: impl FnMut(&[usize])) {
+    let m = p.len();
+    loop {
+        f(p);
+        let Some(i) = (1..m).rev().find(|&i| p[i - 1] < p[i]) else {
+            p.reverse();
+            return;
+        };
+        let j = (i..m).rev().find(|&j| p[j] > p[i - 1]).unwrap_or(i);
+        p.swap(i - 1, j);
+        p[i..].reverse();
+    }
 }

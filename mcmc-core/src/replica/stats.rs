@@ -104,6 +104,13 @@ impl PairStatistics {
 }
 
 /// Everything an ensemble counts about its exchanges.
+///
+/// Pair counts mean "an exchange between levels `i` and `j` was attempted /
+/// accepted, with acceptance probability α". For importance-sampled
+/// permutations (always accepted) they count how often level `i` received
+/// the state of level `j` (`i = j`: kept its own); for IS swaps `(i, i)`
+/// counts identity choices; for equi-energy jumps `(j−1, j)` counts jumps of
+/// `c_{j−1}` to `c_j`'s store.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ReplicaStatistics {
     levels: usize,
@@ -229,8 +236,10 @@ impl ReplicaStatistics {
 
     /// Estimated communication barrier `Λ = Σ_i r_i`, the sum of neighbour
     /// rejection rates `r_i = 1 − E[α_{i,i+1}]` (Syed et al. 2021). `None`
-    /// when some neighbour pair was never attempted (moves that do not swap
-    /// neighbours; see [`crate::replica::schedule`] for probing).
+    /// when some neighbour pair was never attempted. Meaningful for the
+    /// neighbour and even–odd moves, whose attempts are plain Eq. 4.11
+    /// swaps of neighbours; other moves record their own acceptance
+    /// probabilities, which are not the neighbour swap's.
     pub fn barrier(&self) -> Option<f64> {
         let acc = self.neighbour_acceptance();
         if acc.iter().any(|a| a.is_nan()) {
@@ -262,5 +271,32 @@ impl IndexProcess {
                 self.visit(self.replica_at_level[i]);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_replica_going_up_and_down_completes_one_round_trip() {
+        let mut ip = IndexProcess::new(3);
+        ip.swap(0, 1);
+        ip.swap(1, 2);
+        assert_eq!(ip.level_of(0), 2);
+        assert_eq!(ip.total_round_trips(), 0);
+        ip.swap(1, 2);
+        assert_eq!(ip.total_round_trips(), 0);
+        ip.swap(0, 1);
+        assert_eq!(ip.level_of(0), 0);
+        assert_eq!(ip.round_trips()[0], 1);
+        // The same through a permutation: level i receives level source[i].
+        ip.permute(&[2, 0, 1]); // replica 0 goes to level 1… then to the top
+        ip.permute(&[2, 0, 1]);
+        assert_eq!(ip.level_of(0), 2);
+        ip.permute(&[1, 2, 0]);
+        ip.permute(&[1, 2, 0]);
+        assert_eq!(ip.level_of(0), 0);
+        assert_eq!(ip.round_trips()[0], 2);
     }
 }
