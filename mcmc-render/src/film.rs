@@ -144,6 +144,17 @@ impl Film {
         }
     }
 
+    /// A whole-image film holding only the splat accumulator (light-path
+    /// work units: 12 instead of 28 bytes per pixel); camera samples added
+    /// to it are ignored.
+    pub fn new_splat_only(width: u32, height: u32, filter: Arc<Filter>) -> Film {
+        let mut f = Film::sub(width, height, 0, 0, 0, 0, filter);
+        f.w = width;
+        f.h = height;
+        f.splats = vec![[0.0; 3]; (width * height) as usize];
+        f
+    }
+
     /// The film for a tile `[tx0, tx1) × [ty0, ty1)` grown by the filter radius.
     pub fn for_tile(
         width: u32,
@@ -162,7 +173,7 @@ impl Film {
         Film::sub(width, height, x0, y0, x1 - x0, y1 - y0, filter)
     }
 
-    /// Zeroes both accumulators.
+    /// Zeroes the accumulators.
     pub fn clear(&mut self) {
         self.samples.iter_mut().for_each(|p| *p = [0.0; 4]);
         self.splats.iter_mut().for_each(|p| *p = [0.0; 3]);
@@ -195,6 +206,9 @@ impl Film {
     /// Non-finite radiance is dropped (and should be counted by the caller).
     pub fn add_sample(&mut self, p: Vec2, l: Rgb) {
         if !l.is_finite() || !p.is_finite() {
+            return;
+        }
+        if self.samples.is_empty() {
             return;
         }
         let Some((x0, x1, y0, y1)) = self.footprint(p) else {
@@ -271,8 +285,10 @@ impl Film {
                 }
                 let i = ((y - self.y0) * self.w + (x - self.x0)) as usize;
                 let j = (oy * other.w + ox) as usize;
-                for c in 0..4 {
-                    self.samples[i][c] += other.samples[j][c];
+                if !other.samples.is_empty() {
+                    for c in 0..4 {
+                        self.samples[i][c] += other.samples[j][c];
+                    }
                 }
                 for c in 0..3 {
                     self.splats[i][c] += other.splats[j][c];
@@ -289,17 +305,58 @@ impl Film {
         } else {
             0.0
         };
-        self.samples
+        self.splats
             .iter()
-            .zip(&self.splats)
-            .map(|(s, p)| {
-                let mean = if s[3] > 0.0 {
-                    Rgb::new(s[0] / s[3], s[1] / s[3], s[2] / s[3])
-                } else {
-                    Rgb::BLACK
+            .enumerate()
+            .map(|(i, p)| {
+                let mean = match self.samples.get(i) {
+                    Some(s) if s[3] > 0.0 => Rgb::new(s[0] / s[3], s[1] / s[3], s[2] / s[3]),
+                    _ => Rgb::BLACK,
                 };
                 mean + Rgb::new(p[0], p[1], p[2]) * inv
             })
             .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A constant splat density develops to the same constant as camera
+    /// samples of that constant, border pixels included (the per-pixel
+    /// normalisation `Z_j` at work), for both filters.
+    #[test]
+    fn splats_and_samples_develop_to_the_same_constant() {
+        for kind in [FilterKind::Box, FilterKind::Gaussian { stddev: 0.5 }] {
+            let (w, h) = (7u32, 5u32);
+            let filter = Arc::new(Filter::new(kind, w, h));
+            let mut samples = Film::new(w, h, filter.clone());
+            let mut splats = Film::new_splat_only(w, h, filter);
+            // A fine regular grid over the image: n² points per pixel.
+            let n = 32;
+            for y in 0..h * n {
+                for x in 0..w * n {
+                    let p = Vec2::new((x as f32 + 0.5) / n as f32, (y as f32 + 0.5) / n as f32);
+                    samples.add_sample(p, Rgb::splat(2.0));
+                    splats.splat(p, Rgb::splat(2.0));
+                }
+            }
+            let a = samples.develop(0.0);
+            // n² splatting "paths" per pixel.
+            let b = splats.develop((n * n) as f64);
+            for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+                assert!(
+                    (x.r - 2.0).abs() < 1e-4,
+                    "{kind:?} sample pixel {i}: {}",
+                    x.r
+                );
+                assert!(
+                    (y.r - 2.0).abs() < 2e-3,
+                    "{kind:?} splat pixel {i}: {}",
+                    y.r
+                );
+            }
+        }
     }
 }

@@ -52,6 +52,7 @@ pub fn gamma(n: i32) -> f32 {
 /// pbrt-v4's `OffsetRayOrigin`: moves `p` along `n` by the error bound
 /// projected on the normal, to the side `w` leaves through, then rounds
 /// away from the surface so the new origin is provably off it.
+#[inline]
 pub fn offset_ray_origin(p: Vec3, p_err: Vec3, n: Vec3, w: Vec3) -> Vec3 {
     let d = n.abs().dot(p_err);
     let mut offset = n * d;
@@ -282,10 +283,16 @@ impl Geometry {
             *b = Aabb::new(mn.as_vec3().into(), mx.as_vec3().into());
         }
         let bvh_scale = bvh_scale as f32;
+        // Small scenes afford the slowest, best-quality build (it takes
+        // milliseconds there); large ones use obvhs's balanced preset.
+        let params = if aabbs.len() < 10_000 {
+            BvhBuildParams::very_slow_build()
+        } else {
+            BvhBuildParams::medium_build()
+        };
         let start = Instant::now();
         let mut core = Duration::default();
-        let bvh =
-            obvhs::cwbvh::builder::build_cwbvh(&aabbs, BvhBuildParams::medium_build(), &mut core);
+        let bvh = obvhs::cwbvh::builder::build_cwbvh(&aabbs, params, &mut core);
         // Store primitives in BVH order so leaves index them directly.
         let prims: Vec<Prim> = bvh
             .primitive_indices
@@ -315,6 +322,7 @@ impl Geometry {
         self.prims.len()
     }
 
+    #[inline(always)]
     fn intersect_prim(
         &self,
         prim: &Prim,

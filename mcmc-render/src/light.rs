@@ -3,6 +3,9 @@
 //!
 //! Area lights are sampled uniformly by area (per-triangle area CDF for
 //! meshes); densities are converted to solid angle at the receiving point.
+//! Sphere lights seen from outside are sampled uniformly in the cone they
+//! subtend (pbrt-v4's method) for next-event estimation; light-path
+//! origins are always sampled by area.
 
 use crate::color::Rgb;
 use crate::frame::Frame;
@@ -25,6 +28,8 @@ pub enum Light {
         area: f32,
         /// Normalised cumulative triangle areas (meshes only).
         tri_cdf: Vec<f32>,
+        /// Centre and radius when the shape is a sphere (cone sampling).
+        sphere: Option<(Vec3, f32)>,
     },
     /// Isotropic point light.
     Point {
@@ -72,6 +77,17 @@ pub struct EmissionSample {
     pub pdf_pos: f32,
 }
 
+/// The cone a sphere subtends from an outside point.
+#[derive(Clone, Copy, Debug)]
+struct SphereCone {
+    /// Unit direction from the point to the centre.
+    axis: Vec3,
+    sin2_max: f32,
+    one_minus_cos: f32,
+    /// Uniform solid-angle density over the cone.
+    pdf: f32,
+}
+
 /// All emitters and their selection distribution.
 #[derive(Clone, Debug, Default)]
 pub struct Lights {
@@ -107,11 +123,16 @@ impl Lights {
                 }
                 _ => Vec::new(),
             };
+            let sphere = match surface {
+                Surface::Sphere { center, radius } => Some((*center, *radius)),
+                _ => None,
+            };
             lights.push(Light::Area {
                 shape,
                 radiance,
                 area: surface.area(),
                 tri_cdf,
+                sphere,
             });
         }
         for p in points {
@@ -254,7 +275,19 @@ impl Lights {
                     is_delta: true,
                 })
             }
-            Light::Area { radiance, .. } => {
+            Light::Area {
+                radiance,
+                shape,
+                sphere,
+                ..
+            } => {
+                if let Some((center, radius)) = sphere
+                    && let Some(ds) = self.sample_sphere_cone(
+                        geometry, *shape, *center, *radius, *radiance, pmf, p, u,
+                    )
+                {
+                    return ds;
+                }
                 let (lp, pdf_area) = self.sample_area_point(geometry, light, u)?;
                 let delta = lp.p - p;
                 let dist2 = delta.length_squared();
@@ -289,6 +322,14 @@ impl Lights {
         let Light::Area { area, .. } = &self.lights[i as usize] else {
             return 0.0;
         };
+        if let Light::Area {
+            sphere: Some((center, radius)),
+            ..
+        } = &self.lights[i as usize]
+            && let Some(cone) = Lights::sphere_cone_of(*center, *radius, p)
+        {
+            return self.pmf[i as usize] * cone.pdf;
+        }
         let delta = lp.p - p;
         let dist2 = delta.length_squared();
         let cos_l = lp.ns.dot(-delta) / dist2.sqrt();
@@ -296,6 +337,86 @@ impl Lights {
             return 0.0;
         }
         self.pmf[i as usize] * dist2 / (cos_l * area)
+    }
+
+    /// The cone of directions a sphere light subtends from `p`, when `p`
+    /// is clearly outside it (inside, sampling falls back to area).
+    fn sphere_cone_of(center: Vec3, radius: f32, p: Vec3) -> Option<SphereCone> {
+        let to_c = (center.as_dvec3() - p.as_dvec3()).as_vec3();
+        let dc2 = to_c.length_squared();
+        let r2 = radius * radius;
+        if !(dc2 > r2 * 1.0001) {
+            return None;
+        }
+        let sin2_max = r2 / dc2;
+        // 1 − cos θmax loses precision for tiny cones; use its series.
+        let one_minus_cos = if sin2_max < 1e-3 {
+            sin2_max / 2.0 + sin2_max * sin2_max / 8.0
+        } else {
+            1.0 - (1.0 - sin2_max).max(0.0).sqrt()
+        };
+        let pdf = 1.0 / (2.0 * PI * one_minus_cos);
+        (pdf.is_finite() && pdf > 0.0).then_some(SphereCone {
+            axis: to_c / dc2.sqrt(),
+            sin2_max,
+            one_minus_cos,
+            pdf,
+        })
+    }
+
+    /// Next-event estimation towards a sphere light by uniform sampling of
+    /// the cone it subtends (pbrt-v4's method): `None` when `p` is inside
+    /// (the caller then samples by area). The inner `Option` is the sample.
+    #[allow(clippy::too_many_arguments)]
+    fn sample_sphere_cone(
+        &self,
+        geometry: &Geometry,
+        shape: u32,
+        center: Vec3,
+        radius: f32,
+        radiance: Rgb,
+        pmf: f32,
+        p: Vec3,
+        u: (f32, f32),
+    ) -> Option<Option<DirectSample>> {
+        let cone = Lights::sphere_cone_of(center, radius, p)?;
+        // Uniform in cos θ over [cos θmax, 1].
+        let (sin2, cos_t) = if cone.sin2_max < 1e-3 {
+            let s2 = cone.sin2_max * u.0;
+            (s2, (1.0 - s2).max(0.0).sqrt())
+        } else {
+            let c = 1.0 - u.0 * cone.one_minus_cos;
+            (1.0 - c * c, c)
+        };
+        // Angle at the centre between −axis and the sampled surface point.
+        let sin_max = cone.sin2_max.sqrt();
+        let cos_alpha = sin2 / sin_max + cos_t * (1.0 - sin2 / cone.sin2_max).max(0.0).sqrt();
+        let sin_alpha = (1.0 - cos_alpha * cos_alpha).max(0.0).sqrt();
+        let phi = 2.0 * PI * u.1;
+        let frame = Frame::from_normal(-cone.axis);
+        let n = frame.to_world(Vec3::new(
+            sin_alpha * phi.cos(),
+            sin_alpha * phi.sin(),
+            cos_alpha,
+        ));
+        let lp = geometry.sphere_point(shape, center + n * radius);
+        let delta = lp.p - p;
+        let dist = delta.length();
+        if !(dist > 0.0) {
+            return Some(None);
+        }
+        let wi = delta / dist;
+        if lp.ns.dot(-wi) <= 0.0 {
+            return Some(None);
+        }
+        Some(Some(DirectSample {
+            p: lp,
+            wi,
+            dist,
+            le: radiance,
+            pdf: pmf * cone.pdf,
+            is_delta: false,
+        }))
     }
 
     /// Radiance of area light `i` leaving `sp` towards unit `w`.

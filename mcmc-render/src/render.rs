@@ -137,7 +137,7 @@ pub fn render(
         .collect();
     let mut light_films: Vec<Film> = if domain == SampleDomain::LightPaths {
         (0..LIGHT_CHUNKS)
-            .map(|_| Film::new(width, height, filter.clone()))
+            .map(|_| Film::new_splat_only(width, height, filter.clone()))
             .collect()
     } else {
         Vec::new()

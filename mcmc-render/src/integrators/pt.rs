@@ -27,6 +27,10 @@ impl PathTracer {
     /// Radiance arriving along `ray` (numbers consumed as documented in
     /// [`super`]).
     pub fn li(&self, scene: &Scene, ray: Ray, source: &mut dyn RandomSource) -> Rgb {
+        // Mitsuba: max_depth 0 renders nothing, not even visible emitters.
+        if self.max_depth == 0 {
+            return Rgb::BLACK;
+        }
         let mut l = Rgb::BLACK;
         let mut beta = Rgb::WHITE;
         let mut eta_scale = 1.0f32;
