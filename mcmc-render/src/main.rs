@@ -1,7 +1,7 @@
 //! The `mcmc-render` command line.
 //!
 //! - `mcmc-render`: renders the embedded default scene to `render.exr` and `render.png`.
-//! - `mcmc-render render SCENE.xml [--integrator pt|lt] [--spp N | --time S] [--seed K]
+//! - `mcmc-render render SCENE.xml [--integrator pt|lt|bdpt] [--spp N | --time S] [--seed K]
 //!   [--threads T] [--out FILE.exr] [-D name=value]…`
 //! - `mcmc-render compare REF.exr TEST.exr [--json]`
 //! - `mcmc-render info SCENE.xml`
@@ -13,7 +13,12 @@ use indicatif::{ProgressBar, ProgressStyle};
 use mcmc_render::compare::compare;
 use mcmc_render::film::Film;
 use mcmc_render::image_io::{read_exr, write_exr, write_png};
-use mcmc_render::integrators::{Integrator, lt::LightTracer, pt::PathTracer};
+use mcmc_render::integrators::{
+    Integrator,
+    bdpt::{Bdpt, MisHeuristic},
+    lt::LightTracer,
+    pt::PathTracer,
+};
 use mcmc_render::render::{RenderObserver, RenderSettings, render};
 use mcmc_render::scene::Scene;
 use serde::Serialize;
@@ -47,6 +52,8 @@ enum IntegratorArg {
     Pt,
     /// Light tracing.
     Lt,
+    /// Bidirectional path tracing (all techniques, power-heuristic MIS).
+    Bdpt,
 }
 
 #[derive(Subcommand)]
@@ -411,6 +418,11 @@ fn do_render(job: RenderJob) -> Result<(), String> {
         IntegratorArg::Lt => Box::new(LightTracer {
             max_depth: scene.integrator.max_depth,
             rr_depth: scene.integrator.rr_depth,
+        }),
+        IntegratorArg::Bdpt => Box::new(Bdpt {
+            max_depth: scene.integrator.max_depth,
+            rr_depth: scene.integrator.rr_depth,
+            heuristic: MisHeuristic::Power,
         }),
     };
     let budget = job.time.map(Duration::from_secs_f64);
