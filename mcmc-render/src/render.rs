@@ -138,7 +138,14 @@ pub fn render(
         .collect();
     let mut light_films: Vec<Film> = if splats {
         (0..LIGHT_CHUNKS)
-            .map(|_| Film::new_splat_only(width, height, filter.clone()))
+            .map(|_| {
+                // BDPT also adds camera samples: it needs both accumulators.
+                if domain == SampleDomain::PixelsWithSplats {
+                    Film::new(width, height, filter.clone())
+                } else {
+                    Film::new_splat_only(width, height, filter.clone())
+                }
+            })
             .collect()
     } else {
         Vec::new()
