@@ -181,6 +181,16 @@ impl Film {
         Some((lo_x as u32, hi_x as u32, lo_y as u32, hi_y as u32))
     }
 
+    /// Filter weights along one axis for the pixel range `lo..=hi`
+    /// (at most 16 pixels: the support of a filter of radius ≤ 7.5).
+    fn weights(&self, lo: u32, hi: u32, p: f32, out: &mut [f32; 16]) -> usize {
+        let n = ((hi - lo + 1) as usize).min(16);
+        for (k, w) in out.iter_mut().take(n).enumerate() {
+            *w = self.filter.eval_1d((lo + k as u32) as f32 + 0.5 - p);
+        }
+        n
+    }
+
     /// Adds a camera sample at raster position `p` with radiance `l`.
     /// Non-finite radiance is dropped (and should be counted by the caller).
     pub fn add_sample(&mut self, p: Vec2, l: Rgb) {
@@ -190,18 +200,20 @@ impl Film {
         let Some((x0, x1, y0, y1)) = self.footprint(p) else {
             return;
         };
-        for y in y0..=y1 {
-            let wy = self.filter.eval_1d(y as f32 + 0.5 - p.y);
+        let (mut wx, mut wy) = ([0.0f32; 16], [0.0f32; 16]);
+        let nx = self.weights(x0, x1, p.x, &mut wx);
+        let ny = self.weights(y0, y1, p.y, &mut wy);
+        for (ky, &wy) in wy.iter().take(ny).enumerate() {
             if wy == 0.0 {
                 continue;
             }
-            for x in x0..=x1 {
-                let w = wy * self.filter.eval_1d(x as f32 + 0.5 - p.x);
+            let row = ((y0 + ky as u32 - self.y0) * self.w + (x0 - self.x0)) as usize;
+            for (kx, &wx) in wx.iter().take(nx).enumerate() {
+                let w = wy * wx;
                 if w == 0.0 {
                     continue;
                 }
-                let i = ((y - self.y0) * self.w + (x - self.x0)) as usize;
-                let px = &mut self.samples[i];
+                let px = &mut self.samples[row + kx];
                 px[0] += w * l.r;
                 px[1] += w * l.g;
                 px[2] += w * l.b;
@@ -218,21 +230,26 @@ impl Film {
         let Some((x0, x1, y0, y1)) = self.footprint(p) else {
             return;
         };
-        for y in y0..=y1 {
-            let zy = self.filter.norm_y[y as usize];
-            let wy = self.filter.eval_1d(y as f32 + 0.5 - p.y);
-            if wy == 0.0 || zy <= 0.0 {
+        let (mut wx, mut wy) = ([0.0f32; 16], [0.0f32; 16]);
+        let nx = self.weights(x0, x1, p.x, &mut wx);
+        let ny = self.weights(y0, y1, p.y, &mut wy);
+        let norm_x = &self.filter.norm_x[x0 as usize..x0 as usize + nx];
+        for (w, &z) in wx.iter_mut().zip(norm_x) {
+            *w = if z > 0.0 { *w / z } else { 0.0 };
+        }
+        for (ky, &wy) in wy.iter().take(ny).enumerate() {
+            let z = self.filter.norm_y[(y0 + ky as u32) as usize];
+            if wy == 0.0 || z <= 0.0 {
                 continue;
             }
-            for x in x0..=x1 {
-                let zx = self.filter.norm_x[x as usize];
-                let wx = self.filter.eval_1d(x as f32 + 0.5 - p.x);
-                if wx == 0.0 || zx <= 0.0 {
+            let wy = wy / z;
+            let row = ((y0 + ky as u32 - self.y0) * self.w + (x0 - self.x0)) as usize;
+            for (kx, &wx) in wx.iter().take(nx).enumerate() {
+                let w = wy * wx;
+                if w == 0.0 {
                     continue;
                 }
-                let w = wy * wx / (zy * zx);
-                let i = ((y - self.y0) * self.w + (x - self.x0)) as usize;
-                let px = &mut self.splats[i];
+                let px = &mut self.splats[row + kx];
                 px[0] += w * l.r;
                 px[1] += w * l.g;
                 px[2] += w * l.b;

@@ -201,6 +201,10 @@ pub struct Geometry {
     pub shapes: Vec<GeoShape>,
     prims: Vec<Prim>,
     bvh: CwBvh,
+    /// Centre of the BVH's normalised space (scene bounds centre).
+    bvh_center: glam::DVec3,
+    /// Scale from world to the BVH's normalised space (a power of two).
+    bvh_scale: f32,
     /// Wall-clock time of the BVH build.
     pub build_time: Duration,
     /// Total triangle count.
@@ -251,6 +255,33 @@ impl Geometry {
                 }
             }
         }
+        // obvhs culls BVH nodes whose ray exit distance is below a fixed
+        // 1e-4 (`cwbvh::node::EPSILON`), which would lose hits in small
+        // scenes. The BVH therefore lives in a normalised space: centred
+        // on the scene and scaled (by a power of two, exact) so the scene
+        // spans about 1024 units; the cull then only drops hits closer
+        // than ~1e-7 of the scene size, below f32 resolution. Boxes are
+        // mapped in f64 and padded outwards so they stay conservative.
+        let mut lo = glam::DVec3::splat(f64::INFINITY);
+        let mut hi = glam::DVec3::splat(f64::NEG_INFINITY);
+        for b in &aabbs {
+            lo = lo.min(Vec3::from(b.min).as_dvec3());
+            hi = hi.max(Vec3::from(b.max).as_dvec3());
+        }
+        let (bvh_center, bvh_scale) = if lo.x.is_finite() && hi.x.is_finite() {
+            let extent = (hi - lo).max_element().max(f64::MIN_POSITIVE);
+            let scale = 2f64.powi((1024.0 / extent).log2().round().clamp(-120.0, 120.0) as i32);
+            ((lo + hi) * 0.5, scale)
+        } else {
+            (glam::DVec3::ZERO, 1.0)
+        };
+        const PAD: f64 = 1e-3;
+        for b in aabbs.iter_mut() {
+            let mn = (Vec3::from(b.min).as_dvec3() - bvh_center) * bvh_scale - PAD;
+            let mx = (Vec3::from(b.max).as_dvec3() - bvh_center) * bvh_scale + PAD;
+            *b = Aabb::new(mn.as_vec3().into(), mx.as_vec3().into());
+        }
+        let bvh_scale = bvh_scale as f32;
         let start = Instant::now();
         let mut core = Duration::default();
         let bvh =
@@ -265,6 +296,8 @@ impl Geometry {
             shapes,
             prims,
             bvh,
+            bvh_center,
+            bvh_scale,
             build_time: start.elapsed(),
             triangles,
         }
@@ -318,26 +351,27 @@ impl Geometry {
                 }
             }
             Prim::Sphere { center, radius, .. } => {
-                // Hearn–Baker form: the discriminant from the perpendicular
-                // distance avoids cancellation for distant spheres.
-                let oc = o - center;
+                // In f64: `o − center` loses all precision of a small sphere
+                // far from the origin in f32, and a spawned ray could then
+                // find its own surface again. The Hearn–Baker discriminant
+                // (from the perpendicular distance) avoids cancellation.
+                let oc = o.as_dvec3() - center.as_dvec3();
+                let d = d.as_dvec3();
+                let r = radius as f64;
                 let b = oc.dot(d);
                 let perp = oc - d * b;
-                let disc = radius * radius - perp.length_squared();
+                let disc = r * r - perp.length_squared();
                 if disc < 0.0 {
                     return MISS;
                 }
-                let c = oc.length_squared() - radius * radius;
+                let c = oc.length_squared() - r * r;
                 let sq = disc.sqrt();
                 let q = if b > 0.0 { -b - sq } else { -b + sq };
-                let (mut t0, mut t1) = (c / q, q);
-                if q == 0.0 {
-                    t0 = 0.0;
-                    t1 = 0.0;
-                }
+                let (mut t0, mut t1) = if q == 0.0 { (0.0, 0.0) } else { (c / q, q) };
                 if t0 > t1 {
                     std::mem::swap(&mut t0, &mut t1);
                 }
+                let (t0, t1) = (t0 as f32, t1 as f32);
                 if t0 > tmin && t0 < tmax {
                     (t0, 0.0, 0.0)
                 } else if t1 > tmin && t1 < tmax {
@@ -369,33 +403,48 @@ impl Geometry {
         }
     }
 
+    /// The ray in the BVH's normalised space (distances scale by `bvh_scale`).
+    fn bvh_ray(&self, ray: &Ray) -> BvhRay {
+        let o = ((ray.o.as_dvec3() - self.bvh_center) * self.bvh_scale as f64).as_vec3();
+        BvhRay::new(
+            Vec3A::from(o),
+            Vec3A::from(ray.d),
+            ray.tmin * self.bvh_scale,
+            ray.tmax * self.bvh_scale,
+        )
+    }
+
     /// Closest hit along `ray`, if any.
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        let bray = BvhRay::new(Vec3A::from(ray.o), Vec3A::from(ray.d), ray.tmin, ray.tmax);
+        let bray = self.bvh_ray(ray);
         let mut hit = RayHit::none();
-        let mut uv = (0.0f32, 0.0f32);
-        let (o, d, tmin) = (ray.o, ray.d, ray.tmin);
-        let found = self.bvh.ray_traverse(bray, &mut hit, |r, id| {
-            let (t, u, v) = self.intersect_prim(&self.prims[id], o, d, tmin, r.tmax);
-            if t < r.tmax {
-                uv = (u, v);
+        let mut best = (f32::INFINITY, 0.0f32, 0.0f32);
+        let (o, d, tmin, s) = (ray.o, ray.d, ray.tmin, self.bvh_scale);
+        let tmax = ray.tmax;
+        self.bvh.ray_traverse(bray, &mut hit, |_, id| {
+            let (t, u, v) = self.intersect_prim(&self.prims[id], o, d, tmin, best.0.min(tmax));
+            if t < best.0 {
+                best = (t, u, v);
+                t * s
+            } else {
+                f32::INFINITY
             }
-            t
         });
-        found.then_some(Hit {
-            t: hit.t,
+        (best.0 < tmax).then_some(Hit {
+            t: best.0,
             prim: hit.primitive_id,
-            u: uv.0,
-            v: uv.1,
+            u: best.1,
+            v: best.2,
         })
     }
 
     /// True when something blocks `ray` strictly before `ray.tmax`.
     pub fn occluded(&self, ray: &Ray) -> bool {
-        let bray = BvhRay::new(Vec3A::from(ray.o), Vec3A::from(ray.d), ray.tmin, ray.tmax);
-        let (o, d, tmin) = (ray.o, ray.d, ray.tmin);
-        !self.bvh.ray_traverse_miss(bray, |r, id| {
-            self.intersect_prim(&self.prims[id], o, d, tmin, r.tmax).0
+        let bray = self.bvh_ray(ray);
+        let (o, d, tmin, tmax) = (ray.o, ray.d, ray.tmin, ray.tmax);
+        !self.bvh.ray_traverse_miss(bray, |_, id| {
+            let t = self.intersect_prim(&self.prims[id], o, d, tmin, tmax).0;
+            if t < tmax { 0.0 } else { f32::INFINITY }
         })
     }
 
@@ -481,7 +530,9 @@ impl Geometry {
             Vec3::new(0.0, 0.0, radius)
         };
         let p = center + local;
-        let p_err = local.abs() * gamma(5) + (center.abs() + local.abs()) * gamma(1);
+        // Object-space reprojection error plus the translation by the centre
+        // (pbrt's transform bound).
+        let p_err = local.abs() * gamma(5) + (center.abs() + local.abs()) * gamma(3);
         let mut n = (local / radius).normalize();
         if gs.flip_normals {
             n = -n;
@@ -516,6 +567,63 @@ impl Geometry {
             ng: n,
             ns: n,
             shape,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::frame::Frame;
+    use crate::warp::uniform_sphere;
+
+    fn lcg(state: &mut u64) -> f32 {
+        *state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((*state >> 40) as f32) / (1u64 << 24) as f32
+    }
+
+    /// Rays from inside a closed sphere must always hit it, and a ray
+    /// spawned from the hit point back inside must hit the far side (never
+    /// its own origin), at every scale.
+    #[test]
+    fn rays_inside_a_sphere_always_hit_it_at_any_scale() {
+        for (center, radius) in [
+            (Vec3::ZERO, 1.0e-4),
+            (Vec3::new(1e-3, 2e-3, -1e-3), 1.0e-4),
+            (Vec3::ZERO, 1.0),
+            (Vec3::new(3e4, -2e4, 1e4), 5e3),
+        ] {
+            let g = Geometry::build(vec![GeoShape {
+                surface: Surface::Sphere { center, radius },
+                flip_normals: true,
+            }]);
+            let mut s = 1u64;
+            for _ in 0..20_000 {
+                let o = center
+                    + uniform_sphere((lcg(&mut s), lcg(&mut s))) * radius * 0.5 * lcg(&mut s);
+                let d = uniform_sphere((lcg(&mut s), lcg(&mut s)));
+                let ray = Ray::new(o, d);
+                let hit = g
+                    .intersect(&ray)
+                    .unwrap_or_else(|| panic!("r={radius}: ray escaped"));
+                let sp = g.surface_point(&ray, &hit);
+                assert!(
+                    ((sp.p - center).length() - radius).abs() <= 1e-5 * radius.max(center.length())
+                );
+                let d2 = Frame::from_normal(sp.ng)
+                    .to_world(uniform_sphere((lcg(&mut s), lcg(&mut s))).abs());
+                let ray2 = sp.spawn_ray(d2);
+                let hit2 = g
+                    .intersect(&ray2)
+                    .unwrap_or_else(|| panic!("r={radius}: bounce escaped"));
+                assert!(
+                    hit2.t > 1e-3 * radius * d2.dot(sp.ng),
+                    "r={radius}: self-hit at t={}",
+                    hit2.t
+                );
+            }
         }
     }
 }

@@ -4,6 +4,10 @@
 //! BVH) → [`bsdf`], [`light`], [`camera`] → [`integrators`] drawing numbers
 //! from a [`sampling::RandomSource`] → [`film`] → [`image_io`].
 
+// `!(x > 0.0)` is written on purpose throughout: it is true for NaN, which
+// must fail every positivity check, and `x <= 0.0` would let NaN through.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod bsdf;
 pub mod camera;
 pub mod color;

@@ -370,22 +370,23 @@ impl Loader {
         let mut props = Props::new(p);
         let width = props.int("width", 768)?;
         let height = props.int("height", 576)?;
-        // These two only choose the output container and channel layout,
-        // which this renderer fixes (linear RGB EXR); accept Mitsuba's
+        // These only choose the output container and channel layout, which
+        // this renderer fixes (linear float RGB EXR); accept Mitsuba's
         // values that match it and refuse the rest.
-        if let Some((s, loc)) = props.opt_string("file_format")? {
-            if s != "openexr" && s != "exr" {
+        for (name, allowed) in [
+            ("file_format", &["openexr", "exr"][..]),
+            ("pixel_format", &["rgb", "rgba"][..]),
+            ("component_format", &["float32"][..]),
+        ] {
+            if let Some((s, loc)) = props.opt_string(name)?
+                && !allowed.contains(&s.as_str())
+            {
                 return Err(err(
                     &loc,
-                    format!("unsupported file_format \"{s}\" (supported: openexr)"),
-                ));
-            }
-        }
-        if let Some((s, loc)) = props.opt_string("pixel_format")? {
-            if s != "rgb" && s != "rgba" {
-                return Err(err(
-                    &loc,
-                    format!("unsupported pixel_format \"{s}\" (supported: rgb, rgba)"),
+                    format!(
+                        "unsupported {name} \"{s}\" (supported: {})",
+                        allowed.join(", ")
+                    ),
                 ));
             }
         }
@@ -414,8 +415,9 @@ impl Loader {
                     let mut props = Props::new(c);
                     let stddev = props.float("stddev", 0.5)?;
                     props.finish()?;
-                    if !(stddev > 0.0) {
-                        return Err(err(&c.loc, "stddev must be positive"));
+                    // The film keeps filter footprints at most 16 pixels wide.
+                    if !(stddev > 0.0 && stddev <= 1.875) {
+                        return Err(err(&c.loc, "stddev must be in (0, 1.875] pixels"));
                     }
                     filter = FilterKind::Gaussian { stddev };
                 }

@@ -1,0 +1,282 @@
+//! End-to-end renders checked against analytic answers and against each
+//! other: furnace tests (PT and LT, at several scene scales), PT vs LT on
+//! the Cornell box, and bit-identical images across thread counts.
+//!
+//! Tolerances come from standard errors measured in the test itself: a
+//! scene is rendered as K independent batches (different seeds), the
+//! standard error of the image mean is sd(batch means)/√K, and a result
+//! passes when it lies within 4 standard errors (a false-failure rate of
+//! about 6e-5 for a normal estimate; the seeds are fixed, so the test is
+//! deterministic).
+
+use mcmc_render::color::Rgb;
+use mcmc_render::integrators::Integrator;
+use mcmc_render::integrators::lt::LightTracer;
+use mcmc_render::integrators::pt::PathTracer;
+use mcmc_render::render::{NoObserver, RenderSettings, render};
+use mcmc_render::scene::Scene;
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+
+fn load(text: &str) -> Scene {
+    Scene::load_str(text, Path::new("test.xml"), Path::new(".")).expect("scene loads")
+}
+
+fn image_mean(img: &[Rgb]) -> [f64; 3] {
+    let mut m = [0.0f64; 3];
+    for p in img {
+        m[0] += p.r as f64;
+        m[1] += p.g as f64;
+        m[2] += p.b as f64;
+    }
+    m.map(|v| v / img.len() as f64)
+}
+
+fn render_image(
+    scene: &Scene,
+    integ: &dyn Integrator,
+    spp: u32,
+    seed: u64,
+    threads: usize,
+) -> Vec<Rgb> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    let settings = RenderSettings {
+        spp: Some(spp),
+        time_budget: None,
+        seed,
+    };
+    let stop = AtomicBool::new(false);
+    let r = pool.install(|| render(scene, integ, &settings, &stop, &NoObserver));
+    assert_eq!(r.spp_done, spp as u64);
+    assert_eq!(r.stats.nonfinite, 0, "non-finite samples");
+    r.image()
+}
+
+/// Mean and standard error (per channel) of the image mean over `k` independent batches.
+fn batched_mean(scene: &Scene, integ: &dyn Integrator, spp: u32, k: u64) -> ([f64; 3], [f64; 3]) {
+    let means: Vec<[f64; 3]> = (0..k)
+        .map(|seed| image_mean(&render_image(scene, integ, spp, 1000 + seed, 2)))
+        .collect();
+    let mut mean = [0.0; 3];
+    let mut se = [0.0; 3];
+    for c in 0..3 {
+        let m = means.iter().map(|v| v[c]).sum::<f64>() / k as f64;
+        let var = means.iter().map(|v| (v[c] - m).powi(2)).sum::<f64>() / (k - 1) as f64;
+        mean[c] = m;
+        se[c] = (var / k as f64).sqrt();
+    }
+    (mean, se)
+}
+
+/// A closed sphere seen from inside: diffuse albedo `a`, uniform emission
+/// `le` on its inner side, so every pixel is `le / (1 − a)`.
+fn furnace_sphere(center: [f64; 3], radius: f64, albedo: f32, le: f32) -> String {
+    let [x, y, z] = center;
+    format!(
+        r#"<scene version="3.0.0">
+    <integrator type="path"><integer name="max_depth" value="-1"/></integrator>
+    <sensor type="perspective">
+        <float name="fov" value="70"/>
+        <float name="near_clip" value="{near}"/>
+        <float name="far_clip" value="{far}"/>
+        <transform name="to_world">
+            <lookat origin="{x},{y},{z}" target="{x},{y},{z2}" up="0,1,0"/>
+        </transform>
+        <film type="hdrfilm">
+            <integer name="width" value="16"/><integer name="height" value="12"/>
+            <rfilter type="box"/>
+        </film>
+    </sensor>
+    <shape type="sphere">
+        <point name="center" x="{x}" y="{y}" z="{z}"/>
+        <float name="radius" value="{radius}"/>
+        <boolean name="flip_normals" value="true"/>
+        <bsdf type="diffuse"><rgb name="reflectance" value="{albedo}"/></bsdf>
+        <emitter type="area"><rgb name="radiance" value="{le}"/></emitter>
+    </shape>
+</scene>"#,
+        z2 = z + radius * 0.5,
+        near = radius * 1e-3,
+        far = radius * 10.0
+    )
+}
+
+/// The same with a cube made of triangles (exercises triangle hits and
+/// triangle-mesh light sampling).
+fn furnace_cube(albedo: f32, le: f32) -> String {
+    format!(
+        r#"<scene version="3.0.0">
+    <sensor type="perspective">
+        <float name="fov" value="70"/>
+        <transform name="to_world"><lookat origin="0.1,0.2,-0.3" target="0.5,0.4,1" up="0,1,0"/></transform>
+        <film type="hdrfilm">
+            <integer name="width" value="16"/><integer name="height" value="12"/>
+            <rfilter type="box"/>
+        </film>
+    </sensor>
+    <shape type="cube">
+        <transform name="to_world"><scale value="2"/><rotate y="1" angle="30"/></transform>
+        <boolean name="flip_normals" value="true"/>
+        <bsdf type="diffuse"><rgb name="reflectance" value="{albedo}"/></bsdf>
+        <emitter type="area"><rgb name="radiance" value="{le}"/></emitter>
+    </shape>
+</scene>"#
+    )
+}
+
+fn check_furnace(scene: &Scene, expected: f64, what: &str) {
+    let it = scene.integrator;
+    let pt = PathTracer {
+        max_depth: it.max_depth,
+        rr_depth: it.rr_depth,
+    };
+    let lt = LightTracer {
+        max_depth: it.max_depth,
+        rr_depth: it.rr_depth,
+    };
+    // Light tracing spreads each path over the whole image, so it needs
+    // more paths per pixel for the same standard error.
+    for (name, integ, spp) in [
+        ("pt", &pt as &dyn Integrator, 16),
+        ("lt", &lt as &dyn Integrator, 256),
+    ] {
+        let (mean, se) = batched_mean(scene, integ, spp, 8);
+        for c in 0..3 {
+            let err = (mean[c] - expected).abs();
+            assert!(
+                err < 4.0 * se[c] + 1e-5 * expected,
+                "{what} {name} channel {c}: mean {} expected {expected} (se {})",
+                mean[c],
+                se[c]
+            );
+            // The test must be able to see a 2% error.
+            assert!(
+                4.0 * se[c] < 0.02 * expected,
+                "{what} {name}: se {} too large",
+                se[c]
+            );
+        }
+    }
+}
+
+#[test]
+fn furnace_sphere_matches_le_over_one_minus_albedo() {
+    // L = Le / (1 − a) = 1 / 0.5 = 2; unbounded depth with Russian roulette.
+    check_furnace(
+        &load(&furnace_sphere([0.0; 3], 1.0, 0.5, 1.0)),
+        2.0,
+        "unit sphere",
+    );
+}
+
+#[test]
+fn furnace_holds_at_large_and_small_scales() {
+    // Same furnace far from the origin and huge, then tiny: a fixed
+    // self-intersection epsilon would either leak or shadow one of them.
+    check_furnace(
+        &load(&furnace_sphere([3.0e4, -2.0e4, 1.0e4], 5.0e3, 0.3, 0.7)),
+        1.0,
+        "large sphere",
+    );
+    check_furnace(
+        &load(&furnace_sphere([1.0e-3, 2.0e-3, -1.0e-3], 1.0e-4, 0.3, 0.7)),
+        1.0,
+        "tiny sphere",
+    );
+}
+
+#[test]
+fn furnace_triangle_cube() {
+    check_furnace(&load(&furnace_cube(0.6, 0.8)), 2.0, "cube");
+}
+
+fn cornell(res: u32, look_y: f32) -> Scene {
+    let mut defines = HashMap::new();
+    defines.insert("res".to_string(), res.to_string());
+    defines.insert("look_y".to_string(), look_y.to_string());
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/scenes/cornell-box.xml");
+    Scene::load(&path, &defines).expect("cornell box loads")
+}
+
+#[test]
+fn pt_and_lt_agree_on_the_cornell_box() {
+    // The camera is tilted down so the emitter is out of view: the pixels
+    // that see it (radiance 18 against an image mean of 0.1) dominate the
+    // path tracer's variance of the image mean, and would need ~10x more
+    // samples for the same standard error. The emitter seen directly is
+    // covered by the furnace tests (light tracing's one-segment paths).
+    let scene = cornell(32, -1.1);
+    let it = scene.integrator;
+    let pt = PathTracer {
+        max_depth: it.max_depth,
+        rr_depth: it.rr_depth,
+    };
+    let lt = LightTracer {
+        max_depth: it.max_depth,
+        rr_depth: it.rr_depth,
+    };
+    let (mp, sp) = batched_mean(&scene, &pt, 128, 8);
+    let (ml, sl) = batched_mean(&scene, &lt, 512, 8);
+    eprintln!("pt {mp:?} ± {sp:?}\nlt {ml:?} ± {sl:?}");
+    for c in 0..3 {
+        let sigma = (sp[c] * sp[c] + sl[c] * sl[c]).sqrt();
+        let rel = (ml[c] - mp[c]) / mp[c];
+        // Consistent with their noise ...
+        assert!(
+            (ml[c] - mp[c]).abs() < 4.0 * sigma,
+            "channel {c}: pt {} ± {}, lt {} ± {}",
+            mp[c],
+            sp[c],
+            ml[c],
+            sl[c]
+        );
+        // ... and within the 1% the issue asks for, with noise small enough
+        // that 1% is a meaningful bound.
+        assert!(rel.abs() < 0.01, "channel {c}: relative difference {rel}");
+        assert!(
+            4.0 * sigma < 0.01 * mp[c],
+            "channel {c}: noise too large to test 1%"
+        );
+    }
+}
+
+#[test]
+fn images_are_bit_identical_across_thread_counts() {
+    let scene = cornell(40, 0.0);
+    let it = scene.integrator;
+    let pt = PathTracer {
+        max_depth: it.max_depth,
+        rr_depth: it.rr_depth,
+    };
+    let lt = LightTracer {
+        max_depth: it.max_depth,
+        rr_depth: it.rr_depth,
+    };
+    for integ in [&pt as &dyn Integrator, &lt as &dyn Integrator] {
+        let one = render_image(&scene, integ, 5, 42, 1);
+        let three = render_image(&scene, integ, 5, 42, 3);
+        let eight = render_image(&scene, integ, 5, 42, 8);
+        let bits = |img: &[Rgb]| -> Vec<u32> {
+            img.iter()
+                .flat_map(|p| [p.r.to_bits(), p.g.to_bits(), p.b.to_bits()])
+                .collect()
+        };
+        assert!(
+            bits(&one) == bits(&three),
+            "{}: 1 vs 3 threads differ",
+            integ.name()
+        );
+        assert!(
+            bits(&one) == bits(&eight),
+            "{}: 1 vs 8 threads differ",
+            integ.name()
+        );
+        // And a different seed gives a different image (the seed is used).
+        let other = render_image(&scene, integ, 5, 43, 2);
+        assert!(bits(&one) != bits(&other), "{}: seed ignored", integ.name());
+    }
+}

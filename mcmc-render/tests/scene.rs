@@ -1,0 +1,322 @@
+//! Scene loading: Mitsuba defaults, `$name` substitution, includes,
+//! transform order, BSDF parsing, meshes (OBJ, ASCII and binary PLY), and
+//! the camera mapping.
+
+use glam::{Vec2, Vec3};
+use mcmc_render::bsdf::{BsdfDesc, MicrofacetKind};
+use mcmc_render::color::Rgb;
+use mcmc_render::geometry::Ray;
+use mcmc_render::scene::loader::Loader;
+use mcmc_render::scene::{FilterKind, SceneDesc, ShapeGeometry, xml};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("mcmc-render-scene-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+const SENSOR: &str = r#"<sensor type="perspective"><float name="fov" value="40"/></sensor>"#;
+
+fn desc_in(dir: &Path, body: &str, defines: &[(&str, &str)]) -> Result<SceneDesc, String> {
+    let path = dir.join("scene.xml");
+    std::fs::write(
+        &path,
+        format!("<scene version=\"3.0.0\">\n{SENSOR}\n{body}\n</scene>\n"),
+    )
+    .unwrap();
+    let defs: HashMap<String, String> = defines
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
+    let tree = xml::parse_file(&path, &defs).map_err(|e| e.to_string())?;
+    Loader::new(dir)
+        .load(&tree, "scene.xml")
+        .map_err(|e| e.to_string())
+}
+
+fn desc(body: &str) -> SceneDesc {
+    desc_in(&scratch("desc"), body, &[]).expect("loads")
+}
+
+#[test]
+fn mitsuba_defaults() {
+    let d = desc("");
+    assert_eq!((d.film.width, d.film.height), (768, 576));
+    assert_eq!(d.film.filter, FilterKind::Gaussian { stddev: 0.5 });
+    assert_eq!(d.sample_count, 4);
+    assert_eq!(d.integrator.max_depth, u32::MAX);
+    assert_eq!(d.integrator.rr_depth, 5);
+    assert_eq!(d.camera.near_clip, 0.01);
+}
+
+#[test]
+fn defaults_substitution_and_overrides() {
+    let dir = scratch("subst");
+    let body = r#"<default name="w" value="64"/>
+<default name="md" value="3"/>
+<integrator type="path"><integer name="max_depth" value="$md"/></integrator>
+<shape type="sphere"><float name="radius" value="$w"/></shape>"#;
+    let d = desc_in(&dir, body, &[]).unwrap();
+    assert_eq!(d.integrator.max_depth, 3);
+    let d = desc_in(&dir, body, &[("md", "7")]).unwrap();
+    assert_eq!(d.integrator.max_depth, 7);
+    match d.shapes[0].geometry {
+        ShapeGeometry::Sphere { radius, .. } => assert_eq!(radius, 64.0),
+        _ => panic!("not a sphere"),
+    }
+}
+
+#[test]
+fn include_splices_the_other_file() {
+    let dir = scratch("include");
+    std::fs::write(
+        dir.join("part.xml"),
+        r#"<scene version="3.0.0"><bsdf type="diffuse" id="grey"><rgb name="reflectance" value="0.25"/></bsdf></scene>"#,
+    )
+    .unwrap();
+    let d = desc_in(
+        &dir,
+        r#"<include filename="part.xml"/><shape type="sphere"><ref id="grey"/></shape>"#,
+        &[],
+    )
+    .unwrap();
+    assert_eq!(
+        d.bsdfs[d.shapes[0].bsdf],
+        BsdfDesc::Diffuse {
+            reflectance: Rgb::splat(0.25)
+        }
+    );
+}
+
+#[test]
+fn transforms_apply_in_file_order() {
+    // scale, then rotate 90° about z, then translate: (1,0,0) -> (2,0,0) -> (0,2,0) -> (0,2,5).
+    let d = desc(
+        r#"<shape type="rectangle"><transform name="to_world">
+        <scale value="2"/><rotate z="1" angle="90"/><translate z="5"/>
+    </transform></shape>"#,
+    );
+    let ShapeGeometry::Mesh(m) = &d.shapes[0].geometry else {
+        panic!("rectangle is a mesh")
+    };
+    // Rectangle corner (1, -1, 0) -> (2, -2, 0) -> (2, 2, 0) -> (2, 2, 5).
+    let p = m.positions[1];
+    assert!((p - Vec3::new(2.0, 2.0, 5.0)).length() < 1e-5, "{p}");
+    // A row-major <matrix> equals the same translation.
+    let d = desc(
+        r#"<shape type="sphere"><transform name="to_world">
+        <matrix value="1 0 0 1  0 1 0 2  0 0 1 3  0 0 0 1"/></transform></shape>"#,
+    );
+    match d.shapes[0].geometry {
+        ShapeGeometry::Sphere { center, .. } => assert_eq!(center, Vec3::new(1.0, 2.0, 3.0)),
+        _ => panic!("not a sphere"),
+    }
+}
+
+#[test]
+fn bsdf_parsing_fills_mitsuba_defaults() {
+    let d = desc(
+        r#"<bsdf type="conductor" id="mirror"/>
+<bsdf type="conductor" id="gold"><string name="material" value="Au"/></bsdf>
+<bsdf type="roughconductor" id="rough"/>
+<bsdf type="dielectric" id="glass"/>
+<bsdf type="roughdielectric" id="frosted">
+    <string name="distribution" value="ggx"/><float name="alpha" value="0.3"/>
+    <string name="int_ior" value="water"/>
+</bsdf>
+<bsdf type="twosided" id="two"><bsdf type="diffuse"/></bsdf>"#,
+    );
+    assert_eq!(d.bsdfs[0], BsdfDesc::PerfectMirror);
+    match &d.bsdfs[1] {
+        BsdfDesc::Conductor { eta, k, .. } => {
+            // Mitsuba 3 scalar_rgb's values for gold.
+            assert!((eta.r - 0.143_036).abs() < 1e-5 && (k.b - 1.603_36).abs() < 1e-5);
+        }
+        other => panic!("{other:?}"),
+    }
+    match &d.bsdfs[2] {
+        BsdfDesc::RoughConductor {
+            distribution,
+            alpha_u,
+            alpha_v,
+            eta,
+            k,
+            ..
+        } => {
+            assert_eq!(*distribution, MicrofacetKind::Beckmann);
+            assert_eq!((*alpha_u, *alpha_v), (0.1, 0.1));
+            assert_eq!((*eta, *k), (Rgb::splat(0.0), Rgb::WHITE));
+        }
+        other => panic!("{other:?}"),
+    }
+    match &d.bsdfs[3] {
+        BsdfDesc::Dielectric {
+            int_ior, ext_ior, ..
+        } => assert_eq!((*int_ior, *ext_ior), (1.5046, 1.000_277)),
+        other => panic!("{other:?}"),
+    }
+    match &d.bsdfs[4] {
+        BsdfDesc::RoughDielectric {
+            distribution,
+            alpha_u,
+            int_ior,
+            ..
+        } => {
+            assert_eq!(*distribution, MicrofacetKind::Ggx);
+            assert_eq!(*alpha_u, 0.3);
+            assert_eq!(*int_ior, 1.333);
+        }
+        other => panic!("{other:?}"),
+    }
+    assert!(
+        matches!(&d.bsdfs[5], BsdfDesc::TwoSided { inner } if matches!(**inner, BsdfDesc::Diffuse { .. }))
+    );
+}
+
+#[test]
+fn refusals_name_the_line() {
+    let dir = scratch("refuse");
+    let cases = [
+        (
+            r#"<bsdf type="conductor"><string name="material" value="Unobtainium"/></bsdf>"#,
+            "Unobtainium",
+        ),
+        (
+            r#"<bsdf type="conductor"><string name="material" value="Au"/><rgb name="eta" value="1"/></bsdf>"#,
+            "not both",
+        ),
+        (
+            r#"<shape type="sphere"><transform name="to_world"><scale x="1" y="2"/></transform></shape>"#,
+            "non-uniformly",
+        ),
+        (r#"<emitter type="envmap"/>"#, "envmap"),
+        (r#"<integrator type="bdpt"/>"#, "bdpt"),
+        (
+            r#"<shape type="sphere"><ref id="nothing"/></shape>"#,
+            "nothing",
+        ),
+    ];
+    for (body, needle) in cases {
+        let e = desc_in(&dir, body, &[]).expect_err(body);
+        assert!(e.contains("scene.xml:3"), "{e}");
+        assert!(e.contains(needle), "{e}");
+    }
+}
+
+fn write_ply_binary(path: &Path) {
+    let mut data = Vec::new();
+    data.extend_from_slice(
+        b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n",
+    );
+    for v in [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]] {
+        for c in v {
+            data.extend_from_slice(&c.to_le_bytes());
+        }
+        for c in [0.0f32, 0.0, 1.0] {
+            data.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    data.push(3);
+    for i in [0i32, 1, 2] {
+        data.extend_from_slice(&i.to_le_bytes());
+    }
+    std::fs::write(path, data).unwrap();
+}
+
+#[test]
+fn meshes_load_with_the_normals_the_file_asks_for() {
+    let dir = scratch("meshes");
+    std::fs::write(
+        dir.join("quad.ply"),
+        "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n",
+    )
+    .unwrap();
+    write_ply_binary(&dir.join("tri.ply"));
+    std::fs::write(
+        dir.join("tri.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1\n",
+    )
+    .unwrap();
+    let d = desc_in(
+        &dir,
+        r#"<shape type="ply"><string name="filename" value="quad.ply"/></shape>
+<shape type="ply"><string name="filename" value="tri.ply"/></shape>
+<shape type="obj"><string name="filename" value="tri.obj"/></shape>
+<shape type="obj"><string name="filename" value="tri.obj"/><boolean name="face_normals" value="true"/></shape>"#,
+        &[],
+    )
+    .unwrap();
+    let mesh = |i: usize| match &d.shapes[i].geometry {
+        ShapeGeometry::Mesh(m) => m.clone(),
+        _ => panic!("mesh"),
+    };
+    // ASCII quad: fan-triangulated, normals computed (none in the file).
+    let quad = mesh(0);
+    assert_eq!(quad.indices.len(), 2);
+    assert!(
+        quad.normals
+            .as_ref()
+            .unwrap()
+            .iter()
+            .all(|n| (*n - Vec3::Z).length() < 1e-6)
+    );
+    // Binary PLY with normals.
+    let tri = mesh(1);
+    assert_eq!(tri.indices.len(), 1);
+    assert_eq!(tri.normals.as_ref().unwrap()[0], Vec3::Z);
+    // OBJ with normals, then with face_normals: vertex normals discarded.
+    assert!(mesh(2).normals.is_some());
+    assert!(mesh(3).normals.is_none());
+}
+
+#[test]
+fn camera_rays_and_raster_positions_round_trip() {
+    let text = r#"<scene version="3.0.0">
+    <sensor type="perspective">
+        <float name="fov" value="50"/><string name="fov_axis" value="y"/>
+        <transform name="to_world"><lookat origin="1,2,3" target="0,0,0" up="0,0,1"/></transform>
+        <film type="hdrfilm"><integer name="width" value="40"/><integer name="height" value="30"/></film>
+    </sensor>
+    <shape type="sphere"/>
+</scene>"#;
+    let scene =
+        mcmc_render::scene::Scene::load_str(text, Path::new("cam.xml"), Path::new(".")).unwrap();
+    let cam = &scene.camera;
+    for raster in [
+        Vec2::new(0.5, 0.5),
+        Vec2::new(20.0, 15.0),
+        Vec2::new(39.2, 3.7),
+    ] {
+        let ray: Ray = cam.generate_ray(raster);
+        let (back, _) = cam.raster_of(ray.d).expect("on the image");
+        assert!((back - raster).length() < 1e-3, "{raster} -> {back}");
+    }
+    // The image centre looks at the target.
+    let c = cam.generate_ray(Vec2::new(20.0, 15.0));
+    let want = (Vec3::ZERO - Vec3::new(1.0, 2.0, 3.0)).normalize();
+    assert!((c.d - want).length() < 1e-5);
+    // fov_axis = y: the top edge is 25° above the centre ray.
+    let top = cam.generate_ray(Vec2::new(20.0, 0.0));
+    let angle = top.d.dot(c.d).acos().to_degrees();
+    assert!((angle - 25.0).abs() < 1e-3, "{angle}");
+    // The directional pdf of camera rays integrates to one over the image
+    // (midpoint rule over pixels; a pixel's solid angle is its area on the
+    // plane z = 1 times cos³θ).
+    let mut total = 0.0f64;
+    let (w, h) = cam.resolution();
+    for y in 0..h {
+        for x in 0..w {
+            let ray = cam.generate_ray(Vec2::new(x as f32 + 0.5, y as f32 + 0.5));
+            let (_, pdf_dir) = cam.pdf_we(ray.d);
+            // Solid angle of the pixel: its plane area times cos³ (plane at distance 1).
+            let (_, cos) = cam.raster_of(ray.d).unwrap();
+            let tan_y = 25f32.to_radians().tan();
+            let plane_area = (2.0 * tan_y * w as f32 / h as f32) * (2.0 * tan_y) / (w * h) as f32;
+            total += (pdf_dir * plane_area * cos * cos * cos) as f64;
+        }
+    }
+    assert!((total - 1.0).abs() < 1e-3, "{total}");
+}
