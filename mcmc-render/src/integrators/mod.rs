@@ -30,6 +30,7 @@
 //!    The connection to the pinhole camera uses no numbers.
 
 pub mod lt;
+pub mod pssmlt;
 pub mod pt;
 
 use crate::color::Rgb;
