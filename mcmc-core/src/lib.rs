@@ -13,6 +13,8 @@
 //! - [`expected`]: Rao–Blackwellised estimates from transitions.
 //! - [`startup`]: start-up bias elimination by importance resampling.
 //! - [`runner`]: many chains on rayon, bit-identical for any thread count.
+//! - [`gradient`], [`adaptation`]: differentiable targets and warm-up for
+//!   the gradient kernels (HMC, MALA, H²MC in [`kernel`]).
 //! - [`exact`]: transition matrices on finite spaces for exact tests.
 //! - [`diagnostics`]: rank-normalised split R-hat, bulk and tail ESS, MCSE,
 //!   FFT autocorrelation (Vehtari et al. 2021, checked against ArviZ).
@@ -33,17 +35,20 @@
 // Index loops over matrices and parallel arrays read more clearly than zipped iterators here.
 #![allow(clippy::needless_range_loop)]
 
+pub mod adaptation;
 pub mod chain;
 pub mod delayed_rejection;
 pub mod diagnostics;
 pub mod error;
 pub mod exact;
 pub mod expected;
+pub mod gradient;
 pub mod kernel;
 mod linalg;
 pub mod math;
 pub mod mh;
 pub mod mtm;
+pub mod replica;
 pub mod rng;
 pub mod runner;
 pub mod sample;

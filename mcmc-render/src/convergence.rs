@@ -11,8 +11,10 @@
 use crate::color::Rgb;
 use crate::compare::compare;
 use crate::film::Film;
-use crate::integrators::pssmlt::{MltObserver, PssmltSettings, render_pssmlt};
+use crate::integrators::bdpt::{Bdpt, MisHeuristic};
+use crate::integrators::pssmlt::{MltObserver, PssmltSettings, render_family, render_pssmlt};
 use crate::integrators::{Integrator, lt::LightTracer, pt::PathTracer};
+use crate::pss::MmltDepth;
 use crate::render::{RenderObserver, RenderSettings, render};
 use crate::scene::Scene;
 use std::path::Path;
@@ -83,7 +85,7 @@ impl MltObserver for Recorder<'_> {
 }
 
 /// Integrators the study knows.
-pub const KNOWN: &[&str] = &["pt", "lt", "pssmlt"];
+pub const KNOWN: &[&str] = &["pt", "lt", "bdpt", "pssmlt", "pssmlt-bdpt", "mmlt"];
 
 /// What a convergence study runs.
 #[derive(Clone, Debug)]
@@ -151,18 +153,23 @@ pub fn run(
             pixels,
         };
         let it = scene.integrator;
+        let bdpt = Bdpt {
+            max_depth: it.max_depth,
+            rr_depth: it.rr_depth,
+            heuristic: MisHeuristic::Power,
+        };
         match name.as_str() {
-            "pt" | "lt" => {
-                let integ: Box<dyn Integrator> = if name == "pt" {
-                    Box::new(PathTracer {
+            "pt" | "lt" | "bdpt" => {
+                let integ: Box<dyn Integrator> = match name.as_str() {
+                    "pt" => Box::new(PathTracer {
                         max_depth: it.max_depth,
                         rr_depth: it.rr_depth,
-                    })
-                } else {
-                    Box::new(LightTracer {
+                    }),
+                    "lt" => Box::new(LightTracer {
                         max_depth: it.max_depth,
                         rr_depth: it.rr_depth,
-                    })
+                    }),
+                    _ => Box::new(bdpt),
                 };
                 let settings = RenderSettings {
                     spp: None,
@@ -184,8 +191,20 @@ pub fn run(
                     max_depth: it.max_depth,
                     rr_depth: it.rr_depth,
                 };
-                let r =
-                    render_pssmlt(scene, pt, &settings, stop, &rec).map_err(|e| e.to_string())?;
+                let r = match name.as_str() {
+                    "pssmlt" => render_pssmlt(scene, pt, &settings, stop, &rec),
+                    "pssmlt-bdpt" => render_pssmlt(scene, bdpt, &settings, stop, &rec),
+                    _ => {
+                        if it.max_depth == u32::MAX {
+                            return Err("mmlt needs a finite max_depth".into());
+                        }
+                        let depths: Vec<MmltDepth> = (1..=it.max_depth as usize)
+                            .map(|depth| MmltDepth { bdpt, depth })
+                            .collect();
+                        render_family(scene, depths, &settings, stop, &rec)
+                    }
+                }
+                .map_err(|e| e.to_string())?;
                 rec.offer(r.mutations, || r.image(), true);
             }
         }

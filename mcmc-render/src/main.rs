@@ -1,7 +1,7 @@
 //! The `mcmc-render` command line.
 //!
 //! - `mcmc-render`: renders the embedded default scene to `render.exr` and `render.png`.
-//! - `mcmc-render render SCENE.xml [--integrator pt|lt] [--spp N | --time S] [--seed K]
+//! - `mcmc-render render SCENE.xml [--integrator pt|lt|bdpt] [--spp N | --time S] [--seed K]
 //!   [--threads T] [--out FILE.exr] [-D name=value]…`
 //! - `mcmc-render compare REF.exr TEST.exr [--json]`
 //! - `mcmc-render info SCENE.xml`
@@ -13,7 +13,12 @@ use indicatif::{ProgressBar, ProgressStyle};
 use mcmc_render::compare::compare;
 use mcmc_render::film::Film;
 use mcmc_render::image_io::{read_exr, write_exr, write_png};
-use mcmc_render::integrators::{Integrator, lt::LightTracer, pt::PathTracer};
+use mcmc_render::integrators::{
+    Integrator,
+    bdpt::{Bdpt, MisHeuristic},
+    lt::LightTracer,
+    pt::PathTracer,
+};
 use mcmc_render::render::{RenderObserver, RenderSettings, render};
 use mcmc_render::scene::Scene;
 use serde::Serialize;
@@ -47,8 +52,12 @@ enum IntegratorArg {
     Pt,
     /// Light tracing.
     Lt,
-    /// Primary sample space MLT over path tracing (see the MLT flags).
+    /// Primary sample space MLT over pt or bdpt (see the MLT flags).
     Pssmlt,
+    /// Multiplexed MLT over BDPT techniques (see the MLT flags).
+    Mmlt,
+    /// Bidirectional path tracing (all techniques, power-heuristic MIS).
+    Bdpt,
 }
 
 #[derive(Subcommand)]
@@ -101,7 +110,7 @@ enum Command {
         /// Reference EXR (e.g. a long `render --integrator pt` run).
         #[arg(long)]
         reference: PathBuf,
-        /// Comma-separated integrators (pt, lt, pssmlt).
+        /// Comma-separated integrators (pt, lt, bdpt, pssmlt, pssmlt-bdpt, mmlt).
         #[arg(long, default_value = "pt,pssmlt")]
         integrators: String,
         /// Seconds per integrator.
@@ -214,12 +223,17 @@ fn run(cli: Cli) -> Result<(), String> {
             if let Some(file) = &mlt.replay {
                 return mcmc_render::mlt_cli::replay(&loaded, file);
             }
-            if matches!(integrator, IntegratorArg::Pssmlt) {
+            if matches!(integrator, IntegratorArg::Pssmlt | IntegratorArg::Mmlt) {
                 let _ = ctrlc::set_handler(|| STOP.store(true, Ordering::SeqCst));
                 let job = mcmc_render::mlt_cli::MltJob {
                     scene: &loaded,
                     scene_name: &scene.display().to_string(),
                     args: &mlt,
+                    kind: if matches!(integrator, IntegratorArg::Mmlt) {
+                        mcmc_render::mlt_cli::MltKind::Mmlt
+                    } else {
+                        mcmc_render::mlt_cli::MltKind::Pssmlt
+                    },
                     time,
                     seed,
                     threads: threads.unwrap_or_else(|| {
@@ -515,7 +529,14 @@ fn do_render(job: RenderJob) -> Result<(), String> {
             max_depth: scene.integrator.max_depth,
             rr_depth: scene.integrator.rr_depth,
         }),
-        IntegratorArg::Pssmlt => return Err("pssmlt runs through mlt_cli".into()),
+        IntegratorArg::Pssmlt | IntegratorArg::Mmlt => {
+            return Err("pssmlt and mmlt run through mlt_cli".into());
+        }
+        IntegratorArg::Bdpt => Box::new(Bdpt {
+            max_depth: scene.integrator.max_depth,
+            rr_depth: scene.integrator.rr_depth,
+            heuristic: MisHeuristic::Power,
+        }),
     };
     let budget = job.time.map(Duration::from_secs_f64);
     let bar = if job.quiet {

@@ -6,11 +6,13 @@
 
 use crate::color::Rgb;
 use crate::image_io::{write_exr, write_png};
+use crate::integrators::bdpt::{Bdpt, MisHeuristic};
 use crate::integrators::pssmlt::{
-    DepthAcceptance, MltObserver, MltResult, Normalization, PssmltSettings, render_pssmlt,
+    DepthAcceptance, MltObserver, MltResult, Normalization, PssmltSettings, render_family,
+    render_pssmlt,
 };
 use crate::integrators::pt::PathTracer;
-use crate::pss::{Mutation, PssTarget, SmallStepKind};
+use crate::pss::{MmltDepth, Mutation, PssTarget, SmallStepKind};
 use crate::scene::Scene;
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -44,7 +46,27 @@ pub enum NormalizationArg {
     Running,
 }
 
-/// Flags of the Metropolis integrators (`render --integrator pssmlt`).
+/// The path sampler PSSMLT runs over.
+#[derive(Clone, Copy, Debug, ValueEnum, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum MltBase {
+    /// Path tracing.
+    Pt,
+    /// Bidirectional path tracing, all techniques of one sample.
+    Bdpt,
+}
+
+/// Which Metropolis integrator runs.
+#[derive(Clone, Copy, Debug, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum MltKind {
+    /// PSSMLT (over `--mlt-base`).
+    Pssmlt,
+    /// Multiplexed MLT.
+    Mmlt,
+}
+
+/// Flags of the Metropolis integrators (`render --integrator pssmlt|mmlt`).
 #[derive(Args, Clone, Debug)]
 pub struct MltArgs {
     /// MLT small step.
@@ -77,6 +99,13 @@ pub struct MltArgs {
     /// Image normalisation.
     #[arg(long, value_enum, default_value = "bootstrap")]
     pub normalization: NormalizationArg,
+    /// Path sampler under PSSMLT.
+    #[arg(long, value_enum, default_value = "pt")]
+    pub mlt_base: MltBase,
+    /// Longest path in segments for pssmlt/mmlt (default: the scene's
+    /// max_depth; pbrt-v4's `maxdepth 5` counts bounces, i.e. 6 here).
+    #[arg(long)]
+    pub max_depth: Option<u32>,
     /// Re-trace one primary-sample vector (a NaN/inf dump) and print it.
     #[arg(long, value_name = "FILE")]
     pub replay: Option<PathBuf>,
@@ -145,6 +174,7 @@ struct ComponentJson {
 struct MltSidecar<'a> {
     scene: &'a str,
     integrator: &'static str,
+    mlt_base: MltBase,
     seconds: f64,
     bootstrap_seconds: f64,
     mutations: u64,
@@ -212,6 +242,8 @@ pub struct MltJob<'a> {
     pub scene_name: &'a str,
     /// The flags.
     pub args: &'a MltArgs,
+    /// PSSMLT or MMLT.
+    pub kind: MltKind,
     /// Time budget in seconds.
     pub time: Option<f64>,
     /// Seed.
@@ -264,13 +296,35 @@ pub fn run_pssmlt(job: &MltJob<'_>, stop: &AtomicBool) -> Result<MltResult, Stri
         start: Instant::now(),
         lock: Mutex::new(()),
     };
-    let pt = PathTracer {
-        max_depth: scene.integrator.max_depth,
-        rr_depth: scene.integrator.rr_depth,
+    let max_depth = job.args.max_depth.unwrap_or(scene.integrator.max_depth);
+    let rr_depth = scene.integrator.rr_depth;
+    let bdpt = Bdpt {
+        max_depth,
+        rr_depth,
+        heuristic: MisHeuristic::Power,
     };
-    let result = pool
-        .install(|| render_pssmlt(scene, pt, &settings, stop, &observer))
-        .map_err(|e| e.to_string())?;
+    let result = match (job.kind, job.args.mlt_base) {
+        (MltKind::Pssmlt, MltBase::Pt) => {
+            let pt = PathTracer {
+                max_depth,
+                rr_depth,
+            };
+            pool.install(|| render_pssmlt(scene, pt, &settings, stop, &observer))
+        }
+        (MltKind::Pssmlt, MltBase::Bdpt) => {
+            pool.install(|| render_pssmlt(scene, bdpt, &settings, stop, &observer))
+        }
+        (MltKind::Mmlt, _) => {
+            if max_depth == u32::MAX || max_depth == 0 {
+                return Err("mmlt needs a finite max_depth ≥ 1 (give --max-depth)".into());
+            }
+            let depths: Vec<MmltDepth> = (1..=max_depth as usize)
+                .map(|depth| MmltDepth { bdpt, depth })
+                .collect();
+            pool.install(|| render_family(scene, depths, &settings, stop, &observer))
+        }
+    }
+    .map_err(|e| e.to_string())?;
     observer.bar.finish_and_clear();
 
     let image = result.image();
@@ -284,11 +338,14 @@ pub fn run_pssmlt(job: &MltJob<'_>, stop: &AtomicBool) -> Result<MltResult, Stri
         }
         None => None,
     };
-    let md = scene.integrator.max_depth;
     let cs = &result.chain_stats;
     let sidecar = MltSidecar {
         scene: job.scene_name,
-        integrator: "pssmlt",
+        integrator: match job.kind {
+            MltKind::Pssmlt => "pssmlt",
+            MltKind::Mmlt => "mmlt",
+        },
+        mlt_base: job.args.mlt_base,
         seconds: result.seconds,
         bootstrap_seconds: result.bootstrap_seconds,
         mutations: result.mutations,
@@ -298,7 +355,11 @@ pub fn run_pssmlt(job: &MltJob<'_>, stop: &AtomicBool) -> Result<MltResult, Stri
         height: h,
         seed: job.seed,
         threads: job.threads,
-        max_depth: if md == u32::MAX { -1 } else { md as i64 },
+        max_depth: if max_depth == u32::MAX {
+            -1
+        } else {
+            max_depth as i64
+        },
         rr_depth: scene.integrator.rr_depth,
         small_step: job.args.small_step,
         large_step_probability: settings.mutation.large_step_probability,

@@ -23,13 +23,17 @@
 //! [`crate::integrators`].
 
 use crate::color::Rgb;
+use crate::integrators::bdpt::{
+    Bdpt, SubpathBuffers, connect, generate_camera_subpath, generate_light_subpath,
+};
 use crate::integrators::pt::PathTracer;
-use crate::sampling::{RandomSource, to_unit_f32};
+use crate::sampling::{RandomSource, Stream, to_unit_f32};
 use crate::scene::Scene;
 use glam::Vec2;
 use mcmc_core::kernel::{AdaptiveTorusStep, Independent, Kernel, Mixture, TorusStep};
 use mcmc_core::space::{PrimarySampleSpace, SmallStep, TorusPoint};
 use mcmc_core::target::{Evaluation, Target};
+use std::cell::RefCell;
 
 /// A [`RandomSource`] reading a primary-sample vector, stream by stream.
 pub struct PssSource<'a> {
@@ -63,6 +67,10 @@ impl<'a> PssSource<'a> {
 }
 
 impl RandomSource for PssSource<'_> {
+    fn set_stream(&mut self, stream: Stream) {
+        self.start_stream(stream.index());
+    }
+
     fn next_1d(&mut self) -> f32 {
         let k = self.stream;
         let i = self.next[k];
@@ -127,6 +135,119 @@ impl PssPathSampler for PathTracer {
         let l = self.li(scene, ray, source);
         out.push(Splat { p, l });
         ((source.consumed(0) - 2) / PT_NUMBERS_PER_VERTEX) as u32
+    }
+}
+
+/// A raster position uniform over the image from two numbers, strictly
+/// inside it.
+fn raster_of(scene: &Scene, source: &mut PssSource<'_>) -> Vec2 {
+    let (w, h) = (scene.film.width as f32, scene.film.height as f32);
+    let (ux, uy) = source.next_2d();
+    Vec2::new(
+        (ux * w).min(w * (1.0 - f32::EPSILON)),
+        (uy * h).min(h * (1.0 - f32::EPSILON)),
+    )
+}
+
+thread_local! {
+    /// Per-thread subpath storage for the bidirectional samplers.
+    static BUFFERS: RefCell<SubpathBuffers> = RefCell::new(SubpathBuffers::default());
+}
+
+/// PSSMLT over BDPT: every technique of one sample ([`Bdpt::sample_all`])
+/// is a splat at its raster position (the camera sample is uniform over
+/// the image, so `t ≥ 2` contributions are splats too). Depth: the longest
+/// technique (segments) that contributed.
+impl PssPathSampler for Bdpt {
+    fn streams(&self) -> usize {
+        Stream::COUNT
+    }
+
+    fn trace(&self, scene: &Scene, source: &mut PssSource<'_>, out: &mut Vec<Splat>) -> u32 {
+        source.set_stream(Stream::Camera);
+        let raster = raster_of(scene, source);
+        BUFFERS.with_borrow_mut(|buffers| {
+            self.sample_all(scene, raster, source, buffers, |c| {
+                out.push(Splat {
+                    p: c.raster,
+                    l: c.l,
+                });
+            });
+            // Longest subpaths built: an upper bound of the depth reached.
+            (buffers.camera.len() + buffers.light.len()).saturating_sub(1) as u32
+        })
+    }
+}
+
+/// One depth of multiplexed MLT (Hachisuka et al. 2014): paths of exactly
+/// `depth` segments, the technique `(s, t)` (`s + t − 1 = depth`) chosen by
+/// the first number of the connection stream among the techniques BDPT
+/// runs (`(1, 1)` excluded), the contribution multiplied by their number.
+#[derive(Clone, Copy, Debug)]
+pub struct MmltDepth {
+    /// The BDPT settings (MIS heuristic, depth limits).
+    pub bdpt: Bdpt,
+    /// Path depth in segments (≥ 1).
+    pub depth: usize,
+}
+
+impl MmltDepth {
+    /// The techniques `(s, t)` of this depth, in order of increasing `s`.
+    pub fn techniques(&self) -> Vec<(usize, usize)> {
+        let d = self.depth;
+        (0..=d)
+            .map(|s| (s, d + 1 - s))
+            .filter(|&(s, t)| t >= 1 && !(s == 1 && t == 1))
+            .filter(|&(s, t)| {
+                t <= self.bdpt.max_camera_vertices() && s <= self.bdpt.max_light_vertices()
+            })
+            .collect()
+    }
+}
+
+impl PssPathSampler for MmltDepth {
+    fn streams(&self) -> usize {
+        Stream::COUNT
+    }
+
+    fn trace(&self, scene: &Scene, source: &mut PssSource<'_>, out: &mut Vec<Splat>) -> u32 {
+        let techniques = self.techniques();
+        if techniques.is_empty() {
+            return self.depth as u32;
+        }
+        source.set_stream(Stream::Connection);
+        let n = techniques.len();
+        let k = ((source.next_1d() * n as f32) as usize).min(n - 1);
+        let (s, t) = techniques[k];
+        source.set_stream(Stream::Camera);
+        let raster = raster_of(scene, source);
+        BUFFERS.with_borrow_mut(|b| {
+            let nc = generate_camera_subpath(scene, raster, source, t, None, &mut b.camera);
+            if nc != t {
+                return;
+            }
+            source.set_stream(Stream::Light);
+            let nl = generate_light_subpath(scene, source, s, None, &mut b.light);
+            if nl != s {
+                return;
+            }
+            source.set_stream(Stream::Connection);
+            if let Some(c) = connect(
+                scene,
+                &b.camera,
+                &b.light,
+                s,
+                t,
+                source,
+                self.bdpt.heuristic,
+            ) {
+                out.push(Splat {
+                    p: if c.splat { c.raster } else { raster },
+                    l: c.l * n as f32,
+                });
+            }
+        });
+        self.depth as u32
     }
 }
 

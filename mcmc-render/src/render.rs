@@ -117,8 +117,9 @@ pub fn render(
     let domain = integrator.domain();
     let cap = match domain {
         SampleDomain::Pixels => 16,
-        SampleDomain::LightPaths => 4,
+        SampleDomain::LightPaths | SampleDomain::PixelsWithSplats => 4,
     };
+    let splats = domain != SampleDomain::Pixels;
     let mut spp_done = 0u64;
     let mut stats = SampleStats::default();
     let mut interrupted = false;
@@ -135,7 +136,7 @@ pub fn render(
             })
         })
         .collect();
-    let mut light_films: Vec<Film> = if domain == SampleDomain::LightPaths {
+    let mut light_films: Vec<Film> = if splats {
         (0..LIGHT_CHUNKS)
             .map(|_| Film::new(width, height, filter.clone()))
             .collect()
@@ -207,6 +208,39 @@ pub fn render(
                         .collect()
                 }
             }
+            SampleDomain::PixelsWithSplats => {
+                // Splats land anywhere, so each chunk renders the rows
+                // y ≡ chunk (mod LIGHT_CHUNKS) into a whole-image film.
+                let results: Vec<SampleStats> = light_films
+                    .par_iter_mut()
+                    .enumerate()
+                    .map(|(i, f)| {
+                        f.clear();
+                        let mut st = SampleStats::default();
+                        let mut src = unit_source(seed, pass, i as u64);
+                        for y in (i as u32..height).step_by(LIGHT_CHUNKS) {
+                            if check_abort() {
+                                return st;
+                            }
+                            for x in 0..width {
+                                for _ in 0..spp {
+                                    integrator.sample(scene, Some((x, y)), &mut src, f, &mut st);
+                                }
+                            }
+                            observer.unit_done(width as u64 * spp as u64);
+                        }
+                        st
+                    })
+                    .collect();
+                if aborted.load(Ordering::Relaxed) {
+                    Vec::new()
+                } else {
+                    for f in &light_films {
+                        film.add_film(f);
+                    }
+                    results
+                }
+            }
             SampleDomain::LightPaths => {
                 let paths = pixels * spp as u64;
                 let per = paths / LIGHT_CHUNKS as u64;
@@ -253,18 +287,10 @@ pub fn render(
         }
         spp_done += spp as u64;
         pass += 1;
-        let ppp = if domain == SampleDomain::LightPaths {
-            spp_done as f64
-        } else {
-            0.0
-        };
+        let ppp = if splats { spp_done as f64 } else { 0.0 };
         observer.pass_done(&film, spp_done, ppp);
     }
-    let paths_per_pixel = if domain == SampleDomain::LightPaths {
-        spp_done as f64
-    } else {
-        0.0
-    };
+    let paths_per_pixel = if splats { spp_done as f64 } else { 0.0 };
     RenderResult {
         film,
         spp_done,

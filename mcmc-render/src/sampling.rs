@@ -5,10 +5,39 @@
 
 use rand::{Rng, RngExt};
 
+/// Independent streams of numbers a bidirectional sampler draws from, as
+/// pbrt-v4's MLT sampler does (`StartStream`): a primary-sample source maps
+/// index `i` of stream `k` to coordinate `3·i + k`, so that lengthening the
+/// camera subpath does not shift the numbers the light subpath sees.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stream {
+    /// Camera subpath (pixel position, then its scattering decisions).
+    Camera = 0,
+    /// Light subpath (emitter choice, position, direction, scattering).
+    Light = 1,
+    /// Connections (light samples of the `s = 1` techniques).
+    Connection = 2,
+}
+
+impl Stream {
+    /// Number of streams.
+    pub const COUNT: usize = 3;
+
+    /// The stream's index `k` in `0..COUNT`.
+    pub fn index(self) -> usize {
+        self as usize
+    }
+}
+
 /// A source of uniform numbers in `[0, 1)`.
 ///
 /// Implementations must return values strictly below one.
 pub trait RandomSource {
+    /// Switches to `stream` (continuing where that stream left off in this
+    /// sample). Sources without streams ignore it: they draw every number
+    /// from one sequence.
+    fn set_stream(&mut self, _stream: Stream) {}
+
     /// The next uniform number in `[0, 1)`.
     fn next_1d(&mut self) -> f32;
 

@@ -12,6 +12,9 @@
 //!
 //! Every sample is also checked for `weight == eval·|cos|/pdf` and
 //! `pdf == pdf(wo, wi)`.
+//!
+//! Set `CHI2_DEBUG=1` (with `--nocapture`) to print every p-value, timing,
+//! and the worst cells; `CHI2_SEED_OFFSET=k` to run on another set of seeds.
 
 mod bsdf_common;
 
@@ -67,18 +70,6 @@ fn rough_conductor_cases() -> Vec<Case> {
 }
 
 fn rough_dielectric_cases() -> Vec<Case> {
-    if std::env::var("CHI2_ONE").is_ok() {
-        return vec![Case {
-            name: "dbg".into(),
-            bsdf: build(&rough_dielectric(
-                mcmc_render::bsdf::MicrofacetKind::Beckmann,
-                (0.05, 0.4),
-                1.5,
-            )),
-            wo: sph(0.0, 0.7),
-            mode: TransportMode::Radiance,
-        }];
-    }
     let mut v = Vec::new();
     for kind in KINDS {
         for alpha in ALPHAS {
@@ -103,6 +94,29 @@ fn rough_dielectric_cases() -> Vec<Case> {
                         mode,
                     });
                 }
+            }
+        }
+    }
+    v
+}
+
+/// An interface whose inside is the *less* dense medium (int_ior < ext_ior,
+/// e.g. an air bubble in glass): total internal reflection from outside.
+fn inverted_dielectric_cases() -> Vec<Case> {
+    let mut v = Vec::new();
+    for kind in KINDS {
+        for t in [40.0f32, 75.0] {
+            for inside in [false, true] {
+                let mut wo = sph(t.to_radians(), 0.7);
+                if inside {
+                    wo.z = -wo.z;
+                }
+                v.push(Case {
+                    name: format!("roughdielectric η=1/1.5 {kind:?} α=0.3 θo={t} inside={inside}"),
+                    bsdf: build(&rough_dielectric(kind, (0.3, 0.3), 1.0 / 1.5)),
+                    wo,
+                    mode: TransportMode::Radiance,
+                });
             }
         }
     }
@@ -143,6 +157,7 @@ fn total_cases() -> usize {
     diffuse_cases().len()
         + rough_conductor_cases().len()
         + rough_dielectric_cases().len()
+        + inverted_dielectric_cases().len()
         + twosided_cases().len()
 }
 
@@ -236,7 +251,7 @@ fn expected_masses(case: &Case) -> Vec<f64> {
         let z0 = -1.0 + 2.0 * iz as f64 / NZ as f64;
         let z1 = -1.0 + 2.0 * (iz + 1) as f64 / NZ as f64;
         let (t0, t1) = (z1.clamp(-1.0, 1.0).acos(), z0.clamp(-1.0, 1.0).acos());
-        let min_depth = if iz == 0 || iz == NZ - 1 { 3 } else { 0 };
+        let min_depth = if iz == 0 || iz == NZ - 1 { 3 } else { 1 };
         for ip in 0..NPHI {
             let p0 = -PI + 2.0 * PI * ip as f64 / NPHI as f64;
             let p1 = -PI + 2.0 * PI * (ip + 1) as f64 / NPHI as f64;
@@ -253,7 +268,7 @@ fn run_case(case: &Case, seed: u64) -> f64 {
     let mut r = rng(seed);
     let mut observed = vec![0u64; NZ * NPHI + 1];
     let none_cell = NZ * NPHI;
-    for _ in 0..N_SAMPLES {
+    for i in 0..N_SAMPLES {
         let (ul, u) = draw(&mut r);
         let Some(s) = case.bsdf.sample(case.wo, ul, u, case.mode) else {
             observed[none_cell] += 1;
@@ -278,7 +293,7 @@ fn run_case(case: &Case, seed: u64) -> f64 {
             s.pdf
         );
         assert!(s.weight.is_finite(), "{}: weight {:?}", case.name, s.weight);
-        let pdf = case.bsdf.pdf(case.wo, wi, case.mode);
+        let (f, pdf) = case.bsdf.eval_pdf(case.wo, wi, case.mode);
         // `sample` evaluates its pdf from the final (wo, wi) pair through the
         // same code, so only the last-bit rounding of the weight division differs.
         assert!(
@@ -288,13 +303,15 @@ fn run_case(case: &Case, seed: u64) -> f64 {
             s.pdf,
             pdf
         );
-        let f = case.bsdf.eval(case.wo, wi, case.mode);
-        assert_eq!(
-            (f, pdf),
-            case.bsdf.eval_pdf(case.wo, wi, case.mode),
-            "{}",
-            case.name
-        );
+        // The separate entry points must agree with eval_pdf (checked on a
+        // subset: they are thin wrappers, and this halves the test's cost).
+        if i % 16 == 0 {
+            let separate = (
+                case.bsdf.eval(case.wo, wi, case.mode),
+                case.bsdf.pdf(case.wo, wi, case.mode),
+            );
+            assert_eq!(separate, (f, pdf), "{}", case.name);
+        }
         let expect = f * (wi.z.abs() / s.pdf);
         for (a, b) in s.weight.to_array().into_iter().zip(expect.to_array()) {
             assert!(
@@ -321,13 +338,10 @@ fn run_case(case: &Case, seed: u64) -> f64 {
         (1.0 - total).max(0.0) * N_SAMPLES as f64,
         observed[none_cell],
     ));
-    for (i, &(e, o)) in cells.iter().enumerate() {
-        assert!(
-            !(e == 0.0 && o > 0),
-            "{}: {o} samples in cell {i} where the pdf is identically zero",
-            case.name
-        );
-    }
+    // No separate "samples where the pdf integrates to zero" check: every
+    // sample was already checked to have pdf(wo, wi) > 0, and a cell whose
+    // quadrature misses a sliver of lobe thinner than the node spacing would
+    // make such a check fail spuriously. Those cells are pooled below.
     cells.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut pooled = (0.0f64, 0u64);
     let mut kept: Vec<(f64, u64)> = Vec::new();
@@ -378,6 +392,14 @@ fn run_case(case: &Case, seed: u64) -> f64 {
 
 fn check_all(cases: Vec<Case>, seed: u64) {
     let alpha = 1e-3 / total_cases() as f64;
+    // CHI2_SEED_OFFSET re-runs the suite on other seeds (robustness studies);
+    // the default suite uses the fixed seeds below.
+    let seed = seed
+        + std::env::var("CHI2_SEED_OFFSET")
+            .ok()
+            .and_then(|v| v.parse::<u64>().ok())
+            .unwrap_or(0)
+            * 100_000;
     let mut failures = Vec::new();
     for (i, case) in cases.iter().enumerate() {
         let t = std::time::Instant::now();
@@ -409,6 +431,11 @@ fn rough_conductor_sampling_matches_pdf() {
 #[test]
 fn rough_dielectric_sampling_matches_pdf() {
     check_all(rough_dielectric_cases(), 3000);
+}
+
+#[test]
+fn inverted_dielectric_sampling_matches_pdf() {
+    check_all(inverted_dielectric_cases(), 5000);
 }
 
 #[test]

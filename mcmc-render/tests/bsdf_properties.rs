@@ -395,8 +395,17 @@ fn reflection_models_are_reciprocal() {
                 }
                 for mode in [RAD, IMP] {
                     let (a, c) = (b.eval(wo, wi, mode), b.eval(wi, wo, mode));
-                    let tol =
-                        1e-4 + 4.0 * sensitivity(b, wo, wi, mode).max(sensitivity(b, wi, wo, mode));
+                    // The sensitivity costs 24 evaluations: only pay when needed.
+                    let plain = a
+                        .to_array()
+                        .into_iter()
+                        .zip(c.to_array())
+                        .all(|(x, y)| rel_diff(x, y, 1e-30) < 1e-4);
+                    let tol = if plain {
+                        1e-4
+                    } else {
+                        1e-4 + 4.0 * sensitivity(b, wo, wi, mode).max(sensitivity(b, wi, wo, mode))
+                    };
                     tight += usize::from(!a.is_black() && tol <= 1e-3);
                     for (x, y) in a.to_array().into_iter().zip(c.to_array()) {
                         assert!(
@@ -450,8 +459,11 @@ fn rough_dielectric_transmission_obeys_the_adjoint_relation() {
                     let (eta_o, eta_i) = if wo.z > 0.0 { (1.0, eta) } else { (eta, 1.0) };
                     // The half vector is computed from either end, so rounding
                     // differs; allow what the inputs' own rounding can cause.
-                    let tol =
-                        1e-4 + 4.0 * sensitivity(&b, wo, wi, IMP).max(sensitivity(&b, wi, wo, RAD));
+                    let tol = if rel_diff(imp, rad_rev, 1e-30) < 1e-4 {
+                        1e-4
+                    } else {
+                        1e-4 + 4.0 * sensitivity(&b, wo, wi, IMP).max(sensitivity(&b, wi, wo, RAD))
+                    };
                     assert!(
                         rel_diff(imp, rad_rev, 1e-30) < tol,
                         "{kind:?} {alpha:?}: {imp} vs {rad_rev} (tol {tol}) wo={wo:?} wi={wi:?}"

@@ -49,7 +49,7 @@ fn scene_text(film: &str, extra: &str) -> String {
     </sensor>
     <shape type="rectangle"><bsdf type="diffuse"/></shape>
     <shape type="rectangle">
-        <transform name="to_world"><rotate x="1" angle="180"/><translate z="2"/></transform>
+        <transform name="to_world"><scale value="0.3"/><rotate x="1" angle="180"/><translate z="2"/></transform>
         <emitter type="area"><rgb name="radiance" value="1"/></emitter>
     </shape>
     {extra}
@@ -293,4 +293,43 @@ fn no_arguments_renders_the_default_scene() {
     );
     assert!(dir.join("render.exr").is_file());
     assert!(dir.join("render.png").is_file());
+}
+
+#[test]
+fn time_budget_writes_a_normalised_partial_render() {
+    let dir = scratch("time");
+    let film = r#"<film type="hdrfilm"><integer name="width" value="64"/><integer name="height" value="48"/></film>"#;
+    write(&dir, "s.xml", &scene_text(film, ""));
+    let out = run(
+        &[
+            "render", "s.xml", "--time", "1", "--out", "t.exr", "--quiet",
+        ],
+        &dir,
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("t.json")).unwrap()).unwrap();
+    assert!(json["spp"].as_u64().unwrap() >= 1);
+    assert_eq!(json["interrupted"], true);
+    assert!(json["seconds"].as_f64().unwrap() < 60.0);
+    // Whatever the number of passes, the image is normalised by them: its
+    // mean matches a fixed-spp render (both have thousands of samples, so
+    // their means differ by well under 5%).
+    let out = run(
+        &[
+            "render", "s.xml", "--spp", "16", "--out", "r.exr", "--quiet",
+        ],
+        &dir,
+    );
+    assert!(out.status.success());
+    let out = run(&["compare", "r.exr", "t.exr", "--json"], &dir);
+    let c: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for ch in 0..3 {
+        let d = c["mean_rel_diff"][ch].as_f64().unwrap();
+        assert!(d.abs() < 0.05, "channel {ch}: {d}");
+    }
 }

@@ -10,14 +10,22 @@
 mod adaptive_covariance;
 mod finite;
 mod gaussian;
+mod hessian;
+mod hmc;
 mod independent;
+mod mala;
+mod metric;
 mod mixture;
 mod torus_step;
 
 pub use adaptive_covariance::AdaptiveCovariance;
 pub use finite::FiniteProposal;
 pub use gaussian::GaussianRandomWalk;
+pub use hessian::H2mc;
+pub use hmc::{Boundary, GradientKernelStatistics, Hmc, Trajectory};
 pub use independent::Independent;
+pub use mala::Mala;
+pub use metric::Metric;
 pub use mixture::Mixture;
 pub use torus_step::{AdaptiveTorusStep, TorusStep};
 

@@ -17,14 +17,16 @@ pub struct SmoothConductor {
 }
 
 impl SmoothConductor {
-    /// Mirror reflection about the normal; `None` from below the surface.
+    /// Mirror reflection about the normal; `None` from below the surface or
+    /// when nothing is reflected.
     pub fn sample(&self, wo: Vec3, _mode: TransportMode) -> Option<BsdfSample> {
         if wo.z <= 0.0 {
             return None;
         }
-        Some(BsdfSample {
+        let weight = self.specular_reflectance * self.fresnel.eval(wo.z);
+        (!weight.is_black()).then_some(BsdfSample {
             wi: Vec3::new(-wo.x, -wo.y, wo.z),
-            weight: self.specular_reflectance * self.fresnel.eval(wo.z),
+            weight,
             pdf: 1.0,
             is_delta: true,
             eta: 1.0,

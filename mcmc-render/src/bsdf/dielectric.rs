@@ -141,7 +141,7 @@ impl RoughDielectric {
         if d == 0.0 {
             return (Rgb::BLACK, 0.0);
         }
-        // G1 without the orientation test, which half_vector already made.
+        // g1 repeats half_vector's orientation test; it passes here.
         let (g1o, g1i) = (
             self.distribution.g1(wo, hv.h),
             self.distribution.g1(wi, hv.h),

@@ -67,3 +67,33 @@ pub fn square_to_cosine_hemisphere(u: (f32, f32)) -> Vec3 {
     let z = (1.0 - x * x - y * y).max(0.0).sqrt();
     Vec3::new(x, y, z)
 }
+
+/// Inverse of [`square_to_cosine_hemisphere`]: the `u` that maps to `w`
+/// (w.z > 0 assumed; only `w.x`, `w.y` are used).
+pub fn cosine_hemisphere_to_square(w: Vec3) -> (f32, f32) {
+    let (x, y) = (w.x, w.y);
+    let rho = (x * x + y * y).sqrt();
+    if rho == 0.0 {
+        return (0.5, 0.5);
+    }
+    let phi = y.atan2(x);
+    let q = FRAC_PI_4;
+    // Undo the four wedges of the concentric map (r may be negative there).
+    let (a, b) = if phi.abs() <= q {
+        (rho, rho * phi / q)
+    } else if phi > q && phi <= 3.0 * q {
+        (rho * (2.0 * q - phi) / q, rho)
+    } else if phi < -q && phi >= -3.0 * q {
+        let p = phi + 4.0 * q;
+        (-rho * (2.0 * q - p) / q, -rho)
+    } else {
+        let p = if phi > 0.0 {
+            phi - 4.0 * q
+        } else {
+            phi + 4.0 * q
+        };
+        (-rho, -rho * p / q)
+    };
+    let c = |v: f32| ((v + 1.0) * 0.5).clamp(0.0, crate::sampling::ONE_MINUS_EPSILON);
+    (c(a), c(b))
+}

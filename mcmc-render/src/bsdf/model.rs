@@ -281,3 +281,20 @@ fn to_front(wo: Vec3, wi: Vec3) -> (Vec3, Vec3) {
         (wo, wi)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bsdf_is_shareable_across_threads() {
+        fn assert_traits<T: Clone + Send + Sync + std::fmt::Debug + 'static>() {}
+        assert_traits::<Bsdf>();
+        // Small enough to store per shape or per triangle group without boxing.
+        assert!(
+            std::mem::size_of::<Bsdf>() <= 64,
+            "{}",
+            std::mem::size_of::<Bsdf>()
+        );
+    }
+}

@@ -8,6 +8,13 @@
 /// tail, where the Beckmann shadowing term and the visible-slope CDF live.
 pub fn erfc(x: f64) -> f64 {
     let z = x.abs();
+    let ans = (-z * z).exp() * erfc_scaled(z);
+    if x >= 0.0 { ans } else { 2.0 - ans }
+}
+
+/// Scaled complementary error function `erfc(z)·e^{z²}` for `z ≥ 0` (same
+/// fit as [`erfc`]); lets callers that already hold `e^{-z²}` skip an `exp`.
+pub fn erfc_scaled(z: f64) -> f64 {
     let t = 1.0 / (1.0 + 0.5 * z);
     let poly = -1.265_512_23
         + t * (1.000_023_68
@@ -17,8 +24,7 @@ pub fn erfc(x: f64) -> f64 {
                         + t * (0.278_868_07
                             + t * (-1.135_203_98
                                 + t * (1.488_515_87 + t * (-0.822_152_23 + t * 0.170_872_77))))))));
-    let ans = t * (-z * z + poly).exp();
-    if x >= 0.0 { ans } else { 2.0 - ans }
+    t * poly.exp()
 }
 
 /// Single-precision `erfc`, same formula (used on the evaluation hot path).

@@ -28,8 +28,13 @@
 //!    - `next_1d`: Russian roulette.
 //!
 //!    The connection to the pinhole camera uses no numbers.
+//!
+//! **Bidirectional path tracing** ([`bdpt`]): three streams (camera, light,
+//! connection); see the module documentation there.
 
+pub mod bdpt;
 pub mod lt;
+pub mod path_vertex;
 pub mod pssmlt;
 pub mod pt;
 
@@ -63,6 +68,9 @@ pub enum SampleDomain {
     Pixels,
     /// One light path per call, splatting anywhere (light tracing).
     LightPaths,
+    /// One sample per call for a given pixel that may also splat anywhere
+    /// (bidirectional path tracing: one light subpath per camera sample).
+    PixelsWithSplats,
 }
 
 /// Counters an integrator updates while sampling.

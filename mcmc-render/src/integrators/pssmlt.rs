@@ -202,13 +202,14 @@ type PssChain = Chain<
 
 struct ChainSlot {
     chain: PssChain,
+    family: usize,
     remaining: Option<u64>,
 }
 
 struct Task {
     chains: Vec<ChainSlot>,
     film: Film,
-    running: RunningNormalization,
+    running: Vec<RunningNormalization>,
     per_depth: Vec<DepthAcceptance>,
     mutations: u64,
     first_nonfinite: Option<Vec<f64>>,
@@ -234,21 +235,37 @@ pub fn bootstrap<F: PssPathSampler>(
     count: usize,
     seed: u64,
 ) -> Result<(Bootstrap<usize, ()>, Vec<f64>), MltError> {
+    bootstrap_family(std::slice::from_ref(target), count, seed)
+}
+
+/// The joint bootstrap of a family: `count` candidates per member;
+/// candidate `j` belongs to member `j / count`. Its `b*` is the mean of
+/// the members' `b_d`.
+pub fn bootstrap_family<F: PssPathSampler>(
+    targets: &[PssTarget<'_, F>],
+    count: usize,
+    seed: u64,
+) -> Result<(Bootstrap<usize, ()>, Vec<f64>), MltError> {
     if count == 0 {
         return Err(MltError::Setting(
             "the bootstrap needs at least one candidate".into(),
         ));
     }
-    let log_i: Vec<f64> = (0..count)
+    let total = count * targets.len();
+    let log_i: Vec<f64> = (0..total)
         .into_par_iter()
-        .map(|i| target.trace(&bootstrap_point(seed, i)).log_density)
+        .map(|j| {
+            targets[j / count]
+                .trace(&bootstrap_point(seed, j))
+                .log_density
+        })
         .collect();
     // The candidates are indices; their density is the precomputed I(u_i)
     // and the reference density of PSS is 1 (ln p₀ = 0).
     let lookup = |i: usize| log_i[i];
     let mut next = 0usize;
     let mut rng = stream_rng(seed, RESAMPLE_STREAM);
-    let boot = Bootstrap::from_sampler(&lookup, count, &mut rng, |_| {
+    let boot = Bootstrap::from_sampler(&lookup, total, &mut rng, |_| {
         let i = next;
         next += 1;
         (i, 0.0)
@@ -264,6 +281,30 @@ pub fn render_pssmlt<F: PssPathSampler>(
     stop: &AtomicBool,
     observer: &dyn MltObserver,
 ) -> Result<MltResult, MltError> {
+    render_family(scene, vec![sampler], settings, stop, observer)
+}
+
+/// Renders `scene` with a family of PSS targets (one per sampler; MMLT:
+/// one per path depth). The bootstrap draws `settings.bootstrap`
+/// candidates per member, chain starts are resampled jointly (so members
+/// get chains in proportion to their `b_d`), each chain stays with its
+/// member, and the image scale is `b = Σ_d b_d`, i.e. `b*` of the joint
+/// bootstrap times the number of members (pbrt-v4's `mlt`).
+pub fn render_family<F: PssPathSampler>(
+    scene: &Scene,
+    samplers: Vec<F>,
+    settings: &PssmltSettings,
+    stop: &AtomicBool,
+    observer: &dyn MltObserver,
+) -> Result<MltResult, MltError> {
+    if samplers.is_empty() {
+        return Err(MltError::Setting("no path sampler".into()));
+    }
+    if samplers.len() > 1 && settings.mis_large_steps {
+        return Err(MltError::Setting(
+            "Kelemen's MIS combination needs a single target (not MMLT)".into(),
+        ));
+    }
     if settings.chains == 0 || settings.tasks == 0 {
         return Err(MltError::Setting(
             "chains and tasks must be at least 1".into(),
@@ -278,23 +319,27 @@ pub fn render_pssmlt<F: PssPathSampler>(
     let start = Instant::now();
     let deadline = settings.time_budget.map(|b| start + b);
     let out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
-    let target = PssTarget { scene, sampler };
+    let members = samplers.len();
+    let targets: Vec<PssTarget<'_, F>> = samplers
+        .into_iter()
+        .map(|sampler| PssTarget { scene, sampler })
+        .collect();
     let (width, height) = (scene.film.width, scene.film.height);
     let pixels = width as u64 * height as u64;
 
     // Start-up bias elimination.
     let seed = settings.seed;
-    let (boot, log_i) = bootstrap(&target, settings.bootstrap, seed)?;
+    let (boot, log_i) = bootstrap_family(&targets, settings.bootstrap, seed)?;
     if boot.b() == 0.0 || !boot.b().is_finite() {
         return Err(MltError::BlackScene {
             candidates: boot.len(),
             invalid: boot.invalid_candidates(),
         });
     }
-    let b_star = boot.b();
-    let mut boot_running = RunningNormalization::new();
-    for &lw in &log_i {
-        boot_running.add(lw);
+    let b_star = boot.b() * members as f64;
+    let mut boot_running = vec![RunningNormalization::new(); members];
+    for (j, &lw) in log_i.iter().enumerate() {
+        boot_running[j / settings.bootstrap].add(lw);
     }
     let mut rng = stream_rng(seed, RESAMPLE_STREAM + 1);
     let starts = boot.resample(settings.chains, &mut rng)?;
@@ -314,7 +359,7 @@ pub fn render_pssmlt<F: PssPathSampler>(
         .map(|_| Task {
             chains: Vec::new(),
             film: Film::new(width, height, filter.clone()),
-            running: RunningNormalization::new(),
+            running: vec![RunningNormalization::new(); members],
             per_depth: Vec::new(),
             mutations: 0,
             first_nonfinite: None,
@@ -322,14 +367,16 @@ pub fn render_pssmlt<F: PssPathSampler>(
         .collect();
     for (c, s) in starts.iter().enumerate() {
         let kernel = settings.mutation.kernel::<PathSample>()?;
+        let family = s.state / settings.bootstrap;
         let chain = Chain::new(
-            &target,
+            &targets[family],
             bootstrap_point(seed, s.state),
             MetropolisHastings::new(kernel),
             stream_rng(seed, c as u64),
         )?;
         tasks[c * tasks_n / settings.chains].chains.push(ChainSlot {
             chain,
+            family,
             remaining: per_chain(c),
         });
     }
@@ -369,8 +416,10 @@ pub fn render_pssmlt<F: PssPathSampler>(
                     return;
                 }
                 let n = slot.remaining.map_or(ROUND, |r| r.min(ROUND));
+                let target = &targets[slot.family];
+                let running = &mut running[slot.family];
                 for _ in 0..n {
-                    slot.chain.step_with(&target, |t| {
+                    slot.chain.step_with(target, |t| {
                         observe(t, &weights, film, running, per_depth, first_nonfinite);
                     });
                 }
@@ -422,7 +471,14 @@ pub fn render_pssmlt<F: PssPathSampler>(
         mutations_per_pixel: mutations as f64 / pixels as f64,
         scale,
         bootstrap_b: (b_star, boot.standard_error()),
-        running_b: (running.b(), running.standard_error()),
+        running_b: (
+            running.iter().map(|r| r.b()).sum(),
+            running
+                .iter()
+                .map(|r| r.standard_error().powi(2))
+                .sum::<f64>()
+                .sqrt(),
+        ),
         chain_stats: chain_stats.unwrap_or_else(|| ChainStatistics::new(Vec::new())),
         per_depth,
         bootstrap_invalid: boot.invalid_candidates(),
@@ -433,13 +489,13 @@ pub fn render_pssmlt<F: PssPathSampler>(
     })
 }
 
-fn scale_of(settings: &PssmltSettings, w: &Weights, running: &RunningNormalization) -> f64 {
+fn scale_of(settings: &PssmltSettings, w: &Weights, running: &[RunningNormalization]) -> f64 {
     if w.mis {
         1.0
     } else {
         match settings.normalization {
             Normalization::Bootstrap => w.b,
-            Normalization::Running => running.b(),
+            Normalization::Running => running.iter().map(|r| r.b()).sum(),
         }
     }
 }
@@ -450,14 +506,16 @@ fn gather(
     filter: &Arc<Filter>,
     width: u32,
     height: u32,
-    boot_running: &RunningNormalization,
-) -> (Film, u64, RunningNormalization) {
+    boot_running: &[RunningNormalization],
+) -> (Film, u64, Vec<RunningNormalization>) {
     let mut film = Film::new(width, height, filter.clone());
-    let mut running = boot_running.clone();
+    let mut running = boot_running.to_vec();
     let mut mutations = 0;
     for t in tasks {
         film.add_film(&t.film);
-        running.merge(&t.running);
+        for (r, tr) in running.iter_mut().zip(&t.running) {
+            r.merge(tr);
+        }
         mutations += t.mutations;
     }
     (film, mutations, running)

@@ -74,50 +74,149 @@ pub fn load_obj(path: &Path) -> Result<RawMesh, String> {
     Ok(out)
 }
 
+/// One PLY vertex as read (typed, so a large file costs no per-vertex maps).
+struct PlyVertex {
+    p: [f32; 3],
+    n: [f32; 3],
+    /// Bit i set: coordinate i of `p` present; bit 3 + i: of `n`.
+    seen: u8,
+}
+
+impl ply_rs_bw::ply::PropertyAccess for PlyVertex {
+    fn new() -> Self {
+        PlyVertex {
+            p: [0.0; 3],
+            n: [0.0; 3],
+            seen: 0,
+        }
+    }
+    fn set_property(
+        &mut self,
+        name: &str,
+        property: ply_rs_bw::ply::Property,
+    ) -> ply_rs_bw::ply::PropertyAccessResult {
+        use ply_rs_bw::ply::PropertyAccessResult;
+        let slot = match name {
+            "x" => 0,
+            "y" => 1,
+            "z" => 2,
+            "nx" => 3,
+            "ny" => 4,
+            "nz" => 5,
+            _ => return PropertyAccessResult::Ignored,
+        };
+        let Some(v) = property.to_f32_lossy() else {
+            return PropertyAccessResult::UnsupportedType;
+        };
+        if slot < 3 {
+            self.p[slot] = v;
+        } else {
+            self.n[slot - 3] = v;
+        }
+        self.seen |= 1 << slot;
+        PropertyAccessResult::Set
+    }
+}
+
+/// One PLY face: its vertex indices (`None` if a negative index was read).
+struct PlyFace {
+    idx: Option<Vec<u32>>,
+}
+
+impl ply_rs_bw::ply::PropertyAccess for PlyFace {
+    fn new() -> Self {
+        PlyFace { idx: None }
+    }
+    fn set_property(
+        &mut self,
+        name: &str,
+        property: ply_rs_bw::ply::Property,
+    ) -> ply_rs_bw::ply::PropertyAccessResult {
+        use ply_rs_bw::ply::PropertyAccessResult;
+        if name != "vertex_indices" && name != "vertex_index" {
+            return PropertyAccessResult::Ignored;
+        }
+        match property.to_u32_list() {
+            Some(v) => {
+                self.idx = Some(v);
+                PropertyAccessResult::Set
+            }
+            None => PropertyAccessResult::UnsupportedType,
+        }
+    }
+}
+
+/// Elements other than vertex and face are read and dropped.
+struct PlySkip;
+
+impl ply_rs_bw::ply::PropertyAccess for PlySkip {
+    fn new() -> Self {
+        PlySkip
+    }
+}
+
 /// Reads a PLY file (ASCII or binary): `vertex` with x, y, z and optional
 /// nx, ny, nz; `face` with `vertex_indices` (or `vertex_index`), polygons
 /// fan-triangulated.
 pub fn load_ply(path: &Path) -> Result<RawMesh, String> {
-    use ply_rs_bw::parser::Parser;
-    use ply_rs_bw::ply::DefaultElement;
+    use ply_rs_bw::parser::{Parser, Reader};
     let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
-    let mut reader = std::io::BufReader::new(file);
-    let ply = Parser::<DefaultElement>::new()
-        .read_ply(&mut reader)
-        .map_err(|e| format!("PLY parse error: {e}"))?;
-    let vertices = ply
-        .payload
-        .get("vertex")
-        .ok_or("the file has no 'vertex' element")?;
-    let faces = ply
-        .payload
-        .get("face")
-        .ok_or("the file has no 'face' element")?;
-    let scalar = |e: &DefaultElement, k: &str| e.get(k).and_then(|p| p.to_f32_lossy());
-    let mut out = RawMesh::default();
-    let mut normals = Vec::with_capacity(vertices.len());
-    let mut has_normals = true;
-    for (i, v) in vertices.iter().enumerate() {
-        let p = match (scalar(v, "x"), scalar(v, "y"), scalar(v, "z")) {
-            (Some(x), Some(y), Some(z)) => Vec3::new(x, y, z),
-            _ => return Err(format!("vertex {i} lacks x, y or z")),
-        };
-        out.positions.push(p);
-        match (scalar(v, "nx"), scalar(v, "ny"), scalar(v, "nz")) {
-            (Some(x), Some(y), Some(z)) => normals.push(Vec3::new(x, y, z)),
-            _ => has_normals = false,
+    let mut reader = Reader::new(std::io::BufReader::new(file));
+    fn perr(e: impl std::fmt::Display) -> String {
+        format!("PLY parse error: {e}")
+    }
+    let vparser = Parser::<PlyVertex>::new();
+    let header = vparser.read_header(&mut reader).map_err(perr)?;
+    let mut vertices = None;
+    let mut faces = None;
+    for (_, element) in &header.elements {
+        match element.name.as_str() {
+            "vertex" => {
+                vertices = Some(
+                    vparser
+                        .read_payload_for_element(&mut reader, element, &header)
+                        .map_err(perr)?,
+                )
+            }
+            "face" => {
+                faces = Some(
+                    Parser::<PlyFace>::new()
+                        .read_payload_for_element(&mut reader, element, &header)
+                        .map_err(perr)?,
+                )
+            }
+            _ => {
+                Parser::<PlySkip>::new()
+                    .read_payload_for_element(&mut reader, element, &header)
+                    .map_err(perr)?;
+            }
         }
     }
-    if has_normals && !normals.is_empty() {
-        out.normals = Some(normals);
+    let vertices = vertices.ok_or("the file has no 'vertex' element")?;
+    let faces = faces.ok_or("the file has no 'face' element")?;
+    let mut out = RawMesh {
+        positions: Vec::with_capacity(vertices.len()),
+        normals: None,
+        indices: Vec::with_capacity(faces.len()),
+    };
+    let has_normals =
+        !vertices.is_empty() && vertices.iter().all(|v| v.seen & 0b111000 == 0b111000);
+    for (i, v) in vertices.iter().enumerate() {
+        if v.seen & 0b111 != 0b111 {
+            return Err(format!("vertex {i} lacks x, y or z"));
+        }
+        out.positions.push(Vec3::from(v.p));
     }
+    if has_normals {
+        out.normals = Some(vertices.iter().map(|v| Vec3::from(v.n)).collect());
+    }
+    drop(vertices);
     let n = out.positions.len() as u32;
     for (i, f) in faces.iter().enumerate() {
         let idx = f
-            .get("vertex_indices")
-            .or_else(|| f.get("vertex_index"))
-            .and_then(|p| p.to_u32_list())
-            .ok_or_else(|| format!("face {i} has no integer vertex_indices list"))?;
+            .idx
+            .as_ref()
+            .ok_or_else(|| format!("face {i} has no non-negative vertex_indices list"))?;
         if idx.len() < 3 {
             return Err(format!("face {i} has fewer than 3 vertices"));
         }

@@ -264,26 +264,25 @@ impl Scene {
         for d in &desc.bsdfs {
             bsdfs.push(Bsdf::from_desc(d).map_err(SceneError::Invalid)?);
         }
+        let no_geometry = desc.shapes.is_empty() && desc.point_lights.is_empty();
         let mut geo_shapes = Vec::with_capacity(desc.shapes.len());
         let mut shapes = Vec::with_capacity(desc.shapes.len());
         let mut emitters = Vec::new();
         let mut dropped = 0;
-        for (i, s) in desc.shapes.iter().enumerate() {
-            let surface = match &s.geometry {
+        // Meshes are moved, not copied: a million-triangle mesh is large.
+        for (i, s) in desc.shapes.into_iter().enumerate() {
+            let surface = match s.geometry {
                 ShapeGeometry::Mesh(m) => {
                     dropped += m.dropped_degenerate;
                     Surface::Mesh(MeshData {
-                        positions: m.positions.clone(),
-                        normals: m.normals.clone(),
-                        indices: m.indices.clone(),
+                        positions: m.positions,
+                        normals: m.normals,
+                        indices: m.indices,
                     })
                 }
-                ShapeGeometry::Sphere { center, radius } => Surface::Sphere {
-                    center: *center,
-                    radius: *radius,
-                },
+                ShapeGeometry::Sphere { center, radius } => Surface::Sphere { center, radius },
                 ShapeGeometry::Disk { to_world } => {
-                    let normal = (Mat3::from_mat4(*to_world).inverse().transpose() * Vec3::Z)
+                    let normal = (Mat3::from_mat4(to_world).inverse().transpose() * Vec3::Z)
                         .try_normalize()
                         .ok_or_else(|| {
                             SceneError::Invalid(format!(
@@ -292,7 +291,7 @@ impl Scene {
                             ))
                         })?;
                     Surface::Disk {
-                        to_world: *to_world,
+                        to_world,
                         to_local: to_world.inverse(),
                         normal,
                     }
@@ -309,10 +308,10 @@ impl Scene {
             shapes.push(ShapeInfo {
                 bsdf: s.bsdf as u32,
                 light,
-                kind: s.kind.clone(),
+                kind: s.kind,
             });
         }
-        if desc.shapes.is_empty() && desc.point_lights.is_empty() {
+        if no_geometry {
             return Err(SceneError::Invalid(
                 "the scene has no shapes and no lights".into(),
             ));

@@ -1,0 +1,497 @@
+//! Our adaptive HMC, MALA and H²MC side by side with nuts-rs, in one
+//! process, on the same targets: a 100-d correlated Gaussian and a Bayesian
+//! logistic regression (d = 25, n = 1000, synthetic data).
+//!
+//! ```text
+//! cargo run --release --example hmc_vs_nuts -- --json
+//! cargo run --release --example hmc_vs_nuts -- --chains 4 --warmup 1000 --draws 1000
+//! cargo run --release --example hmc_vs_nuts -- --draws 10000 --samplers hmc,nuts-rs
+//! ```
+//!
+//! Every sampler runs `chains` chains one after the other on one thread,
+//! each with `warmup` adaptation steps and `draws` kept draws, from a
+//! point drawn uniformly in `[−1, 1]^d` (Stan's default; the same point for
+//! every sampler). `seconds` is the wall time of warm-up plus sampling;
+//! `gradient_evaluations` counts every `∇ln π` (warm-up included; for
+//! nuts-rs the sum of its per-draw leapfrog steps); `divergences` are
+//! counted after warm-up;
+//! `ess_bulk_min` is the smallest bulk ESS over coordinates and `rhat_max`
+//! the largest rank-normalised split R-hat (mcmc_core::diagnostics).
+//! H²MC also evaluates one Hessian per proposal (`hessian_evaluations`).
+
+// Shared with the `hmc` example, which also reads the true coefficients.
+#[allow(dead_code)]
+#[path = "targets.rs"]
+mod targets;
+
+use mcmc_core::adaptation::MetricAdaptation;
+use mcmc_core::diagnostics::summarize;
+use mcmc_core::gradient::{Differentiable, GradientPayload, GradientTarget};
+use mcmc_core::kernel::{GradientKernelStatistics, H2mc, Hmc, Kernel, Mala, Trajectory};
+use mcmc_core::prelude::{Chain, MetropolisHastings, stream_rng};
+use nuts_rs::{
+    Chain as NutsChain, CpuLogpFunc, CpuMath, DiagNutsSettings, HasDims, LogpError, Settings,
+};
+use serde::Serialize;
+use std::collections::HashMap;
+use std::time::Instant;
+use targets::{CorrelatedGaussian, LogisticRegression};
+
+#[derive(Serialize)]
+struct Run {
+    target: String,
+    sampler: String,
+    seconds: f64,
+    gradient_evaluations: u64,
+    hessian_evaluations: u64,
+    ess_bulk_min: f64,
+    rhat_max: f64,
+    ess_per_second: f64,
+    ess_per_gradient: f64,
+    divergences: u64,
+    step_size: f64,
+}
+
+#[derive(Serialize)]
+struct Report {
+    chains: usize,
+    warmup: usize,
+    draws: usize,
+    runs: Vec<Run>,
+}
+
+struct Options {
+    json: bool,
+    chains: usize,
+    warmup: usize,
+    draws: usize,
+    seed: u64,
+    hmc_time: Option<f64>,
+    h2mc_tau: f64,
+    samplers: Vec<String>,
+}
+
+fn parse() -> Result<Options, String> {
+    let mut o = Options {
+        json: false,
+        chains: 4,
+        warmup: 1000,
+        draws: 1000,
+        seed: 2026,
+        hmc_time: None,
+        h2mc_tau: 1.0,
+        samplers: ["hmc", "mala", "h2mc", "nuts-rs"]
+            .map(String::from)
+            .to_vec(),
+    };
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        let mut value = |name: &str| args.next().ok_or_else(|| format!("{name} needs a value"));
+        match a.as_str() {
+            "--json" => o.json = true,
+            "--chains" => {
+                o.chains = value("--chains")?
+                    .parse()
+                    .map_err(|e| format!("--chains: {e}"))?
+            }
+            "--warmup" => {
+                o.warmup = value("--warmup")?
+                    .parse()
+                    .map_err(|e| format!("--warmup: {e}"))?
+            }
+            "--draws" => {
+                o.draws = value("--draws")?
+                    .parse()
+                    .map_err(|e| format!("--draws: {e}"))?
+            }
+            "--seed" => {
+                o.seed = value("--seed")?
+                    .parse()
+                    .map_err(|e| format!("--seed: {e}"))?
+            }
+            "--hmc-time" => {
+                o.hmc_time = Some(
+                    value("--hmc-time")?
+                        .parse()
+                        .map_err(|e| format!("--hmc-time: {e}"))?,
+                )
+            }
+            "--samplers" => {
+                o.samplers = value("--samplers")?.split(',').map(String::from).collect();
+                if let Some(bad) = o
+                    .samplers
+                    .iter()
+                    .find(|s| !["hmc", "mala", "h2mc", "nuts-rs"].contains(&s.as_str()))
+                {
+                    return Err(format!(
+                        "--samplers: unknown sampler `{bad}` (hmc, mala, h2mc, nuts-rs)"
+                    ));
+                }
+            }
+            "--h2mc-tau" => {
+                o.h2mc_tau = value("--h2mc-tau")?
+                    .parse()
+                    .map_err(|e| format!("--h2mc-tau: {e}"))?
+            }
+            other => {
+                return Err(format!(
+                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --hmc-time T, --h2mc-tau τ, --samplers a,b)"
+                ));
+            }
+        }
+    }
+    if !(o.h2mc_tau > 0.0 && o.h2mc_tau <= 1.0) {
+        return Err("--h2mc-tau must lie in (0, 1]".into());
+    }
+    if o.chains == 0 || o.draws < 4 {
+        return Err("need at least 1 chain and 4 draws".into());
+    }
+    Ok(o)
+}
+
+/// What one of our kernels reports besides its draws.
+trait Counted {
+    fn counts(&self) -> &GradientKernelStatistics;
+    fn step(&self) -> f64;
+}
+impl<G: GradientTarget> Counted for Hmc<G> {
+    fn counts(&self) -> &GradientKernelStatistics {
+        self.statistics()
+    }
+    fn step(&self) -> f64 {
+        self.step_size()
+    }
+}
+impl<G: GradientTarget> Counted for Mala<G> {
+    fn counts(&self) -> &GradientKernelStatistics {
+        self.statistics()
+    }
+    fn step(&self) -> f64 {
+        self.step_size()
+    }
+}
+impl<G: GradientTarget> Counted for H2mc<G> {
+    fn counts(&self) -> &GradientKernelStatistics {
+        self.statistics()
+    }
+    fn step(&self) -> f64 {
+        f64::NAN
+    }
+}
+
+/// What a run counted besides its draws.
+struct Counts {
+    gradients: u64,
+    hessians: u64,
+    divergences: u64,
+    step: f64,
+}
+
+fn finish(target: &str, sampler: &str, seconds: f64, c: Counts, draws: &[Vec<Vec<f64>>]) -> Run {
+    let (ess, rhat) = match summarize(draws) {
+        Ok(s) => (
+            s.iter().map(|r| r.ess_bulk).fold(f64::INFINITY, f64::min),
+            s.iter().map(|r| r.rhat).fold(f64::NEG_INFINITY, f64::max),
+        ),
+        Err(_) => (f64::NAN, f64::NAN),
+    };
+    Run {
+        target: target.into(),
+        sampler: sampler.into(),
+        seconds,
+        gradient_evaluations: c.gradients,
+        hessian_evaluations: c.hessians,
+        ess_bulk_min: ess,
+        rhat_max: rhat,
+        ess_per_second: ess / seconds,
+        ess_per_gradient: ess / c.gradients as f64,
+        divergences: c.divergences,
+        step_size: c.step,
+    }
+}
+
+fn run_ours<G, K>(target_name: &str, sampler: &str, g: &G, make: impl Fn() -> K, o: &Options) -> Run
+where
+    G: GradientTarget + Clone,
+    K: Kernel<Vec<f64>, GradientPayload> + Counted,
+{
+    let t = Differentiable(g.clone());
+    let d = g.dim();
+    let start = Instant::now();
+    let mut all = Vec::new();
+    let (mut grads, mut hessians, mut divergences, mut step) = (0, 0, 0, 0.0);
+    for c in 0..o.chains {
+        let mut chain = Chain::new(
+            &t,
+            initial(d, o.seed, c),
+            MetropolisHastings::new(make()),
+            stream_rng(o.seed, c as u64),
+        )
+        .expect("the initial point has a finite density");
+        for _ in 0..o.warmup {
+            chain.step(&t);
+        }
+        chain.freeze();
+        let warm_divergences = chain.algorithm().kernel().counts().divergences;
+        let mut draws = Vec::with_capacity(o.draws);
+        for _ in 0..o.draws {
+            chain.step(&t);
+            draws.push(chain.state().clone());
+        }
+        let k = chain.algorithm().kernel();
+        grads += k.counts().gradient_evaluations + 1;
+        if sampler == "h2mc" {
+            // One Hessian per proposal (at the proposed state) plus the start.
+            hessians += k.counts().trajectories + 1;
+        }
+        divergences += k.counts().divergences - warm_divergences;
+        step = k.step();
+        all.push(draws);
+    }
+    finish(
+        target_name,
+        sampler,
+        start.elapsed().as_secs_f64(),
+        Counts {
+            gradients: grads,
+            hessians,
+            divergences,
+            step,
+        },
+        &all,
+    )
+}
+
+// ---- nuts-rs ---------------------------------------------------------------
+
+#[derive(Debug)]
+enum NoError {}
+impl std::fmt::Display for NoError {
+    fn fmt(&self, _: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {}
+    }
+}
+impl std::error::Error for NoError {}
+impl LogpError for NoError {
+    fn is_recoverable(&self) -> bool {
+        match *self {}
+    }
+}
+
+/// A gradient target seen by nuts-rs, counting gradient evaluations.
+struct NutsTarget<G> {
+    g: G,
+    evaluations: u64,
+}
+
+impl<G: GradientTarget> HasDims for NutsTarget<G> {
+    fn dim_sizes(&self) -> HashMap<String, u64> {
+        [("unconstrained_parameter".to_string(), self.g.dim() as u64)]
+            .into_iter()
+            .collect()
+    }
+}
+
+impl<G: GradientTarget> CpuLogpFunc for NutsTarget<G> {
+    type LogpError = NoError;
+    type FlowParameters = ();
+    type ExpandedVector = Vec<f64>;
+
+    fn dim(&self) -> usize {
+        self.g.dim()
+    }
+
+    fn logp(&mut self, position: &[f64], gradient: &mut [f64]) -> Result<f64, NoError> {
+        self.evaluations += 1;
+        Ok(self.g.log_density_gradient(position, gradient))
+    }
+
+    fn expand_vector<R: nuts_rs::rand::Rng + ?Sized>(
+        &mut self,
+        _rng: &mut R,
+        array: &[f64],
+    ) -> Result<Vec<f64>, nuts_rs::CpuMathError> {
+        Ok(array.to_vec())
+    }
+}
+
+fn run_nuts<G: GradientTarget + Clone>(
+    target_name: &str,
+    g: &G,
+    o: &Options,
+) -> Result<Run, String> {
+    let d = g.dim();
+    let settings = DiagNutsSettings {
+        num_tune: o.warmup as u64,
+        num_draws: o.draws as u64,
+        ..Default::default()
+    };
+    let start = Instant::now();
+    let mut all = Vec::new();
+    let (mut grads, mut divergences, mut step) = (0, 0, 0.0);
+    for c in 0..o.chains {
+        let math = CpuMath::new(NutsTarget {
+            g: g.clone(),
+            evaluations: 0,
+        });
+        let mut rng = stream_rng(o.seed ^ 0x5EED, c as u64);
+        let mut chain = settings
+            .new_chain(c as u64, math, &mut rng)
+            .map_err(|e| format!("nuts-rs: {e}"))?;
+        chain
+            .set_position(&initial(d, o.seed, c))
+            .map_err(|e| format!("nuts-rs: {e}"))?;
+        let mut draws = Vec::with_capacity(o.draws);
+        for i in 0..o.warmup + o.draws {
+            let (x, info) = chain.draw().map_err(|e| format!("nuts-rs: {e}"))?;
+            grads += info.num_steps;
+            if i >= o.warmup {
+                divergences += info.diverging as u64;
+                step = info.step_size;
+                draws.push(x.to_vec());
+            }
+        }
+        all.push(draws);
+    }
+    Ok(finish(
+        target_name,
+        "nuts-rs",
+        start.elapsed().as_secs_f64(),
+        Counts {
+            gradients: grads,
+            hessians: 0,
+            divergences,
+            step,
+        },
+        &all,
+    ))
+}
+
+fn main() {
+    let o = match parse() {
+        Ok(o) => o,
+        Err(e) => {
+            eprintln!("error: {e}");
+            std::process::exit(2);
+        }
+    };
+    let gauss = CorrelatedGaussian::new(100, 0.5);
+    let logistic = LogisticRegression::synthetic(1000, 25, 7);
+    let mut runs = Vec::new();
+    runs.extend(compare(
+        "gaussian-100",
+        &gauss,
+        o.hmc_time.unwrap_or(2.5),
+        &o,
+    ));
+    runs.extend(compare(
+        "logistic-25",
+        &logistic,
+        o.hmc_time.unwrap_or(2.0),
+        &o,
+    ));
+    let report = Report {
+        chains: o.chains,
+        warmup: o.warmup,
+        draws: o.draws,
+        runs,
+    };
+    if o.json {
+        println!(
+            "{}",
+            serde_json::to_string(&report).expect("plain data serialises")
+        );
+        return;
+    }
+    println!(
+        "{:<13} {:<8} {:>8} {:>11} {:>9} {:>7} {:>9} {:>10} {:>5} {:>8}",
+        "target",
+        "sampler",
+        "seconds",
+        "gradients",
+        "ESS min",
+        "R-hat",
+        "ESS/s",
+        "ESS/grad",
+        "div",
+        "step"
+    );
+    for r in &report.runs {
+        println!(
+            "{:<13} {:<8} {:>8.3} {:>11} {:>9.0} {:>7.3} {:>9.0} {:>10.5} {:>5} {:>8.4}",
+            r.target,
+            r.sampler,
+            r.seconds,
+            r.gradient_evaluations,
+            r.ess_bulk_min,
+            r.rhat_max,
+            r.ess_per_second,
+            r.ess_per_gradient,
+            r.divergences,
+            r.step_size
+        );
+    }
+}
+
+/// Chain `c`'s initial point, uniform in `[−1, 1]^d`.
+fn initial(d: usize, seed: u64, c: usize) -> Vec<f64> {
+    let mut rng = stream_rng(seed ^ 0x1A17, c as u64);
+    (0..d)
+        .map(|_| 2.0 * mcmc_core::rng::uniform(&mut rng) - 1.0)
+        .collect()
+}
+
+/// All four samplers on one target.
+fn compare<G: GradientTarget + Clone>(name: &str, g: &G, time: f64, o: &Options) -> Vec<Run> {
+    let w = o.warmup;
+    let on = |s: &str| o.samplers.iter().any(|x| x == s);
+    let mut runs = Vec::new();
+    if on("hmc") {
+        runs.push(run_ours(name, "hmc", g, || hmc(g.clone(), time, w), o));
+    }
+    if on("mala") {
+        runs.push(run_ours(name, "mala", g, || mala(g.clone(), w), o));
+    }
+    if on("h2mc") {
+        runs.push(run_ours(
+            name,
+            "h2mc",
+            g,
+            || h2mc(g.clone(), o.h2mc_tau, w),
+            o,
+        ));
+    }
+    if on("nuts-rs") {
+        runs.push(run_nuts(name, g, o).unwrap_or_else(|e| fail(&e)));
+    }
+    runs
+}
+
+fn fail(e: &str) -> ! {
+    eprintln!("error: {e}");
+    std::process::exit(1);
+}
+
+/// Our adaptive HMC: Stan-style warm-up (dual averaging to 0.8, diagonal
+/// metric windows), fixed integration time `time`, step-size jitter 20 %.
+fn hmc<G: GradientTarget>(g: G, time: f64, warmup: usize) -> Hmc<G> {
+    Hmc::with_trajectory(g, 0.1, Trajectory::Time(time))
+        .and_then(|h| h.with_jitter(0.2))
+        .and_then(|h| h.with_warmup(warmup, 0.8, MetricAdaptation::Diagonal))
+        .expect("valid settings")
+}
+
+/// H²MC with `tau` (default 1: Newton proposals) after a warm-up of short
+/// moves (τ = 0.1) that bring the chain into the bulk.
+fn h2mc<G: GradientTarget>(g: G, tau: f64, warmup: usize) -> H2mc<G> {
+    H2mc::new(g, tau)
+        .and_then(|h| h.with_warmup(warmup, 0.1))
+        .expect("valid settings")
+}
+
+/// Our adaptive MALA: dual averaging to 0.574, diagonal metric windows.
+fn mala<G: GradientTarget>(g: G, warmup: usize) -> Mala<G> {
+    Mala::new(g, 0.1)
+        .and_then(|m| m.with_warmup(warmup, 0.574, MetricAdaptation::Diagonal))
+        .expect("valid settings")
+}

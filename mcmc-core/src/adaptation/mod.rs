@@ -1,0 +1,131 @@
+//! Warm-up adaptation for gradient kernels, following Stan:
+//!
+//! - [`DualAveraging`]: the step size by Nesterov dual averaging (Hoffman &
+//!   Gelman 2014, §3.2; constants γ = 0.05, t₀ = 10, κ = 0.75, μ = ln 10ε₀);
+//! - [`WarmupSchedule`]: Stan's windows — an initial fast buffer (75
+//!   iterations), slow windows that double in length from 25 in which the
+//!   metric is estimated, and a final fast buffer (50);
+//! - [`MetricEstimator`]: Welford estimates of the variances (diagonal) or
+//!   covariance (dense), regularised towards `10⁻³ I` like Stan;
+//! - [`Warmup`]: all three together. After the last warm-up iteration (or
+//!   [`Warmup::freeze`]) nothing changes any more, so sampling is an exact
+//!   Markov chain.
+
+mod dual_averaging;
+mod schedule;
+mod welford;
+
+pub use dual_averaging::DualAveraging;
+pub use schedule::WarmupSchedule;
+pub use welford::MetricEstimator;
+
+use crate::error::{Result, invalid};
+use crate::kernel::Metric;
+
+/// Which metric the warm-up estimates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MetricAdaptation {
+    /// Keep the metric given to the kernel.
+    None,
+    /// Estimate a diagonal `M⁻¹` (the marginal variances).
+    Diagonal,
+    /// Estimate a dense `M⁻¹` (the covariance).
+    Dense,
+}
+
+/// What one warm-up iteration changed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WarmupUpdate {
+    /// The step size to use next.
+    pub step_size: f64,
+    /// A new metric at the end of a slow window.
+    pub metric: Option<Metric>,
+}
+
+/// Step size and metric adaptation over a warm-up of fixed length.
+#[derive(Clone, Debug)]
+pub struct Warmup {
+    schedule: WarmupSchedule,
+    step: DualAveraging,
+    estimator: Option<MetricEstimator>,
+    iteration: usize,
+    frozen: bool,
+}
+
+impl Warmup {
+    /// A warm-up of `iterations` steps starting from `initial_step`, aiming
+    /// at mean acceptance `target_accept` (0.8 for HMC, 0.574 for MALA),
+    /// estimating the metric of dimension `dim` as `metric` says.
+    pub fn new(
+        iterations: usize,
+        initial_step: f64,
+        target_accept: f64,
+        metric: MetricAdaptation,
+        dim: usize,
+    ) -> Result<Self> {
+        if !(initial_step.is_finite() && initial_step > 0.0) {
+            return Err(invalid("step_size", "must be finite and positive"));
+        }
+        if !(target_accept > 0.0 && target_accept < 1.0) {
+            return Err(invalid("target_accept", "must lie in (0, 1)"));
+        }
+        let estimator = match metric {
+            MetricAdaptation::None => None,
+            MetricAdaptation::Diagonal => Some(MetricEstimator::diagonal(dim)),
+            MetricAdaptation::Dense => Some(MetricEstimator::dense(dim)),
+        };
+        Ok(Warmup {
+            schedule: WarmupSchedule::stan(iterations),
+            step: DualAveraging::new(initial_step, target_accept),
+            estimator,
+            iteration: 0,
+            frozen: iterations == 0,
+        })
+    }
+
+    /// True once warm-up is over.
+    pub fn is_frozen(&self) -> bool {
+        self.frozen
+    }
+
+    /// Iterations observed so far.
+    pub fn iteration(&self) -> usize {
+        self.iteration
+    }
+
+    /// Ends warm-up now; returns the final step size (the dual-averaging
+    /// iterate average).
+    pub fn freeze(&mut self) -> f64 {
+        self.frozen = true;
+        self.step.final_step_size()
+    }
+
+    /// Records one iteration with acceptance probability `alpha` ending at
+    /// `state`. `None` once frozen.
+    pub fn observe(&mut self, alpha: f64, state: &[f64]) -> Option<WarmupUpdate> {
+        if self.frozen {
+            return None;
+        }
+        let i = self.iteration;
+        self.iteration += 1;
+        let mut step_size = self.step.update(if alpha.is_nan() { 0.0 } else { alpha });
+        let mut metric = None;
+        if let Some(est) = &mut self.estimator {
+            if self.schedule.in_slow_window(i) {
+                est.add(state);
+            }
+            if self.schedule.is_window_end(i) {
+                metric = est.metric();
+                est.reset();
+                // Stan restarts dual averaging around the current step size
+                // after every metric change.
+                self.step.restart(step_size);
+            }
+        }
+        if self.iteration >= self.schedule.iterations() {
+            self.frozen = true;
+            step_size = self.step.final_step_size();
+        }
+        Some(WarmupUpdate { step_size, metric })
+    }
+}

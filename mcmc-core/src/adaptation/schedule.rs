@@ -1,0 +1,90 @@
+//! Stan's warm-up windows.
+
+/// Stan's warm-up schedule: iterations `[0, init)` adapt only the step size,
+/// slow windows in `[init, n − term)` (lengths 25, 50, 100, …, the last one
+/// stretched to the terminal buffer) also estimate the metric, and
+/// `[n − term, n)` adapts the step size to the final metric.
+///
+/// ```
+/// use mcmc_core::adaptation::WarmupSchedule;
+/// let s = WarmupSchedule::stan(1000);
+/// assert_eq!(s.window_ends(), vec![99, 149, 249, 449, 949]);
+/// ```
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct WarmupSchedule {
+    iterations: usize,
+    init_buffer: usize,
+    term_buffer: usize,
+    ends: Vec<usize>,
+}
+
+impl WarmupSchedule {
+    /// Stan's defaults (75 / 25 / 50) for `iterations` warm-up steps; when
+    /// they do not fit, Stan's fallback of 15 % / 75 % / 10 %. Under 20
+    /// iterations there are no slow windows.
+    pub fn stan(iterations: usize) -> Self {
+        Self::new(iterations, 75, 25, 50)
+    }
+
+    /// A schedule with the given buffers and base window.
+    pub fn new(iterations: usize, init: usize, base: usize, term: usize) -> Self {
+        let (mut init, mut base, mut term) = (init, base, term);
+        if iterations < 20 {
+            return WarmupSchedule {
+                iterations,
+                init_buffer: iterations,
+                term_buffer: 0,
+                ends: Vec::new(),
+            };
+        }
+        if init + base + term > iterations {
+            init = (0.15 * iterations as f64) as usize;
+            term = (0.1 * iterations as f64) as usize;
+            base = iterations - (init + term);
+        }
+        let slow_end = iterations - term; // first terminal iteration
+        let mut ends = Vec::new();
+        let mut window = base;
+        let mut end = init + base - 1;
+        loop {
+            if end + 1 >= slow_end {
+                ends.push(slow_end - 1);
+                break;
+            }
+            // Stretch this window when the next (doubled) one would not fit.
+            if end + 1 + 2 * window > slow_end {
+                ends.push(slow_end - 1);
+                break;
+            }
+            ends.push(end);
+            window *= 2;
+            end += window;
+        }
+        WarmupSchedule {
+            iterations,
+            init_buffer: init,
+            term_buffer: term,
+            ends,
+        }
+    }
+
+    /// Warm-up length.
+    pub fn iterations(&self) -> usize {
+        self.iterations
+    }
+
+    /// True when iteration `i` (0-based) belongs to a slow window.
+    pub fn in_slow_window(&self, i: usize) -> bool {
+        !self.ends.is_empty() && i >= self.init_buffer && i < self.iterations - self.term_buffer
+    }
+
+    /// True when iteration `i` ends a slow window (the metric is updated).
+    pub fn is_window_end(&self, i: usize) -> bool {
+        self.ends.contains(&i)
+    }
+
+    /// The iterations that end slow windows.
+    pub fn window_ends(&self) -> Vec<usize> {
+        self.ends.clone()
+    }
+}

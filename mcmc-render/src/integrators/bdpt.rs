@@ -1,0 +1,618 @@
+//! Bidirectional path tracing (Veach & Guibas 1995; Veach 1997 ch. 10),
+//! following pbrt-v4's `bdpt` integrator: one camera subpath and one light
+//! subpath per sample, every pair of prefixes connected, each technique
+//! `(s, t)` (`s` light vertices, `t` camera vertices) weighted by multiple
+//! importance sampling computed from forward and reverse area densities with
+//! Veach's ratio chain.
+//!
+//! Techniques:
+//! - `s = 0`: the camera subpath itself hits an emitter;
+//! - `s = 1`: the camera vertex is connected to a freshly sampled light point
+//!   (next-event estimation);
+//! - `t = 1`: a light vertex is connected to the pinhole and **splatted**
+//!   where it lands on the film (light tracing);
+//! - otherwise the two subpath ends are joined by a visibility-tested segment.
+//!
+//! `(1, 1)` is skipped (it duplicates `(0, 2)`, the emitter seen directly).
+//!
+//! # Depth
+//! As in [`super::pt`] (Mitsuba): `max_depth` counts path segments, and a
+//! technique `(s, t)` builds a path of `s + t − 1` segments, so only
+//! techniques with `s + t − 1 ≤ max_depth` run. Camera subpaths hold at
+//! most `max_depth + 1` vertices, light subpaths at most `max_depth`.
+//! Russian roulette follows [`super::pt`]: after the BSDF sample at the
+//! `k`-th surface vertex of a subpath, with `k ≥ rr_depth`, the walk
+//! continues with probability `min(max(β)·η², 0.95)` (η² only on camera
+//! subpaths, as in [`super::lt`]). MIS densities ignore the roulette, which
+//! keeps the weights a partition of unity and the estimator unbiased.
+//!
+//! # Order in which random numbers are consumed
+//!
+//! Each sample switches [`Stream`]s; a source without streams draws all
+//! numbers from one sequence in the order below.
+//! 1. [`Stream::Camera`]: `next_2d` for the position inside the pixel (when
+//!    the integrator picks the raster position), then for every camera
+//!    surface vertex from which the walk may continue, 4 numbers:
+//!    `next_1d` lobe, `next_2d` direction, `next_1d` Russian roulette.
+//! 2. [`Stream::Light`]: `next_1d` emitter choice, `next_2d` position,
+//!    `next_2d` direction, then 4 numbers per light surface vertex from which
+//!    the walk may continue (as above).
+//! 3. [`Stream::Connection`]: for every technique `(1, t)` that is within
+//!    the depth limit, in order of increasing `t`: `next_1d` emitter choice
+//!    and `next_2d` position, drawn even when the camera vertex cannot be
+//!    connected. The pinhole connection (`t = 1`) consumes no numbers.
+//!
+//! Multiplexed MLT (Hachisuka et al. 2014) calls [`generate_camera_subpath`]
+//! and [`generate_light_subpath`] with prescribed lengths and then
+//! [`connect`] for one technique; PSSMLT over BDPT calls
+//! [`Bdpt::sample_all`], which returns every technique of one sample.
+
+use super::path_vertex::{Vertex, emission_pdf_dir, shading_correction};
+use super::{FilmSink, Integrator, SampleDomain, SampleStats, rr_probability};
+use crate::bsdf::TransportMode;
+use crate::color::Rgb;
+use crate::frame::Frame;
+use crate::geometry::Ray;
+use crate::light::Light;
+use crate::sampling::{RandomSource, Stream};
+use crate::scene::Scene;
+use glam::Vec2;
+use std::cell::RefCell;
+
+/// How techniques are weighted against each other.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum MisHeuristic {
+    /// Veach's balance heuristic `p_i / Σ p_j`.
+    Balance,
+    /// Veach's power heuristic with β = 2, `p_i² / Σ p_j²` (pbrt's default).
+    #[default]
+    Power,
+}
+
+/// Bidirectional path tracer settings.
+#[derive(Clone, Copy, Debug)]
+pub struct Bdpt {
+    /// Longest path in segments (`u32::MAX` = unbounded).
+    pub max_depth: u32,
+    /// Depth from which Russian roulette applies.
+    pub rr_depth: u32,
+    /// MIS heuristic.
+    pub heuristic: MisHeuristic,
+}
+
+/// Reusable vertex storage for one thread: subpaths are written into these
+/// buffers, which only grow, so sampling does not allocate once they have
+/// reached the longest subpath seen.
+#[derive(Clone, Debug, Default)]
+pub struct SubpathBuffers {
+    /// Camera subpath, pinhole first.
+    pub camera: Vec<Vertex>,
+    /// Light subpath, emitter point first.
+    pub light: Vec<Vertex>,
+}
+
+/// One technique's contribution.
+#[derive(Clone, Copy, Debug)]
+pub struct Connection {
+    /// Contribution, MIS weight included.
+    pub l: Rgb,
+    /// The MIS weight alone.
+    pub weight: f32,
+    /// Raster position: the camera subpath's for `t ≥ 2`, where the pinhole
+    /// connection lands for `t = 1`.
+    pub raster: Vec2,
+    /// True for `t = 1`: the contribution is a splat (normalised by the
+    /// number of light subpaths per pixel), not part of the pixel's sample.
+    pub splat: bool,
+}
+
+/// Russian roulette setting for a walk: `Some(rr_depth)` or `None` (off,
+/// which prescribed-length subpaths need).
+pub type Roulette = Option<u32>;
+
+/// Extends `path` (whose last vertex is the walk's origin) by tracing `ray`
+/// and sampling BSDFs, adding at most `max_surface` vertices. Returns the
+/// number added.
+#[allow(clippy::too_many_arguments)]
+fn random_walk(
+    scene: &Scene,
+    mut ray: Ray,
+    source: &mut dyn RandomSource,
+    mode: TransportMode,
+    mut beta: Rgb,
+    pdf_dir: f32,
+    max_surface: usize,
+    roulette: Roulette,
+    path: &mut Vec<Vertex>,
+) -> usize {
+    let mut pdf_fwd = pdf_dir;
+    let mut eta_scale = 1.0f32;
+    let mut bounces = 0usize;
+    while bounces < max_surface {
+        let Some(its) = scene.intersect(&ray) else {
+            break;
+        };
+        let sp = its.sp;
+        let prev = path.len() - 1;
+        let mut v = Vertex::surface(scene, sp, -ray.d, beta);
+        v.pdf_fwd = path[prev].convert_density(pdf_fwd, &v);
+        path.push(v);
+        let cur = prev + 1;
+        bounces += 1;
+        if bounces >= max_surface {
+            break;
+        }
+
+        let u_lobe = source.next_1d();
+        let u_dir = source.next_2d();
+        let u_rr = source.next_1d();
+        let bsdf = scene.bsdf(sp.shape);
+        let frame = Frame::from_normal(sp.ns);
+        let wo = frame.to_local(-ray.d);
+        let Some(bs) = bsdf.sample(wo, u_lobe, u_dir, mode) else {
+            break;
+        };
+        if !(bs.pdf > 0.0) || bs.weight.is_black() {
+            break;
+        }
+        let wi_world = frame.to_world(bs.wi);
+        let pdf_rev = if bs.is_delta {
+            // Specular vertices have no density: MIS skips them (pbrt).
+            path[cur].delta = true;
+            pdf_fwd = 0.0;
+            0.0
+        } else {
+            pdf_fwd = bs.pdf;
+            bsdf.pdf(bs.wi, wo, mode.flip())
+        };
+        beta *= bs.weight;
+        match mode {
+            TransportMode::Radiance => eta_scale *= bs.eta * bs.eta,
+            TransportMode::Importance => {
+                beta *= shading_correction(-ray.d, wi_world, sp.ng, sp.ns);
+            }
+        }
+        let rev = path[cur].convert_density(pdf_rev, &path[prev]);
+        path[prev].pdf_rev = rev;
+        ray = sp.spawn_ray(wi_world);
+        if let Some(rr_depth) = roulette
+            && bounces >= rr_depth as usize
+        {
+            let q = rr_probability(beta, eta_scale);
+            if !(u_rr < q) {
+                break;
+            }
+            beta = beta / q;
+        }
+        if beta.is_black() {
+            break;
+        }
+    }
+    bounces
+}
+
+/// Generates a camera subpath of at most `max_vertices` vertices (pinhole
+/// included) through raster position `raster` into `path`; returns its length.
+/// Consumes 4 numbers per surface vertex from which the walk continues (the
+/// pixel position is the caller's).
+pub fn generate_camera_subpath(
+    scene: &Scene,
+    raster: Vec2,
+    source: &mut dyn RandomSource,
+    max_vertices: usize,
+    roulette: Roulette,
+    path: &mut Vec<Vertex>,
+) -> usize {
+    path.clear();
+    if max_vertices == 0 {
+        return 0;
+    }
+    let camera = &scene.camera;
+    let ray = camera.generate_ray(raster);
+    path.push(Vertex::camera(camera.origin(), raster, Rgb::WHITE));
+    let (_, pdf_dir) = camera.pdf_we(ray.d);
+    if !(pdf_dir > 0.0) {
+        return 1;
+    }
+    random_walk(
+        scene,
+        ray,
+        source,
+        TransportMode::Radiance,
+        Rgb::WHITE,
+        pdf_dir,
+        max_vertices - 1,
+        roulette,
+        path,
+    );
+    path.len()
+}
+
+/// Generates a light subpath of at most `max_vertices` vertices (emitter
+/// point included) into `path`; returns its length (0 when the scene has no
+/// emitter). Always consumes the 5 emission numbers first.
+pub fn generate_light_subpath(
+    scene: &Scene,
+    source: &mut dyn RandomSource,
+    max_vertices: usize,
+    roulette: Roulette,
+    path: &mut Vec<Vertex>,
+) -> usize {
+    path.clear();
+    if max_vertices == 0 {
+        return 0;
+    }
+    let u_sel = source.next_1d();
+    let u_pos = source.next_2d();
+    let u_dir = source.next_2d();
+    let Some((light, _)) = scene.lights.select(u_sel) else {
+        return 0;
+    };
+    let Some(es) = scene
+        .lights
+        .sample_emission(&scene.geometry, u_sel, u_pos, u_dir)
+    else {
+        return 0;
+    };
+    if !(es.pdf_pos > 0.0) {
+        return 0;
+    }
+    let is_point = matches!(scene.lights.lights[light as usize], Light::Point { .. });
+    let pdf_dir = emission_pdf_dir(is_point, es.p.ns, es.dir);
+    path.push(Vertex::light(
+        scene,
+        light,
+        es.p,
+        es.le / es.pdf_pos,
+        es.pdf_pos,
+    ));
+    if !(pdf_dir > 0.0) {
+        return 1;
+    }
+    let ray = if es.is_delta {
+        Ray::new(es.p.p, es.dir)
+    } else {
+        es.p.spawn_ray(es.dir)
+    };
+    random_walk(
+        scene,
+        ray,
+        source,
+        TransportMode::Importance,
+        es.weight,
+        pdf_dir,
+        max_vertices - 1,
+        roulette,
+        path,
+    );
+    path.len()
+}
+
+/// `1/d² · |cos| · |cos|` between two vertices (shading normals; no cosine
+/// at a vertex that is not on a surface), times their mutual visibility.
+fn geometry_term(scene: &Scene, a: &Vertex, b: &Vertex) -> f32 {
+    let d = b.p() - a.p();
+    let d2 = d.length_squared();
+    if !(d2 > 0.0) {
+        return 0.0;
+    }
+    let w = d / d2.sqrt();
+    let mut g = 1.0 / d2;
+    if a.on_surface() {
+        g *= a.sp.ns.dot(w).abs();
+    }
+    if b.on_surface() {
+        g *= b.sp.ns.dot(w).abs();
+    }
+    if g > 0.0 && scene.geometry.visible(&a.sp, &b.sp) {
+        g
+    } else {
+        0.0
+    }
+}
+
+/// Evaluates technique `(s, t)` on the first `s` vertices of `light` and the
+/// first `t` vertices of `camera`: the unweighted contribution times its MIS
+/// weight. Requires `t ≥ 1`, `s ≤ light.len()`, `t ≤ camera.len()` and
+/// `(s, t) ≠ (1, 1)`; returns `None` otherwise or when the contribution is
+/// zero. For `s = 1` it draws 3 numbers (`next_1d` emitter, `next_2d`
+/// position) from `source` before anything else, whatever the outcome.
+pub fn connect(
+    scene: &Scene,
+    camera: &[Vertex],
+    light: &[Vertex],
+    s: usize,
+    t: usize,
+    source: &mut dyn RandomSource,
+    heuristic: MisHeuristic,
+) -> Option<Connection> {
+    if t == 0 || t > camera.len() || s > light.len() || (s == 1 && t == 1) {
+        return None;
+    }
+    let mut raster = camera[0].raster;
+    let mut sampled: Option<Vertex> = None;
+    let l = if s == 0 {
+        let pt = &camera[t - 1];
+        if t < 2 || !pt.is_light() {
+            return None;
+        }
+        pt.le(scene, &camera[t - 2]) * pt.beta
+    } else if t == 1 {
+        let qs = &light[s - 1];
+        if !qs.is_connectible(scene) {
+            return None;
+        }
+        let cs = scene.camera.sample_wi(qs.p())?;
+        raster = cs.raster;
+        let cam = Vertex::camera(cs.origin, cs.raster, Rgb::splat(cs.we / cs.pdf));
+        let mut l = qs.beta * qs.f(scene, cs.origin, TransportMode::Importance) * cam.beta;
+        if qs.on_surface() {
+            l *= cs.wi.dot(qs.sp.ns).abs();
+        }
+        if l.is_black()
+            || !scene
+                .geometry
+                .segment_clear(qs.sp.spawn_origin(cs.origin), cs.origin)
+        {
+            return None;
+        }
+        sampled = Some(cam);
+        l
+    } else if s == 1 {
+        let u_sel = source.next_1d();
+        let u_pos = source.next_2d();
+        let pt = &camera[t - 1];
+        if !pt.is_connectible(scene) {
+            return None;
+        }
+        let (index, _) = scene.lights.select(u_sel)?;
+        let ds = scene
+            .lights
+            .sample_direct(&scene.geometry, pt.p(), u_sel, u_pos)?;
+        let mut lv = Vertex::light(scene, index, ds.p, ds.le / ds.pdf, 0.0);
+        lv.pdf_fwd = lv.pdf_light_origin(scene);
+        let mut l = pt.beta * pt.f(scene, ds.p.p, TransportMode::Radiance) * lv.beta;
+        if pt.on_surface() {
+            l *= ds.wi.dot(pt.sp.ns).abs();
+        }
+        if l.is_black() || !scene.geometry.visible(&pt.sp, &ds.p) {
+            return None;
+        }
+        sampled = Some(lv);
+        l
+    } else {
+        let qs = &light[s - 1];
+        let pt = &camera[t - 1];
+        if !qs.is_connectible(scene) || !pt.is_connectible(scene) {
+            return None;
+        }
+        let l = qs.beta
+            * qs.f(scene, pt.p(), TransportMode::Importance)
+            * pt.f(scene, qs.p(), TransportMode::Radiance)
+            * pt.beta;
+        if l.is_black() {
+            return None;
+        }
+        l * geometry_term(scene, qs, pt)
+    };
+    if l.is_black() {
+        return None;
+    }
+    let weight = mis_weight(scene, camera, light, s, t, sampled.as_ref(), heuristic);
+    Some(Connection {
+        l: l * weight,
+        weight,
+        raster,
+        splat: t == 1,
+    })
+}
+
+/// MIS weight of technique `(s, t)` for the path made of `light[..s]` and
+/// `camera[..t]` (pbrt-v4's `MISWeight`). `sampled` replaces the light
+/// endpoint when `s = 1`, the camera endpoint when `t = 1`. The ratio
+/// `r_i = p_i / p_{s,t}` of every other technique's density to this one's is
+/// built vertex by vertex from `pdf_rev / pdf_fwd`; the densities at the two
+/// connected vertices and their predecessors are recomputed for this
+/// connection. Zero densities (specular vertices) are replaced by one in the
+/// ratios, and techniques that would connect to a specular vertex or start
+/// from a point light's position by a camera hit are left out.
+pub fn mis_weight(
+    scene: &Scene,
+    camera: &[Vertex],
+    light: &[Vertex],
+    s: usize,
+    t: usize,
+    sampled: Option<&Vertex>,
+    heuristic: MisHeuristic,
+) -> f32 {
+    if s + t == 2 {
+        return 1.0;
+    }
+    let remap0 = |f: f32| if f != 0.0 { f } else { 1.0 };
+    let power = |r: f32| match heuristic {
+        MisHeuristic::Balance => r,
+        MisHeuristic::Power => r * r,
+    };
+    let endpoint = |path: &[Vertex], n: usize, use_sampled: bool| -> Vertex {
+        match (use_sampled, sampled) {
+            (true, Some(v)) => *v,
+            _ => path[n - 1],
+        }
+    };
+    let qs = (s > 0).then(|| endpoint(light, s, s == 1));
+    let pt = endpoint(camera, t, t == 1);
+    let qs_minus = (s > 1).then(|| &light[s - 2]);
+    let pt_minus = (t > 1).then(|| &camera[t - 2]);
+
+    // Densities at the connection, as the opposite subpath would produce them.
+    let pt_rev = match &qs {
+        Some(qs) => qs.pdf(scene, qs_minus, &pt, TransportMode::Importance),
+        None => pt.pdf_light_origin(scene),
+    };
+    let pt_minus_rev = pt_minus.map(|pm| match &qs {
+        Some(qs) => pt.pdf(scene, Some(qs), pm, TransportMode::Importance),
+        None => pt.pdf_light(scene, pm),
+    });
+    let qs_rev = qs
+        .as_ref()
+        .map(|q| pt.pdf(scene, pt_minus, q, TransportMode::Radiance));
+    let qs_minus_rev = match (&qs, qs_minus) {
+        (Some(q), Some(qm)) => Some(q.pdf(scene, Some(&pt), qm, TransportMode::Radiance)),
+        _ => None,
+    };
+
+    let mut sum = 0.0f32;
+    // Techniques with fewer camera vertices.
+    let mut ri = 1.0f32;
+    for i in (1..t).rev() {
+        let (rev, fwd, delta) = if i == t - 1 {
+            (pt_rev, pt.pdf_fwd, false)
+        } else if i + 2 == t {
+            (
+                pt_minus_rev.unwrap_or(camera[i].pdf_rev),
+                camera[i].pdf_fwd,
+                camera[i].delta,
+            )
+        } else {
+            (camera[i].pdf_rev, camera[i].pdf_fwd, camera[i].delta)
+        };
+        ri *= remap0(rev) / remap0(fwd);
+        if !delta && !camera[i - 1].delta {
+            sum += power(ri);
+        }
+    }
+    // Techniques with fewer light vertices.
+    let mut ri = 1.0f32;
+    for i in (0..s).rev() {
+        let (v, rev) = if i + 1 == s {
+            let q = qs.expect("s > 0");
+            (q, qs_rev.unwrap_or(q.pdf_rev))
+        } else if i + 2 == s {
+            (light[i], qs_minus_rev.unwrap_or(light[i].pdf_rev))
+        } else {
+            (light[i], light[i].pdf_rev)
+        };
+        ri *= remap0(rev) / remap0(v.pdf_fwd);
+        let delta = i + 1 != s && v.delta;
+        let delta_prev = if i > 0 {
+            light[i - 1].delta
+        } else {
+            v.is_delta_light(scene)
+        };
+        if !delta && !delta_prev {
+            sum += power(ri);
+        }
+    }
+    let w = 1.0 / (1.0 + sum);
+    if w.is_finite() { w } else { 0.0 }
+}
+
+impl Bdpt {
+    /// Camera subpath vertex limit (pinhole included).
+    pub fn max_camera_vertices(&self) -> usize {
+        (self.max_depth as usize).saturating_add(1)
+    }
+
+    /// Light subpath vertex limit (emitter point included).
+    pub fn max_light_vertices(&self) -> usize {
+        self.max_depth as usize
+    }
+
+    /// All techniques of one sample through `raster`, in the documented
+    /// order of streams: camera subpath, light subpath, connections. Each
+    /// nonzero technique is passed to `emit` (finite or not: the caller
+    /// counts and drops non-finite ones). Used by [`Integrator::sample`] and
+    /// by PSSMLT over BDPT.
+    pub fn sample_all(
+        &self,
+        scene: &Scene,
+        raster: Vec2,
+        source: &mut dyn RandomSource,
+        buffers: &mut SubpathBuffers,
+        mut emit: impl FnMut(&Connection),
+    ) {
+        let rr = Some(self.rr_depth);
+        source.set_stream(Stream::Camera);
+        let nc = generate_camera_subpath(
+            scene,
+            raster,
+            source,
+            self.max_camera_vertices(),
+            rr,
+            &mut buffers.camera,
+        );
+        source.set_stream(Stream::Light);
+        let nl = generate_light_subpath(
+            scene,
+            source,
+            self.max_light_vertices(),
+            rr,
+            &mut buffers.light,
+        );
+        source.set_stream(Stream::Connection);
+        let max_depth = self.max_depth as usize;
+        for t in 1..=nc {
+            for s in 0..=nl {
+                if (s == 1 && t == 1) || s + t < 2 || s + t - 1 > max_depth {
+                    continue;
+                }
+                if let Some(c) = connect(
+                    scene,
+                    &buffers.camera,
+                    &buffers.light,
+                    s,
+                    t,
+                    source,
+                    self.heuristic,
+                ) {
+                    emit(&c);
+                }
+            }
+        }
+    }
+}
+
+thread_local! {
+    /// Per-thread subpath storage for [`Integrator::sample`].
+    static BUFFERS: RefCell<SubpathBuffers> = RefCell::new(SubpathBuffers::default());
+}
+
+impl Integrator for Bdpt {
+    fn name(&self) -> &'static str {
+        "bdpt"
+    }
+
+    fn domain(&self) -> SampleDomain {
+        SampleDomain::PixelsWithSplats
+    }
+
+    fn sample(
+        &self,
+        scene: &Scene,
+        pixel: Option<(u32, u32)>,
+        source: &mut dyn RandomSource,
+        film: &mut dyn FilmSink,
+        stats: &mut SampleStats,
+    ) {
+        let Some((px, py)) = pixel else {
+            return;
+        };
+        source.set_stream(Stream::Camera);
+        let u = source.next_2d();
+        let raster = Vec2::new(px as f32 + u.0, py as f32 + u.1);
+        let mut l = Rgb::BLACK;
+        BUFFERS.with_borrow_mut(|buffers| {
+            self.sample_all(scene, raster, source, buffers, |c| {
+                if !c.l.is_finite() {
+                    stats.nonfinite += 1;
+                } else if c.splat {
+                    film.splat(c.raster, c.l);
+                } else {
+                    l += c.l;
+                }
+            });
+        });
+        // Every camera sample counts towards the pixel's filter weight, black or not.
+        film.add_sample(raster, l);
+    }
+}
