@@ -46,19 +46,33 @@ fn permutations(c: &mut Criterion) {
             })
         });
     }
-    // The log-space path (rows spanning more than 600/M nats) at M = 8.
-    let mut wide = random_matrix(8, 99);
-    wide[0] = -400.0;
-    let mut dp = PermutationDp::new(8, DEFAULT_MAX_TABLE_BYTES).unwrap();
-    let mut rng = stream_rng(2, 0);
-    let mut source = vec![0; 8];
-    g.bench_function("8-log-space", |b| {
-        b.iter(|| {
-            dp.prepare(black_box(&wide)).unwrap();
-            dp.sample(|| uniform(&mut rng), &mut source);
-            black_box(&source);
+    // A tempered-ladder-like matrix (own-level entries typical, others up
+    // to 1500 nats lower): the linear path with negligible entries dropped.
+    let mut rng = stream_rng(4, 0);
+    let tempered: Vec<f64> = (0..64)
+        .map(|k| {
+            if k / 8 == k % 8 {
+                -uniform(&mut rng)
+            } else {
+                -1500.0 * uniform(&mut rng)
+            }
         })
-    });
+        .collect();
+    // An identity far below the best permutation: the log-space path.
+    let mut wide = random_matrix(8, 99);
+    wide[0] = -2000.0;
+    for (name, matrix) in [("8-tempered", tempered), ("8-log-space", wide)] {
+        let mut dp = PermutationDp::new(8, DEFAULT_MAX_TABLE_BYTES).unwrap();
+        let mut rng = stream_rng(2, 0);
+        let mut source = vec![0; 8];
+        g.bench_function(name, |b| {
+            b.iter(|| {
+                dp.prepare(black_box(&matrix)).unwrap();
+                dp.sample(|| uniform(&mut rng), &mut source);
+                black_box(&source);
+            })
+        });
+    }
     g.finish();
 
     let mut g = c.benchmark_group("brute_force");

@@ -145,6 +145,8 @@ pub struct MultipleTry<K, S, P = ()> {
     competitors: Vec<Sample<S, P>>,
     forward: Vec<TryWeight>,
     backward: Vec<TryWeight>,
+    /// Kernel component of each try, kept to avoid an allocation per step.
+    try_components: Vec<usize>,
 }
 
 impl<K: Kernel<S, P>, S, P> MultipleTry<K, S, P> {
@@ -166,6 +168,7 @@ impl<K: Kernel<S, P>, S, P> MultipleTry<K, S, P> {
             competitors: Vec::new(),
             forward: Vec::new(),
             backward: Vec::new(),
+            try_components: Vec::new(),
         })
     }
 
@@ -223,7 +226,7 @@ where
         };
 
         // 1. k proposals from x.
-        let mut components = Vec::with_capacity(k);
+        self.try_components.clear();
         for j in 0..k {
             let p = self
                 .kernel
@@ -238,13 +241,13 @@ where
             chain
                 .stats
                 .record_class(DensityClass::of(self.proposals[j].log_density));
-            components.push(p.component);
+            self.try_components.push(p.component);
         }
         self.forward.clear();
         for j in 0..k {
             match self.weight(&chain.current, &self.proposals[j]) {
                 Some(w) => self.forward.push(w),
-                None => return fail(chain, components[j]),
+                None => return fail(chain, self.try_components[j]),
             }
         }
 
@@ -257,16 +260,16 @@ where
                 proposal: Some(&self.proposals[0]),
                 alpha: 0.0,
                 accepted: false,
-                component: components[0],
+                component: self.try_components[0],
             });
-            chain.stats.record(components[0], 0.0, false);
+            chain.stats.record(self.try_components[0], 0.0, false);
             return StepInfo {
                 alpha: 0.0,
                 outcome: Outcome::Rejected,
-                component: components[0],
+                component: self.try_components[0],
             };
         };
-        let component = components[sel];
+        let component = self.try_components[sel];
 
         // 3. k − 1 competitors from y, plus x itself.
         let y = &self.proposals[sel];

@@ -52,6 +52,10 @@ enum IntegratorArg {
     Pt,
     /// Light tracing.
     Lt,
+    /// Primary sample space MLT over pt or bdpt (see the MLT flags).
+    Pssmlt,
+    /// Multiplexed MLT over BDPT techniques (see the MLT flags).
+    Mmlt,
     /// Bidirectional path tracing (all techniques, power-heuristic MIS).
     Bdpt,
 }
@@ -86,6 +90,8 @@ enum Command {
         /// Do not show a progress bar.
         #[arg(long)]
         quiet: bool,
+        #[command(flatten)]
+        mlt: mcmc_render::mlt_cli::MltArgs,
     },
     /// Compare a test EXR against a reference EXR.
     Compare {
@@ -96,6 +102,37 @@ enum Command {
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
+    },
+    /// Error against time of several integrators at equal time budgets (CSV + log-log PNG).
+    Convergence {
+        /// Mitsuba 3 XML scene.
+        scene: PathBuf,
+        /// Reference EXR (e.g. a long `render --integrator pt` run).
+        #[arg(long)]
+        reference: PathBuf,
+        /// Comma-separated integrators (pt, lt, bdpt, pssmlt, pssmlt-bdpt, mmlt).
+        #[arg(long, default_value = "pt,pssmlt")]
+        integrators: String,
+        /// Seconds per integrator.
+        #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
+        time: f64,
+        /// Checkpoints per integrator.
+        #[arg(long, default_value_t = 8)]
+        checkpoints: u32,
+        /// Seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Output CSV; the plot goes beside it as PNG.
+        #[arg(long, default_value = "convergence.csv")]
+        out: PathBuf,
+        /// Override a `<default name=…>` value: -D name=value.
+        #[arg(short = 'D', value_name = "NAME=VALUE")]
+        define: Vec<String>,
+        #[command(flatten)]
+        mlt: mcmc_render::mlt_cli::MltArgs,
     },
     /// Describe what a scene file loads to.
     Info {
@@ -160,6 +197,7 @@ fn run(cli: Cli) -> Result<(), String> {
             out,
             define,
             quiet,
+            mlt,
         }) => {
             let spp = match spp {
                 Some(n) if n <= 0 => {
@@ -182,6 +220,30 @@ fn run(cli: Cli) -> Result<(), String> {
             check_writable(&out)?;
             let defines = parse_defines(&define)?;
             let loaded = Scene::load(&scene, &defines).map_err(|e| e.to_string())?;
+            if let Some(file) = &mlt.replay {
+                return mcmc_render::mlt_cli::replay(&loaded, file);
+            }
+            if matches!(integrator, IntegratorArg::Pssmlt | IntegratorArg::Mmlt) {
+                let _ = ctrlc::set_handler(|| STOP.store(true, Ordering::SeqCst));
+                let job = mcmc_render::mlt_cli::MltJob {
+                    scene: &loaded,
+                    scene_name: &scene.display().to_string(),
+                    args: &mlt,
+                    kind: if matches!(integrator, IntegratorArg::Mmlt) {
+                        mcmc_render::mlt_cli::MltKind::Mmlt
+                    } else {
+                        mcmc_render::mlt_cli::MltKind::Pssmlt
+                    },
+                    time,
+                    seed,
+                    threads: threads.unwrap_or_else(|| {
+                        std::thread::available_parallelism().map_or(1, |n| n.get())
+                    }),
+                    out: &out,
+                    quiet,
+                };
+                return mcmc_render::mlt_cli::run_pssmlt(&job, &STOP).map(|_| ());
+            }
             let spp = match (spp, time) {
                 (Some(n), _) => Some(n),
                 (None, Some(_)) => None,
@@ -235,6 +297,54 @@ fn run(cli: Cli) -> Result<(), String> {
                 println!(
                     "non-finite pixels   reference {}  test {}",
                     c.ref_nonfinite, c.test_nonfinite
+                );
+            }
+            Ok(())
+        }
+        Some(Command::Convergence {
+            scene,
+            reference,
+            integrators,
+            time,
+            checkpoints,
+            seed,
+            threads,
+            out,
+            define,
+            mlt,
+        }) => {
+            let defines = parse_defines(&define)?;
+            let loaded = Scene::load(&scene, &defines).map_err(|e| e.to_string())?;
+            let (rw, rh, r) = read_exr(&reference)?;
+            if (rw, rh) != (loaded.film.width, loaded.film.height) {
+                return Err(format!(
+                    "reference is {rw}x{rh}, the scene renders {}x{}",
+                    loaded.film.width, loaded.film.height
+                ));
+            }
+            let names: Vec<String> = integrators
+                .split(',')
+                .map(|s| s.trim().to_string())
+                .collect();
+            let settings = mlt.settings(Some(time), seed)?;
+            let threads = threads.unwrap_or(0);
+            let _ = ctrlc::set_handler(|| STOP.store(true, Ordering::SeqCst));
+            let records = mcmc_core::runner::with_threads(threads, || {
+                let study = mcmc_render::convergence::Study {
+                    integrators: names.clone(),
+                    seconds: time,
+                    checkpoints,
+                    seed,
+                    mlt: settings,
+                };
+                mcmc_render::convergence::run(&loaded, &r, &study, &STOP)
+            })?;
+            mcmc_render::convergence::write_csv(&out, &records)?;
+            mcmc_render::convergence::write_plot(&out.with_extension("png"), &records, &names)?;
+            for rec in &records {
+                println!(
+                    "{:8} {:8.2} s {:>12} relMSE {:.4e} RMSE {:.4e}",
+                    rec.integrator, rec.seconds, rec.samples, rec.rel_mse, rec.rmse
                 );
             }
             Ok(())
@@ -419,6 +529,9 @@ fn do_render(job: RenderJob) -> Result<(), String> {
             max_depth: scene.integrator.max_depth,
             rr_depth: scene.integrator.rr_depth,
         }),
+        IntegratorArg::Pssmlt | IntegratorArg::Mmlt => {
+            return Err("pssmlt and mmlt run through mlt_cli".into());
+        }
         IntegratorArg::Bdpt => Box::new(Bdpt {
             max_depth: scene.integrator.max_depth,
             rr_depth: scene.integrator.rr_depth,

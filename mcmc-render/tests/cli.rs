@@ -282,7 +282,6 @@ fn compare_refuses_missing_files() {
 }
 
 #[test]
-#[ignore = "the default scene needs the real BSDFs (render-bsdf branch); un-ignore at merge"]
 fn no_arguments_renders_the_default_scene() {
     let dir = scratch("default");
     let out = run(&[], &dir);

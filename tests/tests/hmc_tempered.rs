@@ -57,12 +57,13 @@ fn tempered_hmc_with_is_permutations_is_correct() {
     let family = TemperedFamily::new(Bimodal, Prior, &betas).unwrap();
     let algorithms = (0..betas.len())
         .map(|l| {
-            let k = Hmc::with_trajectory(family.level(l).clone(), 0.2, Trajectory::Time(1.5))
-                .unwrap()
-                .with_jitter(0.2)
-                .unwrap()
-                .with_warmup(500, 0.8, MetricAdaptation::Diagonal)
-                .unwrap();
+            let k =
+                Hmc::with_trajectory(family.level(l).unwrap().clone(), 0.2, Trajectory::Time(1.5))
+                    .unwrap()
+                    .with_jitter(0.2)
+                    .unwrap()
+                    .with_warmup(500, 0.8, MetricAdaptation::Diagonal)
+                    .unwrap();
             MetropolisHastings::new(k)
         })
         .collect();
@@ -85,7 +86,10 @@ fn tempered_hmc_with_is_permutations_is_correct() {
         let s = re.current(0);
         // The cached gradient is level 0's gradient at the state, whatever
         // level the state came from.
-        let lp = family.level(0).log_density_gradient(&s.state, &mut g);
+        let lp = family
+            .level(0)
+            .unwrap()
+            .log_density_gradient(&s.state, &mut g);
         assert!((lp - s.log_density).abs() < 1e-9);
         assert!(
             (g[0] - s.payload.gradient[0]).abs() < 1e-9

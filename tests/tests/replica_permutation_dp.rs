@@ -107,11 +107,34 @@ fn linear_and_log_paths_agree() {
     // Shifting a row by a constant changes no probability but forces the log path
     // when the row spread grows.
     let mut wide = small.clone();
-    wide[0] = -500.0;
+    wide[0] = -2000.0;
     dp.prepare(&wide).unwrap();
     assert!(!dp.used_linear_space());
     let brute = brute_force_log_normalizer(m, &wide);
     assert!((dp.log_normalizer() - brute).abs() < 1e-12 * brute.abs().max(1.0));
+    // A tempered-ladder-like matrix: each level's own state is typical,
+    // other levels' states are up to 1500 nats less likely. The linear path
+    // (dropping negligible entries) must give every probability.
+    let tempered: Vec<f64> = (0..m * m)
+        .map(|k| {
+            if k / m == k % m {
+                -uniform(&mut rng)
+            } else {
+                -1500.0 * uniform(&mut rng)
+            }
+        })
+        .collect();
+    dp.prepare(&tempered).unwrap();
+    assert!(dp.used_linear_space());
+    let brute = brute_force_log_normalizer(m, &tempered);
+    assert!((dp.log_normalizer() - brute).abs() < 1e-12 * brute.abs().max(1.0));
+    for p in all_permutations(m) {
+        let exact = (permutation_log_weight(m, &tempered, &p) - brute).exp();
+        assert!(
+            (dp.log_probability(&p).exp() - exact).abs() < 1e-12,
+            "{p:?}"
+        );
+    }
 }
 
 #[test]

@@ -88,3 +88,24 @@ impl WarmupSchedule {
         self.ends.clone()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stan_windows_for_default_and_short_warmups() {
+        // Stan's default 1000: 75 + 25 + 50 + 100 + 200 + 500 (stretched) + 50.
+        let s = WarmupSchedule::stan(1000);
+        assert!(!s.in_slow_window(74) && s.in_slow_window(75));
+        assert!(s.in_slow_window(949) && !s.in_slow_window(950));
+        // 100 < 150: fallback 15 % / 75 % / 10 %, one slow window [15, 90).
+        let s = WarmupSchedule::stan(100);
+        assert_eq!(s.window_ends(), vec![89]);
+        assert!(!s.in_slow_window(14) && s.in_slow_window(15) && !s.in_slow_window(90));
+        // Under 20 iterations: step size only.
+        let s = WarmupSchedule::stan(10);
+        assert!(s.window_ends().is_empty());
+        assert!((0..10).all(|i| !s.in_slow_window(i)));
+    }
+}

@@ -17,6 +17,18 @@ thread_local! {
 /// **level's** gradient (`β∇ln L + ∇ln prior`), which is what the gradient
 /// kernels read; build each level's kernel on [`TemperedFamily::level`].
 ///
+/// ```
+/// use mcmc_core::gradient::{FiniteDifference, TemperedFamily};
+/// use mcmc_core::replica::ReplicaFamily;
+/// let like = FiniteDifference::new(|x: &[f64]| -2.0 * x[0] * x[0], 1);
+/// let prior = FiniteDifference::new(|x: &[f64]| -0.5 * x[0] * x[0], 1);
+/// let family = TemperedFamily::new(like, prior, &[1.0, 0.25]).unwrap();
+/// assert_eq!(family.levels(), 2);
+/// let e = family.evaluate(1, &vec![1.0]);
+/// assert!((e.log_density + 1.0).abs() < 1e-12); // 0.25·(−2) − 0.5
+/// assert!((e.payload.gradient[0] + 2.0).abs() < 1e-6);
+/// ```
+///
 /// On an exchange the sample (state, `ln π`, gradient) moves to its new
 /// level and is re-targeted there: its gradient is recomputed for the new
 /// β (one gradient evaluation). Momentum needs nothing: the kernels draw it
@@ -44,9 +56,10 @@ impl<L: GradientTarget + Clone, Q: GradientTarget + Clone> TemperedFamily<L, Q> 
         Ok(TemperedFamily { levels })
     }
 
-    /// The gradient target of `level`, to build that level's kernel on.
-    pub fn level(&self, level: usize) -> &Tempered<L, Q> {
-        &self.levels[level]
+    /// The gradient target of `level`, to build that level's kernel on;
+    /// `None` when `level ≥ levels()`.
+    pub fn level(&self, level: usize) -> Option<&Tempered<L, Q>> {
+        self.levels.get(level)
     }
 }
 

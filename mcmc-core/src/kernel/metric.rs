@@ -105,6 +105,21 @@ impl Metric {
         }
     }
 
+    /// `M⁻¹` as a dense row-major `d×d` matrix.
+    pub fn inverse_mass_matrix(&self) -> Vec<f64> {
+        match &self.shape {
+            Shape::Diagonal { inv_mass, .. } => {
+                let d = inv_mass.len();
+                let mut m = vec![0.0; d * d];
+                for i in 0..d {
+                    m[i * d + i] = inv_mass[i];
+                }
+                m
+            }
+            Shape::Dense { inv_mass, .. } => inv_mass.clone(),
+        }
+    }
+
     /// Draws `p ~ N(0, M)` into `p`.
     pub(crate) fn sample_momentum(&self, rng: &mut ChainRng, p: &mut [f64]) {
         match &self.shape {

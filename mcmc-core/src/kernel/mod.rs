@@ -10,11 +10,11 @@
 mod adaptive_covariance;
 mod finite;
 mod gaussian;
-mod hessian;
-mod hmc;
+pub mod hessian;
+pub mod hmc;
 mod independent;
-mod mala;
-mod metric;
+pub mod mala;
+pub mod metric;
 mod mixture;
 mod torus_step;
 

@@ -1,8 +1,10 @@
 //! The adaptive equi-energy sampler (Schreck, Fort & Moulines 2013; thesis
 //! §5.3.6): as [`super::EquiEnergySampler`], but chain `j`'s rings are the
 //! `d` quantile groups of all its stored states ranked by `ln π_{j−1}`, so
-//! every ring holds the same number of states. The stores are kept sorted,
-//! so a ring is a contiguous index range and finding it is a binary search.
+//! every ring holds the same number of states. Each store keeps its states
+//! in place and a sorted list of `(energy, index)` keys beside them, so a
+//! ring is a contiguous range of keys, finding it is a binary search, and an
+//! insertion moves 16-byte keys rather than states.
 //!
 //! Memory is capped: once a chain has stored `cap` states, each new state
 //! replaces a uniformly chosen stored one with probability `cap / seen`
@@ -23,8 +25,10 @@ pub struct AdaptiveEquiEnergy<S> {
     p_jump: f64,
     rings: usize,
     cap: usize,
-    /// `stores[j]`: chain `j`'s stored states sorted by `ln π_{j−1}`.
+    /// `stores[j]`: chain `j`'s stored states.
     stores: Vec<Vec<Stored<S>>>,
+    /// `keys[j]`: `(ln π_{j−1}, index into stores[j])`, sorted by energy.
+    keys: Vec<Vec<(f64, u32)>>,
     seen: Vec<u64>,
     frozen: bool,
 }
@@ -43,6 +47,9 @@ impl<S> AdaptiveEquiEnergy<S> {
     /// stored states per chain (`cap ≥ rings`).
     pub fn new(levels: usize, rings: usize, p_eej: f64, cap: usize) -> Result<Self> {
         validate(levels, rings, p_eej)?;
+        if cap > u32::MAX as usize {
+            return Err(invalid("cap", "at most 2^32 − 1 stored states per chain"));
+        }
         if cap < rings {
             return Err(invalid(
                 "cap",
@@ -54,6 +61,7 @@ impl<S> AdaptiveEquiEnergy<S> {
             rings,
             cap,
             stores: (0..levels).map(|_| Vec::new()).collect(),
+            keys: (0..levels).map(|_| Vec::new()).collect(),
             seen: vec![0; levels],
             frozen: false,
         })
@@ -89,21 +97,21 @@ impl<S: Clone + Send + Sync, P: Clone> ExchangeMove<S, P> for AdaptiveEquiEnergy
         rng: &mut ChainRng,
     ) -> Jump<S, P> {
         let partner = level + 1;
-        let Some(store) = self.stores.get(partner) else {
+        let (Some(store), Some(keys)) = (self.stores.get(partner), self.keys.get(partner)) else {
             return Jump::None;
         };
-        let n = store.len();
+        let n = keys.len();
         if !self.frozen || n < self.rings || uniform(rng) >= self.p_jump {
             return Jump::None;
         }
         // The ring of u: the quantile group its rank among the stored
         // energies falls into.
-        let rank = store
-            .partition_point(|s| s.log_lower <= current.log_density)
+        let rank = keys
+            .partition_point(|k| k.0 <= current.log_density)
             .min(n - 1);
         let ring = rank * self.rings / n;
         let (lo, hi) = quantile_ring(n, self.rings, ring);
-        let k = lo + ((uniform(rng) * (hi - lo) as f64) as usize).min(hi - lo - 1);
+        let k = keys[lo + ((uniform(rng) * (hi - lo) as f64) as usize).min(hi - lo - 1)].1 as usize;
         jump_to(level, current, &store[k], family, rng)
     }
 
@@ -117,22 +125,42 @@ impl<S: Clone + Send + Sync, P: Clone> ExchangeMove<S, P> for AdaptiveEquiEnergy
                 continue;
             }
             self.seen[j] += 1;
-            if self.stores[j].len() >= self.cap {
+            let replace = if self.stores[j].len() < self.cap {
+                None
+            } else {
                 // Reservoir sampling: keep a uniform sample of the history.
                 let r = (uniform(cx.rng()) * self.seen[j] as f64) as u64;
                 if r >= self.cap as u64 {
                     continue;
                 }
-                self.stores[j].remove(r as usize);
-            }
+                let r = r as usize;
+                let old = self.stores[j][r].log_lower;
+                let keys = &mut self.keys[j];
+                let from = keys.partition_point(|k| k.0 < old);
+                if let Some(p) = keys[from..].iter().position(|k| k.1 as usize == r) {
+                    keys.remove(from + p);
+                }
+                Some(r)
+            };
             let s = cx.sample(j);
             let stored = Stored {
                 state: s.state.clone(),
                 log_own: s.log_density,
                 log_lower: lower,
             };
-            let at = self.stores[j].partition_point(|x| x.log_lower <= lower);
-            self.stores[j].insert(at, stored);
+            let slot = match replace {
+                None => {
+                    self.stores[j].push(stored);
+                    self.stores[j].len() - 1
+                }
+                Some(r) => {
+                    self.stores[j][r] = stored;
+                    r
+                }
+            };
+            let keys = &mut self.keys[j];
+            let at = keys.partition_point(|k| k.0 <= lower);
+            keys.insert(at, (lower, slot as u32));
         }
     }
 
@@ -151,16 +179,83 @@ impl<S: Clone + Send + Sync, P: Clone> ExchangeMove<S, P> for AdaptiveEquiEnergy
     }
 
     fn memory_bytes(&self) -> usize {
-        self.stores
+        let states: usize = self
+            .stores
             .iter()
             .map(|r| r.capacity() * std::mem::size_of::<Stored<S>>())
-            .sum()
+            .sum();
+        let keys: usize = self
+            .keys
+            .iter()
+            .map(|k| k.capacity() * std::mem::size_of::<(f64, u32)>())
+            .sum();
+        states + keys
     }
 }
 
 #[cfg(test)]
 mod tests {
-    use super::quantile_ring;
+    use super::*;
+    use crate::chain::ChainState;
+    use crate::replica::context::DensityCache;
+    use crate::replica::family::FnFamily;
+    use crate::replica::stats::{IndexProcess, ReplicaStatistics};
+    use crate::rng::stream_rng;
+    use crate::stats::ChainStatistics;
+
+    #[test]
+    fn the_capped_store_keeps_sorted_consistent_keys() {
+        let family = FnFamily::new(3, |l: usize, x: &f64| -x * x / (1.0 + l as f64));
+        let mut aees = AdaptiveEquiEnergy::<f64>::new(3, 4, 0.1, 50).unwrap();
+        ExchangeMove::<f64, ()>::freeze(&mut aees);
+        let mut rng = stream_rng(1, 0);
+        let mut exchange_rng = stream_rng(2, 0);
+        let mut index = IndexProcess::new(3);
+        let mut stats = ReplicaStatistics::new(3, "adaptive-ees");
+        let mut cache = DensityCache::new(3);
+        for step in 0..500 {
+            let mut chains: Vec<ChainState<f64, ()>> = (0..3)
+                .map(|l| {
+                    let x = 4.0 * uniform(&mut rng) - 2.0;
+                    ChainState {
+                        current: Sample {
+                            state: x,
+                            log_density: family.evaluate(l, &x).log_density,
+                            payload: (),
+                        },
+                        rng: stream_rng(3, l as u64),
+                        stats: ChainStatistics::default(),
+                    }
+                })
+                .collect();
+            cache.clear();
+            let mut cx = ExchangeContext {
+                family: &family,
+                chains: &mut chains,
+                rng: &mut exchange_rng,
+                index: &mut index,
+                stats: &mut stats,
+                cache: &mut cache,
+                frozen: true,
+            };
+            aees.end_sweep(&mut cx);
+            for j in 1..3 {
+                let (store, keys) = (&aees.stores[j], &aees.keys[j]);
+                assert_eq!(store.len(), (step + 1).min(50));
+                assert_eq!(keys.len(), store.len());
+                assert!(keys.windows(2).all(|w| w[0].0 <= w[1].0), "keys not sorted");
+                let mut idx: Vec<u32> = keys.iter().map(|k| k.1).collect();
+                idx.sort_unstable();
+                assert_eq!(idx, (0..store.len() as u32).collect::<Vec<_>>());
+                for k in keys {
+                    assert_eq!(k.0, store[k.1 as usize].log_lower);
+                    let x = store[k.1 as usize].state;
+                    assert_eq!(k.0, -x * x / j as f64, "energy is ln π_(j−1)");
+                }
+            }
+        }
+        assert!(ExchangeMove::<f64, ()>::memory_bytes(&aees) > 0);
+    }
 
     #[test]
     fn quantile_rings_partition_the_store() {

@@ -351,3 +351,56 @@ pub fn betas_from_temperatures(temperatures: &[f64]) -> Vec<f64> {
 pub fn kernel_scales(base: f64, temperatures: &[f64]) -> Vec<f64> {
     temperatures.iter().map(|t| base * t.sqrt()).collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ladders_and_betas_are_validated() {
+        let t = geometric_temperatures(8, 2500.0).unwrap();
+        assert_eq!(t[0], 1.0);
+        assert!((t[7] - 2500.0).abs() < 1e-9);
+        assert!((t[1] - 2500f64.powf(1.0 / 7.0)).abs() < 1e-12);
+        assert_eq!(geometric_temperatures(1, 10.0).unwrap(), vec![1.0]);
+        assert!(geometric_temperatures(0, 10.0).is_err());
+        assert!(geometric_temperatures(3, 0.5).is_err());
+        assert!(geometric_temperatures(3, f64::NAN).is_err());
+        assert!(validate_temperatures(&[1.0, 2.0, f64::INFINITY]).is_ok());
+        assert!(validate_temperatures(&[2.0, 3.0]).is_err());
+        assert!(validate_temperatures(&[1.0, 3.0, 2.0]).is_err());
+        assert_eq!(
+            betas_from_temperatures(&[1.0, f64::INFINITY]),
+            vec![1.0, 0.0]
+        );
+        let ll = |x: &[f64]| -x[0] * x[0];
+        assert!(PowerFamily::without_prior(ll, vec![]).is_err());
+        assert!(PowerFamily::without_prior(ll, vec![0.5]).is_err());
+        assert!(PowerFamily::without_prior(ll, vec![1.0, 0.2, 0.5]).is_err());
+        assert!(PowerFamily::without_prior(ll, vec![1.0, -0.1]).is_err());
+        assert!(PowerFamily::without_prior(ll, vec![1.0, 0.0]).is_ok());
+        assert_eq!(kernel_scales(0.5, &[1.0, 4.0]), vec![0.5, 1.0]);
+    }
+
+    #[test]
+    fn power_family_retargets_without_evaluating() {
+        use std::cell::Cell;
+        let calls = Cell::new(0);
+        let ll = |x: &[f64]| {
+            calls.set(calls.get() + 1);
+            -x[0]
+        };
+        let f = PowerFamily::without_prior(ll, vec![1.0, 0.25]).unwrap();
+        let e = f.evaluate(0, &vec![2.0]);
+        let mut s = Sample {
+            state: vec![2.0],
+            log_density: e.log_density,
+            payload: e.payload,
+        };
+        assert_eq!(calls.get(), 1);
+        let hot = f.log_density_of(1, &s);
+        f.retarget(1, &mut s, hot);
+        assert_eq!(s.log_density, -0.5);
+        assert_eq!(calls.get(), 1, "re-tempering must not evaluate the target");
+    }
+}

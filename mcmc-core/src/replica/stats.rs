@@ -236,8 +236,10 @@ impl ReplicaStatistics {
 
     /// Estimated communication barrier `Λ = Σ_i r_i`, the sum of neighbour
     /// rejection rates `r_i = 1 − E[α_{i,i+1}]` (Syed et al. 2021). `None`
-    /// when some neighbour pair was never attempted (moves that do not swap
-    /// neighbours; see [`crate::replica::schedule`] for probing).
+    /// when some neighbour pair was never attempted. Meaningful for the
+    /// neighbour and even–odd moves, whose attempts are plain Eq. 4.11
+    /// swaps of neighbours; other moves record their own acceptance
+    /// probabilities, which are not the neighbour swap's.
     pub fn barrier(&self) -> Option<f64> {
         let acc = self.neighbour_acceptance();
         if acc.iter().any(|a| a.is_nan()) {

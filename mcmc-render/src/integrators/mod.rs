@@ -35,6 +35,7 @@
 pub mod bdpt;
 pub mod lt;
 pub mod path_vertex;
+pub mod pssmlt;
 pub mod pt;
 
 use crate::color::Rgb;

@@ -1,0 +1,306 @@
+//! Error against time: each integrator renders a scene for the same time
+//! budget, and at every checkpoint its current image is compared with a
+//! reference ([`crate::compare`]: relMSE and RMSE). The records go to a
+//! CSV and a log–log PNG plot.
+//!
+//! Checkpoints are taken where an integrator can show an image: after a
+//! pass (`pt`, `lt`) or after a round of mutations (`pssmlt`), at the first
+//! such point after each `k·T/K`. The time of a record is the wall-clock
+//! time since that integrator started, start-up (bootstrap) included.
+
+use crate::color::Rgb;
+use crate::compare::compare;
+use crate::film::Film;
+use crate::integrators::bdpt::{Bdpt, MisHeuristic};
+use crate::integrators::pssmlt::{MltObserver, PssmltSettings, render_family, render_pssmlt};
+use crate::integrators::{Integrator, lt::LightTracer, pt::PathTracer};
+use crate::pss::MmltDepth;
+use crate::render::{RenderObserver, RenderSettings, render};
+use crate::scene::Scene;
+use std::path::Path;
+use std::sync::Mutex;
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+
+/// One checkpoint of one integrator.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Record {
+    /// Integrator name.
+    pub integrator: String,
+    /// Seconds since the integrator started.
+    pub seconds: f64,
+    /// Camera samples, light paths or mutations so far.
+    pub samples: u64,
+    /// relMSE against the reference.
+    pub rel_mse: f64,
+    /// RMSE against the reference.
+    pub rmse: f64,
+}
+
+/// Collects records at checkpoints.
+struct Recorder<'a> {
+    name: &'a str,
+    reference: &'a [Rgb],
+    start: Instant,
+    step: f64,
+    state: Mutex<(u32, Vec<Record>)>,
+    pixels: u64,
+}
+
+impl Recorder<'_> {
+    fn offer(&self, samples: u64, image: impl FnOnce() -> Vec<Rgb>, force: bool) {
+        let t = self.start.elapsed().as_secs_f64();
+        let mut g = self.state.lock().unwrap_or_else(|p| p.into_inner());
+        let next = g.0 as f64 * self.step;
+        if !force && t < next {
+            return;
+        }
+        if let Ok(c) = compare(self.reference, &image()) {
+            g.1.push(Record {
+                integrator: self.name.to_string(),
+                seconds: t,
+                samples,
+                rel_mse: c.rel_mse,
+                rmse: c.rmse,
+            });
+        }
+        g.0 = (t / self.step).floor() as u32 + 1;
+    }
+}
+
+impl RenderObserver for Recorder<'_> {
+    fn pass_done(&self, film: &Film, spp_done: u64, paths_per_pixel: f64) {
+        self.offer(
+            spp_done * self.pixels,
+            || film.develop(paths_per_pixel),
+            false,
+        );
+    }
+}
+
+impl MltObserver for Recorder<'_> {
+    fn preview(&self, image: &[Rgb], mutations: u64) {
+        self.offer(mutations, || image.to_vec(), false);
+    }
+}
+
+/// Integrators the study knows.
+pub const KNOWN: &[&str] = &["pt", "lt", "bdpt", "pssmlt", "pssmlt-bdpt", "mmlt"];
+
+/// What a convergence study runs.
+#[derive(Clone, Debug)]
+pub struct Study {
+    /// Integrator names (see [`KNOWN`]).
+    pub integrators: Vec<String>,
+    /// Seconds per integrator.
+    pub seconds: f64,
+    /// Checkpoints per integrator.
+    pub checkpoints: u32,
+    /// Seed.
+    pub seed: u64,
+    /// PSSMLT settings (budget, seed and preview interval are overridden).
+    pub mlt: PssmltSettings,
+}
+
+/// Runs the study on `scene` against `reference`.
+pub fn run(
+    scene: &Scene,
+    reference: &[Rgb],
+    study: &Study,
+    stop: &AtomicBool,
+) -> Result<Vec<Record>, String> {
+    let Study {
+        integrators,
+        seconds,
+        checkpoints,
+        seed,
+        mlt,
+    } = study;
+    let (seconds, checkpoints, seed) = (*seconds, *checkpoints, *seed);
+    if !(seconds > 0.0 && seconds.is_finite()) {
+        return Err(format!(
+            "--time must be a positive number of seconds, got {seconds}"
+        ));
+    }
+    if checkpoints == 0 {
+        return Err("--checkpoints must be at least 1".into());
+    }
+    let pixels = scene.film.width as u64 * scene.film.height as u64;
+    if reference.len() as u64 != pixels {
+        return Err(format!(
+            "the reference has {} pixels, the scene renders {pixels}",
+            reference.len()
+        ));
+    }
+    for name in integrators {
+        if !KNOWN.contains(&name.as_str()) {
+            return Err(format!(
+                "integrator `{name}` is not available for convergence (known: {})",
+                KNOWN.join(", ")
+            ));
+        }
+    }
+    let mut all = Vec::new();
+    let budget = Duration::from_secs_f64(seconds);
+    let step = seconds / checkpoints as f64;
+    for name in integrators {
+        let rec = Recorder {
+            name,
+            reference,
+            start: Instant::now(),
+            step,
+            state: Mutex::new((1, Vec::new())),
+            pixels,
+        };
+        let it = scene.integrator;
+        let bdpt = Bdpt {
+            max_depth: it.max_depth,
+            rr_depth: it.rr_depth,
+            heuristic: MisHeuristic::Power,
+        };
+        match name.as_str() {
+            "pt" | "lt" | "bdpt" => {
+                let integ: Box<dyn Integrator> = match name.as_str() {
+                    "pt" => Box::new(PathTracer {
+                        max_depth: it.max_depth,
+                        rr_depth: it.rr_depth,
+                    }),
+                    "lt" => Box::new(LightTracer {
+                        max_depth: it.max_depth,
+                        rr_depth: it.rr_depth,
+                    }),
+                    _ => Box::new(bdpt),
+                };
+                let settings = RenderSettings {
+                    spp: None,
+                    time_budget: Some(budget),
+                    seed,
+                };
+                let r = render(scene, integ.as_ref(), &settings, stop, &rec);
+                rec.offer(r.samples, || r.image(), true);
+            }
+            _ => {
+                let settings = PssmltSettings {
+                    mutations_per_pixel: None,
+                    time_budget: Some(budget),
+                    seed,
+                    preview_every: Duration::from_secs_f64(step / 4.0),
+                    ..mlt.clone()
+                };
+                let pt = PathTracer {
+                    max_depth: it.max_depth,
+                    rr_depth: it.rr_depth,
+                };
+                let r = match name.as_str() {
+                    "pssmlt" => render_pssmlt(scene, pt, &settings, stop, &rec),
+                    "pssmlt-bdpt" => render_pssmlt(scene, bdpt, &settings, stop, &rec),
+                    _ => {
+                        if it.max_depth == u32::MAX {
+                            return Err("mmlt needs a finite max_depth".into());
+                        }
+                        let depths: Vec<MmltDepth> = (1..=it.max_depth as usize)
+                            .map(|depth| MmltDepth { bdpt, depth })
+                            .collect();
+                        render_family(scene, depths, &settings, stop, &rec)
+                    }
+                }
+                .map_err(|e| e.to_string())?;
+                rec.offer(r.mutations, || r.image(), true);
+            }
+        }
+        let (_, records) = rec.state.into_inner().unwrap_or_else(|p| p.into_inner());
+        all.extend(records);
+    }
+    Ok(all)
+}
+
+/// Writes the records as CSV.
+pub fn write_csv(path: &Path, records: &[Record]) -> Result<(), String> {
+    let mut text = String::from("integrator,seconds,samples,rel_mse,rmse\n");
+    for r in records {
+        text.push_str(&format!(
+            "{},{:.4},{},{:.6e},{:.6e}\n",
+            r.integrator, r.seconds, r.samples, r.rel_mse, r.rmse
+        ));
+    }
+    std::fs::write(path, text).map_err(|e| format!("cannot write {}: {e}", path.display()))
+}
+
+/// Line colours, by position in the integrator list.
+pub const COLOURS: [(u8, u8, u8); 6] = [
+    (31, 119, 180),
+    (214, 39, 40),
+    (44, 160, 44),
+    (148, 103, 189),
+    (255, 127, 14),
+    (23, 190, 207),
+];
+
+/// Draws relMSE against seconds on log–log axes, one line per integrator
+/// (colours in [`COLOURS`] order). The plot has axes and a grid but no text:
+/// the build uses no font backend (no system font dependency); the caption
+/// belongs in the document that shows the plot, and the numbers are in the CSV.
+pub fn write_plot(path: &Path, records: &[Record], integrators: &[String]) -> Result<(), String> {
+    use plotters::prelude::*;
+    let (w, h) = (800u32, 600u32);
+    let mut buf = vec![0u8; (w * h * 3) as usize];
+    let pos: Vec<&Record> = records
+        .iter()
+        .filter(|r| r.seconds > 0.0 && r.rel_mse > 0.0 && r.rel_mse.is_finite())
+        .collect();
+    if pos.is_empty() {
+        return Err("no positive records to plot".into());
+    }
+    let (t0, t1) = pos.iter().fold((f64::MAX, 0.0f64), |(a, b), r| {
+        (a.min(r.seconds), b.max(r.seconds))
+    });
+    let (e0, e1) = pos.iter().fold((f64::MAX, 0.0f64), |(a, b), r| {
+        (a.min(r.rel_mse), b.max(r.rel_mse))
+    });
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let mut chart = ChartBuilder::on(&root)
+            .margin(20)
+            .x_label_area_size(20)
+            .y_label_area_size(20)
+            .build_cartesian_2d(
+                (t0 * 0.8..t1 * 1.25).log_scale(),
+                (e0 * 0.8..e1 * 1.25).log_scale(),
+            )
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .disable_y_mesh()
+            .draw()
+            .map_err(|e| e.to_string())?;
+        for (i, name) in integrators.iter().enumerate() {
+            let (r, g, b) = COLOURS[i % COLOURS.len()];
+            let colour = RGBColor(r, g, b);
+            let pts: Vec<(f64, f64)> = pos
+                .iter()
+                .filter(|x| &x.integrator == name)
+                .map(|x| (x.seconds, x.rel_mse))
+                .collect();
+            chart
+                .draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))
+                .map_err(|e| e.to_string())?;
+            chart
+                .draw_series(pts.iter().map(|&p| Circle::new(p, 4, colour.filled())))
+                .map_err(|e| e.to_string())?;
+        }
+        root.present().map_err(|e| e.to_string())?;
+    }
+    write_rgb8_png(path, w, h, &buf)
+}
+
+fn write_rgb8_png(path: &Path, w: u32, h: u32, rgb: &[u8]) -> Result<(), String> {
+    let file =
+        std::fs::File::create(path).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w, h);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    let mut writer = enc.write_header().map_err(|e| e.to_string())?;
+    writer.write_image_data(rgb).map_err(|e| e.to_string())
+}

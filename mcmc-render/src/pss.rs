@@ -1,0 +1,363 @@
+//! Primary sample space (PSS) as an `mcmc-core` state space for the renderer.
+//!
+//! A path is a deterministic function of an infinite vector of uniform
+//! numbers. [`PssSource`] reads those numbers from a lazily grown
+//! [`TorusPoint`], so the ordinary path samplers (`pt`, later `bdpt`) run
+//! unchanged from a primary-sample vector. [`PssTarget`] turns a path
+//! sampler into an `mcmc-core` [`Target`]: `ln π(u)` is the log luminance of
+//! the path contribution, and the evaluation payload carries the splats
+//! (raster position and RGB) so that they stay with the state.
+//!
+//! The mutations are `mcmc-core` kernels ([`Mutation::kernel`]): a
+//! [`Mixture`] of a small step ([`TorusStep`] with Kelemen's or the
+//! Gaussian law, or [`AdaptiveTorusStep`]) and an [`Independent`] large
+//! step over [`PrimarySampleSpace`]; nothing is re-implemented here.
+//!
+//! # Coordinate layout
+//!
+//! With `streams = m`, number `i` of stream `k` is coordinate `m·i + k`
+//! (pbrt-v4's `MLTSampler` uses three streams: camera, light, connection).
+//! Path tracing uses one stream: coordinates 0 and 1 place the camera sample
+//! on the image (uniform over the whole raster), and the path tracer's own
+//! numbers follow from coordinate 2 in the order documented in
+//! [`crate::integrators`].
+
+use crate::color::Rgb;
+use crate::integrators::bdpt::{
+    Bdpt, SubpathBuffers, connect, generate_camera_subpath, generate_light_subpath,
+};
+use crate::integrators::pt::PathTracer;
+use crate::sampling::{RandomSource, Stream, to_unit_f32};
+use crate::scene::Scene;
+use glam::Vec2;
+use mcmc_core::kernel::{AdaptiveTorusStep, Independent, Kernel, Mixture, TorusStep};
+use mcmc_core::space::{PrimarySampleSpace, SmallStep, TorusPoint};
+use mcmc_core::target::{Evaluation, Target};
+use std::cell::RefCell;
+
+/// A [`RandomSource`] reading a primary-sample vector, stream by stream.
+pub struct PssSource<'a> {
+    point: &'a TorusPoint,
+    streams: usize,
+    stream: usize,
+    next: [usize; 4],
+}
+
+impl<'a> PssSource<'a> {
+    /// Reads `point` with `streams` interleaved streams (1 to 4), starting at
+    /// stream 0.
+    pub fn new(point: &'a TorusPoint, streams: usize) -> Self {
+        PssSource {
+            point,
+            streams: streams.clamp(1, 4),
+            stream: 0,
+            next: [0; 4],
+        }
+    }
+
+    /// Switches to stream `k` (numbers continue where that stream stopped).
+    pub fn start_stream(&mut self, k: usize) {
+        self.stream = k.min(self.streams - 1);
+    }
+
+    /// Numbers read so far from stream `k`.
+    pub fn consumed(&self, k: usize) -> usize {
+        self.next[k.min(3)]
+    }
+}
+
+impl RandomSource for PssSource<'_> {
+    fn set_stream(&mut self, stream: Stream) {
+        self.start_stream(stream.index());
+    }
+
+    fn next_1d(&mut self) -> f32 {
+        let k = self.stream;
+        let i = self.next[k];
+        self.next[k] += 1;
+        to_unit_f32(self.point.coordinate(self.streams * i + k))
+    }
+}
+
+/// One contribution of a path to the image.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Splat {
+    /// Raster position.
+    pub p: Vec2,
+    /// Radiance (RGB).
+    pub l: Rgb,
+}
+
+/// What evaluating a primary-sample vector produces besides `ln π`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PathSample {
+    /// Contributions to the image (one for path tracing).
+    pub splats: Vec<Splat>,
+    /// Path depth used for the per-depth statistics (for path tracing: the
+    /// number of surface vertices the tracer consumed numbers for).
+    pub depth: u32,
+}
+
+impl PathSample {
+    /// The scalar contribution `I(u)`: the sum of the splats' luminances.
+    pub fn luminance(&self) -> f64 {
+        self.splats.iter().map(|s| s.l.luminance() as f64).sum()
+    }
+}
+
+/// A path sampler driven by a primary-sample vector.
+pub trait PssPathSampler: Sync {
+    /// Number of interleaved streams it reads.
+    fn streams(&self) -> usize;
+    /// Traces the path of `source`, pushing its contributions into `out`
+    /// (cleared by the caller), and returns its depth.
+    fn trace(&self, scene: &Scene, source: &mut PssSource<'_>, out: &mut Vec<Splat>) -> u32;
+}
+
+/// Numbers the path tracer consumes per surface vertex (see
+/// [`crate::integrators`]).
+const PT_NUMBERS_PER_VERTEX: usize = 7;
+
+impl PssPathSampler for PathTracer {
+    fn streams(&self) -> usize {
+        1
+    }
+
+    fn trace(&self, scene: &Scene, source: &mut PssSource<'_>, out: &mut Vec<Splat>) -> u32 {
+        let (w, h) = (scene.film.width as f32, scene.film.height as f32);
+        let (ux, uy) = source.next_2d();
+        // Keep the raster position strictly inside the image.
+        let p = Vec2::new(
+            (ux * w).min(w * (1.0 - f32::EPSILON)),
+            (uy * h).min(h * (1.0 - f32::EPSILON)),
+        );
+        let ray = scene.camera.generate_ray(p);
+        let l = self.li(scene, ray, source);
+        out.push(Splat { p, l });
+        ((source.consumed(0) - 2) / PT_NUMBERS_PER_VERTEX) as u32
+    }
+}
+
+/// A raster position uniform over the image from two numbers, strictly
+/// inside it.
+fn raster_of(scene: &Scene, source: &mut PssSource<'_>) -> Vec2 {
+    let (w, h) = (scene.film.width as f32, scene.film.height as f32);
+    let (ux, uy) = source.next_2d();
+    Vec2::new(
+        (ux * w).min(w * (1.0 - f32::EPSILON)),
+        (uy * h).min(h * (1.0 - f32::EPSILON)),
+    )
+}
+
+thread_local! {
+    /// Per-thread subpath storage for the bidirectional samplers.
+    static BUFFERS: RefCell<SubpathBuffers> = RefCell::new(SubpathBuffers::default());
+}
+
+/// PSSMLT over BDPT: every technique of one sample ([`Bdpt::sample_all`])
+/// is a splat at its raster position (the camera sample is uniform over
+/// the image, so `t ≥ 2` contributions are splats too). Depth: the longest
+/// technique (segments) that contributed.
+impl PssPathSampler for Bdpt {
+    fn streams(&self) -> usize {
+        Stream::COUNT
+    }
+
+    fn trace(&self, scene: &Scene, source: &mut PssSource<'_>, out: &mut Vec<Splat>) -> u32 {
+        source.set_stream(Stream::Camera);
+        let raster = raster_of(scene, source);
+        BUFFERS.with_borrow_mut(|buffers| {
+            self.sample_all(scene, raster, source, buffers, |c| {
+                out.push(Splat {
+                    p: c.raster,
+                    l: c.l,
+                });
+            });
+            // Longest subpaths built: an upper bound of the depth reached.
+            (buffers.camera.len() + buffers.light.len()).saturating_sub(1) as u32
+        })
+    }
+}
+
+/// One depth of multiplexed MLT (Hachisuka et al. 2014): paths of exactly
+/// `depth` segments, the technique `(s, t)` (`s + t − 1 = depth`) chosen by
+/// the first number of the connection stream among the techniques BDPT
+/// runs (`(1, 1)` excluded), the contribution multiplied by their number.
+#[derive(Clone, Copy, Debug)]
+pub struct MmltDepth {
+    /// The BDPT settings (MIS heuristic, depth limits).
+    pub bdpt: Bdpt,
+    /// Path depth in segments (≥ 1).
+    pub depth: usize,
+}
+
+impl MmltDepth {
+    /// The techniques `(s, t)` of this depth, in order of increasing `s`.
+    pub fn techniques(&self) -> Vec<(usize, usize)> {
+        let d = self.depth;
+        (0..=d)
+            .map(|s| (s, d + 1 - s))
+            .filter(|&(s, t)| t >= 1 && !(s == 1 && t == 1))
+            .filter(|&(s, t)| {
+                t <= self.bdpt.max_camera_vertices() && s <= self.bdpt.max_light_vertices()
+            })
+            .collect()
+    }
+}
+
+impl PssPathSampler for MmltDepth {
+    fn streams(&self) -> usize {
+        Stream::COUNT
+    }
+
+    fn trace(&self, scene: &Scene, source: &mut PssSource<'_>, out: &mut Vec<Splat>) -> u32 {
+        let techniques = self.techniques();
+        if techniques.is_empty() {
+            return self.depth as u32;
+        }
+        source.set_stream(Stream::Connection);
+        let n = techniques.len();
+        let k = ((source.next_1d() * n as f32) as usize).min(n - 1);
+        let (s, t) = techniques[k];
+        source.set_stream(Stream::Camera);
+        let raster = raster_of(scene, source);
+        BUFFERS.with_borrow_mut(|b| {
+            let nc = generate_camera_subpath(scene, raster, source, t, None, &mut b.camera);
+            if nc != t {
+                return;
+            }
+            source.set_stream(Stream::Light);
+            let nl = generate_light_subpath(scene, source, s, None, &mut b.light);
+            if nl != s {
+                return;
+            }
+            source.set_stream(Stream::Connection);
+            if let Some(c) = connect(
+                scene,
+                &b.camera,
+                &b.light,
+                s,
+                t,
+                source,
+                self.bdpt.heuristic,
+            ) {
+                out.push(Splat {
+                    p: if c.splat { c.raster } else { raster },
+                    l: c.l * n as f32,
+                });
+            }
+        });
+        self.depth as u32
+    }
+}
+
+/// `ln π(u) = ln I(u)` for a path sampler on a scene.
+///
+/// `I(u) = 0` gives `−∞` (outside the support); a NaN or infinite
+/// contribution gives NaN, which `mcmc-core` rejects and counts.
+pub struct PssTarget<'a, F> {
+    /// The scene.
+    pub scene: &'a Scene,
+    /// The path sampler.
+    pub sampler: F,
+}
+
+impl<F: PssPathSampler> PssTarget<'_, F> {
+    /// Traces `point` and returns its evaluation.
+    pub fn trace(&self, point: &TorusPoint) -> Evaluation<PathSample> {
+        let mut source = PssSource::new(point, self.sampler.streams());
+        let mut splats = Vec::with_capacity(1);
+        let depth = self.sampler.trace(self.scene, &mut source, &mut splats);
+        let sample = PathSample { splats, depth };
+        let finite = sample.splats.iter().all(|s| s.l.is_finite());
+        let i = sample.luminance();
+        let log_density = if !finite || !i.is_finite() {
+            f64::NAN
+        } else if i > 0.0 {
+            i.ln()
+        } else {
+            f64::NEG_INFINITY
+        };
+        Evaluation::new(log_density, sample)
+    }
+}
+
+impl<F: PssPathSampler> Target<TorusPoint> for PssTarget<'_, F> {
+    type Payload = PathSample;
+
+    fn evaluate(&self, state: &TorusPoint) -> Evaluation<PathSample> {
+        self.trace(state)
+    }
+}
+
+/// Which small step the chains use.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SmallStepKind {
+    /// Kelemen et al. 2002 with step bounds `s1 ≤ |Δ| ≤ s2`.
+    Kelemen {
+        /// Smallest step (default 1/1024).
+        s1: f64,
+        /// Largest step (default 1/64).
+        s2: f64,
+    },
+    /// pbrt-v4's Gaussian step.
+    Gaussian {
+        /// Standard deviation (default 0.01).
+        sigma: f64,
+    },
+    /// Hachisuka & Jensen's adaptive power step (`mcmc-core`'s
+    /// [`AdaptiveTorusStep`], θ₀ = 0.5, target acceptance 0.234).
+    Adaptive,
+}
+
+/// The PSS mutation: a small step, and a large step with some probability.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Mutation {
+    /// The small step.
+    pub small: SmallStepKind,
+    /// Probability of a large (independent) step.
+    pub large_step_probability: f64,
+}
+
+impl Default for Mutation {
+    /// Kelemen's small step and large steps with probability 0.3.
+    fn default() -> Self {
+        Mutation {
+            small: SmallStepKind::Kelemen {
+                s1: 1.0 / 1024.0,
+                s2: 1.0 / 64.0,
+            },
+            large_step_probability: 0.3,
+        }
+    }
+}
+
+/// Index of the large step among the kernel components.
+pub const LARGE_STEP_COMPONENT: usize = 1;
+
+impl Mutation {
+    /// Builds the `mcmc-core` kernel: component 0 is the small step,
+    /// component [`LARGE_STEP_COMPONENT`] the large step.
+    pub fn kernel<P: 'static>(&self) -> mcmc_core::Result<Mixture<TorusPoint, P>> {
+        let p = self.large_step_probability;
+        if !(0.0..=1.0).contains(&p) {
+            return Err(mcmc_core::CoreError::InvalidParameter {
+                name: "large step probability",
+                reason: format!("{p} must lie in [0, 1]"),
+            });
+        }
+        let small: Box<dyn Kernel<TorusPoint, P> + Send> = match self.small {
+            SmallStepKind::Kelemen { s1, s2 } => {
+                Box::new(TorusStep::new(SmallStep::Kelemen { s1, s2 })?)
+            }
+            SmallStepKind::Gaussian { sigma } => {
+                Box::new(TorusStep::new(SmallStep::Gaussian { sigma })?)
+            }
+            SmallStepKind::Adaptive => Box::new(AdaptiveTorusStep::standard()),
+        };
+        Mixture::new(vec![
+            (1.0 - p, small),
+            (p, Box::new(Independent::new(PrimarySampleSpace))),
+        ])
+    }
+}
