@@ -237,7 +237,8 @@ pub const COLOURS: [(u8, u8, u8); 6] = [
 ];
 
 /// Draws relMSE against seconds on log–log axes, one line per integrator
-/// (colours in [`COLOURS`] order). The plot has axes and a grid but no text:
+/// (colours in [`COLOURS`] order). The plot has a frame and grey lines at
+/// every power of ten on both axes, but no text:
 /// the build uses no font backend (no system font dependency); the caption
 /// belongs in the document that shows the plot, and the numbers are in the CSV.
 pub fn write_plot(path: &Path, records: &[Record], integrators: &[String]) -> Result<(), String> {
@@ -269,11 +270,27 @@ pub fn write_plot(path: &Path, records: &[Record], integrators: &[String]) -> Re
                 (e0 * 0.8..e1 * 1.25).log_scale(),
             )
             .map_err(|e| e.to_string())?;
+        // Decade grid lines and a frame, drawn as plain lines: plotters'
+        // mesh would draw tick labels, which need a font backend.
+        let grey = RGBColor(200, 200, 200);
+        let (x0, x1, y0, y1) = (t0 * 0.8, t1 * 1.25, e0 * 0.8, e1 * 1.25);
+        for k in x0.log10().ceil() as i32..=x1.log10().floor() as i32 {
+            let x = 10f64.powi(k);
+            chart
+                .draw_series(LineSeries::new([(x, y0), (x, y1)], grey))
+                .map_err(|e| e.to_string())?;
+        }
+        for k in y0.log10().ceil() as i32..=y1.log10().floor() as i32 {
+            let y = 10f64.powi(k);
+            chart
+                .draw_series(LineSeries::new([(x0, y), (x1, y)], grey))
+                .map_err(|e| e.to_string())?;
+        }
         chart
-            .configure_mesh()
-            .disable_x_mesh()
-            .disable_y_mesh()
-            .draw()
+            .draw_series(LineSeries::new(
+                [(x0, y0), (x1, y0), (x1, y1), (x0, y1), (x0, y0)],
+                BLACK,
+            ))
             .map_err(|e| e.to_string())?;
         for (i, name) in integrators.iter().enumerate() {
             let (r, g, b) = COLOURS[i % COLOURS.len()];
