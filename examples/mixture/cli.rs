@@ -5,16 +5,53 @@ use std::path::PathBuf;
 use clap::{Parser, ValueEnum};
 
 /// Which transition algorithm drives the chains.
-///
-/// Replica exchange is meant to join here as a third variant (`replica`),
-/// with its own flags (`--ladder`, `--move`) on [`Args`] and its own driver
-/// in the sampler module.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum SamplerKind {
     /// Metropolis–Hastings: one target evaluation per step.
     Mh,
     /// Multiple-try Metropolis with `--tries k`: `2k − 1` evaluations per step.
     Mtm,
+    /// Replica exchange over a temperature ladder (`--ladder`, `--move`):
+    /// one evaluation per level per sweep; a chain is a whole ladder.
+    Replica,
+}
+
+/// The exchange move of `--sampler replica`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MoveKind {
+    /// Neighbour swaps, hottest pair first, after each level's mutation.
+    Neighbour,
+    /// Deterministic even–odd (non-reversible) neighbour swaps.
+    EvenOdd,
+    /// Importance-sampled permutations of all levels (subset DP).
+    IsPermutation,
+    /// Importance-sampled swaps.
+    IsSwap,
+    /// Original equi-energy moves (8 rings).
+    Eem,
+    /// Frequent equi-energy moves (8 rings).
+    FrequentEem,
+    /// The equi-energy sampler (8 rings, p_EEJ = 0.1).
+    Ees,
+    /// The adaptive equi-energy sampler (16 quantile rings, p_EEJ = 0.1,
+    /// at most 10 000 stored states per ring).
+    AdaptiveEes,
+}
+
+impl MoveKind {
+    /// The name used on the command line and in the report.
+    pub fn name(self) -> &'static str {
+        match self {
+            MoveKind::Neighbour => "neighbour",
+            MoveKind::EvenOdd => "even-odd",
+            MoveKind::IsPermutation => "is-permutation",
+            MoveKind::IsSwap => "is-swap",
+            MoveKind::Eem => "eem",
+            MoveKind::FrequentEem => "frequent-eem",
+            MoveKind::Ees => "ees",
+            MoveKind::AdaptiveEes => "adaptive-ees",
+        }
+    }
 }
 
 /// Which proposal kernel the sampler uses.
@@ -36,6 +73,7 @@ impl SamplerKind {
         match self {
             SamplerKind::Mh => "mh",
             SamplerKind::Mtm => "mtm",
+            SamplerKind::Replica => "replica",
         }
     }
 }
@@ -97,6 +135,18 @@ pub struct Args {
     /// Tries per multiple-try step (only with --sampler mtm; default 4).
     #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..=1024))]
     pub tries: Option<u64>,
+
+    /// Temperature ladder of `--sampler replica`: `geometric:M:Tmax` (M levels,
+    /// T from 1 to Tmax, log-evenly spaced) or `adaptive:M` (starts geometric
+    /// up to T = 1000 and is tuned during burn-in to equalise swap rejection,
+    /// Syed et al. 2021; needs `--move neighbour` or `even-odd`). Level l's
+    /// random-walk scale is `--scale·√T_l` (Kelemen steps: s1, s2 × √T_l).
+    #[arg(long, value_name = "LADDER")]
+    pub ladder: Option<String>,
+
+    /// Exchange move of `--sampler replica` (default: neighbour).
+    #[arg(long = "move", value_enum, value_name = "MOVE")]
+    pub exchange: Option<MoveKind>,
 
     /// Worker threads (0: one per core). The result does not depend on it.
     #[arg(long, value_name = "T", default_value_t = 0, value_parser = clap::value_parser!(u64).range(0..=1024))]

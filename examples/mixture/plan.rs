@@ -1,6 +1,6 @@
 //! How the evaluation budget is split into start-up, burn-in and kept draws.
 
-use super::cli::{Args, DEFAULT_TRIES, KernelKind, SamplerKind};
+use super::cli::{Args, DEFAULT_TRIES, KernelKind, MoveKind, SamplerKind};
 use super::error::ExampleError;
 use super::target::GaussianMixture;
 
@@ -39,6 +39,66 @@ pub struct RunPlan {
     pub burn_in_steps: usize,
     /// Kept steps per chain, each recorded as one draw.
     pub draws: usize,
+    /// Replica exchange: the ladder and the move (`None` for MH and MTM).
+    pub replica: Option<ReplicaPlan>,
+}
+
+/// Starting top temperature of an adaptive ladder.
+pub const ADAPTIVE_INITIAL_T_MAX: f64 = 1000.0;
+
+/// The ladder and exchange move of a replica-exchange run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReplicaPlan {
+    /// Temperatures `T_1 = 1 … T_M` (the starting ladder when adaptive).
+    pub temperatures: Vec<f64>,
+    /// Whether the ladder is tuned during burn-in.
+    pub adaptive: bool,
+    /// The exchange move.
+    pub exchange: MoveKind,
+}
+
+fn parse_ladder(text: &str, exchange: MoveKind) -> Result<ReplicaPlan, ExampleError> {
+    let bad = |why: &str| {
+        ExampleError::usage(format!(
+            "--ladder {text}: {why} (expected geometric:M:Tmax or adaptive:M)"
+        ))
+    };
+    let parts: Vec<&str> = text.split(':').collect();
+    let levels = |s: &str| -> Result<usize, ExampleError> {
+        let m: usize = s.parse().map_err(|_| bad("M must be a whole number"))?;
+        if !(1..=64).contains(&m) {
+            return Err(bad("M must lie in 1..=64"));
+        }
+        Ok(m)
+    };
+    let (temperatures, adaptive) = match parts.as_slice() {
+        ["geometric", m, t] => {
+            let t_max: f64 = t.parse().map_err(|_| bad("Tmax must be a number"))?;
+            let temps = mcmc_core::replica::geometric_temperatures(levels(m)?, t_max)
+                .map_err(|e| bad(&e.to_string()))?;
+            (temps, false)
+        }
+        ["adaptive", m] => {
+            let m = levels(m)?;
+            if m < 2 {
+                return Err(bad("an adaptive ladder needs at least 2 levels"));
+            }
+            if !matches!(exchange, MoveKind::Neighbour | MoveKind::EvenOdd) {
+                return Err(ExampleError::usage(
+                    "--ladder adaptive:M tunes from neighbour swap rates: use --move neighbour or even-odd",
+                ));
+            }
+            let temps = mcmc_core::replica::geometric_temperatures(m, ADAPTIVE_INITIAL_T_MAX)
+                .map_err(|e| bad(&e.to_string()))?;
+            (temps, true)
+        }
+        _ => return Err(bad("unknown form")),
+    };
+    Ok(ReplicaPlan {
+        temperatures,
+        adaptive,
+        exchange,
+    })
 }
 
 impl RunPlan {
@@ -50,20 +110,49 @@ impl RunPlan {
     pub fn new(args: &Args, mixture: &GaussianMixture) -> Result<Self, ExampleError> {
         let tries = match (args.sampler, args.tries) {
             (SamplerKind::Mtm, t) => t.unwrap_or(DEFAULT_TRIES),
-            (SamplerKind::Mh, None) => 1,
-            (SamplerKind::Mh, Some(_)) => {
+            (SamplerKind::Mh | SamplerKind::Replica, None) => 1,
+            (SamplerKind::Mh | SamplerKind::Replica, Some(_)) => {
                 return Err(ExampleError::usage("--tries applies only to --sampler mtm"));
             }
+        };
+        let replica = match (args.sampler, &args.ladder) {
+            (SamplerKind::Replica, Some(l)) => Some(parse_ladder(
+                l,
+                args.exchange.unwrap_or(MoveKind::Neighbour),
+            )?),
+            (SamplerKind::Replica, None) => {
+                return Err(ExampleError::usage(
+                    "--sampler replica needs --ladder geometric:M:Tmax or adaptive:M",
+                ));
+            }
+            (_, Some(_)) => {
+                return Err(ExampleError::usage(
+                    "--ladder applies only to --sampler replica",
+                ));
+            }
+            (_, None) if args.exchange.is_some() => {
+                return Err(ExampleError::usage(
+                    "--move applies only to --sampler replica",
+                ));
+            }
+            (_, None) => None,
         };
         if args.kernel == KernelKind::Kelemen && mixture.bounds().is_none() {
             return Err(ExampleError::usage(
                 "--kernel kelemen needs \"bounds\" in the target file: the small step lives on the unit torus that the bounds box is mapped to",
             ));
         }
-        let evaluations_per_step = 2 * tries - 1;
+        // A replica sweep evaluates every level once; exchanges reuse the
+        // cached ln π (tempering a cached value costs no evaluation).
+        let evaluations_per_step = match &replica {
+            Some(r) => r.temperatures.len() as u64,
+            None => 2 * tries - 1,
+        };
         let per_chain = args.evaluations / args.chains;
         let startup = (per_chain / STARTUP_SHARE).clamp(1, MAX_STARTUP_CANDIDATES);
-        let steps = per_chain.saturating_sub(startup) / evaluations_per_step;
+        // A ladder evaluates each level's initial state once.
+        let initial = replica.as_ref().map_or(0, |r| r.temperatures.len() as u64);
+        let steps = per_chain.saturating_sub(startup + initial) / evaluations_per_step;
         // Truncation towards zero: the burn-in is the floor of F·steps.
         let burn_in = (args.burn_in * steps as f64) as u64;
         let draws = steps - burn_in;
@@ -95,6 +184,7 @@ impl RunPlan {
             evaluations_per_step,
             burn_in_steps: usize::try_from(burn_in).map_err(too_big)?,
             draws: usize::try_from(draws).map_err(too_big)?,
+            replica,
         })
     }
 }

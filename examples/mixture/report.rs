@@ -21,6 +21,17 @@ pub struct ComponentAcceptance {
     pub acceptance: f64,
 }
 
+/// Exchanges between two levels, pooled over the ladders (post-burn-in).
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct SwapAcceptance {
+    /// The two levels (0 is the target of interest, the coldest).
+    pub levels: [usize; 2],
+    /// Exchanges attempted.
+    pub attempted: u64,
+    /// Fraction of them accepted.
+    pub acceptance: f64,
+}
+
 /// The report. Per-coordinate fields are vectors of length `d`. A statistic
 /// that cannot be estimated (e.g. ESS of a chain that never moved) is NaN,
 /// printed as `null` in JSON.
@@ -46,8 +57,18 @@ pub struct Report {
     pub acceptance: f64,
     /// Fraction of post-burn-in draws nearest (Euclidean) each component's mean.
     pub component_visits: Vec<f64>,
-    /// `mh` or `mtm`.
+    /// `mh`, `mtm` or `replica`.
     pub sampler: String,
+    /// Replica exchange: per-pair exchange rates (absent for MH and MTM).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub swap_acceptance: Option<Vec<SwapAcceptance>>,
+    /// Replica exchange: the exchange move.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub exchange_move: Option<String>,
+    /// Replica exchange: temperatures of the first ladder at the end (tuned
+    /// when the ladder is adaptive).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub temperatures: Option<Vec<f64>>,
     /// `gaussian`, `kelemen` or `adaptive`.
     pub kernel: String,
     /// Number of chains.
@@ -102,6 +123,34 @@ impl Report {
             }
         }
         let total_visits: u64 = visits.iter().sum();
+        let swap_acceptance = plan.replica.as_ref().map(|_| {
+            let mut pooled: Vec<SwapAcceptance> = Vec::new();
+            let mut counts: Vec<(u64, u64)> = Vec::new();
+            for r in runs {
+                for p in &r.swaps {
+                    match pooled.iter().position(|q| q.levels == [p.i, p.j]) {
+                        Some(k) => {
+                            counts[k].0 += p.attempted;
+                            counts[k].1 += p.accepted;
+                        }
+                        None => {
+                            pooled.push(SwapAcceptance {
+                                levels: [p.i, p.j],
+                                attempted: 0,
+                                acceptance: 0.0,
+                            });
+                            counts.push((p.attempted, p.accepted));
+                        }
+                    }
+                }
+            }
+            for (q, (attempted, accepted)) in pooled.iter_mut().zip(counts) {
+                q.attempted = attempted;
+                q.acceptance = accepted as f64 / attempted as f64;
+            }
+            pooled.sort_by_key(|q| q.levels);
+            pooled
+        });
         Ok(Report {
             evaluations: runs.iter().map(|r| r.evaluations).sum(),
             seconds,
@@ -117,6 +166,12 @@ impl Report {
                 .map(|&v| v as f64 / total_visits as f64)
                 .collect(),
             sampler: plan.sampler.name().into(),
+            swap_acceptance,
+            exchange_move: plan.replica.as_ref().map(|r| r.exchange.name().into()),
+            temperatures: plan
+                .replica
+                .as_ref()
+                .and(runs.first().map(|r| r.temperatures.clone())),
             kernel: plan.kernel.name().into(),
             chains: plan.chains,
             draws_per_chain: plan.draws,
