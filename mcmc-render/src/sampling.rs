@@ -3,7 +3,7 @@
 //! independent generator (Monte Carlo), from a primary-sample vector
 //! (PSSMLT/MMLT), or from a recorder (for inversion and replay).
 
-use rand::{Rng, RngExt};
+use rand::Rng;
 
 /// Independent streams of numbers a bidirectional sampler draws from, as
 /// pbrt-v4's MLT sampler does (`StartStream`): a primary-sample source maps
@@ -77,6 +77,3 @@ impl<R: Rng> RandomSource for IndependentSource<R> {
 pub fn to_unit_f32(u: f64) -> f32 {
     (u as f32).min(ONE_MINUS_EPSILON)
 }
-
-#[allow(unused_imports)]
-use RngExt as _;

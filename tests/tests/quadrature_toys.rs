@@ -169,15 +169,6 @@ fn histogram(chain: &mut ToyChain, steps: usize) -> Vec<f64> {
     counts.iter().map(|&c| c as f64 / steps as f64).collect()
 }
 
-fn mse(estimate: &[f64]) -> f64 {
-    estimate
-        .iter()
-        .zip(exact_bins())
-        .map(|(e, r)| (e - r).powi(2))
-        .sum::<f64>()
-        / BINS as f64
-}
-
 /// Table 2.3: one chain of 10⁷ steps, `I_j = b·count_j/N` with the exact `b`.
 /// Thesis MSE: 3.510919e−10. The per-bin MCSE comes from 100 batch means of
 /// 10⁵ steps (the chain forgets its state within tens of steps, so batches
@@ -288,7 +279,6 @@ fn twenty_pixel_rendering_reproduces_tables_2_3_and_2_4() {
         expected_unbiased > 10.0 * expected_biased,
         "{expected_unbiased:e} vs {expected_biased:e}"
     );
-    assert!(mse(&unbiased).is_finite() && mse(&biased).is_finite());
 }
 
 /// Table 2.3 of seed003 (biased single chain, 10⁷ samples); I₁₀ as
@@ -367,13 +357,12 @@ fn twenty_pixel_rendering_with_bootstrap_start_up() {
         let mut counts = vec![0.0; BINS];
         let steps = 100_000;
         for _ in 0..steps {
-            let info = chain.step_with(&target, |t| {
+            chain.step_with(&target, |t| {
                 // Component 1 is the independent step (density 1 on [0,1)).
                 if t.component == 1 {
                     running.add(t.proposal.map_or(f64::NEG_INFINITY, |p| p.log_density));
                 }
             });
-            let _ = info;
             counts[((chain.state()[0] * BINS as f64) as usize).min(BINS - 1)] += 1.0 / steps as f64;
         }
         (counts, running)
