@@ -1,7 +1,8 @@
 //! Error against time: each integrator renders a scene for the same time
 //! budget, and at every checkpoint its current image is compared with a
 //! reference ([`crate::compare`]: relMSE and RMSE). The records go to a
-//! CSV and a log–log PNG plot.
+//! CSV and a log–log PNG plot (title, axis and tick labels, legend; the
+//! text is drawn with an embedded DejaVu Sans, so no system font is needed).
 //!
 //! Checkpoints are taken where an integrator can show an image: after a
 //! pass (`pt`, `lt`) or after a round of mutations (`pssmlt`), at the first
@@ -53,6 +54,11 @@ impl Recorder<'_> {
         let mut g = self.state.lock().unwrap_or_else(|p| p.into_inner());
         let next = g.0 as f64 * self.step;
         if !force && t < next {
+            return;
+        }
+        // The final (forced) offer adds nothing when the last checkpoint
+        // already holds the same samples (the run ended on a checkpoint).
+        if force && g.1.last().is_some_and(|r| r.samples == samples) {
             return;
         }
         if let Ok(c) = compare(self.reference, &image()) {
@@ -226,6 +232,52 @@ pub fn write_csv(path: &Path, records: &[Record]) -> Result<(), String> {
     std::fs::write(path, text).map_err(|e| format!("cannot write {}: {e}", path.display()))
 }
 
+/// Reads records written by [`write_csv`] (for re-plotting a study).
+pub fn read_csv(path: &Path) -> Result<Vec<Record>, String> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let mut lines = text.lines().enumerate();
+    match lines.next() {
+        Some((_, h)) if h.trim() == "integrator,seconds,samples,rel_mse,rmse" => {}
+        _ => {
+            return Err(format!(
+                "{}:1: expected the header integrator,seconds,samples,rel_mse,rmse",
+                path.display()
+            ));
+        }
+    }
+    let mut out = Vec::new();
+    for (n, line) in lines {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let bad = || format!("{}:{}: malformed record: {line}", path.display(), n + 1);
+        let f: Vec<&str> = line.split(',').map(str::trim).collect();
+        if f.len() != 5 || f[0].is_empty() {
+            return Err(bad());
+        }
+        out.push(Record {
+            integrator: f[0].to_string(),
+            seconds: f[1].parse().map_err(|_| bad())?,
+            samples: f[2].parse().map_err(|_| bad())?,
+            rel_mse: f[3].parse().map_err(|_| bad())?,
+            rmse: f[4].parse().map_err(|_| bad())?,
+        });
+    }
+    Ok(out)
+}
+
+/// The integrators of `records` in order of first appearance.
+pub fn integrators_of(records: &[Record]) -> Vec<String> {
+    let mut names: Vec<String> = Vec::new();
+    for r in records {
+        if !names.contains(&r.integrator) {
+            names.push(r.integrator.clone());
+        }
+    }
+    names
+}
+
 /// Line colours, by position in the integrator list.
 pub const COLOURS: [(u8, u8, u8); 6] = [
     (31, 119, 180),
@@ -236,13 +288,69 @@ pub const COLOURS: [(u8, u8, u8); 6] = [
     (23, 190, 207),
 ];
 
+/// Registers the embedded DejaVu Sans as plotters' `sans-serif` family.
+///
+/// plotters' `ab_glyph` text backend draws only fonts registered by the
+/// program; the font comes from the `dejavu` crate, so no system font (and
+/// no fontconfig) is needed on a clean machine.
+fn register_font() -> Result<(), String> {
+    use std::sync::OnceLock;
+    static REGISTERED: OnceLock<bool> = OnceLock::new();
+    let ok = *REGISTERED.get_or_init(|| {
+        plotters::style::register_font(
+            "sans-serif",
+            plotters::style::FontStyle::Normal,
+            dejavu::sans::regular(),
+        )
+        .is_ok()
+    });
+    if ok {
+        Ok(())
+    } else {
+        Err("the embedded plot font could not be loaded".into())
+    }
+}
+
+/// The values `m·10^k` (m in `mantissas`) within `[lo, hi]`: the tick
+/// positions of a log axis.
+fn log_ticks(lo: f64, hi: f64, mantissas: &[f64]) -> Vec<f64> {
+    let (k0, k1) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
+    (k0..=k1)
+        .flat_map(|k| mantissas.iter().map(move |m| m * 10f64.powi(k)))
+        .filter(|v| (lo..=hi).contains(v))
+        .collect()
+}
+
+/// Tick label of a log axis (`m·10^k` with a one-digit `m`): plain
+/// decimals between 0.001 and 10000, `2e-5` beyond.
+fn log_tick(v: f64) -> String {
+    if !(v > 0.0 && v.is_finite()) {
+        return String::new();
+    }
+    let k = v.log10().floor() as i32;
+    let m = (v / 10f64.powi(k)).round();
+    if (-3..=4).contains(&k) {
+        format!("{:.*}", (-k).max(0) as usize, m * 10f64.powi(k))
+    } else {
+        format!("{m}e{k}")
+    }
+}
+
 /// Draws relMSE against seconds on log–log axes, one line per integrator
-/// (colours in [`COLOURS`] order). The plot has a frame and grey lines at
-/// every power of ten on both axes, but no text:
-/// the build uses no font backend (no system font dependency); the caption
-/// belongs in the document that shows the plot, and the numbers are in the CSV.
-pub fn write_plot(path: &Path, records: &[Record], integrators: &[String]) -> Result<(), String> {
+/// (colours in [`COLOURS`] order), with `title`, axis labels, tick labels
+/// at the powers of ten and a legend naming the integrators.
+pub fn write_plot(
+    path: &Path,
+    records: &[Record],
+    integrators: &[String],
+    title: &str,
+) -> Result<(), String> {
+    use plotters::coord::combinators::BindKeyPoints;
     use plotters::prelude::*;
+    // Labelled ticks at 1, 2, 3, 5 × 10^k; light grid lines at every m × 10^k.
+    const LABELLED: &[f64] = &[1.0, 2.0, 3.0, 5.0];
+    const GRID: &[f64] = &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0];
+    register_font()?;
     let (w, h) = (800u32, 600u32);
     let mut buf = vec![0u8; (w * h * 3) as usize];
     let pos: Vec<&Record> = records
@@ -258,40 +366,50 @@ pub fn write_plot(path: &Path, records: &[Record], integrators: &[String]) -> Re
     let (e0, e1) = pos.iter().fold((f64::MAX, 0.0f64), |(a, b), r| {
         (a.min(r.rel_mse), b.max(r.rel_mse))
     });
+    // Widen each range to at least one decade around its data so that the
+    // log axes always carry a few labelled ticks.
+    let widen = |lo: f64, hi: f64| {
+        let (a, b) = (lo.log10(), hi.log10());
+        let pad = ((1.0 - (b - a)) / 2.0).max(0.0) + 0.1;
+        (10f64.powf(a - pad), 10f64.powf(b + pad))
+    };
+    let (x0, x1) = widen(t0, t1);
+    let (y0, y1) = widen(e0, e1);
+    // Headroom above the data for the legend (upper right): a third more
+    // decades on top.
+    let y1 = y1 * (y1 / y0).powf(1.0 / 3.0);
+    let err = |e: &dyn std::fmt::Display| format!("cannot draw the plot: {e}");
     {
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        root.fill(&WHITE).map_err(|e| err(&e))?;
         let mut chart = ChartBuilder::on(&root)
-            .margin(20)
-            .x_label_area_size(20)
-            .y_label_area_size(20)
+            .caption(title, ("sans-serif", 24))
+            .margin(16)
+            .x_label_area_size(48)
+            .y_label_area_size(72)
             .build_cartesian_2d(
-                (t0 * 0.8..t1 * 1.25).log_scale(),
-                (e0 * 0.8..e1 * 1.25).log_scale(),
+                (x0..x1)
+                    .log_scale()
+                    .with_key_points(log_ticks(x0, x1, LABELLED))
+                    .with_light_points(log_ticks(x0, x1, GRID)),
+                (y0..y1)
+                    .log_scale()
+                    .with_key_points(log_ticks(y0, y1, LABELLED))
+                    .with_light_points(log_ticks(y0, y1, GRID)),
             )
-            .map_err(|e| e.to_string())?;
-        // Decade grid lines and a frame, drawn as plain lines: plotters'
-        // mesh would draw tick labels, which need a font backend.
-        let grey = RGBColor(200, 200, 200);
-        let (x0, x1, y0, y1) = (t0 * 0.8, t1 * 1.25, e0 * 0.8, e1 * 1.25);
-        for k in x0.log10().ceil() as i32..=x1.log10().floor() as i32 {
-            let x = 10f64.powi(k);
-            chart
-                .draw_series(LineSeries::new([(x, y0), (x, y1)], grey))
-                .map_err(|e| e.to_string())?;
-        }
-        for k in y0.log10().ceil() as i32..=y1.log10().floor() as i32 {
-            let y = 10f64.powi(k);
-            chart
-                .draw_series(LineSeries::new([(x0, y), (x1, y)], grey))
-                .map_err(|e| e.to_string())?;
-        }
+            .map_err(|e| err(&e))?;
         chart
-            .draw_series(LineSeries::new(
-                [(x0, y0), (x1, y0), (x1, y1), (x0, y1), (x0, y0)],
-                BLACK,
-            ))
-            .map_err(|e| e.to_string())?;
+            .configure_mesh()
+            .x_desc("seconds (wall clock, start-up included)")
+            .y_desc("relMSE")
+            .x_label_formatter(&|v| log_tick(*v))
+            .y_label_formatter(&|v| log_tick(*v))
+            .label_style(("sans-serif", 15))
+            .axis_desc_style(("sans-serif", 17))
+            .light_line_style(RGBColor(235, 235, 235))
+            .bold_line_style(RGBColor(200, 200, 200))
+            .draw()
+            .map_err(|e| err(&e))?;
         for (i, name) in integrators.iter().enumerate() {
             let (r, g, b) = COLOURS[i % COLOURS.len()];
             let colour = RGBColor(r, g, b);
@@ -300,14 +418,29 @@ pub fn write_plot(path: &Path, records: &[Record], integrators: &[String]) -> Re
                 .filter(|x| &x.integrator == name)
                 .map(|x| (x.seconds, x.rel_mse))
                 .collect();
+            if pts.is_empty() {
+                continue;
+            }
             chart
                 .draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))
-                .map_err(|e| e.to_string())?;
+                .map_err(|e| err(&e))?
+                .label(name.as_str())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 24, y)], colour.stroke_width(3))
+                });
             chart
                 .draw_series(pts.iter().map(|&p| Circle::new(p, 4, colour.filled())))
-                .map_err(|e| e.to_string())?;
+                .map_err(|e| err(&e))?;
         }
-        root.present().map_err(|e| e.to_string())?;
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .label_font(("sans-serif", 16))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| err(&e))?;
+        root.present().map_err(|e| err(&e))?;
     }
     write_rgb8_png(path, w, h, &buf)
 }

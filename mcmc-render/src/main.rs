@@ -3,10 +3,17 @@
 //! - `mcmc-render`: renders the embedded default scene to `render.exr` and `render.png`.
 //! - `mcmc-render render SCENE.xml [--integrator pt|lt|bdpt] [--spp N | --time S] [--seed K]
 //!   [--threads T] [--out FILE.exr] [-D name=value]…`
+//! - `mcmc-render render SCENE.xml --replay DUMP.pss`: re-trace a NaN/inf
+//!   primary-sample dump of `--integrator pssmlt|mmlt`
+//! - `mcmc-render convergence SCENE.xml --reference REF.exr [--integrators …]
+//!   [--time S] [--checkpoints K] [--out FILE.csv]`, or `convergence --replot FILE.csv`
 //! - `mcmc-render compare REF.exr TEST.exr [--json]`
 //! - `mcmc-render info SCENE.xml`
 //!
-//! Every failure prints one line `error: …` on stderr and exits with status 1.
+//! Ctrl-C (SIGINT) during `render` stops early and writes what was rendered
+//! so far (normalised by it), with `"interrupted": true` in the JSON, and
+//! exits with status 0. Every failure prints one line `error: …` on stderr
+//! and exits with status 1 (2 for unusable arguments).
 
 use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -106,10 +113,17 @@ enum Command {
     /// Error against time of several integrators at equal time budgets (CSV + log-log PNG).
     Convergence {
         /// Mitsuba 3 XML scene.
-        scene: PathBuf,
+        #[arg(required_unless_present = "replot")]
+        scene: Option<PathBuf>,
         /// Reference EXR (e.g. a long `render --integrator pt` run).
+        #[arg(long, required_unless_present = "replot")]
+        reference: Option<PathBuf>,
+        /// Only redraw the plot of an existing CSV (written beside it as PNG).
+        #[arg(long, value_name = "CSV", conflicts_with_all = ["scene", "reference"])]
+        replot: Option<PathBuf>,
+        /// Plot title (default: the scene's or CSV's file stem).
         #[arg(long)]
-        reference: PathBuf,
+        title: Option<String>,
         /// Comma-separated integrators (pt, lt, bdpt, pssmlt, pssmlt-bdpt, mmlt).
         #[arg(long, default_value = "pt,pssmlt")]
         integrators: String,
@@ -156,9 +170,21 @@ fn main() {
                 let _ = e.print();
                 std::process::exit(0);
             }
+            // clap's message is a paragraph (e.g. "required arguments were
+            // not provided:" then the arguments) before the usage; keep the
+            // paragraph, on one line.
             let msg = e.to_string();
-            let first = msg.lines().next().unwrap_or("invalid arguments");
-            eprintln!("{}", first.trim());
+            let para: Vec<&str> = msg
+                .lines()
+                .map(str::trim)
+                .take_while(|l| !l.is_empty())
+                .collect();
+            let line = if para.is_empty() {
+                "error: invalid arguments".to_string()
+            } else {
+                para.join(" ")
+            };
+            eprintln!("{line}");
             std::process::exit(2);
         }
     };
@@ -217,12 +243,14 @@ fn run(cli: Cli) -> Result<(), String> {
             if threads == Some(0) {
                 return Err("--threads must be at least 1".into());
             }
-            check_writable(&out)?;
             let defines = parse_defines(&define)?;
-            let loaded = Scene::load(&scene, &defines).map_err(|e| e.to_string())?;
             if let Some(file) = &mlt.replay {
+                // Replay writes nothing: no output check.
+                let loaded = Scene::load(&scene, &defines).map_err(|e| e.to_string())?;
                 return mcmc_render::mlt_cli::replay(&loaded, file);
             }
+            check_writable(&out)?;
+            let loaded = Scene::load(&scene, &defines).map_err(|e| e.to_string())?;
             if matches!(integrator, IntegratorArg::Pssmlt | IntegratorArg::Mmlt) {
                 let _ = ctrlc::set_handler(|| STOP.store(true, Ordering::SeqCst));
                 let job = mcmc_render::mlt_cli::MltJob {
@@ -304,6 +332,8 @@ fn run(cli: Cli) -> Result<(), String> {
         Some(Command::Convergence {
             scene,
             reference,
+            replot,
+            title,
             integrators,
             time,
             checkpoints,
@@ -313,6 +343,25 @@ fn run(cli: Cli) -> Result<(), String> {
             define,
             mlt,
         }) => {
+            let stem = |p: &Path| {
+                p.file_stem()
+                    .map_or_else(String::new, |s| s.to_string_lossy().into_owned())
+            };
+            if let Some(csv) = replot {
+                let records = mcmc_render::convergence::read_csv(&csv)?;
+                let names = mcmc_render::convergence::integrators_of(&records);
+                let title = title.unwrap_or_else(|| stem(&csv));
+                let png = csv.with_extension("png");
+                mcmc_render::convergence::write_plot(&png, &records, &names, &title)?;
+                println!("{}", png.display());
+                return Ok(());
+            }
+            // clap requires both unless --replot is given.
+            let (Some(scene), Some(reference)) = (scene, reference) else {
+                return Err("convergence needs SCENE and --reference (or --replot CSV)".into());
+            };
+            let title = title.unwrap_or_else(|| stem(&scene));
+            check_writable(&out)?;
             let defines = parse_defines(&define)?;
             let loaded = Scene::load(&scene, &defines).map_err(|e| e.to_string())?;
             let (rw, rh, r) = read_exr(&reference)?;
@@ -340,7 +389,12 @@ fn run(cli: Cli) -> Result<(), String> {
                 mcmc_render::convergence::run(&loaded, &r, &study, &STOP)
             })?;
             mcmc_render::convergence::write_csv(&out, &records)?;
-            mcmc_render::convergence::write_plot(&out.with_extension("png"), &records, &names)?;
+            mcmc_render::convergence::write_plot(
+                &out.with_extension("png"),
+                &records,
+                &names,
+                &title,
+            )?;
             for rec in &records {
                 println!(
                     "{:8} {:8.2} s {:>12} relMSE {:.4e} RMSE {:.4e}",

@@ -12,12 +12,13 @@ use crate::integrators::pssmlt::{
     render_pssmlt,
 };
 use crate::integrators::pt::PathTracer;
-use crate::pss::{MmltDepth, Mutation, PssTarget, SmallStepKind};
+use crate::pss::{MmltDepth, Mutation, PathSample, PssTarget, SmallStepKind};
 use crate::scene::Scene;
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use mcmc_core::rng::stream_rng;
 use mcmc_core::space::TorusPoint;
+use mcmc_core::target::Evaluation;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -333,7 +334,17 @@ pub fn run_pssmlt(job: &MltJob<'_>, stop: &AtomicBool) -> Result<MltResult, Stri
     let dump = match &result.first_nonfinite {
         Some(v) => {
             let path = job.out.with_extension("nonfinite.pss");
-            write_pss(&path, v)?;
+            let sampler = match (job.kind, job.args.mlt_base) {
+                (MltKind::Pssmlt, MltBase::Pt) => DumpSampler::Pt,
+                (MltKind::Pssmlt, MltBase::Bdpt) => DumpSampler::Bdpt,
+                (MltKind::Mmlt, _) => DumpSampler::Mmlt,
+            };
+            let dump = PssDump {
+                sampler,
+                max_depth: Some(max_depth),
+                coords: v.clone(),
+            };
+            write_pss(&path, &dump)?;
             Some(path.display().to_string())
         }
         None => None,
@@ -421,67 +432,181 @@ fn rate(n: u64, seconds: f64) -> f64 {
     }
 }
 
-/// Writes a primary-sample vector, one coordinate per line (shortest
-/// round-trip decimal form).
-pub fn write_pss(path: &Path, coords: &[f64]) -> Result<(), String> {
+/// The path sampler a primary-sample dump was traced with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DumpSampler {
+    /// PSSMLT over the path tracer.
+    Pt,
+    /// PSSMLT over BDPT (all techniques of one sample).
+    Bdpt,
+    /// Multiplexed MLT (one target per path depth).
+    Mmlt,
+}
+
+impl DumpSampler {
+    fn name(self) -> &'static str {
+        match self {
+            DumpSampler::Pt => "pt",
+            DumpSampler::Bdpt => "bdpt",
+            DumpSampler::Mmlt => "mmlt",
+        }
+    }
+}
+
+/// A dumped primary-sample vector and what it must be replayed with.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PssDump {
+    /// The path sampler of the run.
+    pub sampler: DumpSampler,
+    /// The run's longest path in segments (`None`: the scene's).
+    pub max_depth: Option<u32>,
+    /// The coordinates, in `[0, 1)`.
+    pub coords: Vec<f64>,
+}
+
+/// Writes a primary-sample dump: `# sampler` and `# max_depth` header
+/// lines, then one coordinate per line (shortest round-trip decimal form).
+pub fn write_pss(path: &Path, dump: &PssDump) -> Result<(), String> {
     let mut text = String::from("# mcmc-render primary-sample vector (one coordinate per line)\n");
-    for c in coords {
+    text.push_str(&format!("# sampler {}\n", dump.sampler.name()));
+    if let Some(d) = dump.max_depth {
+        text.push_str(&format!("# max_depth {d}\n"));
+    }
+    for c in &dump.coords {
         text.push_str(&format!("{c:?}\n"));
     }
     std::fs::write(path, text).map_err(|e| format!("cannot write {}: {e}", path.display()))
 }
 
-/// Reads a file written by [`write_pss`].
-pub fn read_pss(path: &Path) -> Result<Vec<f64>, String> {
+/// Reads a file written by [`write_pss`]. A file without a `# sampler`
+/// line is taken as a path-tracer dump at the scene's depth.
+pub fn read_pss(path: &Path) -> Result<PssDump, String> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-    let mut out = Vec::new();
+    let mut dump = PssDump {
+        sampler: DumpSampler::Pt,
+        max_depth: None,
+        coords: Vec::new(),
+    };
     for (n, line) in text.lines().enumerate() {
         let t = line.trim();
-        if t.is_empty() || t.starts_with('#') {
+        let at = || format!("{}:{}", path.display(), n + 1);
+        if let Some(comment) = t.strip_prefix('#') {
+            let comment = comment.trim();
+            if let Some(name) = comment.strip_prefix("sampler ") {
+                dump.sampler = match name.trim() {
+                    "pt" => DumpSampler::Pt,
+                    "bdpt" => DumpSampler::Bdpt,
+                    "mmlt" => DumpSampler::Mmlt,
+                    other => {
+                        return Err(format!(
+                            "{}: unknown sampler `{other}` (pt, bdpt or mmlt)",
+                            at()
+                        ));
+                    }
+                };
+            } else if let Some(d) = comment.strip_prefix("max_depth ") {
+                let d: u32 = d
+                    .trim()
+                    .parse()
+                    .map_err(|_| format!("{}: max_depth is not a count: {}", at(), d.trim()))?;
+                dump.max_depth = Some(d);
+            }
+            continue;
+        }
+        if t.is_empty() {
             continue;
         }
         let v: f64 = t
             .parse()
-            .map_err(|_| format!("{}:{}: not a number: {t}", path.display(), n + 1))?;
+            .map_err(|_| format!("{}: not a number: {t}", at()))?;
         if !(0.0..1.0).contains(&v) {
-            return Err(format!(
-                "{}:{}: coordinate {v} is outside [0, 1)",
-                path.display(),
-                n + 1
-            ));
+            return Err(format!("{}: coordinate {v} is outside [0, 1)", at()));
         }
-        out.push(v);
+        dump.coords.push(v);
     }
-    Ok(out)
+    if dump.coords.is_empty() {
+        return Err(format!("{}: no coordinates", path.display()));
+    }
+    Ok(dump)
 }
 
-/// Re-traces the path of a dumped primary-sample vector with the path
-/// tracer and prints what it contributes. Coordinates beyond the file are
-/// drawn from a fixed seed (a NaN path reads only dumped ones).
+/// Re-traces the path of a dumped primary-sample vector with the sampler
+/// recorded in the dump and prints what it contributes. Coordinates beyond
+/// the file are drawn from a fixed seed (a NaN path reads only dumped
+/// ones). An MMLT dump does not record the path depth of its chain, so it
+/// is traced at every depth.
 pub fn replay(scene: &Scene, file: &Path) -> Result<(), String> {
-    let coords = read_pss(file)?;
-    let point = TorusPoint::from_values(&coords, stream_rng(0, 0));
-    let target = PssTarget {
-        scene,
-        sampler: PathTracer {
-            max_depth: scene.integrator.max_depth,
-            rr_depth: scene.integrator.rr_depth,
-        },
+    let dump = read_pss(file)?;
+    let coords = &dump.coords;
+    let point = TorusPoint::from_values(coords, stream_rng(0, 0));
+    let max_depth = dump.max_depth.unwrap_or(scene.integrator.max_depth);
+    let rr_depth = scene.integrator.rr_depth;
+    let bdpt = Bdpt {
+        max_depth,
+        rr_depth,
+        heuristic: MisHeuristic::Power,
     };
-    let e = target.trace(&point);
+    println!("sampler             {}", dump.sampler.name());
+    let evals: Vec<(Option<usize>, Evaluation<PathSample>)> = match dump.sampler {
+        DumpSampler::Pt => {
+            let sampler = PathTracer {
+                max_depth,
+                rr_depth,
+            };
+            vec![(None, PssTarget { scene, sampler }.trace(&point))]
+        }
+        DumpSampler::Bdpt => vec![(
+            None,
+            PssTarget {
+                scene,
+                sampler: bdpt,
+            }
+            .trace(&point),
+        )],
+        DumpSampler::Mmlt => {
+            if max_depth == u32::MAX || max_depth == 0 {
+                return Err(format!(
+                    "{}: an mmlt dump needs a finite max_depth ≥ 1",
+                    file.display()
+                ));
+            }
+            (1..=max_depth as usize)
+                .map(|depth| {
+                    let sampler = MmltDepth { bdpt, depth };
+                    (Some(depth), PssTarget { scene, sampler }.trace(&point))
+                })
+                .collect()
+        }
+    };
     println!(
         "coordinates read    {} (file has {})",
         point.len(),
         coords.len()
     );
-    println!("depth               {}", e.payload.depth);
-    println!("ln I                {}", e.log_density);
-    for s in &e.payload.splats {
+    for (target_depth, e) in &evals {
+        if let Some(d) = target_depth {
+            println!("mmlt depth          {d}");
+        }
+        println!("depth               {}", e.payload.depth);
+        println!("ln I                {}", e.log_density);
+        // PssTarget maps a NaN or infinite contribution to ln I = NaN.
         println!(
-            "splat               raster ({}, {})  L = ({}, {}, {})",
-            s.p.x, s.p.y, s.l.r, s.l.g, s.l.b
+            "contribution        {}",
+            if e.log_density.is_nan() {
+                "non-finite"
+            } else if e.log_density == f64::NEG_INFINITY {
+                "zero"
+            } else {
+                "finite"
+            }
         );
+        for s in &e.payload.splats {
+            println!(
+                "splat               raster ({}, {})  L = ({}, {}, {})",
+                s.p.x, s.p.y, s.l.r, s.l.g, s.l.b
+            );
+        }
     }
     Ok(())
 }

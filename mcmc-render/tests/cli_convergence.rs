@@ -1,0 +1,220 @@
+//! `mcmc-render convergence`: the CSV and the plot of a short study on a
+//! 16×16 Cornell box, `--replot`, and its refusals of bad input.
+
+mod cli_support;
+
+use cli_support::{assert_clean_failure, run, run_ok, scratch, write};
+use mcmc_render::convergence::{Record, read_csv, write_csv};
+use std::path::Path;
+
+/// The Cornell box fixture of the test suite.
+fn cornell() -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/scenes/cornell-box.xml")
+        .display()
+        .to_string()
+}
+
+/// Writes `ref.exr`: the 16×16 box path traced at 1024 spp, with another
+/// seed than the study (seed 0): the same seed would replay the reference's
+/// own samples and make the early error artificially small.
+fn reference(dir: &Path) {
+    let scene = cornell();
+    run_ok(
+        &[
+            "render", &scene, "-D", "res=16", "--spp", "1024", "--seed", "7", "--out", "ref.exr",
+            "--quiet",
+        ],
+        dir,
+    );
+}
+
+/// Decodes a PNG and returns its size.
+fn png_size(path: &Path) -> (u32, u32) {
+    let file = std::fs::File::open(path).unwrap();
+    let decoder = png::Decoder::new(std::io::BufReader::new(file));
+    let mut reader = decoder.read_info().expect("a valid PNG header");
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).expect("valid PNG data");
+    (info.width, info.height)
+}
+
+const INTEGRATORS: [&str; 4] = ["pt", "bdpt", "pssmlt", "mmlt"];
+const CHECKPOINTS: usize = 3;
+
+#[test]
+fn convergence_writes_csv_and_plot_for_four_integrators() {
+    let dir = scratch("convergence");
+    reference(&dir);
+    let scene = cornell();
+    let stdout = run_ok(
+        &[
+            "convergence",
+            &scene,
+            "-D",
+            "res=16",
+            "--reference",
+            "ref.exr",
+            "--integrators",
+            &INTEGRATORS.join(","),
+            "--time",
+            "1",
+            "--checkpoints",
+            &CHECKPOINTS.to_string(),
+            "--bootstrap",
+            "5000",
+            "--chains",
+            "32",
+            "--threads",
+            "2",
+            "--out",
+            "c.csv",
+        ],
+        &dir,
+    );
+    let text = std::fs::read_to_string(dir.join("c.csv")).unwrap();
+    assert_eq!(
+        text.lines().next(),
+        Some("integrator,seconds,samples,rel_mse,rmse")
+    );
+    let records = read_csv(&dir.join("c.csv")).unwrap();
+    assert_eq!(records.len(), text.lines().count() - 1);
+    // One stdout line per record.
+    assert_eq!(stdout.lines().count(), records.len());
+    for name in INTEGRATORS {
+        let rows: Vec<&Record> = records.iter().filter(|r| r.integrator == name).collect();
+        // A record at the first image after each of the K checkpoint times
+        // that the run reaches, and one at the end.
+        assert!(
+            !rows.is_empty() && rows.len() <= CHECKPOINTS + 1,
+            "{name}: {} rows",
+            rows.len()
+        );
+        for r in &rows {
+            assert!(r.seconds > 0.0 && r.seconds.is_finite(), "{r:?}");
+            assert!(r.samples > 0, "{r:?}");
+            assert!(r.rel_mse > 0.0 && r.rel_mse.is_finite(), "{r:?}");
+            assert!(r.rmse > 0.0 && r.rmse.is_finite(), "{r:?}");
+        }
+        for pair in rows.windows(2) {
+            assert!(pair[0].seconds < pair[1].seconds, "{name}: {pair:?}");
+            assert!(pair[0].samples <= pair[1].samples, "{name}: {pair:?}");
+        }
+    }
+    // Records come integrator by integrator, in the order asked for.
+    let order: Vec<&str> =
+        records
+            .iter()
+            .map(|r| r.integrator.as_str())
+            .fold(Vec::new(), |mut v, n| {
+                if v.last() != Some(&n) {
+                    v.push(n);
+                }
+                v
+            });
+    assert_eq!(order, INTEGRATORS);
+    assert_eq!(png_size(&dir.join("c.png")), (800, 600));
+
+    // --replot redraws the plot from the CSV alone.
+    std::fs::remove_file(dir.join("c.png")).unwrap();
+    run_ok(
+        &["convergence", "--replot", "c.csv", "--title", "box"],
+        &dir,
+    );
+    assert_eq!(png_size(&dir.join("c.png")), (800, 600));
+}
+
+#[test]
+fn csv_round_trips_through_read_csv() {
+    let dir = scratch("convergence-csv");
+    let records = vec![
+        Record {
+            integrator: "pt".into(),
+            seconds: 0.5,
+            samples: 1024,
+            rel_mse: 1.25e-2,
+            rmse: 3.5e-3,
+        },
+        Record {
+            integrator: "mmlt".into(),
+            seconds: 1.25,
+            samples: 4096,
+            rel_mse: 2.5e-3,
+            rmse: 1.5e-3,
+        },
+    ];
+    let path = dir.join("r.csv");
+    write_csv(&path, &records).unwrap();
+    // The CSV keeps 4 decimals of seconds and 7 significant digits of the
+    // errors: exact for these values.
+    assert_eq!(read_csv(&path).unwrap(), records);
+}
+
+#[test]
+fn convergence_refuses_bad_input_with_one_line() {
+    let dir = scratch("convergence-bad");
+    reference(&dir);
+    let scene = cornell();
+    let base = |extra: &[&'static str]| -> Vec<String> {
+        let mut a: Vec<String> = [
+            "convergence",
+            scene.as_str(),
+            "--time",
+            "0.2",
+            "--checkpoints",
+            "2",
+            "--out",
+            "c.csv",
+        ]
+        .iter()
+        .map(|x| x.to_string())
+        .collect();
+        a.extend(extra.iter().map(|x| x.to_string()));
+        a
+    };
+    let run = |args: Vec<String>| {
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        run(&refs, &dir)
+    };
+
+    let out = run(base(&["-D", "res=16", "--reference", "missing.exr"]));
+    assert_clean_failure(&out, &["error:", "missing.exr"]);
+
+    let out = run(base(&["-D", "res=8", "--reference", "ref.exr"]));
+    assert_clean_failure(&out, &["error:", "16x16", "8x8"]);
+
+    let out = run(base(&[
+        "-D",
+        "res=16",
+        "--reference",
+        "ref.exr",
+        "--integrators",
+        "pt,warp",
+    ]));
+    assert_clean_failure(&out, &["error:", "warp"]);
+    assert!(!dir.join("c.csv").exists(), "a refused study wrote a CSV");
+
+    // Without a reference (and without --replot), clap refuses.
+    let out = run(vec!["convergence".into(), scene.clone()]);
+    assert_clean_failure(&out, &["--reference"]);
+    assert_eq!(out.status.code(), Some(2));
+
+    write(&dir, "bad.csv", "integrator,seconds\npt,1\n");
+    let out = run(vec![
+        "convergence".into(),
+        "--replot".into(),
+        "bad.csv".into(),
+    ]);
+    assert_clean_failure(&out, &["error:", "bad.csv:1"]);
+    write(
+        &dir,
+        "bad2.csv",
+        "integrator,seconds,samples,rel_mse,rmse\npt,1,x,0.1,0.1\n",
+    );
+    let out = run(vec![
+        "convergence".into(),
+        "--replot".into(),
+        "bad2.csv".into(),
+    ]);
+    assert_clean_failure(&out, &["error:", "bad2.csv:2"]);
+}

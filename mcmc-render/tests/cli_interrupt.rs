@@ -1,0 +1,228 @@
+//! Ctrl-C (SIGINT) during `mcmc-render render`: the run stops early,
+//! exits with status 0, writes the EXR, PNG and JSON of what was rendered
+//! so far (`"interrupted": true`, fewer samples than requested), and the
+//! image is normalised by what it holds: its mean agrees with a completed
+//! render within the noise.
+#![cfg(unix)]
+
+mod cli_support;
+
+use cli_support::{exr, json, mean_luminance, run_ok, scratch, write};
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+/// Starts `render` with `args`, waits `wait`, sends SIGINT and returns the
+/// exit status and stderr.
+fn interrupt(args: &[&str], cwd: &Path, wait: Duration) -> (std::process::ExitStatus, String) {
+    let child = Command::new(cli_support::BIN)
+        .args(args)
+        .current_dir(cwd)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the binary starts");
+    std::thread::sleep(wait);
+    let kill = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(
+        kill.success(),
+        "kill -INT failed (did the render end early?)"
+    );
+    let out = child.wait_with_output().expect("the render ends");
+    (
+        out.status,
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Asserts what every interrupted run leaves behind.
+fn assert_partial_outputs(dir: &Path, status: std::process::ExitStatus, stderr: &str) {
+    assert_eq!(
+        status.code(),
+        Some(0),
+        "an interrupted render exits 0, got {status}: {stderr}"
+    );
+    for f in ["i.exr", "i.png", "i.json"] {
+        assert!(dir.join(f).is_file(), "{f} missing after Ctrl-C");
+    }
+    let j = json(&dir.join("i.json"));
+    assert_eq!(j["interrupted"], true);
+}
+
+const W: u32 = 32;
+const H: u32 = 24;
+/// Far more than can finish in the test (the run is always interrupted).
+const HUGE: &str = "100000000";
+
+/// Mean luminance of `spp`-sample path-traced images with seeds `seeds`.
+fn pt_means(dir: &Path, spp: u32, seeds: std::ops::Range<u64>) -> Vec<f64> {
+    seeds
+        .map(|seed| {
+            let out = format!("pt{seed}.exr");
+            run_ok(
+                &[
+                    "render",
+                    "s.xml",
+                    "--spp",
+                    &spp.to_string(),
+                    "--seed",
+                    &seed.to_string(),
+                    "--threads",
+                    "2",
+                    "--out",
+                    &out,
+                    "--quiet",
+                ],
+                dir,
+            );
+            mean_luminance(&exr(&dir.join(&out)).2)
+        })
+        .collect()
+}
+
+/// Per-sample variance of the image mean, estimated from independent
+/// `spp`-sample renders: Var(mean of an n-spp image) = σ²/n, so
+/// σ² = n · (sample variance of their means), with `means.len() − 1`
+/// degrees of freedom.
+fn per_sample_variance(means: &[f64], spp: u32) -> f64 {
+    let k = means.len() as f64;
+    let m = means.iter().sum::<f64>() / k;
+    let s2 = means.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (k - 1.0);
+    s2 * spp as f64
+}
+
+/// Tolerance in standard deviations for a difference whose variance is
+/// estimated with 7 degrees of freedom: the two-sided 99.9% quantile of
+/// Student's t with 7 dof is 5.41; 6 leaves a margin.
+const T_SIGMAS: f64 = 6.0;
+
+#[test]
+fn ctrl_c_stops_pt_and_writes_a_normalised_partial_render() {
+    let dir = scratch("sigint-pt");
+    write(&dir, "s.xml", &cli_support::floor_scene(W, H));
+    let (status, stderr) = interrupt(
+        &[
+            "render",
+            "s.xml",
+            "--integrator",
+            "pt",
+            "--spp",
+            HUGE,
+            "--threads",
+            "2",
+            "--out",
+            "i.exr",
+            "--quiet",
+        ],
+        &dir,
+        Duration::from_millis(1500),
+    );
+    assert_partial_outputs(&dir, status, &stderr);
+    let j = json(&dir.join("i.json"));
+    let requested = HUGE.parse::<u64>().unwrap() * (W * H) as u64;
+    let samples = j["samples"].as_u64().unwrap();
+    let spp_done = j["spp"].as_u64().unwrap();
+    assert!(spp_done >= 1, "nothing rendered before Ctrl-C");
+    assert!(samples < requested);
+    assert_eq!(samples, spp_done * (W * H) as u64);
+
+    // Passes are deterministic and the pass in flight is discarded, so the
+    // interrupted image is exactly the completed render of `spp_done`
+    // samples per pixel with the same seed.
+    let (_, _, partial_img) = exr(&dir.join("i.exr"));
+    run_ok(
+        &[
+            "render",
+            "s.xml",
+            "--spp",
+            &spp_done.to_string(),
+            "--threads",
+            "2",
+            "--out",
+            "same.exr",
+            "--quiet",
+        ],
+        &dir,
+    );
+    let (_, _, same_img) = exr(&dir.join("same.exr"));
+    assert!(
+        partial_img == same_img,
+        "interrupted image differs from a completed {spp_done}-spp render"
+    );
+
+    // Statistically, against an independent completed render (another
+    // seed), with the per-sample noise of the image mean measured from
+    // eight independent 2-spp renders.
+    let reference = pt_means(&dir, 256, 1000..1001)[0];
+    let sigma2 = per_sample_variance(&pt_means(&dir, 2, 2000..2008), 2);
+    let partial = mean_luminance(&partial_img);
+    let sd = (sigma2 / spp_done as f64 + sigma2 / 256.0).sqrt();
+    assert!(
+        (partial - reference).abs() <= T_SIGMAS * sd,
+        "interrupted mean {partial} vs completed {reference} (sd {sd}, {spp_done} spp)"
+    );
+    // A render normalised by the requested spp instead of the done spp
+    // would be darker by spp_done / HUGE: far outside the band.
+    assert!(partial > 0.5 * reference);
+}
+
+#[test]
+fn ctrl_c_stops_pssmlt_and_writes_a_normalised_partial_render() {
+    let dir = scratch("sigint-pssmlt");
+    write(&dir, "s.xml", &cli_support::floor_scene(W, H));
+    let (status, stderr) = interrupt(
+        &[
+            "render",
+            "s.xml",
+            "--integrator",
+            "pssmlt",
+            "--mutations-per-pixel",
+            HUGE,
+            "--bootstrap",
+            "20000",
+            "--chains",
+            "64",
+            "--threads",
+            "2",
+            "--out",
+            "i.exr",
+            "--quiet",
+        ],
+        &dir,
+        Duration::from_millis(2500),
+    );
+    assert_partial_outputs(&dir, status, &stderr);
+    let j = json(&dir.join("i.json"));
+    let requested = HUGE.parse::<u64>().unwrap() * (W * H) as u64;
+    let mutations = j["mutations"].as_u64().unwrap();
+    assert!(mutations > 0, "no mutation before Ctrl-C");
+    assert!(mutations < requested);
+    let (w, h, img) = exr(&dir.join("i.exr"));
+    assert_eq!((w, h), (W, H));
+    assert!(img.iter().all(|p| p.is_finite()));
+    let partial = mean_luminance(&img);
+
+    // Expected-value splatting puts luminance exactly 1 on the film per
+    // mutation (a + (1 − a), each splat L/I(L) has luminance 1) and the box
+    // filter keeps every splat in one pixel, so the image normalised by the
+    // mutations done has mean luminance b* (the JSON's scale), up to f32
+    // accumulation. Normalising by the requested mutations would give ~0.
+    let b = j["scale"].as_f64().unwrap();
+    assert!(
+        (partial - b).abs() <= 1e-3 * b,
+        "mean {partial} vs b* {b} after {mutations} mutations"
+    );
+    // And b* agrees with a completed path-traced render within the
+    // bootstrap's standard error and the path tracer's noise.
+    let se_b = j["b_bootstrap_standard_error"].as_f64().unwrap();
+    let reference = pt_means(&dir, 256, 1000..1001)[0];
+    let sigma2 = per_sample_variance(&pt_means(&dir, 2, 2000..2008), 2);
+    let sd = (se_b * se_b + sigma2 / 256.0).sqrt();
+    assert!(
+        (partial - reference).abs() <= T_SIGMAS * sd,
+        "interrupted pssmlt mean {partial} vs pt {reference} (sd {sd})"
+    );
+}
