@@ -20,7 +20,7 @@ use crate::render::{RenderObserver, RenderSettings, render};
 use crate::scene::Scene;
 use std::path::Path;
 use std::sync::Mutex;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 /// One checkpoint of one integrator.
@@ -57,8 +57,9 @@ impl Recorder<'_> {
             return;
         }
         // The final (forced) offer adds nothing when the last checkpoint
-        // already holds the same samples (the run ended on a checkpoint).
-        if force && g.1.last().is_some_and(|r| r.samples == samples) {
+        // already holds the same samples (the run ended on a checkpoint) or
+        // when nothing was rendered (stopped at once).
+        if force && (samples == 0 || g.1.last().is_some_and(|r| r.samples == samples)) {
             return;
         }
         if let Ok(c) = compare(self.reference, &image()) {
@@ -108,7 +109,8 @@ pub struct Study {
     pub mlt: PssmltSettings,
 }
 
-/// Runs the study on `scene` against `reference`.
+/// Runs the study on `scene` against `reference`. Setting `stop` ends the
+/// integrator in flight (its records so far are kept) and skips the rest.
 pub fn run(
     scene: &Scene,
     reference: &[Rgb],
@@ -216,6 +218,10 @@ pub fn run(
         }
         let (_, records) = rec.state.into_inner().unwrap_or_else(|p| p.into_inner());
         all.extend(records);
+        // Ctrl-C ends the study: the integrators not started yet are skipped.
+        if stop.load(Ordering::Relaxed) {
+            break;
+        }
     }
     Ok(all)
 }

@@ -12,7 +12,8 @@
 //!
 //! Ctrl-C (SIGINT) during `render` stops early and writes what was rendered
 //! so far (normalised by it), with `"interrupted": true` in the JSON, and
-//! exits with status 0. Every failure prints one line `error: …` on stderr
+//! exits with status 0; a second Ctrl-C exits at once with status 130.
+//! Every failure prints one line `error: …` on stderr
 //! and exits with status 1 (2 for unusable arguments).
 
 use clap::{Parser, Subcommand, ValueEnum};
@@ -252,7 +253,7 @@ fn run(cli: Cli) -> Result<(), String> {
             check_writable(&out)?;
             let loaded = Scene::load(&scene, &defines).map_err(|e| e.to_string())?;
             if matches!(integrator, IntegratorArg::Pssmlt | IntegratorArg::Mmlt) {
-                let _ = ctrlc::set_handler(|| STOP.store(true, Ordering::SeqCst));
+                stop_on_ctrl_c();
                 let job = mcmc_render::mlt_cli::MltJob {
                     scene: &loaded,
                     scene_name: &scene.display().to_string(),
@@ -377,7 +378,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 .collect();
             let settings = mlt.settings(Some(time), seed)?;
             let threads = threads.unwrap_or(0);
-            let _ = ctrlc::set_handler(|| STOP.store(true, Ordering::SeqCst));
+            stop_on_ctrl_c();
             let records = mcmc_core::runner::with_threads(threads, || {
                 let study = mcmc_render::convergence::Study {
                     integrators: names.clone(),
@@ -410,6 +411,20 @@ fn run(cli: Cli) -> Result<(), String> {
             Ok(())
         }
     }
+}
+
+/// Ctrl-C sets [`STOP`]: the run finishes with what it has and writes it.
+/// A second Ctrl-C (e.g. during an MLT bootstrap, which does not poll the
+/// flag) exits at once with status 130, writing nothing.
+fn stop_on_ctrl_c() {
+    // Ignore a failure to install the handler (e.g. set twice): rendering
+    // still works, only Ctrl-C falls back to the default action.
+    let _ = ctrlc::set_handler(|| {
+        if STOP.swap(true, Ordering::SeqCst) {
+            eprintln!("error: interrupted twice; exiting without writing");
+            std::process::exit(130);
+        }
+    });
 }
 
 fn parse_defines(defs: &[String]) -> Result<HashMap<String, String>, String> {
@@ -568,9 +583,7 @@ fn do_render(job: RenderJob) -> Result<(), String> {
         .num_threads(threads)
         .build()
         .map_err(|e| format!("cannot start {threads} threads: {e}"))?;
-    // Ignore a failure to install the handler (e.g. set twice in tests):
-    // rendering still works, only Ctrl-C falls back to the default action.
-    let _ = ctrlc::set_handler(|| STOP.store(true, Ordering::SeqCst));
+    stop_on_ctrl_c();
 
     let scene = &job.scene;
     let pixels = scene.film.width as u64 * scene.film.height as u64;

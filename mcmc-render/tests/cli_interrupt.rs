@@ -7,14 +7,25 @@
 
 mod cli_support;
 
-use cli_support::{exr, json, mean_luminance, run_ok, scratch, write};
+use cli_support::{assert_clean_failure, exr, json, mean_luminance, run_ok, scratch, write};
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-/// Starts `render` with `args`, waits `wait`, sends SIGINT and returns the
-/// exit status and stderr.
+/// Starts the binary with `args`, waits `wait`, sends SIGINT and returns
+/// the exit status and stderr.
 fn interrupt(args: &[&str], cwd: &Path, wait: Duration) -> (std::process::ExitStatus, String) {
+    interrupt_at(args, cwd, &[wait])
+}
+
+/// Starts the binary with `args` and sends SIGINT after each of `waits`
+/// (each counted from the previous signal); returns the exit status and
+/// stderr.
+fn interrupt_at(
+    args: &[&str],
+    cwd: &Path,
+    waits: &[Duration],
+) -> (std::process::ExitStatus, String) {
     let child = Command::new(cli_support::BIN)
         .args(args)
         .current_dir(cwd)
@@ -22,16 +33,15 @@ fn interrupt(args: &[&str], cwd: &Path, wait: Duration) -> (std::process::ExitSt
         .stderr(Stdio::piped())
         .spawn()
         .expect("the binary starts");
-    std::thread::sleep(wait);
-    let kill = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .expect("kill runs");
-    assert!(
-        kill.success(),
-        "kill -INT failed (did the render end early?)"
-    );
-    let out = child.wait_with_output().expect("the render ends");
+    for wait in waits {
+        std::thread::sleep(*wait);
+        let kill = Command::new("kill")
+            .args(["-INT", &child.id().to_string()])
+            .status()
+            .expect("kill runs");
+        assert!(kill.success(), "kill -INT failed (did the run end early?)");
+    }
+    let out = child.wait_with_output().expect("the run ends");
     (
         out.status,
         String::from_utf8_lossy(&out.stderr).into_owned(),
@@ -225,4 +235,86 @@ fn ctrl_c_stops_pssmlt_and_writes_a_normalised_partial_render() {
         (partial - reference).abs() <= T_SIGMAS * sd,
         "interrupted pssmlt mean {partial} vs pt {reference} (sd {sd})"
     );
+}
+
+#[test]
+fn ctrl_c_ends_a_convergence_study_with_what_it_has() {
+    let dir = scratch("sigint-convergence");
+    write(&dir, "s.xml", &cli_support::floor_scene(W, H));
+    run_ok(
+        &[
+            "render", "s.xml", "--spp", "64", "--seed", "9", "--out", "ref.exr", "--quiet",
+        ],
+        &dir,
+    );
+    // 600 s per integrator with a checkpoint every 0.5 s; Ctrl-C after
+    // 2 s, during pt: pt's records so far are kept, bdpt never starts.
+    let (status, stderr) = interrupt(
+        &[
+            "convergence",
+            "s.xml",
+            "--reference",
+            "ref.exr",
+            "--integrators",
+            "pt,bdpt",
+            "--time",
+            "600",
+            "--checkpoints",
+            "1200",
+            "--threads",
+            "2",
+            "--out",
+            "c.csv",
+        ],
+        &dir,
+        Duration::from_millis(2000),
+    );
+    assert_eq!(status.code(), Some(0), "{stderr}");
+    let records = mcmc_render::convergence::read_csv(&dir.join("c.csv")).unwrap();
+    assert!(!records.is_empty(), "no record before Ctrl-C");
+    for r in &records {
+        assert_eq!(r.integrator, "pt", "{r:?}");
+        assert!(r.seconds < 600.0 && r.samples > 0, "{r:?}");
+        assert!(r.rel_mse > 0.0 && r.rel_mse.is_finite(), "{r:?}");
+    }
+    assert!(dir.join("c.png").is_file());
+}
+
+#[test]
+fn a_second_ctrl_c_exits_at_once_without_writing() {
+    let dir = scratch("sigint-twice");
+    write(&dir, "s.xml", &cli_support::floor_scene(W, H));
+    // The bootstrap of 4 M candidates takes seconds and does not poll the
+    // stop flag; the second Ctrl-C must end the process during it.
+    let start = std::time::Instant::now();
+    let (status, stderr) = interrupt_at(
+        &[
+            "render",
+            "s.xml",
+            "--integrator",
+            "pssmlt",
+            "--bootstrap",
+            "4000000",
+            "--threads",
+            "2",
+            "--out",
+            "i.exr",
+            "--quiet",
+        ],
+        &dir,
+        &[Duration::from_millis(300), Duration::from_millis(300)],
+    );
+    let elapsed = start.elapsed();
+    assert_eq!(status.code(), Some(130), "{stderr}");
+    let out = std::process::Output {
+        status,
+        stdout: Vec::new(),
+        stderr: stderr.into_bytes(),
+    };
+    assert_clean_failure(&out, &["interrupted twice"]);
+    assert!(
+        !dir.join("i.exr").exists(),
+        "wrote an image after two Ctrl-C"
+    );
+    assert!(elapsed < Duration::from_secs(30), "{elapsed:?}");
 }
