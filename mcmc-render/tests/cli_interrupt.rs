@@ -128,7 +128,7 @@ fn ctrl_c_stops_pt_and_writes_a_normalised_partial_render() {
             "--quiet",
         ],
         &dir,
-        Duration::from_millis(1500),
+        Duration::from_millis(2000),
     );
     assert_partial_outputs(&dir, status, &stderr);
     let j = json(&dir.join("i.json"));
@@ -283,14 +283,19 @@ fn ctrl_c_ends_a_convergence_study_with_what_it_has() {
 #[test]
 fn a_second_ctrl_c_exits_at_once_without_writing() {
     let dir = scratch("sigint-twice");
-    write(&dir, "s.xml", &cli_support::floor_scene(W, H));
-    // The bootstrap of 4 M candidates takes seconds and does not poll the
-    // stop flag; the second Ctrl-C must end the process during it.
+    let cornell = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/scenes/cornell-box.xml");
+    // A bootstrap of 4 M Cornell-box paths takes seconds (≈ 2.6 µs of CPU
+    // per candidate measured here; still > 1 s on 2 idle fast cores) and
+    // does not poll the stop flag: the first Ctrl-C (after 0.5 s, once the
+    // handler is installed) only marks the stop, the second must end the
+    // process during the bootstrap.
     let start = std::time::Instant::now();
     let (status, stderr) = interrupt_at(
         &[
             "render",
-            "s.xml",
+            cornell.to_str().unwrap(),
+            "-D",
+            "res=16",
             "--integrator",
             "pssmlt",
             "--bootstrap",
@@ -302,7 +307,7 @@ fn a_second_ctrl_c_exits_at_once_without_writing() {
             "--quiet",
         ],
         &dir,
-        &[Duration::from_millis(300), Duration::from_millis(300)],
+        &[Duration::from_millis(500), Duration::from_millis(200)],
     );
     let elapsed = start.elapsed();
     assert_eq!(status.code(), Some(130), "{stderr}");
