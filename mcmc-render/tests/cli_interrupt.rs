@@ -26,7 +26,7 @@ fn interrupt_at(
     cwd: &Path,
     waits: &[Duration],
 ) -> (std::process::ExitStatus, String) {
-    let child = Command::new(cli_support::BIN)
+    let mut child = Command::new(cli_support::BIN)
         .args(args)
         .current_dir(cwd)
         .stdout(Stdio::null())
@@ -41,11 +41,26 @@ fn interrupt_at(
             .expect("kill runs");
         assert!(kill.success(), "kill -INT failed (did the run end early?)");
     }
-    let out = child.wait_with_output().expect("the run ends");
-    (
-        out.status,
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    // A run that ignores Ctrl-C would go on for hours: give it a minute,
+    // then kill it and fail.
+    let deadline = std::time::Instant::now() + Duration::from_secs(60);
+    let status = loop {
+        if let Some(status) = child.try_wait().expect("waiting works") {
+            break status;
+        }
+        if std::time::Instant::now() > deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("the run did not stop within 60 s of Ctrl-C");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let mut stderr = String::new();
+    if let Some(mut pipe) = child.stderr.take() {
+        use std::io::Read;
+        let _ = pipe.read_to_string(&mut stderr);
+    }
+    (status, stderr)
 }
 
 /// Asserts what every interrupted run leaves behind.
