@@ -396,6 +396,16 @@ fn run(cli: Cli) -> Result<(), String> {
                 &names,
                 &title,
             )?;
+            if !STOP.load(Ordering::SeqCst) {
+                for name in names
+                    .iter()
+                    .filter(|n| !records.iter().any(|r| &r.integrator == *n))
+                {
+                    eprintln!(
+                        "warning: {name} has no record: its start-up (bootstrap) outlasted --time {time}"
+                    );
+                }
+            }
             for rec in &records {
                 println!(
                     "{:8} {:8.2} s {:>12} relMSE {:.4e} RMSE {:.4e}",

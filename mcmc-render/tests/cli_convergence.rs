@@ -220,3 +220,46 @@ fn convergence_refuses_bad_input_with_one_line() {
     ]);
     assert_clean_failure(&out, &["error:", "bad2.csv:2"]);
 }
+
+#[test]
+fn an_integrator_without_records_is_reported() {
+    let dir = scratch("convergence-empty");
+    reference(&dir);
+    let scene = cornell();
+    // mmlt's bootstrap (8 depths × 100 000 paths, ≥ 0.4 s) outlasts the
+    // 0.05 s budget, so it renders nothing; pt records its passes.
+    let out = run(
+        &[
+            "convergence",
+            &scene,
+            "-D",
+            "res=16",
+            "--reference",
+            "ref.exr",
+            "--integrators",
+            "pt,mmlt",
+            "--time",
+            "0.05",
+            "--checkpoints",
+            "2",
+            "--bootstrap",
+            "100000",
+            "--chains",
+            "16",
+            "--threads",
+            "2",
+            "--out",
+            "c.csv",
+        ],
+        &dir,
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("warning: mmlt has no record"),
+        "stderr: {stderr}"
+    );
+    let records = read_csv(&dir.join("c.csv")).unwrap();
+    assert!(records.iter().any(|r| r.integrator == "pt"));
+    assert!(records.iter().all(|r| r.integrator != "mmlt"));
+}
