@@ -63,8 +63,8 @@
 mod common;
 
 use common::{
-    DirectView, direct_view, lt_of, luminance, masked_mean, mean_se, mean_se1, pixel_mean, pt_of,
-    rel_mse_weighted, rel_weights, render_image, repo_scene,
+    DirectView, MeanAgreement, direct_view, lt_of, luminance, masked_mean, mean_se1, pixel_mean,
+    pt_of, rel_mse_weighted, rel_weights, render_image, repo_scene,
 };
 use glam::Vec2;
 use mcmc_render::color::Rgb;
@@ -140,50 +140,12 @@ fn relmse_check(pt: &[Vec<Rgb>], lt: &[Vec<Rgb>], mask: &[bool]) -> RelMseCheck 
     }
 }
 
-/// The outcome of the image-mean check, per channel.
-#[derive(Debug)]
-struct MeanCheck {
-    pt: [f64; 3],
-    lt: [f64; 3],
-    /// Standard errors of the two means (read through `Debug` in reports).
-    #[allow(dead_code)]
-    se_pt: [f64; 3],
-    #[allow(dead_code)]
-    se_lt: [f64; 3],
-    /// Standard error of the difference.
-    sigma: [f64; 3],
-}
-
-impl MeanCheck {
-    fn new(pt: &[Vec<Rgb>], lt: &[Vec<Rgb>], mask: &[bool]) -> MeanCheck {
-        let means = |imgs: &[Vec<Rgb>]| -> Vec<[f64; 3]> {
-            imgs.iter().map(|i| masked_mean(i, Some(mask))).collect()
-        };
-        let (mp, sp) = mean_se(&means(pt));
-        let (ml, sl) = mean_se(&means(lt));
-        MeanCheck {
-            pt: mp,
-            lt: ml,
-            se_pt: sp,
-            se_lt: sl,
-            sigma: [0, 1, 2].map(|c| (sp[c] * sp[c] + sl[c] * sl[c]).sqrt()),
-        }
-    }
-
-    /// Channels that fail: outside 4σ or outside 1%.
-    fn failures(&self) -> Vec<usize> {
-        (0..3)
-            .filter(|&c| {
-                let d = self.lt[c] - self.pt[c];
-                d.abs() >= 4.0 * self.sigma[c] || d.abs() >= 0.01 * self.pt[c]
-            })
-            .collect()
-    }
-
-    /// 5σ below 1% on every channel: a 1% discrepancy is resolved.
-    fn resolves_one_percent(&self) -> bool {
-        (0..3).all(|c| 5.0 * self.sigma[c] < 0.01 * self.pt[c])
-    }
+/// The image-mean check on the pixels of `mask` (see the module comment).
+fn mean_check(pt: &[Vec<Rgb>], lt: &[Vec<Rgb>], mask: &[bool]) -> MeanAgreement {
+    let means = |imgs: &[Vec<Rgb>]| -> Vec<[f64; 3]> {
+        imgs.iter().map(|i| masked_mean(i, Some(mask))).collect()
+    };
+    MeanAgreement::new(&means(pt), &means(lt))
 }
 
 /// Everything the checks need for one scene.
@@ -229,14 +191,14 @@ fn check_scene(name: &str, spp: (u32, u32)) -> Renders {
         rel.excess_se,
         rel.threshold
     );
-    let mean = MeanCheck::new(&r.pt, &r.lt, &plain);
+    let mean = mean_check(&r.pt, &r.lt, &plain);
     eprintln!("{name}: {mean:?}");
     assert!(
-        mean.failures().is_empty(),
+        mean.failures(4.0, 0.01).is_empty(),
         "{name}: image means differ: {mean:?}"
     );
     assert!(
-        mean.resolves_one_percent(),
+        mean.resolves(5.0, 0.01),
         "{name}: noise too large to resolve 1%: {mean:?}"
     );
     r
@@ -323,16 +285,20 @@ fn the_checks_reject_biased_light_tracers() {
     let rel = relmse_check(&r.pt, &scaled, &all);
     eprintln!("LT x1.03: {rel:?}");
     assert!(rel.excess > rel.threshold * rel.excess_se, "{rel:?}");
-    assert!(!MeanCheck::new(&r.pt, &scaled, &plain).failures().is_empty());
+    assert!(
+        !mean_check(&r.pt, &scaled, &plain)
+            .failures(4.0, 0.01)
+            .is_empty()
+    );
 
     // LT scaled by 1.01: the image-mean check resolves 1%.
     let scaled: Vec<Vec<Rgb>> =
         r.lt.iter()
             .map(|img| img.iter().map(|&p| p * 1.01).collect())
             .collect();
-    let mean = MeanCheck::new(&r.pt, &scaled, &plain);
+    let mean = mean_check(&r.pt, &scaled, &plain);
     eprintln!("LT x1.01: {mean:?}");
-    assert!(!mean.failures().is_empty(), "{mean:?}");
+    assert!(!mean.failures(4.0, 0.01).is_empty(), "{mean:?}");
 
     // LT splatting half a pixel to the right (a raster-mapping bug): the
     // image mean hardly moves, the per-pixel comparison rejects it.

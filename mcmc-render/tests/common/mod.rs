@@ -282,3 +282,54 @@ pub fn direct_view(scene: &Scene, n: u32) -> DirectView {
     }
     DirectView { delta, emitter }
 }
+
+/// Per-channel agreement of two estimators' image means, each known from
+/// independent replicates: the standard error of the difference is
+/// `σ = √(se_ref² + se_test²)`.
+#[derive(Debug)]
+pub struct MeanAgreement {
+    /// Mean of the reference replicates.
+    pub reference: [f64; 3],
+    /// Mean of the tested replicates.
+    pub test: [f64; 3],
+    /// Standard errors of the two means.
+    pub se: ([f64; 3], [f64; 3]),
+    /// Standard error of the difference.
+    pub sigma: [f64; 3],
+}
+
+impl MeanAgreement {
+    /// From replicate image means.
+    pub fn new(reference: &[[f64; 3]], test: &[[f64; 3]]) -> MeanAgreement {
+        let (mr, sr) = mean_se(reference);
+        let (mt, st) = mean_se(test);
+        MeanAgreement {
+            reference: mr,
+            test: mt,
+            se: (sr, st),
+            sigma: [0, 1, 2].map(|c| (sr[c] * sr[c] + st[c] * st[c]).sqrt()),
+        }
+    }
+
+    /// Relative difference per channel.
+    pub fn rel(&self) -> [f64; 3] {
+        [0, 1, 2].map(|c| (self.test[c] - self.reference[c]) / self.reference[c])
+    }
+
+    /// Channels that fail: the difference outside `z`σ or outside `bound`
+    /// (relative).
+    pub fn failures(&self, z: f64, bound: f64) -> Vec<usize> {
+        (0..3)
+            .filter(|&c| {
+                let d = self.test[c] - self.reference[c];
+                d.abs() >= z * self.sigma[c] || d.abs() >= bound * self.reference[c]
+            })
+            .collect()
+    }
+
+    /// `zσ < bound` (relative) on every channel: a discrepancy of `bound`
+    /// lies at least `z` standard errors out.
+    pub fn resolves(&self, z: f64, bound: f64) -> bool {
+        (0..3).all(|c| z * self.sigma[c] < bound * self.reference[c])
+    }
+}
