@@ -170,6 +170,19 @@ fn pssmlt_agrees_with_pt_on_the_cornell_box() {
 }
 
 #[test]
+fn pssmlt_over_bdpt_agrees_with_pt_on_the_cornell_box() {
+    // All techniques of one BDPT sample per state; per-replicate spread
+    // 0.4–0.8% at ~2.6e5 mutations; 16 replicates.
+    let budget = Budget {
+        bootstrap: 50_000,
+        chains: 512,
+        mpp: 1024,
+    };
+    let pss = mlt_reps(cornell(), Mlt::PssmltBdpt, budget, 16, 6000);
+    check("pssmlt-bdpt", pt_reference(), &pss);
+}
+
+#[test]
 fn mmlt_agrees_with_pt_on_the_cornell_box() {
     check("mmlt", pt_reference(), mmlt_reps());
 }
