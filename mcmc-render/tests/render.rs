@@ -10,6 +10,9 @@
 //! about 6e-5 for a normal estimate; the seeds are fixed, so the test is
 //! deterministic).
 
+mod common;
+
+use common::{image_mean, load_str as load};
 use mcmc_render::color::Rgb;
 use mcmc_render::integrators::Integrator;
 use mcmc_render::integrators::lt::LightTracer;
@@ -19,20 +22,6 @@ use mcmc_render::scene::Scene;
 use std::collections::HashMap;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
-
-fn load(text: &str) -> Scene {
-    Scene::load_str(text, Path::new("test.xml"), Path::new(".")).expect("scene loads")
-}
-
-fn image_mean(img: &[Rgb]) -> [f64; 3] {
-    let mut m = [0.0f64; 3];
-    for p in img {
-        m[0] += p.r as f64;
-        m[1] += p.g as f64;
-        m[2] += p.b as f64;
-    }
-    m.map(|v| v / img.len() as f64)
-}
 
 fn render_image(
     scene: &Scene,
