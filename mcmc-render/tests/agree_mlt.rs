@@ -31,9 +31,9 @@
 //!
 //! The default tests use the diffuse box (about 100 s of one core). The
 //! glossy-glass variant is noisier for every estimator (caustic, glossy
-//! gold): BDPT and PSSMLT over BDPT to 1% take about 4 minutes of one
-//! core, and MMLT, whose `b` and blue channel spread 2.5–3.6% between
-//! seeds there, resolves only 3% in 6 minutes; both are ignored tests
+//! gold): BDPT and PSSMLT over BDPT are checked to 1% there, and MMLT,
+//! whose `b` and blue channel spread 2.5–3.6% between seeds, to 3% only,
+//! in two ignored tests that take 6.5 minutes of one core together
 //! (`cargo test -p mcmc-render --test agree_mlt -- --ignored`).
 
 mod common;
@@ -220,7 +220,7 @@ fn glossy() -> (Scene, Vec<[f64; 3]>) {
 #[test]
 #[ignore = "minutes: BDPT and PSSMLT to 1% on the glossy-glass box"]
 fn bdpt_and_pssmlt_agree_with_pt_on_the_glossy_glass_box() {
-    // Measured (about 4 min of one core): BDPT +0.06%, PSSMLT over BDPT
+    // Measured: BDPT +0.06%, PSSMLT over BDPT
     // +0.2% per channel, SE of the difference 0.13–0.19%.
     let (scene, pt) = glossy();
     check(
@@ -244,7 +244,7 @@ fn bdpt_and_pssmlt_agree_with_pt_on_the_glossy_glass_box() {
 #[ignore = "minutes: MMLT to 3% on the glossy-glass box"]
 fn mmlt_agrees_with_pt_on_the_glossy_glass_box() {
     // 48 replicates of 2e4 bootstrap candidates per depth, 1024 chains,
-    // 16384 mutations per pixel (about 6 min of one core) measured
+    // 16384 mutations per pixel measured
     // +0.25%, +0.12%, −0.14% with SE of the difference 0.28%, 0.32%,
     // 0.52%: the blue channel's per-replicate spread (3.6%) allows 3%
     // at 5σ. Resolving 1% would take ~7× this budget (~45 min).
