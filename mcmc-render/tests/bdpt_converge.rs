@@ -12,51 +12,23 @@
 //! of the issue is checked too, together with a check that the noise is
 //! small enough for 1% to be meaningful (4σ < 1%).
 
+mod common;
+
+use common::{image_mean, load_str as load, repo_scene_tilted_text};
 use mcmc_render::color::Rgb;
 use mcmc_render::integrators::Integrator;
 use mcmc_render::integrators::bdpt::{Bdpt, MisHeuristic};
 use mcmc_render::integrators::pt::PathTracer;
 use mcmc_render::render::{NoObserver, RenderSettings, render};
 use mcmc_render::scene::Scene;
-use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
-/// A repo scene at `res`×`res` with the camera tilted down (target y =
-/// −1.1) so that the emitter is out of view: pixels that see it (radiance
-/// 18 on a strip thinner than a pixel at this resolution) make the image
-/// mean's noise ~10× larger for every integrator alike, without testing
-/// anything BDPT-specific (the emitter seen directly is technique (0, 2),
-/// weight one, exactly path tracing's first hit).
+/// A repo scene at `res`×`res` with the camera tilted down so that the
+/// emitter is out of view (see `common::repo_scene_tilted_text`): the
+/// emitter seen directly is technique (0, 2), weight one, exactly path
+/// tracing's first hit, and nothing BDPT-specific.
 fn repo_scene_text(name: &str, res: u32) -> String {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../scenes")
-        .join(name);
-    let text = std::fs::read_to_string(path).expect("scene file");
-    let tilted = text.replace(r#"target="0, 0, 0""#, r#"target="0, -1.1, 0""#);
-    assert_ne!(tilted, text, "camera target not found");
-    tilted
-        .replace(
-            r#"<default name="width" value="256"/>"#,
-            &format!(r#"<default name="width" value="{res}"/>"#),
-        )
-        .replace(
-            r#"<default name="height" value="256"/>"#,
-            &format!(r#"<default name="height" value="{res}"/>"#),
-        )
-}
-
-fn load(text: &str) -> Scene {
-    Scene::load_str(text, Path::new("test.xml"), Path::new(".")).expect("scene loads")
-}
-
-fn image_mean(img: &[Rgb]) -> [f64; 3] {
-    let mut m = [0.0f64; 3];
-    for p in img {
-        m[0] += p.r as f64;
-        m[1] += p.g as f64;
-        m[2] += p.b as f64;
-    }
-    m.map(|v| v / img.len() as f64)
+    repo_scene_tilted_text(name, res, 8)
 }
 
 /// Renders one image; returns it with the number of dropped non-finite contributions.

@@ -1,6 +1,7 @@
 //! End-to-end renders checked against analytic answers and against each
-//! other: furnace tests (PT and LT, at several scene scales), PT vs LT on
-//! the Cornell box, and bit-identical images across thread counts.
+//! other: furnace tests (PT and LT, at several scene scales), PT vs LT with
+//! disk and sphere emitters, and bit-identical images across thread counts.
+//! PT against LT on the repo's Cornell variants is `agree_pt_lt.rs`.
 //!
 //! Tolerances come from standard errors measured in the test itself: a
 //! scene is rendered as K independent batches (different seeds), the
@@ -9,6 +10,9 @@
 //! about 6e-5 for a normal estimate; the seeds are fixed, so the test is
 //! deterministic).
 
+mod common;
+
+use common::{image_mean, load_str as load};
 use mcmc_render::color::Rgb;
 use mcmc_render::integrators::Integrator;
 use mcmc_render::integrators::lt::LightTracer;
@@ -18,20 +22,6 @@ use mcmc_render::scene::Scene;
 use std::collections::HashMap;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
-
-fn load(text: &str) -> Scene {
-    Scene::load_str(text, Path::new("test.xml"), Path::new(".")).expect("scene loads")
-}
-
-fn image_mean(img: &[Rgb]) -> [f64; 3] {
-    let mut m = [0.0f64; 3];
-    for p in img {
-        m[0] += p.r as f64;
-        m[1] += p.g as f64;
-        m[2] += p.b as f64;
-    }
-    m.map(|v| v / img.len() as f64)
-}
 
 fn render_image(
     scene: &Scene,
@@ -200,48 +190,6 @@ fn cornell(res: u32, look_y: f32) -> Scene {
     defines.insert("look_y".to_string(), look_y.to_string());
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/scenes/cornell-box.xml");
     Scene::load(&path, &defines).expect("cornell box loads")
-}
-
-#[test]
-fn pt_and_lt_agree_on_the_cornell_box() {
-    // The camera is tilted down so the emitter is out of view: the pixels
-    // that see it (radiance 18 against an image mean of 0.1) dominate the
-    // path tracer's variance of the image mean, and would need ~10x more
-    // samples for the same standard error. The emitter seen directly is
-    // covered by the furnace tests (light tracing's one-segment paths).
-    let scene = cornell(32, -1.1);
-    let it = scene.integrator;
-    let pt = PathTracer {
-        max_depth: it.max_depth,
-        rr_depth: it.rr_depth,
-    };
-    let lt = LightTracer {
-        max_depth: it.max_depth,
-        rr_depth: it.rr_depth,
-    };
-    let (mp, sp) = batched_mean(&scene, &pt, 128, 8);
-    let (ml, sl) = batched_mean(&scene, &lt, 512, 8);
-    eprintln!("pt {mp:?} ± {sp:?}\nlt {ml:?} ± {sl:?}");
-    for c in 0..3 {
-        let sigma = (sp[c] * sp[c] + sl[c] * sl[c]).sqrt();
-        let rel = (ml[c] - mp[c]) / mp[c];
-        // Consistent with their noise ...
-        assert!(
-            (ml[c] - mp[c]).abs() < 4.0 * sigma,
-            "channel {c}: pt {} ± {}, lt {} ± {}",
-            mp[c],
-            sp[c],
-            ml[c],
-            sl[c]
-        );
-        // ... and within the 1% the issue asks for, with noise small enough
-        // that 1% is a meaningful bound.
-        assert!(rel.abs() < 0.01, "channel {c}: relative difference {rel}");
-        assert!(
-            4.0 * sigma < 0.01 * mp[c],
-            "channel {c}: noise too large to test 1%"
-        );
-    }
 }
 
 #[test]

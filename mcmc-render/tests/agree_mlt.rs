@@ -1,0 +1,263 @@
+//! BDPT, PSSMLT and MMLT agree with path tracing on the repo's Cornell
+//! variants to 1% of the image mean, per channel.
+//!
+//! # Tolerances
+//!
+//! Every estimator is run as `K` independent replicates (distinct fixed
+//! seeds; for PSSMLT and MMLT each replicate has its own bootstrap and
+//! chains). The standard error of a mean is sd(replicate means)/√K, so it
+//! includes everything that varies between seeds: for (PS/M)MLT the image
+//! luminance is essentially `b` (bootstrap plus large steps, the running
+//! normalisation), while the split between channels depends on where the
+//! chains went. With `σ` the standard error of the difference to PT, a
+//! channel passes when the difference is within 4σ (false-alarm rate
+//! ~1e-4 per channel for the t distributions with ≥ 11 degrees of freedom
+//! used here) and within 1%, and the budgets are chosen so that 5σ < 1%
+//! (SE ≤ 0.2%): a 1% discrepancy then lies 5σ out and fails the 4σ check
+//! with probability ≈ 0.84, a 1.5% one with probability > 0.999. The
+//! control test checks that an estimate biased by 1% is rejected.
+//!
+//! # Scenes
+//!
+//! `scenes/cornell-box.xml` and `scenes/cornell-glossy-glass.xml` at 16×16,
+//! `max_depth` 5 (the MMLT default), with the camera tilted down so that
+//! the emitter is out of view (`common::repo_scene_tilted_text`): seen
+//! directly, its pixels dominate the variance of the image mean for every
+//! estimator and of `b` for MLT (measured: ~10× the variance), and
+//! resolving 1% with them in view would cost minutes per estimator. The
+//! emitter seen directly is a one-segment path (PT's first hit, BDPT's
+//! technique (0, 2), MMLT's depth 1), covered by the PT/LT tests on the
+//! untilted scenes (`agree_pt_lt.rs`).
+//!
+//! The default tests use the diffuse box (about 100 s of one core). The
+//! glossy-glass variant is noisier for every estimator (caustic, glossy
+//! gold): BDPT and PSSMLT over BDPT are checked to 1% there, and MMLT,
+//! whose `b` and blue channel spread 2.5–3.6% between seeds, to 3% only,
+//! in two ignored tests that take 6.5 minutes of one core together
+//! (`cargo test -p mcmc-render --test agree_mlt -- --ignored`).
+
+mod common;
+
+use common::{
+    MeanAgreement, bdpt_of, image_mean, mmlt_depths, pt_of, render_image, repo_scene_tilted,
+};
+use mcmc_render::integrators::Integrator;
+use mcmc_render::integrators::pssmlt::{
+    NoMltObserver, Normalization, PssmltSettings, render_family, render_pssmlt,
+};
+use mcmc_render::scene::Scene;
+use std::sync::OnceLock;
+use std::sync::atomic::AtomicBool;
+
+const RES: u32 = 16;
+const DEPTH: u32 = 5;
+
+/// Image means of `k` renders of a pixel-driven integrator.
+fn mc_reps(scene: &Scene, integ: &dyn Integrator, spp: u32, k: u64, seed0: u64) -> Vec<[f64; 3]> {
+    (0..k)
+        .map(|s| image_mean(&render_image(scene, integ, spp, seed0 + s)))
+        .collect()
+}
+
+/// Which Metropolis estimator.
+#[derive(Clone, Copy, Debug)]
+enum Mlt {
+    PssmltPt,
+    PssmltBdpt,
+    Mmlt,
+}
+
+/// A replicate budget: bootstrap candidates (per member), chains,
+/// mutations per pixel.
+#[derive(Clone, Copy, Debug)]
+struct Budget {
+    bootstrap: usize,
+    chains: usize,
+    mpp: u64,
+}
+
+/// Image means of `k` independent runs of `kind`.
+fn mlt_reps(scene: &Scene, kind: Mlt, budget: Budget, k: u64, seed0: u64) -> Vec<[f64; 3]> {
+    let stop = AtomicBool::new(false);
+    (0..k)
+        .map(|s| {
+            let settings = PssmltSettings {
+                bootstrap: budget.bootstrap,
+                chains: budget.chains,
+                mutations_per_pixel: Some(budget.mpp),
+                seed: seed0 + s,
+                // b from the bootstrap and every large step: the large steps
+                // outnumber a small bootstrap, so b's variance falls with
+                // the mutations.
+                normalization: Normalization::Running,
+                ..PssmltSettings::default()
+            };
+            let r = match kind {
+                Mlt::PssmltPt => {
+                    render_pssmlt(scene, pt_of(scene), &settings, &stop, &NoMltObserver)
+                }
+                Mlt::PssmltBdpt => {
+                    render_pssmlt(scene, bdpt_of(scene), &settings, &stop, &NoMltObserver)
+                }
+                Mlt::Mmlt => {
+                    render_family(scene, mmlt_depths(scene), &settings, &stop, &NoMltObserver)
+                }
+            }
+            .expect("mlt runs");
+            assert_eq!(r.chain_stats.invalid_density, 0, "{kind:?}: NaN/inf paths");
+            image_mean(&r.image())
+        })
+        .collect()
+}
+
+/// Asserts agreement within 4σ and 1%, with 5σ < 1%.
+fn check(what: &str, pt: &[[f64; 3]], test: &[[f64; 3]]) {
+    check_to(what, pt, test, 0.01);
+}
+
+/// Asserts agreement within 4σ and `bound` (relative), with 5σ < `bound`.
+fn check_to(what: &str, pt: &[[f64; 3]], test: &[[f64; 3]], bound: f64) {
+    let a = MeanAgreement::new(pt, test);
+    eprintln!("{what}: rel {:?}\n  {a:?}", a.rel());
+    assert!(
+        a.failures(4.0, bound).is_empty(),
+        "{what} disagrees with PT: {a:?}"
+    );
+    assert!(
+        a.resolves(5.0, bound),
+        "{what}: noise too large for {bound}: {a:?}"
+    );
+}
+
+/// The tilted box.
+fn cornell() -> &'static Scene {
+    static SCENE: OnceLock<Scene> = OnceLock::new();
+    SCENE.get_or_init(|| repo_scene_tilted("cornell-box.xml", RES, DEPTH))
+}
+
+/// PT replicates of the tilted box, shared by the tests: 48 × 256 spp
+/// (measured per-replicate spread 0.7% per channel, so SE ≈ 0.1%).
+fn pt_reference() -> &'static [[f64; 3]] {
+    static PT: OnceLock<Vec<[f64; 3]>> = OnceLock::new();
+    PT.get_or_init(|| mc_reps(cornell(), &pt_of(cornell()), 256, 48, 1000))
+}
+
+/// MMLT replicates, shared by the agreement test and the control: 32 runs
+/// of 5000 bootstrap candidates per depth (the running normalisation adds
+/// ~3e5 large steps), 1024 chains of ~1000 mutations. Measured
+/// per-replicate spread 0.5–1.0% per channel (blue the largest).
+fn mmlt_reps() -> &'static [[f64; 3]] {
+    static MMLT: OnceLock<Vec<[f64; 3]>> = OnceLock::new();
+    let budget = Budget {
+        bootstrap: 5000,
+        chains: 1024,
+        mpp: 4096,
+    };
+    MMLT.get_or_init(|| mlt_reps(cornell(), Mlt::Mmlt, budget, 32, 4000))
+}
+
+#[test]
+fn bdpt_agrees_with_pt_on_the_cornell_box() {
+    // Per-replicate spread 0.65% at 128 spp; 24 replicates.
+    let bdpt = mc_reps(cornell(), &bdpt_of(cornell()), 128, 24, 2000);
+    check("bdpt", pt_reference(), &bdpt);
+}
+
+#[test]
+fn pssmlt_agrees_with_pt_on_the_cornell_box() {
+    // Over PT; per-replicate spread 0.4–0.8% (blue the largest) at ~2.6e5
+    // mutations; 24 replicates.
+    let budget = Budget {
+        bootstrap: 50_000,
+        chains: 512,
+        mpp: 1024,
+    };
+    let pss = mlt_reps(cornell(), Mlt::PssmltPt, budget, 24, 3000);
+    check("pssmlt-pt", pt_reference(), &pss);
+}
+
+#[test]
+fn pssmlt_over_bdpt_agrees_with_pt_on_the_cornell_box() {
+    // All techniques of one BDPT sample per state; per-replicate spread
+    // 0.4–0.8% at ~2.6e5 mutations; 16 replicates.
+    let budget = Budget {
+        bootstrap: 50_000,
+        chains: 512,
+        mpp: 1024,
+    };
+    let pss = mlt_reps(cornell(), Mlt::PssmltBdpt, budget, 16, 6000);
+    check("pssmlt-bdpt", pt_reference(), &pss);
+}
+
+#[test]
+fn mmlt_agrees_with_pt_on_the_cornell_box() {
+    check("mmlt", pt_reference(), mmlt_reps());
+}
+
+#[test]
+fn a_one_percent_bias_is_rejected() {
+    // The same check on a deliberately biased estimator: the MMLT
+    // replicates (the noisiest estimator above) scaled by 1.01 must fail
+    // against PT.
+    let biased: Vec<[f64; 3]> = mmlt_reps().iter().map(|m| m.map(|v| v * 1.01)).collect();
+    let a = MeanAgreement::new(pt_reference(), &biased);
+    eprintln!("mmlt x1.01: rel {:?}\n  {a:?}", a.rel());
+    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
+    assert!(
+        !a.failures(4.0, 0.01).is_empty(),
+        "a 1% bias passed the check: {a:?}"
+    );
+}
+
+/// The tilted glossy-glass box and its PT replicates: 64 × 1024 spp
+/// (per-replicate spread 1.5% at 256 spp, so SE ≈ 0.1%).
+fn glossy() -> (Scene, Vec<[f64; 3]>) {
+    let scene = repo_scene_tilted("cornell-glossy-glass.xml", RES, DEPTH);
+    let pt = mc_reps(&scene, &pt_of(&scene), 1024, 64, 1000);
+    (scene, pt)
+}
+
+#[test]
+#[ignore = "minutes: BDPT and PSSMLT to 1% on the glossy-glass box"]
+fn bdpt_and_pssmlt_agree_with_pt_on_the_glossy_glass_box() {
+    // Measured: BDPT +0.06%, PSSMLT over BDPT
+    // +0.2% per channel, SE of the difference 0.13–0.19%.
+    let (scene, pt) = glossy();
+    check(
+        "bdpt",
+        &pt,
+        &mc_reps(&scene, &bdpt_of(&scene), 512, 64, 2000),
+    );
+    let pss = Budget {
+        bootstrap: 100_000,
+        chains: 1024,
+        mpp: 1024,
+    };
+    check(
+        "pssmlt-bdpt",
+        &pt,
+        &mlt_reps(&scene, Mlt::PssmltBdpt, pss, 24, 3000),
+    );
+}
+
+#[test]
+#[ignore = "minutes: MMLT to 3% on the glossy-glass box"]
+fn mmlt_agrees_with_pt_on_the_glossy_glass_box() {
+    // 48 replicates of 2e4 bootstrap candidates per depth, 1024 chains,
+    // 16384 mutations per pixel measured
+    // +0.25%, +0.12%, −0.14% with SE of the difference 0.28%, 0.32%,
+    // 0.52%: the blue channel's per-replicate spread (3.6%) allows 3%
+    // at 5σ. Resolving 1% would take ~7× this budget (~45 min).
+    let (scene, pt) = glossy();
+    let mmlt = Budget {
+        bootstrap: 20_000,
+        chains: 1024,
+        mpp: 16_384,
+    };
+    check_to(
+        "mmlt",
+        &pt,
+        &mlt_reps(&scene, Mlt::Mmlt, mmlt, 48, 4000),
+        0.03,
+    );
+}

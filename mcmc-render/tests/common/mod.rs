@@ -1,0 +1,335 @@
+//! Support shared by the integration tests: the repo's scenes at test
+//! resolution, integrators configured from a scene, renders, image means,
+//! replicate statistics and the relMSE of two images.
+//!
+//! Each test binary compiles this module on its own and uses part of it.
+#![allow(dead_code)]
+
+use mcmc_render::color::Rgb;
+use mcmc_render::integrators::Integrator;
+use mcmc_render::integrators::bdpt::{Bdpt, MisHeuristic};
+use mcmc_render::integrators::lt::LightTracer;
+use mcmc_render::integrators::pt::PathTracer;
+use mcmc_render::pss::MmltDepth;
+use mcmc_render::render::{NoObserver, RenderSettings, render};
+use mcmc_render::scene::Scene;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+
+/// Path of a scene file in the repository's `scenes/` directory.
+pub fn repo_scene_path(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenes")
+        .join(name)
+}
+
+/// A repo scene (`cornell-box.xml`, `cornell-glossy-glass.xml`, …) loaded
+/// unchanged except for its `$width`/`$height` defaults (the `-D`
+/// overrides of the CLI), set to `res`×`res`.
+pub fn repo_scene(name: &str, res: u32) -> Scene {
+    let mut defines = HashMap::new();
+    defines.insert("width".to_string(), res.to_string());
+    defines.insert("height".to_string(), res.to_string());
+    let scene = Scene::load(&repo_scene_path(name), &defines).expect("repo scene loads");
+    assert_eq!(
+        (scene.film.width, scene.film.height),
+        (res, res),
+        "resolution override ignored"
+    );
+    scene
+}
+
+/// The text of a repo scene at `res`×`res` and `max_depth` (its
+/// `$width`, `$height` and `$max_depth` defaults) with the camera tilted
+/// down (target y = −1.1) so that the emitter is out of view. Pixels that
+/// see the emitter (radiance 18 on a strip thinner than a pixel at test
+/// resolutions) make the image mean's noise ~10× larger for every
+/// integrator alike; for PSSMLT and MMLT they dominate the variance of
+/// `b`. The emitter seen directly is one camera segment: PT's first hit,
+/// BDPT's technique (0, 2), MMLT's depth 1.
+pub fn repo_scene_tilted_text(name: &str, res: u32, max_depth: u32) -> String {
+    let text = std::fs::read_to_string(repo_scene_path(name)).expect("scene file");
+    let mut out = text.replace(r#"target="0, 0, 0""#, r#"target="0, -1.1, 0""#);
+    assert_ne!(out, text, "camera target not found");
+    for (key, from, to) in [
+        ("width", 256, res),
+        ("height", 256, res),
+        ("max_depth", 8, max_depth),
+    ] {
+        let before = out.clone();
+        out = out.replace(
+            &format!(r#"<default name="{key}" value="{from}"/>"#),
+            &format!(r#"<default name="{key}" value="{to}"/>"#),
+        );
+        assert!(out != before || from == to, "default {key} not found");
+    }
+    out
+}
+
+/// [`repo_scene_tilted_text`], loaded.
+pub fn repo_scene_tilted(name: &str, res: u32, max_depth: u32) -> Scene {
+    let scene = load_str(&repo_scene_tilted_text(name, res, max_depth));
+    assert_eq!(scene.integrator.max_depth, max_depth);
+    scene
+}
+
+/// Loads a scene from XML text (no external files).
+pub fn load_str(text: &str) -> Scene {
+    Scene::load_str(text, Path::new("test.xml"), Path::new(".")).expect("scene loads")
+}
+
+/// The path tracer with the scene's depth settings.
+pub fn pt_of(scene: &Scene) -> PathTracer {
+    PathTracer {
+        max_depth: scene.integrator.max_depth,
+        rr_depth: scene.integrator.rr_depth,
+    }
+}
+
+/// The light tracer with the scene's depth settings.
+pub fn lt_of(scene: &Scene) -> LightTracer {
+    LightTracer {
+        max_depth: scene.integrator.max_depth,
+        rr_depth: scene.integrator.rr_depth,
+    }
+}
+
+/// BDPT (power heuristic) with the scene's depth settings.
+pub fn bdpt_of(scene: &Scene) -> Bdpt {
+    Bdpt {
+        max_depth: scene.integrator.max_depth,
+        rr_depth: scene.integrator.rr_depth,
+        heuristic: MisHeuristic::Power,
+    }
+}
+
+/// MMLT's family: one BDPT target per path depth `1..=max_depth`.
+pub fn mmlt_depths(scene: &Scene) -> Vec<MmltDepth> {
+    (1..=scene.integrator.max_depth as usize)
+        .map(|depth| MmltDepth {
+            bdpt: bdpt_of(scene),
+            depth,
+        })
+        .collect()
+}
+
+/// Renders `spp` samples per pixel (light paths per pixel for light
+/// tracing) with `seed` on the current rayon pool; asserts that the whole
+/// budget ran and that no contribution was non-finite.
+pub fn render_image(scene: &Scene, integ: &dyn Integrator, spp: u32, seed: u64) -> Vec<Rgb> {
+    let settings = RenderSettings {
+        spp: Some(spp),
+        time_budget: None,
+        seed,
+    };
+    let stop = AtomicBool::new(false);
+    let r = render(scene, integ, &settings, &stop, &NoObserver);
+    assert_eq!(r.spp_done, spp as u64);
+    assert_eq!(
+        r.stats.nonfinite,
+        0,
+        "{}: non-finite contributions",
+        integ.name()
+    );
+    r.image()
+}
+
+/// Per-channel image mean.
+pub fn image_mean(img: &[Rgb]) -> [f64; 3] {
+    masked_mean(img, None)
+}
+
+/// Per-channel mean over the pixels where `mask` is true (all pixels
+/// without a mask).
+pub fn masked_mean(img: &[Rgb], mask: Option<&[bool]>) -> [f64; 3] {
+    let mut m = [0.0f64; 3];
+    let mut n = 0usize;
+    for (i, p) in img.iter().enumerate() {
+        if mask.is_some_and(|m| !m[i]) {
+            continue;
+        }
+        n += 1;
+        m[0] += p.r as f64;
+        m[1] += p.g as f64;
+        m[2] += p.b as f64;
+    }
+    m.map(|v| v / n.max(1) as f64)
+}
+
+/// Mean and standard error of the mean (sample sd / √k) of `k` independent
+/// replicates, per channel.
+pub fn mean_se<const N: usize>(reps: &[[f64; N]]) -> ([f64; N], [f64; N]) {
+    let k = reps.len() as f64;
+    assert!(reps.len() >= 2, "need at least two replicates");
+    let mut mean = [0.0; N];
+    let mut se = [0.0; N];
+    for c in 0..N {
+        let m = reps.iter().map(|v| v[c]).sum::<f64>() / k;
+        let var = reps.iter().map(|v| (v[c] - m).powi(2)).sum::<f64>() / (k - 1.0);
+        mean[c] = m;
+        se[c] = (var / k).sqrt();
+    }
+    (mean, se)
+}
+
+/// Mean and standard error of scalar replicates.
+pub fn mean_se1(reps: &[f64]) -> (f64, f64) {
+    let v: Vec<[f64; 1]> = reps.iter().map(|&x| [x]).collect();
+    let (m, s) = mean_se(&v);
+    (m[0], s[0])
+}
+
+/// Per-pixel luminance.
+pub fn luminance(img: &[Rgb]) -> Vec<f64> {
+    img.iter().map(|p| p.luminance() as f64).collect()
+}
+
+/// relMSE weights `1 / (r² + 0.01)` for a fixed reference luminance `r`
+/// (the metric of `mcmc-render compare`, with the reference in the
+/// denominator replaced by a fixed, noise-free-enough image so that the
+/// weights do not depend on the images compared).
+pub fn rel_weights(reference: &[f64]) -> Vec<f64> {
+    reference.iter().map(|r| 1.0 / (r * r + 0.01)).collect()
+}
+
+/// `Σ_p w_p (a_p − b_p)² / #mask` over the pixels of `mask` (all without):
+/// the relMSE of luminance images `a` and `b` with fixed weights `w`.
+pub fn rel_mse_weighted(a: &[f64], b: &[f64], w: &[f64], mask: Option<&[bool]>) -> f64 {
+    let mut s = 0.0;
+    let mut n = 0usize;
+    for i in 0..a.len() {
+        if mask.is_some_and(|m| !m[i]) {
+            continue;
+        }
+        s += w[i] * (a[i] - b[i]).powi(2);
+        n += 1;
+    }
+    s / n.max(1) as f64
+}
+
+/// Per-pixel mean of luminance images.
+pub fn pixel_mean(images: &[Vec<f64>]) -> Vec<f64> {
+    let n = images[0].len();
+    let k = images.len() as f64;
+    (0..n)
+        .map(|i| images.iter().map(|im| im[i]).sum::<f64>() / k)
+        .collect()
+}
+
+/// What a pixel's reconstruction filter may see directly through the camera.
+#[derive(Clone, Debug)]
+pub struct DirectView {
+    /// Some camera ray inside the pixel's filter footprint hits a delta
+    /// (smooth specular) surface first.
+    pub delta: Vec<bool>,
+    /// Some camera ray inside the pixel's filter footprint hits an emitter first.
+    pub emitter: Vec<bool>,
+}
+
+impl DirectView {
+    /// Pixels whose footprint sees neither a delta surface nor an emitter.
+    pub fn plain(&self) -> Vec<bool> {
+        self.delta
+            .iter()
+            .zip(&self.emitter)
+            .map(|(&d, &e)| !d && !e)
+            .collect()
+    }
+
+    /// Pixels whose footprint sees no delta surface.
+    pub fn no_delta(&self) -> Vec<bool> {
+        self.delta.iter().map(|&d| !d).collect()
+    }
+}
+
+/// Classifies pixels by tracing primary rays on a grid of `n`×`n` per
+/// pixel: a hit at raster position `q` marks every pixel whose filter
+/// reaches `q` (the film's footprint rule), grown by one pixel so that a
+/// surface slipping between grid rays is still caught. Conservative by
+/// design: marking too many pixels only shrinks the compared set.
+pub fn direct_view(scene: &Scene, n: u32) -> DirectView {
+    let (w, h) = (scene.film.width, scene.film.height);
+    let filter = mcmc_render::film::Filter::new(scene.film.filter, w, h);
+    let reach = filter.radius() + 1.0;
+    let mut delta = vec![false; (w * h) as usize];
+    let mut emitter = vec![false; (w * h) as usize];
+    for y in 0..h * n {
+        for x in 0..w * n {
+            let q = glam::Vec2::new((x as f32 + 0.5) / n as f32, (y as f32 + 0.5) / n as f32);
+            let Some(its) = scene.intersect(&scene.camera.generate_ray(q)) else {
+                continue;
+            };
+            let shape = its.sp.shape;
+            let is_delta = scene.bsdf(shape).is_delta();
+            let is_emitter = scene.shapes[shape as usize].light.is_some();
+            if !is_delta && !is_emitter {
+                continue;
+            }
+            // Pixel centres (i + 0.5) within `reach` of q.
+            let x0 = (q.x - 0.5 - reach).ceil().max(0.0) as u32;
+            let x1 = ((q.x - 0.5 + reach).floor().max(-1.0) as i64).min(w as i64 - 1);
+            let y0 = (q.y - 0.5 - reach).ceil().max(0.0) as u32;
+            let y1 = ((q.y - 0.5 + reach).floor().max(-1.0) as i64).min(h as i64 - 1);
+            for py in y0 as i64..=y1 {
+                for px in x0 as i64..=x1 {
+                    let i = (py as u32 * w + px as u32) as usize;
+                    delta[i] |= is_delta;
+                    emitter[i] |= is_emitter;
+                }
+            }
+        }
+    }
+    DirectView { delta, emitter }
+}
+
+/// Per-channel agreement of two estimators' image means, each known from
+/// independent replicates: the standard error of the difference is
+/// `σ = √(se_ref² + se_test²)`.
+#[derive(Debug)]
+pub struct MeanAgreement {
+    /// Mean of the reference replicates.
+    pub reference: [f64; 3],
+    /// Mean of the tested replicates.
+    pub test: [f64; 3],
+    /// Standard errors of the two means.
+    pub se: ([f64; 3], [f64; 3]),
+    /// Standard error of the difference.
+    pub sigma: [f64; 3],
+}
+
+impl MeanAgreement {
+    /// From replicate image means.
+    pub fn new(reference: &[[f64; 3]], test: &[[f64; 3]]) -> MeanAgreement {
+        let (mr, sr) = mean_se(reference);
+        let (mt, st) = mean_se(test);
+        MeanAgreement {
+            reference: mr,
+            test: mt,
+            se: (sr, st),
+            sigma: [0, 1, 2].map(|c| (sr[c] * sr[c] + st[c] * st[c]).sqrt()),
+        }
+    }
+
+    /// Relative difference per channel.
+    pub fn rel(&self) -> [f64; 3] {
+        [0, 1, 2].map(|c| (self.test[c] - self.reference[c]) / self.reference[c])
+    }
+
+    /// Channels that fail: the difference outside `z`σ or outside `bound`
+    /// (relative).
+    pub fn failures(&self, z: f64, bound: f64) -> Vec<usize> {
+        (0..3)
+            .filter(|&c| {
+                let d = self.test[c] - self.reference[c];
+                d.abs() >= z * self.sigma[c] || d.abs() >= bound * self.reference[c]
+            })
+            .collect()
+    }
+
+    /// `zσ < bound` (relative) on every channel: a discrepancy of `bound`
+    /// lies at least `z` standard errors out.
+    pub fn resolves(&self, z: f64, bound: f64) -> bool {
+        (0..3).all(|c| z * self.sigma[c] < bound * self.reference[c])
+    }
+}
