@@ -27,6 +27,8 @@ pub struct Filter {
     radius: f32,
     alpha: f32,
     bias: f32,
+    /// `e^{2α}`, the ratio step of [`Film`]'s weight recurrence.
+    exp_2alpha: f32,
     /// `Z` per column: ∫ over the image width of f(x_col − q).
     norm_x: Vec<f32>,
     /// `Z` per row.
@@ -49,6 +51,7 @@ impl Filter {
             radius,
             alpha,
             bias,
+            exp_2alpha: (2.0 * alpha).exp(),
             norm_x: Vec::new(),
             norm_y: Vec::new(),
         };
@@ -196,8 +199,25 @@ impl Film {
     /// (at most 16 pixels: the support of a filter of radius ≤ 7.5).
     fn weights(&self, lo: u32, hi: u32, p: f32, out: &mut [f32; 16]) -> usize {
         let n = ((hi - lo + 1) as usize).min(16);
-        for (k, w) in out.iter_mut().take(n).enumerate() {
-            *w = self.filter.eval_1d((lo + k as u32) as f32 + 0.5 - p);
+        let f = &*self.filter;
+        let x0 = lo as f32 + 0.5 - p;
+        if let FilterKind::Gaussian { .. } = f.kind {
+            // e^{α(x0+k)²} for k = 0, 1, … by the recurrence
+            // g_{k+1} = g_k·q_k, q_k = e^{α(2(x0+k)+1)}, q_{k+1} = q_k·e^{2α}:
+            // two exponentials per axis instead of one per pixel (the
+            // exponentials were a fifth of the cost of a camera sample).
+            // The recurrence's relative error stays near n·2⁻²⁴ ≈ 1e-6.
+            let mut g = (f.alpha * x0 * x0).exp();
+            let mut q = (f.alpha * (2.0 * x0 + 1.0)).exp();
+            for w in out.iter_mut().take(n) {
+                *w = (g - f.bias).max(0.0);
+                g *= q;
+                q *= f.exp_2alpha;
+            }
+        } else {
+            for (k, w) in out.iter_mut().take(n).enumerate() {
+                *w = f.eval_1d((lo + k as u32) as f32 + 0.5 - p);
+            }
         }
         n
     }
