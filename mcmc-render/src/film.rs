@@ -17,8 +17,25 @@
 
 use crate::color::Rgb;
 use crate::scene::FilterKind;
-use glam::Vec2;
+use glam::{Vec2, Vec4};
 use std::sync::Arc;
+
+/// `x.floor()` for the footprint computation without a libm call (x86-64
+/// has no rounding instruction before SSE4.1). Outside the `i32` range the
+/// result is wrong but still far outside any film, which the caller's
+/// clamping turns into an empty footprint, as the exact value would.
+#[inline(always)]
+fn fast_floor(x: f32) -> f32 {
+    let f = x as i32 as f32;
+    if f > x { f - 1.0 } else { f }
+}
+
+/// `x.ceil()`, as [`fast_floor`].
+#[inline(always)]
+fn fast_ceil(x: f32) -> f32 {
+    let f = x as i32 as f32;
+    if f < x { f + 1.0 } else { f }
+}
 
 /// A separable reconstruction filter with its border normalisation.
 #[derive(Clone, Debug)]
@@ -185,10 +202,10 @@ impl Film {
     /// Pixel range the filter at `p` reaches, clipped to this film.
     fn footprint(&self, p: Vec2) -> Option<(u32, u32, u32, u32)> {
         let r = self.filter.radius();
-        let lo_x = (p.x - 0.5 - r).ceil().max(self.x0 as f32);
-        let lo_y = (p.y - 0.5 - r).ceil().max(self.y0 as f32);
-        let hi_x = (p.x - 0.5 + r).floor().min((self.x0 + self.w) as f32 - 1.0);
-        let hi_y = (p.y - 0.5 + r).floor().min((self.y0 + self.h) as f32 - 1.0);
+        let lo_x = fast_ceil(p.x - 0.5 - r).max(self.x0 as f32);
+        let lo_y = fast_ceil(p.y - 0.5 - r).max(self.y0 as f32);
+        let hi_x = fast_floor(p.x - 0.5 + r).min((self.x0 + self.w) as f32 - 1.0);
+        let hi_y = fast_floor(p.y - 0.5 + r).min((self.y0 + self.h) as f32 - 1.0);
         if !(lo_x <= hi_x && lo_y <= hi_y) {
             return None;
         }
@@ -237,21 +254,19 @@ impl Film {
         let (mut wx, mut wy) = ([0.0f32; 16], [0.0f32; 16]);
         let nx = self.weights(x0, x1, p.x, &mut wx);
         let ny = self.weights(y0, y1, p.y, &mut wy);
-        for (ky, &wy) in wy.iter().take(ny).enumerate() {
+        let stride = self.w as usize;
+        let first = (y0 - self.y0) as usize * stride + (x0 - self.x0) as usize;
+        // Rows of the footprint as slices (one bounds check per row); zero
+        // weights add nothing, so the inner loop needs no test.
+        // One 4-wide multiply-add per pixel: (Σ f·L, Σ f) += f·(L, 1).
+        let value = Vec4::new(l.r, l.g, l.b, 1.0);
+        for (ky, &wy) in wy[..ny].iter().enumerate() {
             if wy == 0.0 {
                 continue;
             }
-            let row = ((y0 + ky as u32 - self.y0) * self.w + (x0 - self.x0)) as usize;
-            for (kx, &wx) in wx.iter().take(nx).enumerate() {
-                let w = wy * wx;
-                if w == 0.0 {
-                    continue;
-                }
-                let px = &mut self.samples[row + kx];
-                px[0] += w * l.r;
-                px[1] += w * l.g;
-                px[2] += w * l.b;
-                px[3] += w;
+            let row = first + ky * stride;
+            for (px, &wx) in self.samples[row..row + nx].iter_mut().zip(&wx[..nx]) {
+                *px = (Vec4::from_array(*px) + value * (wy * wx)).to_array();
             }
         }
     }

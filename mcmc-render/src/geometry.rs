@@ -10,7 +10,7 @@
 mod bvh4;
 
 use bvh4::Bvh4;
-use glam::{Mat4, Vec3};
+use glam::{Mat4, Vec3, Vec3A};
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
 use std::time::{Duration, Instant};
@@ -91,10 +91,12 @@ fn ulp_step(x: f32, dir: f32) -> f32 {
 /// One primitive as stored in BVH order.
 #[derive(Clone, Copy, Debug)]
 enum Prim {
+    /// Vertices in SIMD vectors (the test then needs about half the
+    /// instructions of the scalar form); 64 bytes, one cache line.
     Triangle {
-        v0: Vec3,
-        e1: Vec3,
-        e2: Vec3,
+        v0: Vec3A,
+        e1: Vec3A,
+        e2: Vec3A,
         shape: u32,
         /// Index of the triangle in its mesh.
         tri: u32,
@@ -247,9 +249,9 @@ impl Geometry {
                         bb.extend(b.into()).extend(c.into());
                         aabbs.push(bb);
                         prims.push(Prim::Triangle {
-                            v0: a,
-                            e1: b - a,
-                            e2: c - a,
+                            v0: a.into(),
+                            e1: (b - a).into(),
+                            e2: (c - a).into(),
                             shape: s,
                             tri: i as u32,
                         });
@@ -329,8 +331,8 @@ impl Geometry {
     fn intersect_prim(
         &self,
         prim: &Prim,
-        o: Vec3,
-        d: Vec3,
+        o: Vec3A,
+        d: Vec3A,
         tmin: f32,
         tmax: f32,
     ) -> (f32, f32, f32) {
@@ -367,6 +369,7 @@ impl Geometry {
                 }
             }
             Prim::Sphere { center, radius, .. } => {
+                let (o, d) = (Vec3::from(o), Vec3::from(d));
                 // In f64: `o − center` loses all precision of a small sphere
                 // far from the origin in f32, and a spawned ray could then
                 // find its own surface again. The Hearn–Baker discriminant
@@ -400,8 +403,8 @@ impl Geometry {
                 let Surface::Disk { to_local, .. } = &self.shapes[shape as usize].surface else {
                     return MISS;
                 };
-                let lo = to_local.transform_point3(o);
-                let ld = to_local.transform_vector3(d);
+                let lo = to_local.transform_point3(o.into());
+                let ld = to_local.transform_vector3(d.into());
                 if ld.z == 0.0 {
                     return MISS;
                 }
@@ -422,9 +425,10 @@ impl Geometry {
     /// Closest hit along `ray`, if any.
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
         let (o, d, tmin) = (ray.o, ray.d, ray.tmin);
+        let (oa, da) = (Vec3A::from(o), Vec3A::from(d));
         let mut uv = (0.0, 0.0);
         let (prim, t) = self.bvh.closest(o, d, tmin, ray.tmax, |id, tmax| {
-            let (t, u, v) = self.intersect_prim(&self.prims[id], o, d, tmin, tmax);
+            let (t, u, v) = self.intersect_prim(&self.prims[id], oa, da, tmin, tmax);
             // The traversal keeps the last accepted hit, so `uv` is its.
             (t < tmax).then(|| {
                 uv = (u, v);
@@ -442,8 +446,9 @@ impl Geometry {
     /// True when something blocks `ray` strictly before `ray.tmax`.
     pub fn occluded(&self, ray: &Ray) -> bool {
         let (o, d, tmin, tmax) = (ray.o, ray.d, ray.tmin, ray.tmax);
+        let (oa, da) = (Vec3A::from(o), Vec3A::from(d));
         self.bvh.any(o, d, tmin, tmax, |id| {
-            self.intersect_prim(&self.prims[id], o, d, tmin, tmax).0 < tmax
+            self.intersect_prim(&self.prims[id], oa, da, tmin, tmax).0 < tmax
         })
     }
 

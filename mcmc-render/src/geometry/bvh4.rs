@@ -16,7 +16,7 @@
 //! ray really crosses, and zero direction components are replaced by a tiny
 //! value of the same sign so no `0 · ∞ = NaN` can arise.
 
-use glam::{Vec3, Vec4};
+use glam::{Vec3, Vec3A, Vec4};
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::Bvh2;
@@ -144,22 +144,21 @@ struct BoxRay {
 impl BoxRay {
     #[inline(always)]
     fn new(o: Vec3, d: Vec3) -> BoxRay {
-        let mut inv = [Vec4::ZERO; 3];
-        let mut near = [0usize; 3];
-        for axis in 0..3 {
-            // A zero component would give 0·∞ = NaN on a box face through the
-            // origin; a tiny same-signed value gives the right ±huge slabs.
-            let mut c = d[axis];
-            if c.abs() < 1e-30 {
-                c = 1e-30f32.copysign(c);
-            }
-            inv[axis] = Vec4::splat(1.0 / c);
-            near[axis] = usize::from(c < 0.0);
-        }
+        // A zero component would give 0·∞ = NaN on a box face through the
+        // origin; a tiny same-signed value gives the right ±huge slabs.
+        let d = Vec3A::from(d);
+        let tiny = Vec3A::splat(1e-30);
+        let d = Vec3A::select(d.abs().cmplt(tiny), tiny.copysign(d), d);
+        // One SIMD division for the three reciprocals.
+        let inv = Vec3A::ONE / d;
         BoxRay {
             o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
-            inv,
-            near,
+            inv: [Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z)],
+            near: [
+                usize::from(d.x < 0.0),
+                usize::from(d.y < 0.0),
+                usize::from(d.z < 0.0),
+            ],
         }
     }
 
