@@ -8,12 +8,14 @@
 //! geometric normal just past that bound ([`offset_ray_origin`]).
 
 mod bvh4;
+mod tri_pack;
 
 use bvh4::Bvh4;
 use glam::{Mat4, Vec3, Vec3A};
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
 use std::time::{Duration, Instant};
+use tri_pack::{Ray4, TriPack};
 
 /// A ray with origin, unit direction and a maximum distance.
 #[derive(Clone, Copy, Debug)]
@@ -87,6 +89,9 @@ fn ulp_step(x: f32, dir: f32) -> f32 {
     let away = (bits >> 31) == (dir.to_bits() >> 31);
     f32::from_bits(if away { bits + 1 } else { bits - 1 })
 }
+
+/// `Geometry::leaf_pack` entry of a leaf without a triangle pack.
+const NO_PACK: u32 = u32::MAX;
 
 /// One primitive as stored in BVH order.
 #[derive(Clone, Copy, Debug)]
@@ -226,6 +231,11 @@ pub struct Geometry {
     /// non-meshes): computed once instead of a square root and a division
     /// at every hit.
     face_normals: Vec<Vec<Vec3>>,
+    /// Triangles of the leaves made only of (at most four) triangles.
+    packs: Vec<TriPack>,
+    /// Index into `packs` of the leaf starting at each primitive index
+    /// (`NO_PACK`: the leaf is tested primitive by primitive).
+    leaf_pack: Vec<u32>,
     /// Wall-clock time of the BVH build.
     pub build_time: Duration,
     /// Total triangle count.
@@ -307,11 +317,30 @@ impl Geometry {
                 _ => Vec::new(),
             })
             .collect();
+        let mut packs = Vec::new();
+        let mut leaf_pack = vec![NO_PACK; prims.len()];
+        for leaf in bvh.leaves() {
+            let tris: Option<Vec<(Vec3, Vec3, Vec3)>> = prims[leaf.clone()]
+                .iter()
+                .map(|p| match *p {
+                    Prim::Triangle { v0, e1, e2, .. } => Some((v0.into(), e1.into(), e2.into())),
+                    _ => None,
+                })
+                .collect();
+            if let Some(tris) = tris
+                && tris.len() <= tri_pack::LANES
+            {
+                leaf_pack[leaf.start] = packs.len() as u32;
+                packs.push(TriPack::new(&tris));
+            }
+        }
         Geometry {
             shapes,
             prims,
             bvh,
             face_normals,
+            packs,
+            leaf_pack,
             build_time: start.elapsed(),
             triangles,
         }
@@ -319,7 +348,10 @@ impl Geometry {
 
     /// Bytes used by the BVH nodes, the primitive array and the index array.
     pub fn bvh_bytes(&self) -> usize {
-        self.bvh.bytes() + std::mem::size_of_val(self.prims.as_slice())
+        self.bvh.bytes()
+            + std::mem::size_of_val(self.prims.as_slice())
+            + std::mem::size_of_val(self.packs.as_slice())
+            + std::mem::size_of_val(self.leaf_pack.as_slice())
     }
 
     /// Number of primitives in the BVH.
@@ -426,14 +458,27 @@ impl Geometry {
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
         let (o, d, tmin) = (ray.o, ray.d, ray.tmin);
         let (oa, da) = (Vec3A::from(o), Vec3A::from(d));
+        let ray4 = Ray4::new(o, d);
         let mut uv = (0.0, 0.0);
-        let (prim, t) = self.bvh.closest(o, d, tmin, ray.tmax, |id, tmax| {
-            let (t, u, v) = self.intersect_prim(&self.prims[id], oa, da, tmin, tmax);
-            // The traversal keeps the last accepted hit, so `uv` is its.
-            (t < tmax).then(|| {
+        let (prim, t) = self.bvh.closest(o, d, tmin, ray.tmax, |leaf, tmax| {
+            // The traversal keeps the last hit returned, so `uv` is its.
+            let pack = self.leaf_pack[leaf.start];
+            if pack != NO_PACK {
+                let (lane, t, u, v) = self.packs[pack as usize].intersect(&ray4, tmin, tmax)?;
                 uv = (u, v);
-                t
-            })
+                return Some((leaf.start + lane, t));
+            }
+            let mut best = None;
+            let mut tmax = tmax;
+            for id in leaf {
+                let (t, u, v) = self.intersect_prim(&self.prims[id], oa, da, tmin, tmax);
+                if t < tmax {
+                    tmax = t;
+                    uv = (u, v);
+                    best = Some((id, t));
+                }
+            }
+            best
         })?;
         Some(Hit {
             t,
@@ -447,8 +492,14 @@ impl Geometry {
     pub fn occluded(&self, ray: &Ray) -> bool {
         let (o, d, tmin, tmax) = (ray.o, ray.d, ray.tmin, ray.tmax);
         let (oa, da) = (Vec3A::from(o), Vec3A::from(d));
-        self.bvh.any(o, d, tmin, tmax, |id| {
-            self.intersect_prim(&self.prims[id], oa, da, tmin, tmax).0 < tmax
+        let ray4 = Ray4::new(o, d);
+        self.bvh.any(o, d, tmin, tmax, |leaf| {
+            let pack = self.leaf_pack[leaf.start];
+            if pack != NO_PACK {
+                return self.packs[pack as usize].occludes(&ray4, tmin, tmax);
+            }
+            leaf.into_iter()
+                .any(|id| self.intersect_prim(&self.prims[id], oa, da, tmin, tmax).0 < tmax)
         })
     }
 

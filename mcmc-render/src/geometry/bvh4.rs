@@ -235,11 +235,21 @@ impl Bvh4 {
         3 * self.depth < STACK
     }
 
-    /// Closest hit: calls `hit(prim, tmax)` for candidate primitives, which
-    /// returns the hit distance if below `tmax` (else `None`); the interval
-    /// shrinks with every hit. Returns the closest `(prim, t)`.
+    /// Primitive ranges of all leaves.
+    pub fn leaves(&self) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {
+        self.nodes
+            .iter()
+            .flat_map(|n| n.child)
+            .filter(|&c| c != EMPTY && c & LEAF_BIT != 0)
+            .map(leaf_range)
+    }
+
+    /// Closest hit: calls `hit(leaf, tmax)` for candidate leaves (primitive
+    /// ranges), which returns the closest `(prim, t)` of the leaf with `t`
+    /// below `tmax` (else `None`); the interval shrinks with every hit.
+    /// Returns the closest `(prim, t)`.
     #[inline(always)]
-    pub fn closest<F: FnMut(usize, f32) -> Option<f32>>(
+    pub fn closest<F: FnMut(std::ops::Range<usize>, f32) -> Option<(usize, f32)>>(
         &self,
         o: Vec3,
         d: Vec3,
@@ -259,7 +269,10 @@ impl Bvh4 {
     }
 
     #[inline(always)]
-    fn closest_with<S: PushPop<(u32, f32)>, F: FnMut(usize, f32) -> Option<f32>>(
+    fn closest_with<
+        S: PushPop<(u32, f32)>,
+        F: FnMut(std::ops::Range<usize>, f32) -> Option<(usize, f32)>,
+    >(
         &self,
         stack: &mut S,
         o: Vec3,
@@ -274,11 +287,9 @@ impl Bvh4 {
         let mut cur = 0u32;
         loop {
             if cur & LEAF_BIT != 0 {
-                for prim in leaf_range(cur) {
-                    if let Some(t) = hit(prim, tmax) {
-                        tmax = t;
-                        best = Some((prim, t));
-                    }
+                if let Some((prim, t)) = hit(leaf_range(cur), tmax) {
+                    tmax = t;
+                    best = Some((prim, t));
                 }
             } else {
                 let node = &self.nodes[cur as usize];
@@ -323,10 +334,10 @@ impl Bvh4 {
         }
     }
 
-    /// Any hit: true as soon as `blocks(prim)` says a primitive blocks the
-    /// ray within `[tmin, tmax]`.
+    /// Any hit: true as soon as `blocks(leaf)` says a primitive of a leaf
+    /// (primitive range) blocks the ray within `[tmin, tmax]`.
     #[inline(always)]
-    pub fn any<F: FnMut(usize) -> bool>(
+    pub fn any<F: FnMut(std::ops::Range<usize>) -> bool>(
         &self,
         o: Vec3,
         d: Vec3,
@@ -346,7 +357,7 @@ impl Bvh4 {
     }
 
     #[inline(always)]
-    fn any_with<S: PushPop<u32>, F: FnMut(usize) -> bool>(
+    fn any_with<S: PushPop<u32>, F: FnMut(std::ops::Range<usize>) -> bool>(
         &self,
         stack: &mut S,
         o: Vec3,
@@ -359,10 +370,8 @@ impl Bvh4 {
         let mut cur = 0u32;
         loop {
             if cur & LEAF_BIT != 0 {
-                for prim in leaf_range(cur) {
-                    if blocks(prim) {
-                        return true;
-                    }
+                if blocks(leaf_range(cur)) {
+                    return true;
                 }
             } else {
                 let node = &self.nodes[cur as usize];
