@@ -17,8 +17,25 @@
 
 use crate::color::Rgb;
 use crate::scene::FilterKind;
-use glam::Vec2;
+use glam::{Vec2, Vec4};
 use std::sync::Arc;
+
+/// `x.floor()` for the footprint computation without a libm call (x86-64
+/// has no rounding instruction before SSE4.1). Outside the `i32` range the
+/// result is wrong but still far outside any film, which the caller's
+/// clamping turns into an empty footprint, as the exact value would.
+#[inline(always)]
+fn fast_floor(x: f32) -> f32 {
+    let f = x as i32 as f32;
+    if f > x { f - 1.0 } else { f }
+}
+
+/// `x.ceil()`, as [`fast_floor`].
+#[inline(always)]
+fn fast_ceil(x: f32) -> f32 {
+    let f = x as i32 as f32;
+    if f < x { f + 1.0 } else { f }
+}
 
 /// A separable reconstruction filter with its border normalisation.
 #[derive(Clone, Debug)]
@@ -27,6 +44,8 @@ pub struct Filter {
     radius: f32,
     alpha: f32,
     bias: f32,
+    /// `e^{2α}`, the ratio step of [`Film`]'s weight recurrence.
+    exp_2alpha: f32,
     /// `Z` per column: ∫ over the image width of f(x_col − q).
     norm_x: Vec<f32>,
     /// `Z` per row.
@@ -49,6 +68,7 @@ impl Filter {
             radius,
             alpha,
             bias,
+            exp_2alpha: (2.0 * alpha).exp(),
             norm_x: Vec::new(),
             norm_y: Vec::new(),
         };
@@ -182,10 +202,10 @@ impl Film {
     /// Pixel range the filter at `p` reaches, clipped to this film.
     fn footprint(&self, p: Vec2) -> Option<(u32, u32, u32, u32)> {
         let r = self.filter.radius();
-        let lo_x = (p.x - 0.5 - r).ceil().max(self.x0 as f32);
-        let lo_y = (p.y - 0.5 - r).ceil().max(self.y0 as f32);
-        let hi_x = (p.x - 0.5 + r).floor().min((self.x0 + self.w) as f32 - 1.0);
-        let hi_y = (p.y - 0.5 + r).floor().min((self.y0 + self.h) as f32 - 1.0);
+        let lo_x = fast_ceil(p.x - 0.5 - r).max(self.x0 as f32);
+        let lo_y = fast_ceil(p.y - 0.5 - r).max(self.y0 as f32);
+        let hi_x = fast_floor(p.x - 0.5 + r).min((self.x0 + self.w) as f32 - 1.0);
+        let hi_y = fast_floor(p.y - 0.5 + r).min((self.y0 + self.h) as f32 - 1.0);
         if !(lo_x <= hi_x && lo_y <= hi_y) {
             return None;
         }
@@ -196,8 +216,25 @@ impl Film {
     /// (at most 16 pixels: the support of a filter of radius ≤ 7.5).
     fn weights(&self, lo: u32, hi: u32, p: f32, out: &mut [f32; 16]) -> usize {
         let n = ((hi - lo + 1) as usize).min(16);
-        for (k, w) in out.iter_mut().take(n).enumerate() {
-            *w = self.filter.eval_1d((lo + k as u32) as f32 + 0.5 - p);
+        let f = &*self.filter;
+        let x0 = lo as f32 + 0.5 - p;
+        if let FilterKind::Gaussian { .. } = f.kind {
+            // e^{α(x0+k)²} for k = 0, 1, … by the recurrence
+            // g_{k+1} = g_k·q_k, q_k = e^{α(2(x0+k)+1)}, q_{k+1} = q_k·e^{2α}:
+            // two exponentials per axis instead of one per pixel (the
+            // exponentials were a fifth of the cost of a camera sample).
+            // The recurrence's relative error stays near n·2⁻²⁴ ≈ 1e-6.
+            let mut g = (f.alpha * x0 * x0).exp();
+            let mut q = (f.alpha * (2.0 * x0 + 1.0)).exp();
+            for w in out.iter_mut().take(n) {
+                *w = (g - f.bias).max(0.0);
+                g *= q;
+                q *= f.exp_2alpha;
+            }
+        } else {
+            for (k, w) in out.iter_mut().take(n).enumerate() {
+                *w = f.eval_1d((lo + k as u32) as f32 + 0.5 - p);
+            }
         }
         n
     }
@@ -217,21 +254,19 @@ impl Film {
         let (mut wx, mut wy) = ([0.0f32; 16], [0.0f32; 16]);
         let nx = self.weights(x0, x1, p.x, &mut wx);
         let ny = self.weights(y0, y1, p.y, &mut wy);
-        for (ky, &wy) in wy.iter().take(ny).enumerate() {
+        let stride = self.w as usize;
+        let first = (y0 - self.y0) as usize * stride + (x0 - self.x0) as usize;
+        // Rows of the footprint as slices (one bounds check per row); zero
+        // weights add nothing, so the inner loop needs no test.
+        // One 4-wide multiply-add per pixel: (Σ f·L, Σ f) += f·(L, 1).
+        let value = Vec4::new(l.r, l.g, l.b, 1.0);
+        for (ky, &wy) in wy[..ny].iter().enumerate() {
             if wy == 0.0 {
                 continue;
             }
-            let row = ((y0 + ky as u32 - self.y0) * self.w + (x0 - self.x0)) as usize;
-            for (kx, &wx) in wx.iter().take(nx).enumerate() {
-                let w = wy * wx;
-                if w == 0.0 {
-                    continue;
-                }
-                let px = &mut self.samples[row + kx];
-                px[0] += w * l.r;
-                px[1] += w * l.g;
-                px[2] += w * l.b;
-                px[3] += w;
+            let row = first + ky * stride;
+            for (px, &wx) in self.samples[row..row + nx].iter_mut().zip(&wx[..nx]) {
+                *px = (Vec4::from_array(*px) + value * (wy * wx)).to_array();
             }
         }
     }

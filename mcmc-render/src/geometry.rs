@@ -1,17 +1,21 @@
-//! Scene geometry: triangles, analytic spheres and disks in one obvhs
-//! compressed wide BVH, with closest-hit and occlusion queries.
+//! Scene geometry: triangles, analytic spheres and disks in one BVH (built
+//! by obvhs, traversed as a four-wide BVH, see [`bvh4`]), with closest-hit
+//! and occlusion queries.
 //!
 //! Self-intersection is avoided the pbrt-v4 way, without any scene-scale
 //! epsilon: every hit point carries a conservative bound on its floating-
 //! point error, and rays leave a surface from a point pushed along the
 //! geometric normal just past that bound ([`offset_ray_origin`]).
 
+mod bvh4;
+mod tri_pack;
+
+use bvh4::Bvh4;
 use glam::{Mat4, Vec3, Vec3A};
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
-use obvhs::cwbvh::CwBvh;
-use obvhs::ray::{Ray as BvhRay, RayHit};
 use std::time::{Duration, Instant};
+use tri_pack::{Ray4, TriPack};
 
 /// A ray with origin, unit direction and a maximum distance.
 #[derive(Clone, Copy, Debug)]
@@ -59,24 +63,45 @@ pub fn offset_ray_origin(p: Vec3, p_err: Vec3, n: Vec3, w: Vec3) -> Vec3 {
     if w.dot(n) < 0.0 {
         offset = -offset;
     }
-    let mut po = p + offset;
-    for i in 0..3 {
-        if offset[i] > 0.0 {
-            po[i] = po[i].next_up();
-        } else if offset[i] < 0.0 {
-            po[i] = po[i].next_down();
-        }
-    }
-    po
+    let po = p + offset;
+    Vec3::new(
+        ulp_step(po.x, offset.x),
+        ulp_step(po.y, offset.y),
+        ulp_step(po.z, offset.z),
+    )
 }
+
+/// `x` moved one ulp towards +∞ when `dir > 0` and towards −∞ when
+/// `dir < 0` (pbrt's `NextFloatUp`/`NextFloatDown`, as `f32::next_up` and
+/// `next_down`); unchanged when `dir` is zero or `x` is not finite. Written
+/// on the bits directly: ray spawning calls it three times per ray.
+#[inline(always)]
+fn ulp_step(x: f32, dir: f32) -> f32 {
+    if dir == 0.0 || !x.is_finite() {
+        return x;
+    }
+    let bits = x.to_bits();
+    if bits & 0x7fff_ffff == 0 {
+        // ±0 steps to the smallest subnormal of `dir`'s sign.
+        return f32::from_bits(1).copysign(dir);
+    }
+    // Same signs: the magnitude grows (one more ulp); else it shrinks.
+    let away = (bits >> 31) == (dir.to_bits() >> 31);
+    f32::from_bits(if away { bits + 1 } else { bits - 1 })
+}
+
+/// `Geometry::leaf_pack` entry of a leaf without a triangle pack.
+const NO_PACK: u32 = u32::MAX;
 
 /// One primitive as stored in BVH order.
 #[derive(Clone, Copy, Debug)]
 enum Prim {
+    /// Vertices in SIMD vectors (the test then needs about half the
+    /// instructions of the scalar form); 64 bytes, one cache line.
     Triangle {
-        v0: Vec3,
-        e1: Vec3,
-        e2: Vec3,
+        v0: Vec3A,
+        e1: Vec3A,
+        e2: Vec3A,
         shape: u32,
         /// Index of the triangle in its mesh.
         tri: u32,
@@ -201,11 +226,16 @@ pub struct Geometry {
     /// Shapes, indexed by shape id.
     pub shapes: Vec<GeoShape>,
     prims: Vec<Prim>,
-    bvh: CwBvh,
-    /// Centre of the BVH's normalised space (scene bounds centre).
-    bvh_center: glam::DVec3,
-    /// Scale from world to the BVH's normalised space (a power of two).
-    bvh_scale: f32,
+    bvh: Bvh4,
+    /// Unit face normal of every mesh triangle, per shape (empty for
+    /// non-meshes): computed once instead of a square root and a division
+    /// at every hit.
+    face_normals: Vec<Vec<Vec3>>,
+    /// Triangles of the leaves made only of (at most four) triangles.
+    packs: Vec<TriPack>,
+    /// Index into `packs` of the leaf starting at each primitive index
+    /// (`NO_PACK`: the leaf is tested primitive by primitive).
+    leaf_pack: Vec<u32>,
     /// Wall-clock time of the BVH build.
     pub build_time: Duration,
     /// Total triangle count.
@@ -229,9 +259,9 @@ impl Geometry {
                         bb.extend(b.into()).extend(c.into());
                         aabbs.push(bb);
                         prims.push(Prim::Triangle {
-                            v0: a,
-                            e1: b - a,
-                            e2: c - a,
+                            v0: a.into(),
+                            e1: (b - a).into(),
+                            e2: (c - a).into(),
                             shape: s,
                             tri: i as u32,
                         });
@@ -256,55 +286,61 @@ impl Geometry {
                 }
             }
         }
-        // obvhs culls BVH nodes whose ray exit distance is below a fixed
-        // 1e-4 (`cwbvh::node::EPSILON`), which would lose hits in small
-        // scenes. The BVH therefore lives in a normalised space: centred
-        // on the scene and scaled (by a power of two, exact) so the scene
-        // spans about 1024 units; the cull then only drops hits closer
-        // than ~1e-7 of the scene size, below f32 resolution. Boxes are
-        // mapped in f64 and padded outwards so they stay conservative.
-        let mut lo = glam::DVec3::splat(f64::INFINITY);
-        let mut hi = glam::DVec3::splat(f64::NEG_INFINITY);
-        for b in &aabbs {
-            lo = lo.min(Vec3::from(b.min).as_dvec3());
-            hi = hi.max(Vec3::from(b.max).as_dvec3());
-        }
-        let (bvh_center, bvh_scale) = if lo.x.is_finite() && hi.x.is_finite() {
-            let extent = (hi - lo).max_element().max(f64::MIN_POSITIVE);
-            let scale = 2f64.powi((1024.0 / extent).log2().round().clamp(-120.0, 120.0) as i32);
-            ((lo + hi) * 0.5, scale)
-        } else {
-            (glam::DVec3::ZERO, 1.0)
-        };
-        const PAD: f64 = 1e-3;
-        for b in aabbs.iter_mut() {
-            let mn = (Vec3::from(b.min).as_dvec3() - bvh_center) * bvh_scale - PAD;
-            let mx = (Vec3::from(b.max).as_dvec3() - bvh_center) * bvh_scale + PAD;
-            *b = Aabb::new(mn.as_vec3().into(), mx.as_vec3().into());
-        }
-        let bvh_scale = bvh_scale as f32;
         // Small scenes afford the slowest, best-quality build (it takes
         // milliseconds there); large ones use obvhs's balanced preset.
-        let params = if aabbs.len() < 10_000 {
+        let mut params = if aabbs.len() < 10_000 {
             BvhBuildParams::very_slow_build()
         } else {
             BvhBuildParams::medium_build()
         };
+        // Small leaves: the four-wide box test is cheaper than a triangle
+        // test, so splitting down to one or two primitives per leaf pays
+        // (obvhs's presets aim at eight-primitive leaves). On the Cornell
+        // box this halves the instructions per closest-hit ray.
+        params.max_prims_per_leaf = 4;
+        params.collapse_traversal_cost = 1.0;
         let start = Instant::now();
-        let mut core = Duration::default();
-        let bvh = obvhs::cwbvh::builder::build_cwbvh(&aabbs, params, &mut core);
+        let (bvh, order) = Bvh4::build(&aabbs, params);
         // Store primitives in BVH order so leaves index them directly.
-        let prims: Vec<Prim> = bvh
-            .primitive_indices
+        let prims: Vec<Prim> = order.iter().map(|&i| prims[i as usize]).collect();
+        let face_normals = shapes
             .iter()
-            .map(|&i| prims[i as usize])
+            .map(|s| match &s.surface {
+                Surface::Mesh(m) => m
+                    .indices
+                    .iter()
+                    .map(|t| {
+                        let [p0, p1, p2] = t.map(|i| m.positions[i as usize]);
+                        (p1 - p0).cross(p2 - p0).normalize()
+                    })
+                    .collect(),
+                _ => Vec::new(),
+            })
             .collect();
+        let mut packs = Vec::new();
+        let mut leaf_pack = vec![NO_PACK; prims.len()];
+        for leaf in bvh.leaves() {
+            let tris: Option<Vec<(Vec3, Vec3, Vec3)>> = prims[leaf.clone()]
+                .iter()
+                .map(|p| match *p {
+                    Prim::Triangle { v0, e1, e2, .. } => Some((v0.into(), e1.into(), e2.into())),
+                    _ => None,
+                })
+                .collect();
+            if let Some(tris) = tris
+                && tris.len() <= tri_pack::LANES
+            {
+                leaf_pack[leaf.start] = packs.len() as u32;
+                packs.push(TriPack::new(&tris));
+            }
+        }
         Geometry {
             shapes,
             prims,
             bvh,
-            bvh_center,
-            bvh_scale,
+            face_normals,
+            packs,
+            leaf_pack,
             build_time: start.elapsed(),
             triangles,
         }
@@ -312,9 +348,10 @@ impl Geometry {
 
     /// Bytes used by the BVH nodes, the primitive array and the index array.
     pub fn bvh_bytes(&self) -> usize {
-        std::mem::size_of_val(self.bvh.nodes.as_slice())
-            + std::mem::size_of_val(self.bvh.primitive_indices.as_slice())
+        self.bvh.bytes()
             + std::mem::size_of_val(self.prims.as_slice())
+            + std::mem::size_of_val(self.packs.as_slice())
+            + std::mem::size_of_val(self.leaf_pack.as_slice())
     }
 
     /// Number of primitives in the BVH.
@@ -326,31 +363,36 @@ impl Geometry {
     fn intersect_prim(
         &self,
         prim: &Prim,
-        o: Vec3,
-        d: Vec3,
+        o: Vec3A,
+        d: Vec3A,
         tmin: f32,
         tmax: f32,
     ) -> (f32, f32, f32) {
         const MISS: (f32, f32, f32) = (f32::INFINITY, 0.0, 0.0);
         match *prim {
             Prim::Triangle { v0, e1, e2, .. } => {
-                // Möller–Trumbore.
+                // Möller–Trumbore, with the barycentric tests done on the
+                // unnormalised values (scaled by |det|) so that the
+                // division, a long-latency operation, is only paid by rays
+                // that pass them.
                 let pv = d.cross(e2);
                 let det = e1.dot(pv);
                 if det == 0.0 || !det.is_finite() {
                     return MISS;
                 }
-                let inv = 1.0 / det;
                 let tv = o - v0;
-                let u = tv.dot(pv) * inv;
-                if !(0.0..=1.0).contains(&u) {
-                    return MISS;
-                }
                 let qv = tv.cross(e1);
-                let v = d.dot(qv) * inv;
-                if v < 0.0 || u + v > 1.0 {
+                let (su, sv) = (tv.dot(pv), d.dot(qv));
+                let (au, av, adet) = if det > 0.0 {
+                    (su, sv, det)
+                } else {
+                    (-su, -sv, -det)
+                };
+                if !(au >= 0.0 && av >= 0.0 && au + av <= adet) {
                     return MISS;
                 }
+                let inv = 1.0 / det;
+                let (u, v) = (su * inv, sv * inv);
                 let t = e2.dot(qv) * inv;
                 if t > tmin && t < tmax {
                     (t, u, v)
@@ -359,6 +401,7 @@ impl Geometry {
                 }
             }
             Prim::Sphere { center, radius, .. } => {
+                let (o, d) = (Vec3::from(o), Vec3::from(d));
                 // In f64: `o − center` loses all precision of a small sphere
                 // far from the origin in f32, and a spawned ray could then
                 // find its own surface again. The Hearn–Baker discriminant
@@ -392,8 +435,8 @@ impl Geometry {
                 let Surface::Disk { to_local, .. } = &self.shapes[shape as usize].surface else {
                     return MISS;
                 };
-                let lo = to_local.transform_point3(o);
-                let ld = to_local.transform_vector3(d);
+                let lo = to_local.transform_point3(o.into());
+                let ld = to_local.transform_vector3(d.into());
                 if ld.z == 0.0 {
                     return MISS;
                 }
@@ -411,48 +454,52 @@ impl Geometry {
         }
     }
 
-    /// The ray in the BVH's normalised space (distances scale by `bvh_scale`).
-    fn bvh_ray(&self, ray: &Ray) -> BvhRay {
-        let o = ((ray.o.as_dvec3() - self.bvh_center) * self.bvh_scale as f64).as_vec3();
-        BvhRay::new(
-            Vec3A::from(o),
-            Vec3A::from(ray.d),
-            ray.tmin * self.bvh_scale,
-            ray.tmax * self.bvh_scale,
-        )
-    }
-
     /// Closest hit along `ray`, if any.
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        let bray = self.bvh_ray(ray);
-        let mut hit = RayHit::none();
-        let mut best = (f32::INFINITY, 0.0f32, 0.0f32);
-        let (o, d, tmin, s) = (ray.o, ray.d, ray.tmin, self.bvh_scale);
-        let tmax = ray.tmax;
-        self.bvh.ray_traverse(bray, &mut hit, |_, id| {
-            let (t, u, v) = self.intersect_prim(&self.prims[id], o, d, tmin, best.0.min(tmax));
-            if t < best.0 {
-                best = (t, u, v);
-                t * s
-            } else {
-                f32::INFINITY
+        let (o, d, tmin) = (ray.o, ray.d, ray.tmin);
+        let (oa, da) = (Vec3A::from(o), Vec3A::from(d));
+        let ray4 = Ray4::new(o, d);
+        let mut uv = (0.0, 0.0);
+        let (prim, t) = self.bvh.closest(o, d, tmin, ray.tmax, |leaf, tmax| {
+            // The traversal keeps the last hit returned, so `uv` is its.
+            let pack = self.leaf_pack[leaf.start];
+            if pack != NO_PACK {
+                let (lane, t, u, v) = self.packs[pack as usize].intersect(&ray4, tmin, tmax)?;
+                uv = (u, v);
+                return Some((leaf.start + lane, t));
             }
-        });
-        (best.0 < tmax).then_some(Hit {
-            t: best.0,
-            prim: hit.primitive_id,
-            u: best.1,
-            v: best.2,
+            let mut best = None;
+            let mut tmax = tmax;
+            for id in leaf {
+                let (t, u, v) = self.intersect_prim(&self.prims[id], oa, da, tmin, tmax);
+                if t < tmax {
+                    tmax = t;
+                    uv = (u, v);
+                    best = Some((id, t));
+                }
+            }
+            best
+        })?;
+        Some(Hit {
+            t,
+            prim: prim as u32,
+            u: uv.0,
+            v: uv.1,
         })
     }
 
     /// True when something blocks `ray` strictly before `ray.tmax`.
     pub fn occluded(&self, ray: &Ray) -> bool {
-        let bray = self.bvh_ray(ray);
         let (o, d, tmin, tmax) = (ray.o, ray.d, ray.tmin, ray.tmax);
-        !self.bvh.ray_traverse_miss(bray, |_, id| {
-            let t = self.intersect_prim(&self.prims[id], o, d, tmin, tmax).0;
-            if t < tmax { 0.0 } else { f32::INFINITY }
+        let (oa, da) = (Vec3A::from(o), Vec3A::from(d));
+        let ray4 = Ray4::new(o, d);
+        self.bvh.any(o, d, tmin, tmax, |leaf| {
+            let pack = self.leaf_pack[leaf.start];
+            if pack != NO_PACK {
+                return self.packs[pack as usize].occludes(&ray4, tmin, tmax);
+            }
+            leaf.into_iter()
+                .any(|id| self.intersect_prim(&self.prims[id], oa, da, tmin, tmax).0 < tmax)
         })
     }
 
@@ -499,7 +546,7 @@ impl Geometry {
         let [p0, p1, p2] = idx.map(|i| m.positions[i as usize]);
         let p = p0 * b0 + p1 * b1 + p2 * b2;
         let p_err = ((p0 * b0).abs() + (p1 * b1).abs() + (p2 * b2).abs()) * gamma(7);
-        let mut ng = (p1 - p0).cross(p2 - p0).normalize();
+        let mut ng = self.face_normals[shape as usize][tri as usize];
         let mut ns = match &m.normals {
             Some(n) => {
                 let [n0, n1, n2] = idx.map(|i| n[i as usize]);
@@ -590,6 +637,43 @@ mod tests {
             .wrapping_mul(6364136223846793005)
             .wrapping_add(1442695040888963407);
         ((*state >> 40) as f32) / (1u64 << 24) as f32
+    }
+
+    /// The bit-level ulp step equals the standard library's `next_up` /
+    /// `next_down` on zeros, subnormals, normals of both signs and the
+    /// largest finite values.
+    #[test]
+    fn ulp_step_matches_next_up_and_next_down() {
+        let xs = [
+            0.0f32,
+            -0.0,
+            f32::from_bits(1),
+            -f32::from_bits(1),
+            f32::MIN_POSITIVE,
+            -f32::MIN_POSITIVE,
+            1.0,
+            -1.0,
+            0.3,
+            -123.456,
+            f32::MAX,
+            f32::MIN,
+        ];
+        for x in xs {
+            for dir in [1.0f32, -1e-30, 0.0, -0.0] {
+                let want = if dir > 0.0 {
+                    x.next_up()
+                } else if dir < 0.0 {
+                    x.next_down()
+                } else {
+                    x
+                };
+                assert_eq!(
+                    ulp_step(x, dir).to_bits(),
+                    want.to_bits(),
+                    "x={x} dir={dir}"
+                );
+            }
+        }
     }
 
     /// Rays from inside a closed sphere must always hit it, and a ray

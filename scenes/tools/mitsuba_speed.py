@@ -52,6 +52,7 @@ def cpu_model() -> str:
 
 def run_ours(binary: str, scene: str, spp: int, seed: int, threads: int, overrides: dict[str, str]) -> dict:
     """Render once with our CLI and return its JSON sidecar."""
+    import resource
     import subprocess
     import tempfile
 
@@ -61,11 +62,17 @@ def run_ours(binary: str, scene: str, spp: int, seed: int, threads: int, overrid
         cmd += ["--threads", str(threads), "--out", out, "--quiet"]
         for k, v in overrides.items():
             cmd += ["-D", f"{k}={v}"]
+        # CPU time of the child (whole process: start-up and file output
+        # included, so slightly pessimistic for us).
+        r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         done = subprocess.run(cmd, capture_output=True, text=True)
+        r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
         if done.returncode != 0:
             raise SystemExit(f"error: {' '.join(cmd)} failed: {done.stderr.strip()}")
         with open(os.path.join(tmp, "speed.json")) as f:
-            return json.load(f)
+            report = json.load(f)
+        report["process_cpu_seconds"] = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+        return report
 
 
 def main() -> int:
@@ -155,9 +162,12 @@ def main() -> int:
     }
     if args.ours:
         our_rates = [o["samples_per_second"] for o in ours]
+        our_cpu = [o["process_cpu_seconds"] for o in ours]
         report["ours"] = {
             "binary": args.ours,
             "runs": ours,
+            "cpu_seconds": our_cpu,
+            "samples_per_cpu_second_median": statistics.median(samples / c for c in our_cpu if c > 0),
             "samples_per_second_median": statistics.median(our_rates),
             "speedup_over_mitsuba_median": statistics.median(our_rates) / statistics.median(rates),
         }
