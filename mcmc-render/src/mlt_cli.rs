@@ -169,6 +169,21 @@ struct ComponentJson {
     acceptance: f64,
 }
 
+/// One member of the chain family (MMLT: one path depth), for the JSON
+/// statistics.
+#[derive(Serialize)]
+struct FamilyJson {
+    /// MMLT: path depth in segments; PSSMLT: 0.
+    depth: usize,
+    chains: usize,
+    mutations: u64,
+    b_bootstrap: f64,
+    b_bootstrap_standard_error: f64,
+    b_running: f64,
+    b_running_standard_error: f64,
+    scale: f64,
+}
+
 /// The run statistics written beside a PSSMLT image.
 #[derive(Serialize)]
 struct MltSidecar<'a> {
@@ -200,6 +215,7 @@ struct MltSidecar<'a> {
     acceptance: f64,
     acceptance_per_component: Vec<ComponentJson>,
     acceptance_per_depth: Vec<DepthAcceptance>,
+    families: Vec<FamilyJson>,
     nonfinite_contributions: u64,
     nonfinite_bootstrap_candidates: usize,
     nonfinite_dump: Option<String>,
@@ -384,6 +400,24 @@ pub fn run_pssmlt(job: &MltJob<'_>, stop: &AtomicBool) -> Result<MltResult, Stri
             })
             .collect(),
         acceptance_per_depth: result.per_depth.clone(),
+        families: result
+            .families
+            .iter()
+            .enumerate()
+            .map(|(d, f)| FamilyJson {
+                depth: match job.kind {
+                    MltKind::Pssmlt => 0,
+                    MltKind::Mmlt => d + 1,
+                },
+                chains: f.chains,
+                mutations: f.mutations,
+                b_bootstrap: f.bootstrap_b.0,
+                b_bootstrap_standard_error: f.bootstrap_b.1,
+                b_running: f.running_b.0,
+                b_running_standard_error: f.running_b.1,
+                scale: f.scale,
+            })
+            .collect(),
         nonfinite_contributions: cs.invalid_density,
         nonfinite_bootstrap_candidates: result.bootstrap_invalid,
         nonfinite_dump: dump,
@@ -484,4 +518,67 @@ pub fn replay(scene: &Scene, file: &Path) -> Result<(), String> {
         );
     }
     Ok(())
+}
+
+/// Splits an integrator name of the `convergence` command,
+/// `BASE[+MODIFIER]...` (e.g. `mmlt+running+mis`), into the base name and
+/// the MLT settings its modifiers give, so that variants of one
+/// integrator can be compared within one run. Modifiers: `running` or
+/// `bootstrap` (normalisation), `mis` (Kelemen's MIS of large steps),
+/// `kelemen` (s1 = 1/1024, s2 = 1/64) or `gaussian` (sigma 0.01) or
+/// `sigma=S` (Gaussian) small step, `plarge=P`, `chains=N`, `candidates=N` (bootstrap
+/// candidates).
+pub fn mlt_variant(name: &str, base: &PssmltSettings) -> Result<(String, PssmltSettings), String> {
+    let mut parts = name.split('+');
+    let head = parts.next().unwrap_or_default().to_string();
+    let mut s = base.clone();
+    for m in parts {
+        let (key, value) = match m.split_once('=') {
+            Some((k, v)) => (k, Some(v)),
+            None => (m, None),
+        };
+        let number = |what: &str| -> Result<f64, String> {
+            value
+                .and_then(|v| v.parse::<f64>().ok())
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| format!("modifier `{m}` of `{name}` needs a number ({what})"))
+        };
+        let count = |what: &str| -> Result<usize, String> {
+            value
+                .and_then(|v| v.parse::<usize>().ok())
+                .filter(|&v| v > 0)
+                .ok_or_else(|| {
+                    format!("modifier `{m}` of `{name}` needs a positive integer ({what})")
+                })
+        };
+        match key {
+            "running" => s.normalization = Normalization::Running,
+            "bootstrap" => s.normalization = Normalization::Bootstrap,
+            "mis" => s.mis_large_steps = true,
+            "kelemen" => {
+                s.mutation.small = SmallStepKind::Kelemen {
+                    s1: 1.0 / 1024.0,
+                    s2: 1.0 / 64.0,
+                }
+            }
+            "gaussian" => s.mutation.small = SmallStepKind::Gaussian { sigma: 0.01 },
+            "sigma" => {
+                s.mutation.small = SmallStepKind::Gaussian {
+                    sigma: number("the Gaussian small step's sigma")?,
+                }
+            }
+            "plarge" => s.mutation.large_step_probability = number("large-step probability")?,
+            "chains" => s.chains = count("chains")?,
+            "candidates" => s.bootstrap = count("bootstrap candidates")?,
+            _ => {
+                return Err(format!(
+                    "unknown modifier `{m}` in `{name}` (known: running, bootstrap, mis, kelemen, gaussian, sigma=S, plarge=P, chains=N, candidates=N)"
+                ));
+            }
+        }
+    }
+    s.mutation
+        .kernel::<()>()
+        .map_err(|e| format!("`{name}`: {e}"))?;
+    Ok((head, s))
 }
