@@ -101,6 +101,8 @@ pub struct Study {
     pub seed: u64,
     /// PSSMLT settings (budget, seed and preview interval are overridden).
     pub mlt: PssmltSettings,
+    /// MMLT settings (its default small step differs from PSSMLT's).
+    pub mmlt: PssmltSettings,
 }
 
 /// Runs the study on `scene` against `reference`.
@@ -116,6 +118,7 @@ pub fn run(
         checkpoints,
         seed,
         mlt,
+        mmlt,
     } = study;
     let (seconds, checkpoints, seed) = (*seconds, *checkpoints, *seed);
     if !(seconds > 0.0 && seconds.is_finite()) {
@@ -161,7 +164,12 @@ pub fn run(
             heuristic: MisHeuristic::Power,
         };
         // `BASE+MODIFIER...` names variants of the MLT settings.
-        let (base, mlt) = crate::mlt_cli::mlt_variant(name, mlt)?;
+        let family = if name.split('+').next() == Some("mmlt") {
+            mmlt
+        } else {
+            mlt
+        };
+        let (base, mlt) = crate::mlt_cli::mlt_variant(name, family)?;
         match base.as_str() {
             "pt" | "lt" | "bdpt" => {
                 let integ: Box<dyn Integrator> = match base.as_str() {

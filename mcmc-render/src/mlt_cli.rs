@@ -69,9 +69,10 @@ pub enum MltKind {
 /// Flags of the Metropolis integrators (`render --integrator pssmlt|mmlt`).
 #[derive(Args, Clone, Debug)]
 pub struct MltArgs {
-    /// MLT small step.
-    #[arg(long, value_enum, default_value = "kelemen")]
-    pub small_step: SmallStepArg,
+    /// MLT small step (default: gaussian for mmlt, as pbrt-v4's `mlt`;
+    /// kelemen for pssmlt, as Kelemen et al. 2002).
+    #[arg(long, value_enum)]
+    pub small_step: Option<SmallStepArg>,
     /// Kelemen's smallest step.
     #[arg(long, default_value_t = 1.0 / 1024.0)]
     pub s1: f64,
@@ -112,9 +113,32 @@ pub struct MltArgs {
 }
 
 impl MltArgs {
+    /// The small step of `kind` when `--small-step` is not given: MMLT
+    /// uses pbrt-v4's Gaussian step. (A lazily updated coordinate that
+    /// missed `n` small steps costs one draw with the Gaussian law, but `n`
+    /// draws with Kelemen's; MMLT's chains leave many coordinates unread
+    /// for long stretches, e.g. the light subpath while `s = 0`.)
+    pub fn small_step_for(&self, kind: MltKind) -> SmallStepArg {
+        self.small_step.unwrap_or(match kind {
+            MltKind::Pssmlt => SmallStepArg::Kelemen,
+            MltKind::Mmlt => SmallStepArg::Gaussian,
+        })
+    }
+
     /// The PSSMLT settings these flags describe.
     pub fn settings(&self, time: Option<f64>, seed: u64) -> Result<PssmltSettings, String> {
-        let small = match self.small_step {
+        self.settings_for(MltKind::Pssmlt, time, seed)
+    }
+
+    /// The settings these flags describe for `kind` (the defaults differ
+    /// in the small step, see [`MltArgs::small_step_for`]).
+    pub fn settings_for(
+        &self,
+        kind: MltKind,
+        time: Option<f64>,
+        seed: u64,
+    ) -> Result<PssmltSettings, String> {
+        let small = match self.small_step_for(kind) {
             SmallStepArg::Kelemen => SmallStepKind::Kelemen {
                 s1: self.s1,
                 s2: self.s2,
@@ -277,7 +301,7 @@ pub struct MltJob<'a> {
 /// contribution (`<out>.nonfinite.pss`, for `--replay`).
 pub fn run_pssmlt(job: &MltJob<'_>, stop: &AtomicBool) -> Result<MltResult, String> {
     let scene = job.scene;
-    let settings = job.args.settings(job.time, job.seed)?;
+    let settings = job.args.settings_for(job.kind, job.time, job.seed)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(job.threads)
         .build()
@@ -377,7 +401,7 @@ pub fn run_pssmlt(job: &MltJob<'_>, stop: &AtomicBool) -> Result<MltResult, Stri
             max_depth as i64
         },
         rr_depth: scene.integrator.rr_depth,
-        small_step: job.args.small_step,
+        small_step: job.args.small_step_for(job.kind),
         large_step_probability: settings.mutation.large_step_probability,
         bootstrap_candidates: settings.bootstrap,
         chains: settings.chains,
@@ -527,7 +551,7 @@ pub fn replay(scene: &Scene, file: &Path) -> Result<(), String> {
 /// `bootstrap` (normalisation), `mis` (Kelemen's MIS of large steps),
 /// `kelemen` (s1 = 1/1024, s2 = 1/64) or `gaussian` (sigma 0.01) or
 /// `sigma=S` (Gaussian) small step, `plarge=P`, `chains=N`, `candidates=N` (bootstrap
-/// candidates).
+/// candidates), `alloc=G` (chains per depth `∝ b_d^G`).
 pub fn mlt_variant(name: &str, base: &PssmltSettings) -> Result<(String, PssmltSettings), String> {
     let mut parts = name.split('+');
     let head = parts.next().unwrap_or_default().to_string();
@@ -569,10 +593,11 @@ pub fn mlt_variant(name: &str, base: &PssmltSettings) -> Result<(String, PssmltS
             }
             "plarge" => s.mutation.large_step_probability = number("large-step probability")?,
             "chains" => s.chains = count("chains")?,
+            "alloc" => s.depth_allocation_exponent = number("depth allocation exponent")?,
             "candidates" => s.bootstrap = count("bootstrap candidates")?,
             _ => {
                 return Err(format!(
-                    "unknown modifier `{m}` in `{name}` (known: running, bootstrap, mis, kelemen, gaussian, sigma=S, plarge=P, chains=N, candidates=N)"
+                    "unknown modifier `{m}` in `{name}` (known: running, bootstrap, mis, kelemen, gaussian, sigma=S, plarge=P, chains=N, candidates=N, alloc=G)"
                 ));
             }
         }

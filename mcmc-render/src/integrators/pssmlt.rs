@@ -110,6 +110,10 @@ pub struct PssmltSettings {
     pub tasks: usize,
     /// Time between previews ([`MltObserver::preview`]).
     pub preview_every: Duration,
+    /// Chains go to family members in proportion to `b_d^γ`, `γ` this
+    /// exponent: 1 (default) is pbrt-v4's share (what a single chain over
+    /// all depths spends per depth); 0 gives every member the same number.
+    pub depth_allocation_exponent: f64,
 }
 
 impl Default for PssmltSettings {
@@ -125,6 +129,7 @@ impl Default for PssmltSettings {
             normalization: Normalization::Bootstrap,
             tasks: 16,
             preview_every: Duration::from_secs(5),
+            depth_allocation_exponent: 1.0,
         }
     }
 }
@@ -348,10 +353,11 @@ pub fn bootstrap_family<F: PssPathSampler>(
     Ok((boot, log_i))
 }
 
-/// Chains per member: proportional to `b_d` (the share a single chain over
-/// the joint space would spend there, as pbrt-v4's per-chain draw of the
-/// depth gives on average), rounded by largest remainder, with at least
-/// one chain for every member with `b_d > 0` while chains last.
+/// Chains per member: proportional to `share[d]` (by default `b_d`, the
+/// share a single chain over the joint space would spend there, as
+/// pbrt-v4's per-chain draw of the depth gives on average), rounded by
+/// largest remainder, with at least one chain for every member with a
+/// positive share while chains last.
 fn allocate_chains(chains: usize, b: &[f64]) -> Vec<usize> {
     let total: f64 = b.iter().sum();
     let quota: Vec<f64> = b.iter().map(|&x| chains as f64 * x / total).collect();
@@ -471,7 +477,17 @@ pub fn render_family<F: PssPathSampler>(
     for (j, &lw) in log_i.iter().enumerate() {
         boot_running[j / count].add(lw);
     }
-    let chains_of = allocate_chains(settings.chains, &b_d);
+    let gamma = settings.depth_allocation_exponent;
+    if !gamma.is_finite() || gamma < 0.0 {
+        return Err(MltError::Setting(format!(
+            "the depth allocation exponent must be finite and ≥ 0, got {gamma}"
+        )));
+    }
+    let shares: Vec<f64> = b_d
+        .iter()
+        .map(|&b| if b > 0.0 { b.powf(gamma) } else { 0.0 })
+        .collect();
+    let chains_of = allocate_chains(settings.chains, &shares);
     let mut starts: Vec<Vec<usize>> = Vec::with_capacity(members);
     for (d, boot) in boots.iter().enumerate() {
         let mut rng = stream_rng(seed, RESAMPLE_STREAM + 1 + d as u64);
@@ -759,12 +775,13 @@ fn observe(
             }
             per_depth[d].proposed += 1;
             per_depth[d].accepted += u64::from(t.accepted);
-            let i = y.log_density.exp();
+            // `I(y)` itself (ln I is its logarithm): saves an `exp` per state.
+            let i = y.payload.luminance();
             splat_all(film, &y.payload, w.of(t.alpha, large, i));
         }
         // A black proposal (I = 0) contributes nothing, in either weighting.
     }
     let x = t.current;
-    let ix = x.log_density.exp();
+    let ix = x.payload.luminance();
     splat_all(film, &x.payload, w.of(1.0 - t.alpha, false, ix));
 }
