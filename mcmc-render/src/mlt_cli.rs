@@ -607,3 +607,64 @@ pub fn mlt_variant(name: &str, base: &PssmltSettings) -> Result<(String, PssmltS
         .map_err(|e| format!("`{name}`: {e}"))?;
     Ok((head, s))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn variant_modifiers_set_the_settings() {
+        let base = PssmltSettings::default();
+        let (name, s) = mlt_variant(
+            "mmlt+running+mis+plarge=0.1+chains=10+candidates=50+alloc=0.5",
+            &base,
+        )
+        .expect("valid variant");
+        assert_eq!(name, "mmlt");
+        assert_eq!(s.normalization, Normalization::Running);
+        assert!(s.mis_large_steps);
+        assert_eq!(s.mutation.large_step_probability, 0.1);
+        assert_eq!((s.chains, s.bootstrap), (10, 50));
+        assert_eq!(s.depth_allocation_exponent, 0.5);
+        let (_, g) = mlt_variant("pssmlt+sigma=0.02", &base).expect("valid variant");
+        assert_eq!(g.mutation.small, SmallStepKind::Gaussian { sigma: 0.02 });
+        let (plain, same) = mlt_variant("pt", &base).expect("no modifiers");
+        assert_eq!(plain, "pt");
+        assert_eq!(same.chains, base.chains);
+        for bad in [
+            "mmlt+fast",
+            "mmlt+plarge=x",
+            "mmlt+plarge=2",
+            "mmlt+chains=0",
+            "mmlt+sigma=inf",
+        ] {
+            assert!(mlt_variant(bad, &base).is_err(), "{bad} accepted");
+        }
+    }
+
+    #[test]
+    fn mmlt_defaults_to_the_gaussian_small_step() {
+        use clap::Parser;
+        #[derive(Parser)]
+        struct Cli {
+            #[command(flatten)]
+            mlt: MltArgs,
+        }
+        let cli = Cli::parse_from(["x"]);
+        let m = cli
+            .mlt
+            .settings_for(MltKind::Mmlt, None, 0)
+            .expect("defaults are valid");
+        assert_eq!(m.mutation.small, SmallStepKind::Gaussian { sigma: 0.01 });
+        assert_eq!(m.mutation.large_step_probability, 0.3);
+        assert_eq!(
+            (m.bootstrap, m.chains, m.mutations_per_pixel),
+            (100_000, 1000, Some(100))
+        );
+        let p = cli.mlt.settings(None, 0).expect("defaults are valid");
+        assert!(matches!(p.mutation.small, SmallStepKind::Kelemen { .. }));
+        let k = Cli::parse_from(["x", "--small-step", "kelemen"]);
+        let m = k.mlt.settings_for(MltKind::Mmlt, None, 0).expect("valid");
+        assert!(matches!(m.mutation.small, SmallStepKind::Kelemen { .. }));
+    }
+}

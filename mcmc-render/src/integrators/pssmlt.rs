@@ -785,3 +785,31 @@ fn observe(
     let ix = x.payload.luminance();
     splat_all(film, &x.payload, w.of(1.0 - t.alpha, false, ix));
 }
+
+#[cfg(test)]
+mod tests {
+    use super::allocate_chains;
+
+    #[test]
+    fn chains_follow_the_shares_and_every_positive_member_gets_one() {
+        // Exact quotas are met exactly.
+        assert_eq!(allocate_chains(10, &[1.0, 3.0, 6.0]), vec![1, 3, 6]);
+        // Largest remainder: quotas 3.33, 3.33, 3.33 -> the first gets the spare.
+        assert_eq!(allocate_chains(10, &[1.0, 1.0, 1.0]), vec![4, 3, 3]);
+        // Zero shares get no chain; a tiny positive share still gets one,
+        // taken from the largest member.
+        assert_eq!(allocate_chains(100, &[0.0, 1e-6, 1.0]), vec![0, 1, 99]);
+        // More positive members than chains: no minimum, still `chains` in all.
+        // (quotas 0.25, 0.25, 0.25, 1.25: floors 0, 0, 0, 1, the spare to the first tie)
+        assert_eq!(allocate_chains(2, &[1.0, 1.0, 1.0, 5.0]), vec![1, 0, 0, 1]);
+        // Always exactly `chains`, never more than the quota plus one.
+        let shares = [0.023, 0.048, 0.035, 0.031, 0.023, 0.0];
+        let n = allocate_chains(1000, &shares);
+        assert_eq!(n.iter().sum::<usize>(), 1000);
+        let total: f64 = shares.iter().sum();
+        for (k, s) in n.iter().zip(shares) {
+            let quota = 1000.0 * s / total;
+            assert!((*k as f64 - quota).abs() < 1.0, "{k} vs {quota}");
+        }
+    }
+}
