@@ -166,10 +166,12 @@ fn mmlt_and_pt_agree_on_the_cornell_box() {
         })
         .collect();
     // MMLT's image mean is noisier at this budget (chains split over five
-    // depths): measured 4σ ≈ 1.6% (red) and 2.1% (blue) of the mean over
-    // 12 seeds, so this fast test resolves 3%, not 1%; the means themselves
-    // agreed to 0.2–0.4% in the runs recorded in docs/rendering-results.md.
-    check_agreement("mmlt", &pt_reps(&scene, k), &mlt, 0.03);
+    // depths): with per-depth normalisation, measured 4σ of the difference
+    // ≈ 1.3% (red), 0.9% (green), 1.3% (blue) of the mean over 12 seeds
+    // (it was 1.6–2.1% when one film was scaled by b = Σ b_d and chains
+    // were drawn at random), so this fast test resolves 1.5%, not 1%; the
+    // means themselves agree to 0.05–0.2% (and the 1% check still holds).
+    check_agreement("mmlt", &pt_reps(&scene, k), &mlt, 0.015);
 }
 
 #[test]
