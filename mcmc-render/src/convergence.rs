@@ -97,7 +97,8 @@ pub const KNOWN: &[&str] = &["pt", "lt", "bdpt", "pssmlt", "pssmlt-bdpt", "mmlt"
 /// What a convergence study runs.
 #[derive(Clone, Debug)]
 pub struct Study {
-    /// Integrator names (see [`KNOWN`]).
+    /// Integrator names (see [`KNOWN`]), each optionally with MLT
+    /// modifiers (`mmlt+running`, see [`crate::mlt_cli::mlt_variant`]).
     pub integrators: Vec<String>,
     /// Seconds per integrator.
     pub seconds: f64,
@@ -107,6 +108,8 @@ pub struct Study {
     pub seed: u64,
     /// PSSMLT settings (budget, seed and preview interval are overridden).
     pub mlt: PssmltSettings,
+    /// MMLT settings (its default small step differs from PSSMLT's).
+    pub mmlt: PssmltSettings,
 }
 
 /// Runs the study on `scene` against `reference`. Setting `stop` ends the
@@ -123,6 +126,7 @@ pub fn run(
         checkpoints,
         seed,
         mlt,
+        mmlt,
     } = study;
     let (seconds, checkpoints, seed) = (*seconds, *checkpoints, *seed);
     if !(seconds > 0.0 && seconds.is_finite()) {
@@ -141,7 +145,8 @@ pub fn run(
         ));
     }
     for name in integrators {
-        if !KNOWN.contains(&name.as_str()) {
+        let (base, _) = crate::mlt_cli::mlt_variant(name, mlt)?;
+        if !KNOWN.contains(&base.as_str()) {
             return Err(format!(
                 "integrator `{name}` is not available for convergence (known: {})",
                 KNOWN.join(", ")
@@ -166,9 +171,16 @@ pub fn run(
             rr_depth: it.rr_depth,
             heuristic: MisHeuristic::Power,
         };
-        match name.as_str() {
+        // `BASE+MODIFIER...` names variants of the MLT settings.
+        let family = if name.split('+').next() == Some("mmlt") {
+            mmlt
+        } else {
+            mlt
+        };
+        let (base, mlt) = crate::mlt_cli::mlt_variant(name, family)?;
+        match base.as_str() {
             "pt" | "lt" | "bdpt" => {
-                let integ: Box<dyn Integrator> = match name.as_str() {
+                let integ: Box<dyn Integrator> = match base.as_str() {
                     "pt" => Box::new(PathTracer {
                         max_depth: it.max_depth,
                         rr_depth: it.rr_depth,
@@ -193,13 +205,13 @@ pub fn run(
                     time_budget: Some(budget),
                     seed,
                     preview_every: Duration::from_secs_f64(step / 4.0),
-                    ..mlt.clone()
+                    ..mlt
                 };
                 let pt = PathTracer {
                     max_depth: it.max_depth,
                     rr_depth: it.rr_depth,
                 };
-                let r = match name.as_str() {
+                let r = match base.as_str() {
                     "pssmlt" => render_pssmlt(scene, pt, &settings, stop, &rec),
                     "pssmlt-bdpt" => render_pssmlt(scene, bdpt, &settings, stop, &rec),
                     _ => {

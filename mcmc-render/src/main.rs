@@ -377,6 +377,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 .map(|s| s.trim().to_string())
                 .collect();
             let settings = mlt.settings(Some(time), seed)?;
+            let mmlt = mlt.settings_for(mcmc_render::mlt_cli::MltKind::Mmlt, Some(time), seed)?;
             let threads = threads.unwrap_or(0);
             stop_on_ctrl_c();
             let records = mcmc_core::runner::with_threads(threads, || {
@@ -386,6 +387,7 @@ fn run(cli: Cli) -> Result<(), String> {
                     checkpoints,
                     seed,
                     mlt: settings,
+                    mmlt,
                 };
                 mcmc_render::convergence::run(&loaded, &r, &study, &STOP)
             })?;

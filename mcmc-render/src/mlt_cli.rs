@@ -70,9 +70,10 @@ pub enum MltKind {
 /// Flags of the Metropolis integrators (`render --integrator pssmlt|mmlt`).
 #[derive(Args, Clone, Debug)]
 pub struct MltArgs {
-    /// MLT small step.
-    #[arg(long, value_enum, default_value = "kelemen")]
-    pub small_step: SmallStepArg,
+    /// MLT small step (default: gaussian for mmlt, as pbrt-v4's `mlt`;
+    /// kelemen for pssmlt, as Kelemen et al. 2002).
+    #[arg(long, value_enum)]
+    pub small_step: Option<SmallStepArg>,
     /// Kelemen's smallest step.
     #[arg(long, default_value_t = 1.0 / 1024.0)]
     pub s1: f64,
@@ -113,9 +114,32 @@ pub struct MltArgs {
 }
 
 impl MltArgs {
+    /// The small step of `kind` when `--small-step` is not given: MMLT
+    /// uses pbrt-v4's Gaussian step. (A lazily updated coordinate that
+    /// missed `n` small steps costs one draw with the Gaussian law, but `n`
+    /// draws with Kelemen's; MMLT's chains leave many coordinates unread
+    /// for long stretches, e.g. the light subpath while `s = 0`.)
+    pub fn small_step_for(&self, kind: MltKind) -> SmallStepArg {
+        self.small_step.unwrap_or(match kind {
+            MltKind::Pssmlt => SmallStepArg::Kelemen,
+            MltKind::Mmlt => SmallStepArg::Gaussian,
+        })
+    }
+
     /// The PSSMLT settings these flags describe.
     pub fn settings(&self, time: Option<f64>, seed: u64) -> Result<PssmltSettings, String> {
-        let small = match self.small_step {
+        self.settings_for(MltKind::Pssmlt, time, seed)
+    }
+
+    /// The settings these flags describe for `kind` (the defaults differ
+    /// in the small step, see [`MltArgs::small_step_for`]).
+    pub fn settings_for(
+        &self,
+        kind: MltKind,
+        time: Option<f64>,
+        seed: u64,
+    ) -> Result<PssmltSettings, String> {
+        let small = match self.small_step_for(kind) {
             SmallStepArg::Kelemen => SmallStepKind::Kelemen {
                 s1: self.s1,
                 s2: self.s2,
@@ -170,6 +194,21 @@ struct ComponentJson {
     acceptance: f64,
 }
 
+/// One member of the chain family (MMLT: one path depth), for the JSON
+/// statistics.
+#[derive(Serialize)]
+struct FamilyJson {
+    /// MMLT: path depth in segments; PSSMLT: 0.
+    depth: usize,
+    chains: usize,
+    mutations: u64,
+    b_bootstrap: f64,
+    b_bootstrap_standard_error: f64,
+    b_running: f64,
+    b_running_standard_error: f64,
+    scale: f64,
+}
+
 /// The run statistics written beside a PSSMLT image.
 #[derive(Serialize)]
 struct MltSidecar<'a> {
@@ -201,6 +240,7 @@ struct MltSidecar<'a> {
     acceptance: f64,
     acceptance_per_component: Vec<ComponentJson>,
     acceptance_per_depth: Vec<DepthAcceptance>,
+    families: Vec<FamilyJson>,
     nonfinite_contributions: u64,
     nonfinite_bootstrap_candidates: usize,
     nonfinite_dump: Option<String>,
@@ -262,7 +302,7 @@ pub struct MltJob<'a> {
 /// contribution (`<out>.nonfinite.pss`, for `--replay`).
 pub fn run_pssmlt(job: &MltJob<'_>, stop: &AtomicBool) -> Result<MltResult, String> {
     let scene = job.scene;
-    let settings = job.args.settings(job.time, job.seed)?;
+    let settings = job.args.settings_for(job.kind, job.time, job.seed)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(job.threads)
         .build()
@@ -372,7 +412,7 @@ pub fn run_pssmlt(job: &MltJob<'_>, stop: &AtomicBool) -> Result<MltResult, Stri
             max_depth as i64
         },
         rr_depth: scene.integrator.rr_depth,
-        small_step: job.args.small_step,
+        small_step: job.args.small_step_for(job.kind),
         large_step_probability: settings.mutation.large_step_probability,
         bootstrap_candidates: settings.bootstrap,
         chains: settings.chains,
@@ -395,6 +435,24 @@ pub fn run_pssmlt(job: &MltJob<'_>, stop: &AtomicBool) -> Result<MltResult, Stri
             })
             .collect(),
         acceptance_per_depth: result.per_depth.clone(),
+        families: result
+            .families
+            .iter()
+            .enumerate()
+            .map(|(d, f)| FamilyJson {
+                depth: match job.kind {
+                    MltKind::Pssmlt => 0,
+                    MltKind::Mmlt => d + 1,
+                },
+                chains: f.chains,
+                mutations: f.mutations,
+                b_bootstrap: f.bootstrap_b.0,
+                b_bootstrap_standard_error: f.bootstrap_b.1,
+                b_running: f.running_b.0,
+                b_running_standard_error: f.running_b.1,
+                scale: f.scale,
+            })
+            .collect(),
         nonfinite_contributions: cs.invalid_density,
         nonfinite_bootstrap_candidates: result.bootstrap_invalid,
         nonfinite_dump: dump,
@@ -609,4 +667,129 @@ pub fn replay(scene: &Scene, file: &Path) -> Result<(), String> {
         }
     }
     Ok(())
+}
+
+/// Splits an integrator name of the `convergence` command,
+/// `BASE[+MODIFIER]...` (e.g. `mmlt+running+mis`), into the base name and
+/// the MLT settings its modifiers give, so that variants of one
+/// integrator can be compared within one run. Modifiers: `running` or
+/// `bootstrap` (normalisation), `mis` (Kelemen's MIS of large steps),
+/// `kelemen` (s1 = 1/1024, s2 = 1/64) or `gaussian` (sigma 0.01) or
+/// `sigma=S` (Gaussian) small step, `plarge=P`, `chains=N`, `candidates=N` (bootstrap
+/// candidates), `alloc=G` (chains per depth `∝ b_d^G`).
+pub fn mlt_variant(name: &str, base: &PssmltSettings) -> Result<(String, PssmltSettings), String> {
+    let mut parts = name.split('+');
+    let head = parts.next().unwrap_or_default().to_string();
+    let mut s = base.clone();
+    for m in parts {
+        let (key, value) = match m.split_once('=') {
+            Some((k, v)) => (k, Some(v)),
+            None => (m, None),
+        };
+        let number = |what: &str| -> Result<f64, String> {
+            value
+                .and_then(|v| v.parse::<f64>().ok())
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| format!("modifier `{m}` of `{name}` needs a number ({what})"))
+        };
+        let count = |what: &str| -> Result<usize, String> {
+            value
+                .and_then(|v| v.parse::<usize>().ok())
+                .filter(|&v| v > 0)
+                .ok_or_else(|| {
+                    format!("modifier `{m}` of `{name}` needs a positive integer ({what})")
+                })
+        };
+        match key {
+            "running" => s.normalization = Normalization::Running,
+            "bootstrap" => s.normalization = Normalization::Bootstrap,
+            "mis" => s.mis_large_steps = true,
+            "kelemen" => {
+                s.mutation.small = SmallStepKind::Kelemen {
+                    s1: 1.0 / 1024.0,
+                    s2: 1.0 / 64.0,
+                }
+            }
+            "gaussian" => s.mutation.small = SmallStepKind::Gaussian { sigma: 0.01 },
+            "sigma" => {
+                s.mutation.small = SmallStepKind::Gaussian {
+                    sigma: number("the Gaussian small step's sigma")?,
+                }
+            }
+            "plarge" => s.mutation.large_step_probability = number("large-step probability")?,
+            "chains" => s.chains = count("chains")?,
+            "alloc" => s.depth_allocation_exponent = number("depth allocation exponent")?,
+            "candidates" => s.bootstrap = count("bootstrap candidates")?,
+            _ => {
+                return Err(format!(
+                    "unknown modifier `{m}` in `{name}` (known: running, bootstrap, mis, kelemen, gaussian, sigma=S, plarge=P, chains=N, candidates=N, alloc=G)"
+                ));
+            }
+        }
+    }
+    s.mutation
+        .kernel::<()>()
+        .map_err(|e| format!("`{name}`: {e}"))?;
+    Ok((head, s))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn variant_modifiers_set_the_settings() {
+        let base = PssmltSettings::default();
+        let (name, s) = mlt_variant(
+            "mmlt+running+mis+plarge=0.1+chains=10+candidates=50+alloc=0.5",
+            &base,
+        )
+        .expect("valid variant");
+        assert_eq!(name, "mmlt");
+        assert_eq!(s.normalization, Normalization::Running);
+        assert!(s.mis_large_steps);
+        assert_eq!(s.mutation.large_step_probability, 0.1);
+        assert_eq!((s.chains, s.bootstrap), (10, 50));
+        assert_eq!(s.depth_allocation_exponent, 0.5);
+        let (_, g) = mlt_variant("pssmlt+sigma=0.02", &base).expect("valid variant");
+        assert_eq!(g.mutation.small, SmallStepKind::Gaussian { sigma: 0.02 });
+        let (plain, same) = mlt_variant("pt", &base).expect("no modifiers");
+        assert_eq!(plain, "pt");
+        assert_eq!(same.chains, base.chains);
+        for bad in [
+            "mmlt+fast",
+            "mmlt+plarge=x",
+            "mmlt+plarge=2",
+            "mmlt+chains=0",
+            "mmlt+sigma=inf",
+        ] {
+            assert!(mlt_variant(bad, &base).is_err(), "{bad} accepted");
+        }
+    }
+
+    #[test]
+    fn mmlt_defaults_to_the_gaussian_small_step() {
+        use clap::Parser;
+        #[derive(Parser)]
+        struct Cli {
+            #[command(flatten)]
+            mlt: MltArgs,
+        }
+        let cli = Cli::parse_from(["x"]);
+        let m = cli
+            .mlt
+            .settings_for(MltKind::Mmlt, None, 0)
+            .expect("defaults are valid");
+        assert_eq!(m.mutation.small, SmallStepKind::Gaussian { sigma: 0.01 });
+        assert_eq!(m.mutation.large_step_probability, 0.3);
+        assert_eq!(
+            (m.bootstrap, m.chains, m.mutations_per_pixel),
+            (100_000, 1000, Some(100))
+        );
+        let p = cli.mlt.settings(None, 0).expect("defaults are valid");
+        assert!(matches!(p.mutation.small, SmallStepKind::Kelemen { .. }));
+        let k = Cli::parse_from(["x", "--small-step", "kelemen"]);
+        let m = k.mlt.settings_for(MltKind::Mmlt, None, 0).expect("valid");
+        assert!(matches!(m.mutation.small, SmallStepKind::Kelemen { .. }));
+    }
 }

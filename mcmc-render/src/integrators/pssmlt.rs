@@ -20,11 +20,19 @@
 //!   running estimate over bootstrap candidates and all large steps so far
 //!   (`mcmc_core::startup::RunningNormalization`), e.g. for previews.
 //!   (With `mis_large_steps` `b*` is part of the weights and is used.)
+//! - **Families** (MMLT): one target per path depth `d`, each with its own
+//!   bootstrap `b_d`, chains, film and mutation count; the image is the sum
+//!   of the members' images, each normalised by its own mutations
+//!   ([`render_family`]). The bootstrap `b_d` of a rare depth can be far
+//!   off (on the door-ajar scene, 100 000 candidates give the direct-light
+//!   depth a relative standard error near 40%); the running estimate keeps
+//!   improving with the large steps.
 //!
 //! # Parallelism and determinism
 //!
-//! The chains are cut into a fixed number of tasks ([`PssmltSettings::tasks`],
-//! independent of the thread count); each task owns its chains, one film
+//! The chains are cut into about [`PssmltSettings::tasks`] tasks (a number
+//! independent of the thread count), each holding chains of one family
+//! member; each task owns its chains, one film
 //! and its counters, and runs its chains one after another in rounds. Films
 //! and counters are summed in task order, the bootstrap is evaluated in
 //! parallel but collected in candidate order, and every chain draws from
@@ -102,6 +110,10 @@ pub struct PssmltSettings {
     pub tasks: usize,
     /// Time between previews ([`MltObserver::preview`]).
     pub preview_every: Duration,
+    /// Chains go to family members in proportion to `b_d^γ`, `γ` this
+    /// exponent: 1 (default) is pbrt-v4's share (what a single chain over
+    /// all depths spends per depth); 0 gives every member the same number.
+    pub depth_allocation_exponent: f64,
 }
 
 impl Default for PssmltSettings {
@@ -117,6 +129,7 @@ impl Default for PssmltSettings {
             normalization: Normalization::Bootstrap,
             tasks: 16,
             preview_every: Duration::from_secs(5),
+            depth_allocation_exponent: 1.0,
         }
     }
 }
@@ -143,20 +156,49 @@ pub struct DepthAcceptance {
     pub accepted: u64,
 }
 
+/// What one member of a family (an MMLT depth; the single PSSMLT target)
+/// ran and contributes.
+#[derive(Clone, Debug)]
+pub struct FamilyResult {
+    /// Splat film of this member's chains, not yet scaled.
+    pub film: Film,
+    /// Mutations done by this member's chains.
+    pub mutations: u64,
+    /// Chains this member ran.
+    pub chains: usize,
+    /// The scale applied to this member's developed film: its `b_d`
+    /// (bootstrap or running, see [`Normalization`]), or 1 with Kelemen's
+    /// MIS (where `b_d` is inside the splat weights).
+    pub scale: f64,
+    /// Bootstrap `b_d` and its standard error.
+    pub bootstrap_b: (f64, f64),
+    /// Running `⟨b_d⟩` (bootstrap and large steps) and its standard error.
+    pub running_b: (f64, f64),
+}
+
+impl FamilyResult {
+    /// This member's image: its film over its own mutations per pixel,
+    /// times its scale (see [`render_family`] for why per member).
+    pub fn image(&self) -> Vec<Rgb> {
+        develop(&self.film, self.mutations, self.scale)
+    }
+}
+
 /// The outcome of a PSSMLT render.
 #[derive(Clone, Debug)]
 pub struct MltResult {
-    /// Splat film, not yet scaled by `b`.
-    pub film: Film,
+    /// Per member of the family (one for PSSMLT, one per depth for MMLT).
+    pub families: Vec<FamilyResult>,
     /// Mutations done.
     pub mutations: u64,
-    /// Mutations per pixel (the splat normalisation).
+    /// Mutations per pixel (all members).
     pub mutations_per_pixel: f64,
-    /// The scale applied to the developed film.
+    /// The sum of the members' scales (`b` unless MIS).
     pub scale: f64,
-    /// Bootstrap `b*` and its standard error.
+    /// Bootstrap `b* = Σ_d b_d` and its standard error.
     pub bootstrap_b: (f64, f64),
-    /// Running `⟨b⟩` (bootstrap and large steps) and its standard error.
+    /// Running `⟨b⟩ = Σ_d ⟨b_d⟩` (bootstrap and large steps) and its
+    /// standard error.
     pub running_b: (f64, f64),
     /// Statistics of all chains (per kernel component, NaN/inf count).
     pub chain_stats: ChainStatistics,
@@ -175,10 +217,26 @@ pub struct MltResult {
 }
 
 impl MltResult {
-    /// The developed image, row-major.
+    /// The developed image, row-major: the sum of the members' images.
     pub fn image(&self) -> Vec<Rgb> {
-        develop(&self.film, self.mutations, self.scale)
+        sum_images(self.families.iter().map(FamilyResult::image))
     }
+}
+
+/// The pixel-wise sum of images of equal size.
+fn sum_images(images: impl Iterator<Item = Vec<Rgb>>) -> Vec<Rgb> {
+    let mut out: Option<Vec<Rgb>> = None;
+    for img in images {
+        match out.as_mut() {
+            None => out = Some(img),
+            Some(o) => {
+                for (a, b) in o.iter_mut().zip(img) {
+                    *a += b;
+                }
+            }
+        }
+    }
+    out.unwrap_or_default()
 }
 
 /// The image of a splat film after `mutations` mutations, scaled by `scale`.
@@ -202,14 +260,15 @@ type PssChain = Chain<
 
 struct ChainSlot {
     chain: PssChain,
-    family: usize,
     remaining: Option<u64>,
 }
 
+/// A work unit: chains of one family member, run one after another.
 struct Task {
+    family: usize,
     chains: Vec<ChainSlot>,
     film: Film,
-    running: Vec<RunningNormalization>,
+    running: RunningNormalization,
     per_depth: Vec<DepthAcceptance>,
     mutations: u64,
     first_nonfinite: Option<Vec<f64>>,
@@ -238,6 +297,44 @@ pub fn bootstrap<F: PssPathSampler>(
     bootstrap_family(std::slice::from_ref(target), count, seed)
 }
 
+/// `ln I(u_j)` of the `count` candidates of every member, evaluated in
+/// parallel and collected in order; candidate `j` belongs to member
+/// `j / count`.
+fn bootstrap_log_densities<F: PssPathSampler>(
+    targets: &[PssTarget<'_, F>],
+    count: usize,
+    seed: u64,
+) -> Vec<f64> {
+    (0..count * targets.len())
+        .into_par_iter()
+        .map(|j| {
+            targets[j / count]
+                .trace(&bootstrap_point(seed, j))
+                .log_density
+        })
+        .collect()
+}
+
+/// The `mcmc-core` bootstrap over candidate indices `offset..offset +
+/// log_i.len()` with densities `log_i` (the reference density of PSS is 1,
+/// ln p₀ = 0).
+fn index_bootstrap(log_i: &[f64], offset: usize) -> Result<Bootstrap<usize, ()>, MltError> {
+    let lookup = |i: usize| log_i[i - offset];
+    let mut next = offset;
+    // The sampler hands out indices in order; the generator is not used.
+    let mut rng = stream_rng(0, RESAMPLE_STREAM);
+    Ok(Bootstrap::from_sampler(
+        &lookup,
+        log_i.len(),
+        &mut rng,
+        |_| {
+            let i = next;
+            next += 1;
+            (i, 0.0)
+        },
+    )?)
+}
+
 /// The joint bootstrap of a family: `count` candidates per member;
 /// candidate `j` belongs to member `j / count`. Its `b*` is the mean of
 /// the members' `b_d`.
@@ -251,26 +348,46 @@ pub fn bootstrap_family<F: PssPathSampler>(
             "the bootstrap needs at least one candidate".into(),
         ));
     }
-    let total = count * targets.len();
-    let log_i: Vec<f64> = (0..total)
-        .into_par_iter()
-        .map(|j| {
-            targets[j / count]
-                .trace(&bootstrap_point(seed, j))
-                .log_density
-        })
-        .collect();
-    // The candidates are indices; their density is the precomputed I(u_i)
-    // and the reference density of PSS is 1 (ln p₀ = 0).
-    let lookup = |i: usize| log_i[i];
-    let mut next = 0usize;
-    let mut rng = stream_rng(seed, RESAMPLE_STREAM);
-    let boot = Bootstrap::from_sampler(&lookup, total, &mut rng, |_| {
-        let i = next;
-        next += 1;
-        (i, 0.0)
-    })?;
+    let log_i = bootstrap_log_densities(targets, count, seed);
+    let boot = index_bootstrap(&log_i, 0)?;
     Ok((boot, log_i))
+}
+
+/// Chains per member: proportional to `share[d]` (by default `b_d`, the
+/// share a single chain over the joint space would spend there, as
+/// pbrt-v4's per-chain draw of the depth gives on average), rounded by
+/// largest remainder, with at least one chain for every member with a
+/// positive share while chains last.
+fn allocate_chains(chains: usize, b: &[f64]) -> Vec<usize> {
+    let total: f64 = b.iter().sum();
+    let quota: Vec<f64> = b.iter().map(|&x| chains as f64 * x / total).collect();
+    let mut n: Vec<usize> = quota.iter().map(|q| q.floor() as usize).collect();
+    let positive: Vec<usize> = (0..b.len()).filter(|&d| b[d] > 0.0).collect();
+    if chains >= positive.len() {
+        for &d in &positive {
+            n[d] = n[d].max(1);
+        }
+    }
+    let mut assigned: usize = n.iter().sum();
+    // Largest fractional remainder first (ties: lower index).
+    let mut order = positive.clone();
+    order.sort_by(|&a, &c| {
+        let (ra, rc) = (quota[a] - quota[a].floor(), quota[c] - quota[c].floor());
+        rc.total_cmp(&ra).then(a.cmp(&c))
+    });
+    for &d in order.iter().cycle().take(chains.saturating_sub(assigned)) {
+        n[d] += 1;
+        assigned += 1;
+    }
+    // The minimum of one chain can overshoot: take back from the largest.
+    while assigned > chains {
+        let d = (0..n.len())
+            .max_by_key(|&d| (n[d], usize::MAX - d))
+            .unwrap_or(0);
+        n[d] -= 1;
+        assigned -= 1;
+    }
+    n
 }
 
 /// Renders `scene` with PSSMLT over `sampler`.
@@ -285,11 +402,19 @@ pub fn render_pssmlt<F: PssPathSampler>(
 }
 
 /// Renders `scene` with a family of PSS targets (one per sampler; MMLT:
-/// one per path depth). The bootstrap draws `settings.bootstrap`
-/// candidates per member, chain starts are resampled jointly (so members
-/// get chains in proportion to their `b_d`), each chain stays with its
-/// member, and the image scale is `b = Σ_d b_d`, i.e. `b*` of the joint
-/// bootstrap times the number of members (pbrt-v4's `mlt`).
+/// one per path depth), each with its own normalisation.
+///
+/// The bootstrap draws `settings.bootstrap` candidates per member `d`,
+/// which give `b_d = ∫ I_d` and that member's chain starts (resampled
+/// `∝ I_d` among its own candidates). Chains are allocated to members in
+/// proportion to `b_d` ([`allocate_chains`]) and stay with their member.
+/// The image is `Σ_d b_d · film_d / (M_d / pixels)`, with `M_d` the
+/// mutations member `d` actually ran. pbrt-v4 instead scales one film by
+/// `b = Σ_d b_d` over all mutations, which is right only if every member's
+/// share of the mutations equals `b_d / b`; with chains drawn at random
+/// (and time budgets cutting rounds short) it does not, and each depth's
+/// brightness is then off by the relative error of its chain count — a
+/// bias that more mutations do not remove.
 pub fn render_family<F: PssPathSampler>(
     scene: &Scene,
     samplers: Vec<F>,
@@ -300,14 +425,14 @@ pub fn render_family<F: PssPathSampler>(
     if samplers.is_empty() {
         return Err(MltError::Setting("no path sampler".into()));
     }
-    if samplers.len() > 1 && settings.mis_large_steps {
-        return Err(MltError::Setting(
-            "Kelemen's MIS combination needs a single target (not MMLT)".into(),
-        ));
-    }
     if settings.chains == 0 || settings.tasks == 0 {
         return Err(MltError::Setting(
             "chains and tasks must be at least 1".into(),
+        ));
+    }
+    if settings.bootstrap == 0 {
+        return Err(MltError::Setting(
+            "the bootstrap needs at least one candidate".into(),
         ));
     }
     if settings.mutations_per_pixel.is_none() && settings.time_budget.is_none() {
@@ -327,25 +452,56 @@ pub fn render_family<F: PssPathSampler>(
     let (width, height) = (scene.film.width, scene.film.height);
     let pixels = width as u64 * height as u64;
 
-    // Start-up bias elimination.
+    // Start-up bias elimination, per member.
     let seed = settings.seed;
-    let (boot, log_i) = bootstrap_family(&targets, settings.bootstrap, seed)?;
-    if boot.b() == 0.0 || !boot.b().is_finite() {
+    let count = settings.bootstrap;
+    let log_i = bootstrap_log_densities(&targets, count, seed);
+    let boots: Vec<Bootstrap<usize, ()>> = (0..members)
+        .map(|d| index_bootstrap(&log_i[d * count..(d + 1) * count], d * count))
+        .collect::<Result<_, _>>()?;
+    let b_d: Vec<f64> = boots.iter().map(|b| b.b()).collect();
+    let b_star: f64 = b_d.iter().sum();
+    let invalid: usize = boots.iter().map(|b| b.invalid_candidates()).sum();
+    if b_star == 0.0 || !b_star.is_finite() {
         return Err(MltError::BlackScene {
-            candidates: boot.len(),
-            invalid: boot.invalid_candidates(),
+            candidates: count * members,
+            invalid,
         });
     }
-    let b_star = boot.b() * members as f64;
+    let b_star_se = boots
+        .iter()
+        .map(|b| b.standard_error().powi(2))
+        .sum::<f64>()
+        .sqrt();
     let mut boot_running = vec![RunningNormalization::new(); members];
     for (j, &lw) in log_i.iter().enumerate() {
-        boot_running[j / settings.bootstrap].add(lw);
+        boot_running[j / count].add(lw);
     }
-    let mut rng = stream_rng(seed, RESAMPLE_STREAM + 1);
-    let starts = boot.resample(settings.chains, &mut rng)?;
+    let gamma = settings.depth_allocation_exponent;
+    if !gamma.is_finite() || gamma < 0.0 {
+        return Err(MltError::Setting(format!(
+            "the depth allocation exponent must be finite and ≥ 0, got {gamma}"
+        )));
+    }
+    let shares: Vec<f64> = b_d
+        .iter()
+        .map(|&b| if b > 0.0 { b.powf(gamma) } else { 0.0 })
+        .collect();
+    let chains_of = allocate_chains(settings.chains, &shares);
+    let mut starts: Vec<Vec<usize>> = Vec::with_capacity(members);
+    for (d, boot) in boots.iter().enumerate() {
+        let mut rng = stream_rng(seed, RESAMPLE_STREAM + 1 + d as u64);
+        let s = if chains_of[d] == 0 {
+            Vec::new()
+        } else {
+            boot.resample(chains_of[d], &mut rng)?
+        };
+        starts.push(s.into_iter().map(|x| x.state).collect());
+    }
     let bootstrap_seconds = start.elapsed().as_secs_f64();
 
-    // Chains, grouped into tasks in contiguous blocks.
+    // Chains, numbered member by member, grouped into tasks of one member
+    // each (about `settings.tasks` in all) in contiguous blocks.
     let total = settings.mutations_per_pixel.map(|m| m * pixels);
     let per_chain = |c: usize| {
         total.map(|t| {
@@ -354,38 +510,49 @@ pub fn render_family<F: PssPathSampler>(
         })
     };
     let filter = Arc::new(Filter::new(scene.film.filter, width, height));
-    let tasks_n = settings.tasks.min(settings.chains);
-    let mut tasks: Vec<Task> = (0..tasks_n)
-        .map(|_| Task {
-            chains: Vec::new(),
-            film: Film::new(width, height, filter.clone()),
-            running: vec![RunningNormalization::new(); members],
-            per_depth: Vec::new(),
-            mutations: 0,
-            first_nonfinite: None,
-        })
-        .collect();
-    for (c, s) in starts.iter().enumerate() {
-        let kernel = settings.mutation.kernel::<PathSample>()?;
-        let family = s.state / settings.bootstrap;
-        let chain = Chain::new(
-            &targets[family],
-            bootstrap_point(seed, s.state),
-            MetropolisHastings::new(kernel),
-            stream_rng(seed, c as u64),
-        )?;
-        tasks[c * tasks_n / settings.chains].chains.push(ChainSlot {
-            chain,
-            family,
-            remaining: per_chain(c),
-        });
+    let mut tasks: Vec<Task> = Vec::new();
+    let mut c = 0usize;
+    for (d, member_starts) in starts.iter().enumerate() {
+        let n = member_starts.len();
+        if n == 0 {
+            continue;
+        }
+        let k = ((settings.tasks * n + settings.chains / 2) / settings.chains).clamp(1, n);
+        let first = tasks.len();
+        for _ in 0..k {
+            tasks.push(Task {
+                family: d,
+                chains: Vec::new(),
+                film: Film::new(width, height, filter.clone()),
+                running: RunningNormalization::new(),
+                per_depth: Vec::new(),
+                mutations: 0,
+                first_nonfinite: None,
+            });
+        }
+        for (i, &candidate) in member_starts.iter().enumerate() {
+            let chain = Chain::new(
+                &targets[d],
+                bootstrap_point(seed, candidate),
+                MetropolisHastings::new(settings.mutation.kernel::<PathSample>()?),
+                stream_rng(seed, c as u64),
+            )?;
+            tasks[first + i * k / n].chains.push(ChainSlot {
+                chain,
+                remaining: per_chain(c),
+            });
+            c += 1;
+        }
     }
 
-    let weights = Weights {
-        mis: settings.mis_large_steps,
-        p_large: settings.mutation.large_step_probability,
-        b: b_star,
-    };
+    let weights: Vec<Weights> = b_d
+        .iter()
+        .map(|&b| Weights {
+            mis: settings.mis_large_steps,
+            p_large: settings.mutation.large_step_probability,
+            b,
+        })
+        .collect();
     let mut interrupted = false;
     let mut last_preview = Instant::now();
     loop {
@@ -402,6 +569,7 @@ pub fn render_family<F: PssPathSampler>(
         let aborted = AtomicBool::new(false);
         tasks.par_iter_mut().for_each(|task| {
             let Task {
+                family,
                 chains,
                 film,
                 running,
@@ -409,6 +577,8 @@ pub fn render_family<F: PssPathSampler>(
                 mutations,
                 first_nonfinite,
             } = task;
+            let target = &targets[*family];
+            let w = &weights[*family];
             for slot in chains.iter_mut() {
                 if aborted.load(Ordering::Relaxed) || stop.load(Ordering::Relaxed) || out_of_time()
                 {
@@ -416,11 +586,9 @@ pub fn render_family<F: PssPathSampler>(
                     return;
                 }
                 let n = slot.remaining.map_or(ROUND, |r| r.min(ROUND));
-                let target = &targets[slot.family];
-                let running = &mut running[slot.family];
                 for _ in 0..n {
                     slot.chain.step_with(target, |t| {
-                        observe(t, &weights, film, running, per_depth, first_nonfinite);
+                        observe(t, w, film, running, per_depth, first_nonfinite);
                     });
                 }
                 if let Some(r) = slot.remaining.as_mut() {
@@ -436,13 +604,33 @@ pub fn render_family<F: PssPathSampler>(
         }
         if last_preview.elapsed() >= settings.preview_every {
             last_preview = Instant::now();
-            let (film, mutations, running) = gather(&tasks, &filter, width, height, &boot_running);
-            let scale = scale_of(settings, &weights, &running);
-            observer.preview(&develop(&film, mutations, scale), mutations);
+            let families = gather(
+                &tasks,
+                settings,
+                &boots,
+                &boot_running,
+                &chains_of,
+                &filter,
+                (width, height),
+            );
+            let mutations = families.iter().map(|f| f.mutations).sum();
+            observer.preview(
+                &sum_images(families.iter().map(FamilyResult::image)),
+                mutations,
+            );
         }
     }
 
-    let (film, mutations, running) = gather(&tasks, &filter, width, height, &boot_running);
+    let families = gather(
+        &tasks,
+        settings,
+        &boots,
+        &boot_running,
+        &chains_of,
+        &filter,
+        (width, height),
+    );
+    let mutations: u64 = families.iter().map(|f| f.mutations).sum();
     let mut chain_stats: Option<ChainStatistics> = None;
     let mut per_depth: Vec<DepthAcceptance> = Vec::new();
     let mut first_nonfinite = None;
@@ -464,24 +652,24 @@ pub fn render_family<F: PssPathSampler>(
             first_nonfinite.clone_from(&t.first_nonfinite);
         }
     }
-    let scale = scale_of(settings, &weights, &running);
+    let running_b = (
+        families.iter().map(|f| f.running_b.0).sum(),
+        families
+            .iter()
+            .map(|f| f.running_b.1.powi(2))
+            .sum::<f64>()
+            .sqrt(),
+    );
     Ok(MltResult {
-        film,
+        scale: families.iter().map(|f| f.scale).sum(),
+        families,
         mutations,
         mutations_per_pixel: mutations as f64 / pixels as f64,
-        scale,
-        bootstrap_b: (b_star, boot.standard_error()),
-        running_b: (
-            running.iter().map(|r| r.b()).sum(),
-            running
-                .iter()
-                .map(|r| r.standard_error().powi(2))
-                .sum::<f64>()
-                .sqrt(),
-        ),
+        bootstrap_b: (b_star, b_star_se),
+        running_b,
         chain_stats: chain_stats.unwrap_or_else(|| ChainStatistics::new(Vec::new())),
         per_depth,
-        bootstrap_invalid: boot.invalid_candidates(),
+        bootstrap_invalid: invalid,
         first_nonfinite,
         bootstrap_seconds,
         seconds: start.elapsed().as_secs_f64(),
@@ -489,36 +677,50 @@ pub fn render_family<F: PssPathSampler>(
     })
 }
 
-fn scale_of(settings: &PssmltSettings, w: &Weights, running: &[RunningNormalization]) -> f64 {
-    if w.mis {
-        1.0
-    } else {
-        match settings.normalization {
-            Normalization::Bootstrap => w.b,
-            Normalization::Running => running.iter().map(|r| r.b()).sum(),
-        }
-    }
-}
-
-/// Sums the task films and counters in task order.
+/// Sums the task films and counters of every member, in task order.
 fn gather(
     tasks: &[Task],
-    filter: &Arc<Filter>,
-    width: u32,
-    height: u32,
+    settings: &PssmltSettings,
+    boots: &[Bootstrap<usize, ()>],
     boot_running: &[RunningNormalization],
-) -> (Film, u64, Vec<RunningNormalization>) {
-    let mut film = Film::new(width, height, filter.clone());
+    chains_of: &[usize],
+    filter: &Arc<Filter>,
+    (w, h): (u32, u32),
+) -> Vec<FamilyResult> {
+    let mut films: Vec<Film> = (0..boots.len())
+        .map(|_| Film::new(w, h, filter.clone()))
+        .collect();
     let mut running = boot_running.to_vec();
-    let mut mutations = 0;
+    let mut mutations = vec![0u64; boots.len()];
     for t in tasks {
-        film.add_film(&t.film);
-        for (r, tr) in running.iter_mut().zip(&t.running) {
-            r.merge(tr);
-        }
-        mutations += t.mutations;
+        films[t.family].add_film(&t.film);
+        running[t.family].merge(&t.running);
+        mutations[t.family] += t.mutations;
     }
-    (film, mutations, running)
+    films
+        .into_iter()
+        .enumerate()
+        .map(|(d, film)| {
+            let bootstrap_b = (boots[d].b(), boots[d].standard_error());
+            let running_b = (running[d].b(), running[d].standard_error());
+            let scale = if settings.mis_large_steps {
+                1.0
+            } else {
+                match settings.normalization {
+                    Normalization::Bootstrap => bootstrap_b.0,
+                    Normalization::Running => running_b.0,
+                }
+            };
+            FamilyResult {
+                film,
+                mutations: mutations[d],
+                chains: chains_of[d],
+                scale,
+                bootstrap_b,
+                running_b,
+            }
+        })
+        .collect()
 }
 
 struct Weights {
@@ -573,12 +775,41 @@ fn observe(
             }
             per_depth[d].proposed += 1;
             per_depth[d].accepted += u64::from(t.accepted);
-            let i = y.log_density.exp();
+            // `I(y)` itself (ln I is its logarithm): saves an `exp` per state.
+            let i = y.payload.luminance();
             splat_all(film, &y.payload, w.of(t.alpha, large, i));
         }
         // A black proposal (I = 0) contributes nothing, in either weighting.
     }
     let x = t.current;
-    let ix = x.log_density.exp();
+    let ix = x.payload.luminance();
     splat_all(film, &x.payload, w.of(1.0 - t.alpha, false, ix));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::allocate_chains;
+
+    #[test]
+    fn chains_follow_the_shares_and_every_positive_member_gets_one() {
+        // Exact quotas are met exactly.
+        assert_eq!(allocate_chains(10, &[1.0, 3.0, 6.0]), vec![1, 3, 6]);
+        // Largest remainder: quotas 3.33, 3.33, 3.33 -> the first gets the spare.
+        assert_eq!(allocate_chains(10, &[1.0, 1.0, 1.0]), vec![4, 3, 3]);
+        // Zero shares get no chain; a tiny positive share still gets one,
+        // taken from the largest member.
+        assert_eq!(allocate_chains(100, &[0.0, 1e-6, 1.0]), vec![0, 1, 99]);
+        // More positive members than chains: no minimum, still `chains` in all.
+        // (quotas 0.25, 0.25, 0.25, 1.25: floors 0, 0, 0, 1, the spare to the first tie)
+        assert_eq!(allocate_chains(2, &[1.0, 1.0, 1.0, 5.0]), vec![1, 0, 0, 1]);
+        // Always exactly `chains`, never more than the quota plus one.
+        let shares = [0.023, 0.048, 0.035, 0.031, 0.023, 0.0];
+        let n = allocate_chains(1000, &shares);
+        assert_eq!(n.iter().sum::<usize>(), 1000);
+        let total: f64 = shares.iter().sum();
+        for (k, s) in n.iter().zip(shares) {
+            let quota = 1000.0 * s / total;
+            assert!((*k as f64 - quota).abs() < 1.0, "{k} vs {quota}");
+        }
+    }
 }
