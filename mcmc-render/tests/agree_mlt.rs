@@ -246,8 +246,13 @@ fn mmlt_agrees_with_pt_on_the_glossy_glass_box() {
     // 48 replicates of 2e4 bootstrap candidates per depth, 1024 chains,
     // 16384 mutations per pixel measured
     // +0.25%, +0.12%, −0.14% with SE of the difference 0.28%, 0.32%,
-    // 0.52%: the blue channel's per-replicate spread (3.6%) allows 3%
-    // at 5σ. Resolving 1% would take ~7× this budget (~45 min).
+    // 0.52% before MMLT's per-depth normalisation (one film scaled by
+    // Σ b_d); the blue channel's per-replicate spread (3.6%) allowed 3%
+    // at 5σ. After it (main a99aca0, 518 s of one core): +0.13%, −0.28%,
+    // −1.05% with SE 0.24%, 0.24%, 0.34%. Blue is 3.1σ low, which the 4σ
+    // check passes but which does not demonstrate 1% agreement (it may be
+    // the heavy tail of rarely found glass paths, or a small bias; not yet
+    // settled), so the bound stays 3%.
     let (scene, pt) = glossy();
     let mmlt = Budget {
         bootstrap: 20_000,
