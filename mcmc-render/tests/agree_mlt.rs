@@ -241,7 +241,7 @@ fn bdpt_and_pssmlt_agree_with_pt_on_the_glossy_glass_box() {
 }
 
 #[test]
-#[ignore = "minutes: MMLT to 1% on the glossy-glass box (resolution 1.25% at 5σ)"]
+#[ignore = "minutes: MMLT to 1% on the glossy-glass box (resolves 1.5% at 5σ)"]
 fn mmlt_agrees_with_pt_on_the_glossy_glass_box() {
     // 3 × 48 replicates of 2e4 bootstrap candidates per depth, 1024 chains,
     // 16384 mutations per pixel. The blue channel's per-replicate spread
