@@ -14,7 +14,9 @@
 
 mod common;
 
-use common::{image_mean, load_str as load, repo_scene_tilted_text};
+use common::{
+    image_mean, load_str as load, mean_se, point_light_on_a_plane, repo_scene_tilted_text,
+};
 use mcmc_render::color::Rgb;
 use mcmc_render::integrators::Integrator;
 use mcmc_render::integrators::bdpt::{Bdpt, MisHeuristic};
@@ -53,15 +55,7 @@ fn batched_mean(scene: &Scene, integ: &dyn Integrator, spp: u32, k: u64) -> ([f6
             image_mean(&img)
         })
         .collect();
-    let mut mean = [0.0; 3];
-    let mut se = [0.0; 3];
-    for c in 0..3 {
-        let m = means.iter().map(|v| v[c]).sum::<f64>() / k as f64;
-        let var = means.iter().map(|v| (v[c] - m).powi(2)).sum::<f64>() / (k - 1) as f64;
-        mean[c] = m;
-        se[c] = (var / k as f64).sqrt();
-    }
-    (mean, se)
+    mean_se(&means)
 }
 
 /// Checks BDPT against PT: consistent within 4σ, within `bound` relative,
@@ -317,42 +311,7 @@ fn bdpt_point_light_on_a_plane_matches_the_closed_form() {
     // light only: L = ρ/π · I h / d³ at the plane point a pixel sees (the
     // same closed form as the PT/LT test in tests/render.rs). Techniques
     // (1, 2) and (2, 1) share these paths through MIS.
-    let (rho, intensity, h) = (0.5f64, 3.0f64, 2.0f64);
-    let scene = load(&format!(
-        r#"<scene version="3.0.0">
-    <integrator type="path"><integer name="max_depth" value="2"/></integrator>
-    <sensor type="perspective">
-        <float name="fov" value="30"/>
-        <transform name="to_world"><lookat origin="0.3,0.2,4" target="0.3,0.2,0" up="0,1,0"/></transform>
-        <film type="hdrfilm">
-            <integer name="width" value="12"/><integer name="height" value="10"/>
-            <rfilter type="box"/>
-        </film>
-    </sensor>
-    <shape type="rectangle">
-        <transform name="to_world"><scale value="5"/></transform>
-        <bsdf type="diffuse"><rgb name="reflectance" value="{rho}"/></bsdf>
-    </shape>
-    <emitter type="point">
-        <rgb name="intensity" value="{intensity}"/>
-        <point name="position" x="0" y="0" z="{h}"/>
-    </emitter>
-</scene>"#
-    ));
-    // The closed form averaged over each pixel by a 16×16 midpoint rule.
-    let (w, hgt) = scene.camera.resolution();
-    let mut expected = 0.0f64;
-    for y in 0..hgt * 16 {
-        for x in 0..w * 16 {
-            let raster = glam::Vec2::new((x as f32 + 0.5) / 16.0, (y as f32 + 0.5) / 16.0);
-            let ray = scene.camera.generate_ray(raster);
-            let t = -ray.o.z / ray.d.z;
-            let p = ray.o + ray.d * t;
-            let d = ((p.x as f64).powi(2) + (p.y as f64).powi(2) + h * h).sqrt();
-            expected += rho / std::f64::consts::PI * intensity * h / (d * d * d);
-        }
-    }
-    expected /= (w * hgt * 256) as f64;
+    let (scene, expected) = point_light_on_a_plane();
     let it = scene.integrator;
     for heuristic in [MisHeuristic::Power, MisHeuristic::Balance] {
         let bdpt = Bdpt {

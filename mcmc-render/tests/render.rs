@@ -12,7 +12,7 @@
 
 mod common;
 
-use common::{image_mean, load_str as load};
+use common::{image_mean, load_str as load, mean_se, point_light_on_a_plane};
 use mcmc_render::color::Rgb;
 use mcmc_render::integrators::Integrator;
 use mcmc_render::integrators::lt::LightTracer;
@@ -51,15 +51,7 @@ fn batched_mean(scene: &Scene, integ: &dyn Integrator, spp: u32, k: u64) -> ([f6
     let means: Vec<[f64; 3]> = (0..k)
         .map(|seed| image_mean(&render_image(scene, integ, spp, 1000 + seed, 2)))
         .collect();
-    let mut mean = [0.0; 3];
-    let mut se = [0.0; 3];
-    for c in 0..3 {
-        let m = means.iter().map(|v| v[c]).sum::<f64>() / k as f64;
-        let var = means.iter().map(|v| (v[c] - m).powi(2)).sum::<f64>() / (k - 1) as f64;
-        mean[c] = m;
-        se[c] = (var / k as f64).sqrt();
-    }
-    (mean, se)
+    mean_se(&means)
 }
 
 /// A closed sphere seen from inside: diffuse albedo `a`, uniform emission
@@ -234,43 +226,7 @@ fn images_are_bit_identical_across_thread_counts() {
 /// `L = ρ/π · I cos θ / d² = ρ/π · I h / d³` at the plane point it sees.
 #[test]
 fn point_light_on_a_plane_matches_the_closed_form() {
-    let (rho, intensity, h) = (0.5f64, 3.0f64, 2.0f64);
-    let scene = load(&format!(
-        r#"<scene version="3.0.0">
-    <integrator type="path"><integer name="max_depth" value="2"/></integrator>
-    <sensor type="perspective">
-        <float name="fov" value="30"/>
-        <transform name="to_world"><lookat origin="0.3,0.2,4" target="0.3,0.2,0" up="0,1,0"/></transform>
-        <film type="hdrfilm">
-            <integer name="width" value="12"/><integer name="height" value="10"/>
-            <rfilter type="box"/>
-        </film>
-    </sensor>
-    <shape type="rectangle">
-        <transform name="to_world"><scale value="5"/></transform>
-        <bsdf type="diffuse"><rgb name="reflectance" value="{rho}"/></bsdf>
-    </shape>
-    <emitter type="point">
-        <rgb name="intensity" value="{intensity}"/>
-        <point name="position" x="0" y="0" z="{h}"/>
-    </emitter>
-</scene>"#
-    ));
-    // Expected image mean: the closed form averaged over each pixel by a
-    // 16×16 midpoint rule (smooth integrand: error far below 1e-4).
-    let (w, hgt) = scene.camera.resolution();
-    let mut expected = 0.0f64;
-    for y in 0..hgt * 16 {
-        for x in 0..w * 16 {
-            let raster = glam::Vec2::new((x as f32 + 0.5) / 16.0, (y as f32 + 0.5) / 16.0);
-            let ray = scene.camera.generate_ray(raster);
-            let t = -ray.o.z / ray.d.z;
-            let p = ray.o + ray.d * t;
-            let d = ((p.x as f64).powi(2) + (p.y as f64).powi(2) + h * h).sqrt();
-            expected += rho / std::f64::consts::PI * intensity * h / (d * d * d);
-        }
-    }
-    expected /= (w * hgt * 256) as f64;
+    let (scene, expected) = point_light_on_a_plane();
     let it = scene.integrator;
     let pt = PathTracer {
         max_depth: it.max_depth,
