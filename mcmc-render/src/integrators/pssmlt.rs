@@ -553,6 +553,18 @@ pub fn render_family<F: PssPathSampler>(
             b,
         })
         .collect();
+    // Previews and the final image gather the same per-depth films.
+    let gather_now = |tasks: &[Task]| {
+        gather(
+            tasks,
+            settings,
+            &boots,
+            &boot_running,
+            &chains_of,
+            &filter,
+            (width, height),
+        )
+    };
     let mut interrupted = false;
     let mut last_preview = Instant::now();
     loop {
@@ -604,15 +616,7 @@ pub fn render_family<F: PssPathSampler>(
         }
         if last_preview.elapsed() >= settings.preview_every {
             last_preview = Instant::now();
-            let families = gather(
-                &tasks,
-                settings,
-                &boots,
-                &boot_running,
-                &chains_of,
-                &filter,
-                (width, height),
-            );
+            let families = gather_now(&tasks);
             let mutations = families.iter().map(|f| f.mutations).sum();
             observer.preview(
                 &sum_images(families.iter().map(FamilyResult::image)),
@@ -621,15 +625,7 @@ pub fn render_family<F: PssPathSampler>(
         }
     }
 
-    let families = gather(
-        &tasks,
-        settings,
-        &boots,
-        &boot_running,
-        &chains_of,
-        &filter,
-        (width, height),
-    );
+    let families = gather_now(&tasks);
     let mutations: u64 = families.iter().map(|f| f.mutations).sum();
     let mut chain_stats: Option<ChainStatistics> = None;
     let mut per_depth: Vec<DepthAcceptance> = Vec::new();
