@@ -9,7 +9,7 @@
 
 use crate::color::Rgb;
 use crate::frame::Frame;
-use crate::geometry::{Geometry, Surface, SurfacePoint, triangle_area};
+use crate::geometry::{FlatTriangle, Geometry, Surface, SurfacePoint, triangle_area};
 use crate::scene::PointLightDesc;
 use crate::warp;
 use glam::{Vec2, Vec3};
@@ -28,6 +28,9 @@ pub enum Light {
         area: f32,
         /// Normalised cumulative triangle areas (meshes only).
         tri_cdf: Vec<f32>,
+        /// The mesh's triangles, cached for sampling (empty unless the shape
+        /// is a mesh without vertex normals).
+        flat_tris: Vec<FlatTriangle>,
         /// Centre and radius when the shape is a sphere (cone sampling).
         sphere: Option<(Vec3, f32)>,
     },
@@ -127,11 +130,16 @@ impl Lights {
                 Surface::Sphere { center, radius } => Some((*center, *radius)),
                 _ => None,
             };
+            let flat_tris = (0..tri_cdf.len() as u32)
+                .map(|t| geometry.flat_triangle(shape, t))
+                .collect::<Option<Vec<_>>>()
+                .unwrap_or_default();
             lights.push(Light::Area {
                 shape,
                 radiance,
                 area: surface.area(),
                 tri_cdf,
+                flat_tris,
                 sphere,
             });
         }
@@ -196,6 +204,7 @@ impl Lights {
     }
 
     /// Uniform point on an area light; returns it with its area density.
+    #[inline]
     fn sample_area_point(
         &self,
         geometry: &Geometry,
@@ -206,32 +215,40 @@ impl Lights {
             shape,
             area,
             tri_cdf,
+            flat_tris,
             ..
         } = light
         else {
             return None;
         };
-        let sp = match &geometry.shapes[*shape as usize].surface {
-            Surface::Mesh(_) => {
-                let i = tri_cdf
-                    .partition_point(|&c| c <= u.0)
-                    .min(tri_cdf.len() - 1);
-                let lo = if i == 0 { 0.0 } else { tri_cdf[i - 1] };
-                let width = tri_cdf[i] - lo;
-                let u0 = if width > 0.0 {
-                    ((u.0 - lo) / width).clamp(0.0, crate::sampling::ONE_MINUS_EPSILON)
-                } else {
-                    0.5
-                };
-                let (b0, b1, b2) = warp::uniform_triangle((u0, u.1));
-                geometry.triangle_point(*shape, i as u32, b0, b1, b2)
+        // Only meshes have a triangle CDF: they skip the shape look-up.
+        let sp = if !tri_cdf.is_empty() {
+            let i = tri_cdf
+                .partition_point(|&c| c <= u.0)
+                .min(tri_cdf.len() - 1);
+            let lo = if i == 0 { 0.0 } else { tri_cdf[i - 1] };
+            let width = tri_cdf[i] - lo;
+            let u0 = if width > 0.0 {
+                ((u.0 - lo) / width).clamp(0.0, crate::sampling::ONE_MINUS_EPSILON)
+            } else {
+                0.5
+            };
+            let (b0, b1, b2) = warp::uniform_triangle((u0, u.1));
+            match flat_tris.get(i) {
+                Some(t) => t.point(b0, b1, b2),
+                None => geometry.triangle_point(*shape, i as u32, b0, b1, b2),
             }
-            Surface::Sphere { center, radius } => {
-                geometry.sphere_point(*shape, *center + warp::uniform_sphere(u) * *radius)
-            }
-            Surface::Disk { .. } => {
-                let d: Vec2 = warp::concentric_disk(u);
-                geometry.disk_point(*shape, d.x, d.y)
+        } else {
+            match &geometry.shapes[*shape as usize].surface {
+                Surface::Sphere { center, radius } => {
+                    geometry.sphere_point(*shape, *center + warp::uniform_sphere(u) * *radius)
+                }
+                Surface::Disk { .. } => {
+                    let d: Vec2 = warp::concentric_disk(u);
+                    geometry.disk_point(*shape, d.x, d.y)
+                }
+                // A mesh always has a triangle CDF (an empty mesh is no emitter).
+                Surface::Mesh(_) => return None,
             }
         };
         Some((sp, 1.0 / area))
