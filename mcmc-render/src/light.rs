@@ -100,6 +100,60 @@ pub struct Lights {
     cdf: Vec<f32>,
 }
 
+/// A triangle of a mesh emitter picked by area with `u.0` (reused, rescaled
+/// to the triangle's share of the CDF) and a uniform point on it with
+/// (`u.0`, `u.1`): the triangle's index and the point's barycentrics.
+#[inline(always)]
+fn pick_triangle(tri_cdf: &[f32], u: (f32, f32)) -> (usize, (f32, f32, f32)) {
+    let i = tri_cdf
+        .partition_point(|&c| c <= u.0)
+        .min(tri_cdf.len() - 1);
+    let lo = if i == 0 { 0.0 } else { tri_cdf[i - 1] };
+    let width = tri_cdf[i] - lo;
+    let u0 = if width > 0.0 {
+        ((u.0 - lo) / width).clamp(0.0, crate::sampling::ONE_MINUS_EPSILON)
+    } else {
+        0.5
+    };
+    (i, warp::uniform_triangle((u0, u.1)))
+}
+
+/// The direct-light sample of area-light point `lp` (area density
+/// `pdf_area`, light chosen with probability `pmf`) seen from `p`: `None`
+/// from behind the light or for a degenerate density.
+#[inline(always)]
+fn area_direct(
+    lp: SurfacePoint,
+    pdf_area: f32,
+    pmf: f32,
+    radiance: Rgb,
+    p: Vec3,
+) -> Option<DirectSample> {
+    let delta = lp.p - p;
+    let dist2 = delta.length_squared();
+    if !(dist2 > 0.0) {
+        return None;
+    }
+    let dist = dist2.sqrt();
+    let wi = delta / dist;
+    let cos_l = lp.ns.dot(-wi);
+    if cos_l <= 0.0 {
+        return None;
+    }
+    let pdf = pmf * pdf_area * dist2 / cos_l;
+    if !(pdf > 0.0 && pdf.is_finite()) {
+        return None;
+    }
+    Some(DirectSample {
+        p: lp,
+        wi,
+        dist,
+        le: radiance,
+        pdf,
+        is_delta: false,
+    })
+}
+
 impl Lights {
     /// Builds emitters from `(shape, radiance)` pairs and point lights.
     pub fn new(geometry: &Geometry, area: &[(u32, Rgb)], points: &[PointLightDesc]) -> Lights {
@@ -204,7 +258,6 @@ impl Lights {
     }
 
     /// Uniform point on an area light; returns it with its area density.
-    #[inline]
     fn sample_area_point(
         &self,
         geometry: &Geometry,
@@ -223,17 +276,7 @@ impl Lights {
         };
         // Only meshes have a triangle CDF: they skip the shape look-up.
         let sp = if !tri_cdf.is_empty() {
-            let i = tri_cdf
-                .partition_point(|&c| c <= u.0)
-                .min(tri_cdf.len() - 1);
-            let lo = if i == 0 { 0.0 } else { tri_cdf[i - 1] };
-            let width = tri_cdf[i] - lo;
-            let u0 = if width > 0.0 {
-                ((u.0 - lo) / width).clamp(0.0, crate::sampling::ONE_MINUS_EPSILON)
-            } else {
-                0.5
-            };
-            let (b0, b1, b2) = warp::uniform_triangle((u0, u.1));
+            let (i, (b0, b1, b2)) = pick_triangle(tri_cdf, u);
             match flat_tris.get(i) {
                 Some(t) => t.point(b0, b1, b2),
                 None => geometry.triangle_point(*shape, i as u32, b0, b1, b2),
@@ -256,6 +299,7 @@ impl Lights {
 
     /// Next-event estimation: a light point seen from `p`, with numbers
     /// consumed as `u_sel` (light choice) then `u` (position).
+    #[inline]
     pub fn sample_direct(
         &self,
         geometry: &Geometry,
@@ -265,6 +309,34 @@ impl Lights {
     ) -> Option<DirectSample> {
         let (i, pmf) = self.select(u_sel)?;
         let light = &self.lights[i as usize];
+        // Fast path for the common emitter, a mesh without vertex normals:
+        // no shape look-up, the triangle's data cached.
+        if let Light::Area {
+            radiance,
+            area,
+            tri_cdf,
+            flat_tris,
+            ..
+        } = light
+            && !flat_tris.is_empty()
+        {
+            let (t, (b0, b1, b2)) = pick_triangle(tri_cdf, u);
+            let lp = flat_tris[t].point(b0, b1, b2);
+            return area_direct(lp, 1.0 / area, pmf, *radiance, p);
+        }
+        self.sample_direct_other(geometry, light, pmf, p, u)
+    }
+
+    /// [`Lights::sample_direct`] for all but flat mesh emitters.
+    #[inline(never)]
+    fn sample_direct_other(
+        &self,
+        geometry: &Geometry,
+        light: &Light,
+        pmf: f32,
+        p: Vec3,
+        u: (f32, f32),
+    ) -> Option<DirectSample> {
         match light {
             Light::Point {
                 position,
@@ -306,29 +378,7 @@ impl Lights {
                     return ds;
                 }
                 let (lp, pdf_area) = self.sample_area_point(geometry, light, u)?;
-                let delta = lp.p - p;
-                let dist2 = delta.length_squared();
-                if !(dist2 > 0.0) {
-                    return None;
-                }
-                let dist = dist2.sqrt();
-                let wi = delta / dist;
-                let cos_l = lp.ns.dot(-wi);
-                if cos_l <= 0.0 {
-                    return None;
-                }
-                let pdf = pmf * pdf_area * dist2 / cos_l;
-                if !(pdf > 0.0 && pdf.is_finite()) {
-                    return None;
-                }
-                Some(DirectSample {
-                    p: lp,
-                    wi,
-                    dist,
-                    le: *radiance,
-                    pdf,
-                    is_delta: false,
-                })
+                area_direct(lp, pdf_area, pmf, *radiance, p)
             }
         }
     }
