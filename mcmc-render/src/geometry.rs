@@ -133,6 +133,10 @@ fn ulp_step(x: f32, dir: f32) -> f32 {
     f32::from_bits(if keep { bits } else { base.wrapping_add(step) })
 }
 
+/// Relative length by which shadow rays stop short of their target
+/// (pbrt's `ShadowEpsilon`): covers the rounding of computed hit distances.
+const SHADOW_EPSILON: f32 = 1e-4;
+
 /// `Geometry::leaf_pack` entry of a leaf without a triangle pack.
 const NO_PACK: u32 = u32::MAX;
 
@@ -617,12 +621,38 @@ impl Geometry {
         })
     }
 
-    /// True when the segment between two surface points (each offset off
-    /// its own surface) is unobstructed.
+    /// True when the segment between two surface points is unobstructed
+    /// (neither point's own surface counts as a blocker).
+    ///
+    /// One ray from `a`, its origin offset off `a`'s surface, towards
+    /// `b.p`. Instead of a second offset at `b` (pbrt-v4's two-sided
+    /// `SpawnRayTo`), the ray stops where it comes within `b`'s error bound
+    /// of `b`'s tangent plane: `b`'s surface lies within
+    /// `e = |n_b|·p_err_b` of `b.p` along `n_b`, which the ray covers in the
+    /// last `e·dist / |n_b·(b.p − o)|` of its length. Both exclude the same
+    /// slab around `b`'s plane; this form needs no rounding steps. A
+    /// relative margin (pbrt's `ShadowEpsilon`) covers the rounding of the
+    /// hit distances as before.
     pub fn visible(&self, a: &SurfacePoint, b: &SurfacePoint) -> bool {
-        let pa = a.spawn_origin(b.p);
-        let pb = b.spawn_origin(pa);
-        self.segment_clear(pa, pb)
+        let from = a.spawn_origin(b.p);
+        let delta = b.p - from;
+        let dist2 = delta.length_squared();
+        if !(dist2 > 0.0) || !dist2.is_finite() {
+            return dist2 == 0.0;
+        }
+        let err = b.ng.abs().dot(b.p_err);
+        // Fraction of the segment to keep; `along` = dist·|cos θ_b|.
+        let along = b.ng.dot(delta).abs();
+        let keep = (1.0 - SHADOW_EPSILON) - if err > 0.0 { err / along } else { 0.0 };
+        if !(keep > 0.0) {
+            // The whole segment lies within `b`'s error slab (a grazing
+            // segment shorter than the bounds): nothing provably blocks it.
+            return true;
+        }
+        let dist = dist2.sqrt();
+        let mut ray = Ray::new(from, delta / dist);
+        ray.tmax = dist * keep;
+        !self.occluded(&ray)
     }
 
     /// True when nothing lies strictly between the two points.
@@ -635,7 +665,7 @@ impl Geometry {
         let mut ray = Ray::new(from, delta / dist);
         // Stop short of the target point by a relative margin (pbrt's
         // ShadowEpsilon), so the far surface itself never counts as a blocker.
-        ray.tmax = dist * (1.0 - 1e-4);
+        ray.tmax = dist * (1.0 - SHADOW_EPSILON);
         !self.occluded(&ray)
     }
 
@@ -829,6 +859,93 @@ mod tests {
                         );
                     }
                 }
+            }
+        }
+    }
+
+    /// A quad `c + x·ex + y·ey` for x, y in [0, 1], as two triangles
+    /// whose normal is `ex × ey`.
+    fn quad(c: Vec3, ex: Vec3, ey: Vec3) -> GeoShape {
+        GeoShape {
+            surface: Surface::Mesh(MeshData {
+                positions: vec![c, c + ex, c + ex + ey, c + ey],
+                normals: None,
+                indices: vec![[0, 1, 2], [0, 2, 3]],
+            }),
+            flip_normals: false,
+        }
+    }
+
+    /// A uniform-ish point on quad shape `shape` (its two triangles).
+    fn point_on(g: &Geometry, shape: u32, s: &mut u64) -> SurfacePoint {
+        let (b0, b1) = (lcg(s), lcg(s));
+        let (b0, b1) = if b0 + b1 > 1.0 {
+            (1.0 - b0, 1.0 - b1)
+        } else {
+            (b0, b1)
+        };
+        let tri = (lcg(s) * 2.0) as u32;
+        g.triangle_point(shape, tri.min(1), 1.0 - b0 - b1, b0, b1)
+    }
+
+    /// Shadow rays between points on surfaces that touch (a floor and a
+    /// wall meeting at an edge, at grazing angles near it) or are coplanar
+    /// (a light set into the ceiling) never see their own surfaces, at
+    /// scales from 1e-3 to 1e4 and far from the origin; a blocker between
+    /// them is still found.
+    #[test]
+    fn shadow_rays_between_touching_and_coplanar_surfaces_at_any_scale() {
+        for (scale, origin) in [
+            (1e-3f32, Vec3::ZERO),
+            (1e-3, Vec3::new(0.5, -0.25, 0.125)),
+            (1.0, Vec3::ZERO),
+            (1.0, Vec3::new(300.0, -200.0, 100.0)),
+            (1e4, Vec3::new(-3e4, 1e4, 2e4)),
+        ] {
+            let at = |x: f32, y: f32, z: f32| origin + Vec3::new(x, y, z) * scale;
+            let (ex, ey, ez) = (Vec3::X * scale, Vec3::Y * scale, Vec3::Z * scale);
+            let shapes = vec![
+                // 0: floor z = 0 (normal +z).
+                quad(at(0.0, 0.0, 0.0), ex, ey),
+                // 1: wall x = 0 (normal +x), touching the floor along y.
+                quad(at(0.0, 0.0, 0.0), ey, ez),
+                // 2: ceiling z = 1 (normal −z).
+                quad(at(0.0, 0.0, 1.0), ey, ex),
+                // 3: a light in the ceiling's plane (normal −z).
+                quad(at(0.25, 0.25, 1.0), ey * 0.5, ex * 0.5),
+            ];
+            let g = Geometry::build(shapes);
+            let mut s = 7u64;
+            for _ in 0..5_000 {
+                let floor = point_on(&g, 0, &mut s);
+                for other in [1, 2, 3] {
+                    let q = point_on(&g, other, &mut s);
+                    assert!(
+                        g.visible(&floor, &q),
+                        "scale {scale}: floor {:?} to shape {other} {:?} blocked",
+                        floor.p,
+                        q.p
+                    );
+                    assert!(g.visible(&q, &floor), "scale {scale}: reverse blocked");
+                }
+                // Grazing: both points within 1e-3 of the shared edge.
+                // Floor triangle 1 is (0,0)-(1,1)-(0,1): x = b1.
+                let (x, t) = (1e-3 * lcg(&mut s), lcg(&mut s));
+                let near = g.triangle_point(0, 1, (1.0 - x) * t, x, (1.0 - x) * (1.0 - t));
+                // Wall triangle 0 is (y,z) = (0,0)-(1,0)-(1,1): z = b2.
+                let (z, t) = (1e-3 * lcg(&mut s), lcg(&mut s));
+                let wall = g.triangle_point(1, 0, (1.0 - z) * t, (1.0 - z) * (1.0 - t), z);
+                assert!(g.visible(&near, &wall), "scale {scale}: grazing blocked");
+                assert!(g.visible(&wall, &near), "scale {scale}: grazing reverse");
+            }
+            // A blocker halfway between the floor and the light is found.
+            let mut shapes = g.shapes.clone();
+            shapes.push(quad(at(0.0, 0.0, 0.5), ex, ey));
+            let g = Geometry::build(shapes);
+            for _ in 0..1_000 {
+                let floor = point_on(&g, 0, &mut s);
+                let light = point_on(&g, 3, &mut s);
+                assert!(!g.visible(&floor, &light), "scale {scale}: blocker missed");
             }
         }
     }
