@@ -263,9 +263,12 @@ impl SurfacePoint {
 /// (`flip_normals` applied). Cached per triangle so that hit points and
 /// light samples skip the mesh look-ups of [`Geometry::triangle_point`],
 /// whose result [`FlatTriangle::point`] reproduces bit for bit.
+///
+/// The vertices are SIMD vectors (one instruction per operation on all
+/// three axes, the same arithmetic lane by lane): 64 bytes, one cache line.
 #[derive(Clone, Copy, Debug)]
 pub struct FlatTriangle {
-    p: [Vec3; 3],
+    p: [Vec3A; 3],
     ng: Vec3,
     shape: u32,
 }
@@ -278,8 +281,8 @@ impl FlatTriangle {
         let [p0, p1, p2] = self.p;
         let (q0, q1, q2) = (p0 * b0, p1 * b1, p2 * b2);
         SurfacePoint {
-            p: q0 + q1 + q2,
-            p_err: (q0.abs() + q1.abs() + q2.abs()) * gamma(7),
+            p: (q0 + q1 + q2).into(),
+            p_err: ((q0.abs() + q1.abs() + q2.abs()) * gamma(7)).into(),
             ng: self.ng,
             ns: self.ng,
             shape: self.shape,
@@ -431,7 +434,7 @@ impl Geometry {
     /// The cached flat triangle of every primitive (the `flat` field).
     fn flat_per_prim(&self) -> Vec<FlatTriangle> {
         let none = FlatTriangle {
-            p: [Vec3::ZERO; 3],
+            p: [Vec3A::ZERO; 3],
             ng: Vec3::ZERO,
             shape: u32::MAX,
         };
@@ -458,7 +461,7 @@ impl Geometry {
         let idx = m.indices.get(tri as usize)?;
         let ng = self.face_normals[shape as usize][tri as usize];
         Some(FlatTriangle {
-            p: idx.map(|i| m.positions[i as usize]),
+            p: idx.map(|i| m.positions[i as usize].into()),
             ng: if gs.flip_normals { -ng } else { ng },
             shape,
         })
