@@ -299,7 +299,7 @@ impl Lights {
 
     /// Next-event estimation: a light point seen from `p`, with numbers
     /// consumed as `u_sel` (light choice) then `u` (position).
-    #[inline]
+    #[inline(always)]
     pub fn sample_direct(
         &self,
         geometry: &Geometry,
