@@ -673,16 +673,22 @@ impl Geometry {
     }
 
     /// The surface point of a hit, with its error bound and normals.
+    #[inline]
     pub fn surface_point(&self, ray: &Ray, hit: &Hit) -> SurfacePoint {
+        // Flat triangles, the common case, need only their cached entry.
+        let flat = &self.flat[hit.prim as usize];
+        if flat.shape != u32::MAX {
+            return flat.point(1.0 - hit.u - hit.v, hit.u, hit.v);
+        }
+        self.surface_point_other(ray, hit)
+    }
+
+    /// [`Geometry::surface_point`] on all but flat triangles.
+    #[inline(never)]
+    fn surface_point_other(&self, ray: &Ray, hit: &Hit) -> SurfacePoint {
         match self.prims[hit.prim as usize] {
             Prim::Triangle { shape, tri, .. } => {
-                let (b0, b1, b2) = (1.0 - hit.u - hit.v, hit.u, hit.v);
-                let flat = &self.flat[hit.prim as usize];
-                if flat.shape != u32::MAX {
-                    flat.point(b0, b1, b2)
-                } else {
-                    self.triangle_point(shape, tri, b0, b1, b2)
-                }
+                self.triangle_point(shape, tri, 1.0 - hit.u - hit.v, hit.u, hit.v)
             }
             Prim::Sphere { shape, .. } => self.sphere_point(shape, ray.at(hit.t)),
             Prim::Disk { shape } => self.disk_point(shape, hit.u, hit.v),
