@@ -59,10 +59,8 @@ pub fn gamma(n: i32) -> f32 {
 #[inline]
 pub fn offset_ray_origin(p: Vec3, p_err: Vec3, n: Vec3, w: Vec3) -> Vec3 {
     let d = n.abs().dot(p_err);
-    let mut offset = n * d;
-    if w.dot(n) < 0.0 {
-        offset = -offset;
-    }
+    // The side is chosen on the scalar (exact: n·(−d) = −(n·d)).
+    let offset = n * if w.dot(n) < 0.0 { -d } else { d };
     let po = p + offset;
     ulp_step3(po.into(), offset.into()).into()
 }
