@@ -957,6 +957,46 @@ mod tests {
         }
     }
 
+    /// The cached flat triangles give bit for bit the points of the general
+    /// `triangle_point`, with and without `flip_normals`, and meshes with
+    /// vertex normals get no cache entry (their shading normal varies).
+    #[test]
+    fn flat_triangle_points_equal_triangle_point() {
+        let mesh = |flip: bool, normals: Option<Vec<Vec3>>| GeoShape {
+            surface: Surface::Mesh(MeshData {
+                positions: vec![
+                    Vec3::new(0.3, -1.7, 2.0),
+                    Vec3::new(4.1, 0.2, 1.5),
+                    Vec3::new(-0.6, 3.3, 0.7),
+                ],
+                normals,
+                indices: vec![[0, 1, 2]],
+            }),
+            flip_normals: flip,
+        };
+        let g = Geometry::build(vec![
+            mesh(false, None),
+            mesh(true, None),
+            mesh(false, Some(vec![Vec3::Z; 3])),
+        ]);
+        assert!(g.flat_triangle(2, 0).is_none());
+        assert!(g.flat_triangle(0, 1).is_none());
+        let bits = |sp: &SurfacePoint| {
+            [sp.p, sp.p_err, sp.ng, sp.ns].map(|v| v.to_array().map(f32::to_bits))
+        };
+        let mut s = 3u64;
+        for shape in [0, 1] {
+            let flat = g.flat_triangle(shape, 0).expect("flat mesh");
+            for _ in 0..1000 {
+                let (b1, b2) = (lcg(&mut s) * 0.5, lcg(&mut s) * 0.5);
+                let want = g.triangle_point(shape, 0, 1.0 - b1 - b2, b1, b2);
+                let got = flat.point(1.0 - b1 - b2, b1, b2);
+                assert_eq!(bits(&got), bits(&want));
+                assert_eq!(got.shape, want.shape);
+            }
+        }
+    }
+
     /// Rays from inside a closed sphere must always hit it, and a ray
     /// spawned from the hit point back inside must hit the far side (never
     /// its own origin), at every scale.
