@@ -4,6 +4,7 @@
 //! (PSSMLT/MMLT), or from a recorder (for inversion and replay).
 
 use rand::Rng;
+use rand_xoshiro::Xoshiro256PlusPlus;
 
 /// Independent streams of numbers a bidirectional sampler draws from, as
 /// pbrt-v4's MLT sampler does (`StartStream`): a primary-sample source maps
@@ -42,6 +43,7 @@ pub trait RandomSource {
     fn next_1d(&mut self) -> f32;
 
     /// Two uniform numbers, consumed in order (first `x`, then `y`).
+    #[inline]
     fn next_2d(&mut self) -> (f32, f32) {
         let x = self.next_1d();
         let y = self.next_1d();
@@ -61,10 +63,17 @@ impl<R: Rng> IndependentSource<R> {
     }
 }
 
+/// The independent source of the render driver's work units. Named so that
+/// [`crate::integrators::Integrator::render_pixels`] can take it by its
+/// concrete type: a path tracer monomorphised for it draws its numbers
+/// without a virtual call per number.
+pub type PixelSource = IndependentSource<Xoshiro256PlusPlus>;
+
 /// Largest `f32` strictly below one.
 pub const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
 
 impl<R: Rng> RandomSource for IndependentSource<R> {
+    #[inline]
     fn next_1d(&mut self) -> f32 {
         // 24 random mantissa bits give every f32 multiple of 2^-24 in [0, 1).
         let bits = self.rng.next_u32() >> 8;

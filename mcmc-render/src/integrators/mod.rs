@@ -40,7 +40,7 @@ pub mod pt;
 
 use crate::color::Rgb;
 use crate::film::Film;
-use crate::sampling::RandomSource;
+use crate::sampling::{PixelSource, RandomSource};
 use crate::scene::Scene;
 use glam::Vec2;
 
@@ -103,6 +103,33 @@ pub trait Integrator: Send + Sync {
         film: &mut dyn FilmSink,
         stats: &mut SampleStats,
     );
+
+    /// Draws `spp` samples for every pixel of the tile `[x0, x1) × [y0, y1)`
+    /// (rows top to bottom, pixels left to right, the `spp` samples of a
+    /// pixel in a row), as that many calls of [`Integrator::sample`] would.
+    /// The render driver calls this for [`SampleDomain::Pixels`]; its
+    /// source and film have concrete types so that an integrator may
+    /// override it with a monomorphised loop (the path tracer does: a
+    /// virtual call per random number and per film sample was about a
+    /// tenth of a camera sample). Overrides must consume the same numbers
+    /// in the same order as the default.
+    fn render_pixels(
+        &self,
+        scene: &Scene,
+        (x0, y0, x1, y1): (u32, u32, u32, u32),
+        spp: u32,
+        source: &mut PixelSource,
+        film: &mut Film,
+        stats: &mut SampleStats,
+    ) {
+        for y in y0..y1 {
+            for x in x0..x1 {
+                for _ in 0..spp {
+                    self.sample(scene, Some((x, y)), source, film, stats);
+                }
+            }
+        }
+    }
 }
 
 /// Mitsuba's Russian-roulette continuation probability.
