@@ -7,9 +7,9 @@
 use super::{FilmSink, Integrator, SampleDomain, SampleStats, rr_probability};
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
+use crate::film::Film;
 use crate::frame::Frame;
 use crate::geometry::Ray;
-use crate::film::Film;
 use crate::sampling::{PixelSource, RandomSource};
 use crate::scene::Scene;
 use crate::warp::power_heuristic;
