@@ -5,7 +5,8 @@
 //! # Order in which random numbers are consumed
 //!
 //! Every number comes from the [`RandomSource`] passed to
-//! [`Integrator::sample`], in exactly this order. A fixed number of draws
+//! [`Integrator::sample`] (or [`Integrator::render_pixels`], which draws
+//! the same numbers as that many `sample` calls), in exactly this order. A fixed number of draws
 //! per vertex is consumed whether or not a technique applies (e.g. the
 //! light-sampling numbers at a specular vertex), so dimension `k` of a
 //! primary-sample vector always feeds the same decision.

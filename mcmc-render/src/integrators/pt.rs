@@ -27,6 +27,7 @@ pub struct PathTracer {
 impl PathTracer {
     /// Radiance arriving along `ray` (numbers consumed as documented in
     /// [`super`]).
+    ///
     /// Generic over the source so that the render driver's loop
     /// ([`Integrator::render_pixels`]) draws its numbers without virtual
     /// calls; `S = dyn RandomSource` serves everything else.
