@@ -13,7 +13,7 @@
 
 use crate::film::{Film, Filter};
 use crate::integrators::{Integrator, SampleDomain, SampleStats};
-use crate::sampling::IndependentSource;
+use crate::sampling::{IndependentSource, PixelSource};
 use crate::scene::Scene;
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -88,7 +88,7 @@ fn mix(mut z: u64) -> u64 {
 }
 
 /// The generator of one work unit.
-fn unit_source(seed: u64, pass: u64, unit: u64) -> IndependentSource<Xoshiro256PlusPlus> {
+fn unit_source(seed: u64, pass: u64, unit: u64) -> PixelSource {
     let s = mix(mix(mix(seed) ^ pass) ^ unit.wrapping_mul(0x2545_f491_4f6c_dd1d));
     IndependentSource::new(Xoshiro256PlusPlus::seed_from_u64(s))
 }
@@ -186,19 +186,14 @@ pub fn render(
                             return (tile, st);
                         }
                         let mut src = unit_source(seed, pass, i as u64);
-                        for y in y0..y1 {
-                            for x in x0..x1 {
-                                for _ in 0..spp {
-                                    integrator.sample(
-                                        scene,
-                                        Some((x, y)),
-                                        &mut src,
-                                        &mut tile,
-                                        &mut st,
-                                    );
-                                }
-                            }
-                        }
+                        integrator.render_pixels(
+                            scene,
+                            (x0, y0, x1, y1),
+                            spp,
+                            &mut src,
+                            &mut tile,
+                            &mut st,
+                        );
                         observer.unit_done(((x1 - x0) * (y1 - y0)) as u64 * spp as u64);
                         (tile, st)
                     })

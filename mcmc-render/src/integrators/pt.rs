@@ -7,9 +7,10 @@
 use super::{FilmSink, Integrator, SampleDomain, SampleStats, rr_probability};
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
+use crate::film::Film;
 use crate::frame::Frame;
 use crate::geometry::Ray;
-use crate::sampling::RandomSource;
+use crate::sampling::{PixelSource, RandomSource};
 use crate::scene::Scene;
 use crate::warp::power_heuristic;
 use glam::Vec2;
@@ -26,7 +27,11 @@ pub struct PathTracer {
 impl PathTracer {
     /// Radiance arriving along `ray` (numbers consumed as documented in
     /// [`super`]).
-    pub fn li(&self, scene: &Scene, ray: Ray, source: &mut dyn RandomSource) -> Rgb {
+    ///
+    /// Generic over the source so that the render driver's loop
+    /// ([`Integrator::render_pixels`]) draws its numbers without virtual
+    /// calls; `S = dyn RandomSource` serves everything else.
+    pub fn li<S: RandomSource + ?Sized>(&self, scene: &Scene, ray: Ray, source: &mut S) -> Rgb {
         // Mitsuba: max_depth 0 renders nothing, not even visible emitters.
         if self.max_depth == 0 {
             return Rgb::BLACK;
@@ -117,6 +122,30 @@ impl PathTracer {
     }
 }
 
+impl PathTracer {
+    /// One camera sample for pixel `(px, py)`: [`Integrator::sample`] for
+    /// any source and film (monomorphised in [`Integrator::render_pixels`]).
+    #[inline]
+    fn sample_pixel<S: RandomSource + ?Sized, F: FilmSink + ?Sized>(
+        &self,
+        scene: &Scene,
+        (px, py): (u32, u32),
+        source: &mut S,
+        film: &mut F,
+        stats: &mut SampleStats,
+    ) {
+        let u = source.next_2d();
+        let raster = Vec2::new(px as f32 + u.0, py as f32 + u.1);
+        let ray = scene.camera.generate_ray(raster);
+        let l = self.li(scene, ray, source);
+        if l.is_finite() {
+            film.add_sample(raster, l);
+        } else {
+            stats.nonfinite += 1;
+        }
+    }
+}
+
 impl Integrator for PathTracer {
     fn name(&self) -> &'static str {
         "pt"
@@ -134,17 +163,26 @@ impl Integrator for PathTracer {
         film: &mut dyn FilmSink,
         stats: &mut SampleStats,
     ) {
-        let Some((px, py)) = pixel else {
-            return;
-        };
-        let u = source.next_2d();
-        let raster = Vec2::new(px as f32 + u.0, py as f32 + u.1);
-        let ray = scene.camera.generate_ray(raster);
-        let l = self.li(scene, ray, source);
-        if l.is_finite() {
-            film.add_sample(raster, l);
-        } else {
-            stats.nonfinite += 1;
+        if let Some(pixel) = pixel {
+            self.sample_pixel(scene, pixel, source, film, stats);
+        }
+    }
+
+    fn render_pixels(
+        &self,
+        scene: &Scene,
+        (x0, y0, x1, y1): (u32, u32, u32, u32),
+        spp: u32,
+        source: &mut PixelSource,
+        film: &mut Film,
+        stats: &mut SampleStats,
+    ) {
+        for y in y0..y1 {
+            for x in x0..x1 {
+                for _ in 0..spp {
+                    self.sample_pixel(scene, (x, y), source, film, stats);
+                }
+            }
         }
     }
 }
