@@ -4,11 +4,15 @@
 //! MIS heuristics.
 //!
 //! Tolerances come from standard errors measured in the test itself: each
-//! integrator renders K = 8 independent batches (different seeds); the
-//! standard error of the image mean is sd(batch means)/√K, and the
-//! difference of the two estimates must lie within 4·√(se_pt² + se_bdpt²)
-//! (a false-failure probability of about 6e-5 per channel for normal
-//! estimates; seeds are fixed, so the test is deterministic). The 1% bound
+//! integrator renders K = [`BATCHES`] independent batches (different seeds);
+//! the standard error of the image mean is sd(batch means)/√K, and the
+//! difference of the two estimates must lie within 4·√(se_pt² + se_bdpt²).
+//! The standard errors are themselves estimates: with K = 32 batches (31
+//! degrees of freedom each) the false-failure rate of the 4σ bound is about
+//! 4e-4 per channel (Student's t), and the power check below rarely flips on
+//! a noisy σ; with the earlier K = 8 batches of four times the samples (the
+//! same work) both flipped when the random streams changed. Seeds are
+//! fixed, so the test is deterministic. The 1% bound
 //! of the issue is checked too, together with a check that the noise is
 //! small enough for 1% to be meaningful (4σ < 1%).
 
@@ -32,6 +36,9 @@ use std::sync::atomic::AtomicBool;
 fn repo_scene_text(name: &str, res: u32) -> String {
     repo_scene_tilted_text(name, res, 8)
 }
+
+/// Independent batches per estimate (see the module documentation).
+const BATCHES: u64 = 32;
 
 /// Renders one image; returns it with the number of dropped non-finite contributions.
 fn render_image(scene: &Scene, integ: &dyn Integrator, spp: u32, seed: u64) -> (Vec<Rgb>, u64) {
@@ -73,14 +80,14 @@ fn check_agreement(
         max_depth: it.max_depth,
         rr_depth: it.rr_depth,
     };
-    let (mp, sp) = batched_mean(scene, &pt, pt_spp, 8);
+    let (mp, sp) = batched_mean(scene, &pt, pt_spp / 4, BATCHES);
     for &heuristic in heuristics {
         let bdpt = Bdpt {
             max_depth: it.max_depth,
             rr_depth: it.rr_depth,
             heuristic,
         };
-        let (mb, sb) = batched_mean(scene, &bdpt, bdpt_spp, 8);
+        let (mb, sb) = batched_mean(scene, &bdpt, bdpt_spp / 4, BATCHES);
         eprintln!("{what} {heuristic:?}: pt {mp:?} ± {sp:?}\n  bdpt {mb:?} ± {sb:?}");
         for c in 0..3 {
             let sigma = (sp[c] * sp[c] + sb[c] * sb[c]).sqrt();
@@ -127,12 +134,14 @@ fn bdpt_matches_pt_on_the_glossy_glass_cornell_box() {
     let scene = load(&repo_scene_text("cornell-glossy-glass.xml", 32));
     // The caustic makes both estimators noisier: at a test-sized budget
     // (~30 s) the noise allows a 2% bound, not 1%; the 1% check on this
-    // scene is the ignored test below.
+    // scene is the ignored test below. BDPT dominates the noise of the blue
+    // channel: at 128 spp its 4σ was 2.0% of the mean, on the bound itself,
+    // so BDPT gets 192 (4σ ≈ 1.7%).
     check_agreement(
         &scene,
         "cornell-glossy-glass",
         512,
-        128,
+        192,
         &[MisHeuristic::Power],
         0.02,
     );
@@ -292,7 +301,7 @@ fn bdpt_furnace_matches_le_over_one_minus_albedo() {
             rr_depth: it.rr_depth,
             heuristic,
         };
-        let (mean, se) = batched_mean(&scene, &bdpt, 64, 8);
+        let (mean, se) = batched_mean(&scene, &bdpt, 16, BATCHES);
         for c in 0..3 {
             assert!(
                 (mean[c] - 2.0).abs() < 4.0 * se[c] + 1e-5,
@@ -319,7 +328,7 @@ fn bdpt_point_light_on_a_plane_matches_the_closed_form() {
             rr_depth: it.rr_depth,
             heuristic,
         };
-        let (mean, se) = batched_mean(&scene, &bdpt, 64, 8);
+        let (mean, se) = batched_mean(&scene, &bdpt, 16, BATCHES);
         eprintln!("{heuristic:?}: {mean:?} ± {se:?}, expected {expected}");
         for c in 0..3 {
             assert!(

