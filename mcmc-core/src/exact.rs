@@ -3,7 +3,7 @@
 //!
 //! The matrices are built from a kernel's enumerated outcomes
 //! ([`Kernel::enumerate`]) and the very acceptance functions the samplers
-//! use ([`mh_log_acceptance`], [`mtm_log_weight`], [`mtm_log_acceptance`],
+//! use ([`mh_log_acceptance`], [`mtm_weight`], [`mtm_log_acceptance`],
 //! [`dr_log_acceptance`]), so a wrong ratio in a kernel or an acceptance
 //! formula shows up as a violation.
 

@@ -255,7 +255,7 @@ struct LazyCoordinates {
     uniform_after: Option<(SmallStep, u64)>,
 }
 
-/// A point of primary sample space `[0,1)^∞`; see the [module docs](self).
+/// A point of primary sample space `[0,1)^∞`; see the module docs of `lazy_torus`.
 #[derive(Debug)]
 pub struct TorusPoint {
     inner: RefCell<LazyCoordinates>,

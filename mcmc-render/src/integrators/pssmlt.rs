@@ -3,7 +3,7 @@
 //!
 //! - **Target**: `ln I(u)`, the log luminance of the contribution of the
 //!   path traced from the primary-sample vector `u` ([`PssTarget`]).
-//! - **Mutation**: `mcmc-core`'s [`Mixture`](mcmc_core::kernel::Mixture) of a
+//! - **Mutation**: `mcmc-core`'s [`Mixture`] of a
 //!   torus small step and an independent large step ([`Mutation`]).
 //! - **Start-up**: `N` independent candidates, `b* = (1/N) Σ I(u_i)` and
 //!   chain starts resampled `∝ I(u_i)` (`mcmc_core::startup::Bootstrap`),
@@ -407,7 +407,7 @@ pub fn render_pssmlt<F: PssPathSampler>(
 /// The bootstrap draws `settings.bootstrap` candidates per member `d`,
 /// which give `b_d = ∫ I_d` and that member's chain starts (resampled
 /// `∝ I_d` among its own candidates). Chains are allocated to members in
-/// proportion to `b_d` ([`allocate_chains`]) and stay with their member.
+/// proportion to `b_d` (`allocate_chains`) and stay with their member.
 /// The image is `Σ_d b_d · film_d / (M_d / pixels)`, with `M_d` the
 /// mutations member `d` actually ran. pbrt-v4 instead scales one film by
 /// `b = Σ_d b_d` over all mutations, which is right only if every member's
