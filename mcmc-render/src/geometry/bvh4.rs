@@ -16,6 +16,7 @@
 //! ray really crosses, and zero direction components are replaced by a tiny
 //! value of the same sign so no `0 · ∞ = NaN` can arise.
 
+use super::tri_pack::Ray4;
 use glam::{Vec3, Vec3A, Vec4};
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
@@ -30,66 +31,11 @@ const LEAF_BIT: u32 = 1 << 31;
 const FIRST_BITS: u32 = 28;
 /// A child slot without a child.
 const EMPTY: u32 = u32::MAX;
-/// Capacity of the fixed traversal stack. Each level of the tree pushes at
-/// most three entries, so trees up to 42 levels deep (PLOC trees over
-/// millions of primitives stay far below) use it; deeper ones fall back to
-/// a heap stack.
+/// Capacity of the fixed traversal stack. Each level of the tree leaves at
+/// most three entries on it (siblings of the current path's node), so
+/// trees up to 42 levels deep (PLOC trees over millions of primitives stay
+/// far below) use it; deeper ones get a heap stack of their own size.
 const STACK: usize = 128;
-
-/// Push/pop storage of a traversal.
-trait PushPop<T> {
-    fn push(&mut self, x: T);
-    fn pop(&mut self) -> Option<T>;
-}
-
-/// A fixed-capacity stack left uninitialised up front: zeroing a
-/// kilobyte-sized array per ray cost more than the traversal of a small
-/// scene. The caller guarantees it never holds more than `N` items.
-struct ArrayStack<T: Copy, const N: usize> {
-    items: [MaybeUninit<T>; N],
-    len: usize,
-}
-
-impl<T: Copy, const N: usize> ArrayStack<T, N> {
-    #[inline(always)]
-    fn new() -> Self {
-        ArrayStack {
-            items: [const { MaybeUninit::uninit() }; N],
-            len: 0,
-        }
-    }
-}
-
-impl<T: Copy, const N: usize> PushPop<T> for ArrayStack<T, N> {
-    #[inline(always)]
-    fn push(&mut self, x: T) {
-        // Indexing keeps an overflow a panic rather than memory corruption.
-        self.items[self.len].write(x);
-        self.len += 1;
-    }
-
-    #[inline(always)]
-    fn pop(&mut self) -> Option<T> {
-        if self.len == 0 {
-            return None;
-        }
-        self.len -= 1;
-        // SAFETY: every slot below `len` was written by `push`.
-        Some(unsafe { self.items[self.len].assume_init() })
-    }
-}
-
-impl<T> PushPop<T> for Vec<T> {
-    #[inline(always)]
-    fn push(&mut self, x: T) {
-        Vec::push(self, x);
-    }
-
-    #[inline(always)]
-    fn pop(&mut self) -> Option<T> {
-        Vec::pop(self)
-    }
-}
 
 /// One node: the boxes of up to four children and their references.
 #[derive(Clone, Copy, Debug)]
@@ -132,10 +78,11 @@ fn leaf_range(r: u32) -> std::ops::Range<usize> {
     first..first + count
 }
 
-/// A ray prepared for box tests: origin and reciprocal direction per axis
-/// splatted to four lanes, and which bound of each axis is met first.
+/// A ray prepared for box tests: origin and direction splatted to four
+/// lanes (shared with the leaves' triangle packs), the reciprocal direction
+/// per axis, and which bound of each axis is met first.
 struct BoxRay {
-    o: [Vec4; 3],
+    simd: Ray4,
     inv: [Vec4; 3],
     /// `bounds` index of the near plane per axis (the far one is `near ^ 1`).
     near: [usize; 3],
@@ -144,6 +91,7 @@ struct BoxRay {
 impl BoxRay {
     #[inline(always)]
     fn new(o: Vec3, d: Vec3) -> BoxRay {
+        let simd = Ray4::new(o, d);
         // A zero component would give 0·∞ = NaN on a box face through the
         // origin; a tiny same-signed value gives the right ±huge slabs.
         let d = Vec3A::from(d);
@@ -152,7 +100,7 @@ impl BoxRay {
         // One SIMD division for the three reciprocals.
         let inv = Vec3A::ONE / d;
         BoxRay {
-            o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
+            simd,
             inv: [Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z)],
             near: [
                 usize::from(d.x < 0.0),
@@ -168,12 +116,13 @@ impl BoxRay {
     fn test(&self, node: &Node, tmin: f32, tmax: f32) -> (Vec4, u32) {
         let b = &node.bounds;
         let [nx, ny, nz] = self.near;
-        let t0x = (b[nx] - self.o[0]) * self.inv[0];
-        let t1x = (b[nx ^ 1] - self.o[0]) * self.inv[0];
-        let t0y = (b[2 + ny] - self.o[1]) * self.inv[1];
-        let t1y = (b[2 + (ny ^ 1)] - self.o[1]) * self.inv[1];
-        let t0z = (b[4 + nz] - self.o[2]) * self.inv[2];
-        let t1z = (b[4 + (nz ^ 1)] - self.o[2]) * self.inv[2];
+        let o = &self.simd.o;
+        let t0x = (b[nx] - o[0]) * self.inv[0];
+        let t1x = (b[nx ^ 1] - o[0]) * self.inv[0];
+        let t0y = (b[2 + ny] - o[1]) * self.inv[1];
+        let t1y = (b[2 + (ny ^ 1)] - o[1]) * self.inv[1];
+        let t0z = (b[4 + nz] - o[2]) * self.inv[2];
+        let t1z = (b[4 + (nz ^ 1)] - o[2]) * self.inv[2];
         let tnear = t0x.max(t0y).max(t0z).max(Vec4::splat(tmin));
         // pbrt-v4's conservative far distance: 1 + 2γ(3).
         let tfar = t1x.min(t1y).min(t1z) * (1.0 + 2.0 * super::gamma(3));
@@ -229,10 +178,10 @@ impl Bvh4 {
         std::mem::size_of_val(self.nodes.as_slice())
     }
 
-    /// True when the fixed traversal stack is deep enough for this tree.
+    /// Entries the traversal stack must hold for this tree.
     #[inline(always)]
-    fn fits_array_stack(&self) -> bool {
-        3 * self.depth < STACK
+    fn stack_need(&self) -> usize {
+        3 * self.depth
     }
 
     /// Primitive ranges of all leaves.
@@ -244,12 +193,13 @@ impl Bvh4 {
             .map(leaf_range)
     }
 
-    /// Closest hit: calls `hit(leaf, tmax)` for candidate leaves (primitive
-    /// ranges), which returns the closest `(prim, t)` of the leaf with `t`
-    /// below `tmax` (else `None`); the interval shrinks with every hit.
-    /// Returns the closest `(prim, t)`.
+    /// Closest hit: calls `hit(ray, leaf, tmax)` for candidate leaves
+    /// (primitive ranges; `ray` is the query ray splatted to four lanes),
+    /// which returns the closest `(prim, t)` of the leaf with `t` below
+    /// `tmax` (else `None`); the interval shrinks with every hit. Returns
+    /// the closest `(prim, t)`.
     #[inline(always)]
-    pub fn closest<F: FnMut(std::ops::Range<usize>, f32) -> Option<(usize, f32)>>(
+    pub fn closest<F: FnMut(&Ray4, std::ops::Range<usize>, f32) -> Option<(usize, f32)>>(
         &self,
         o: Vec3,
         d: Vec3,
@@ -260,21 +210,25 @@ impl Bvh4 {
         if self.nodes.is_empty() {
             return None;
         }
-        if self.fits_array_stack() {
-            let mut stack = ArrayStack::<(u32, f32), STACK>::new();
-            self.closest_with(&mut stack, o, d, tmin, tmax, hit)
+        // Left uninitialised: zeroing a kilobyte per ray cost more than the
+        // traversal of a small scene.
+        let mut local = [const { MaybeUninit::uninit() }; STACK];
+        let mut heap;
+        let stack: &mut [MaybeUninit<(u32, f32)>] = if self.stack_need() <= STACK {
+            &mut local
         } else {
-            self.closest_with(&mut Vec::new(), o, d, tmin, tmax, hit)
-        }
+            heap = vec![MaybeUninit::uninit(); self.stack_need()];
+            &mut heap
+        };
+        self.closest_in(stack, o, d, tmin, tmax, hit)
     }
 
+    /// The closest-hit traversal on a stack of at least
+    /// [`Self::stack_need`] entries.
     #[inline(always)]
-    fn closest_with<
-        S: PushPop<(u32, f32)>,
-        F: FnMut(std::ops::Range<usize>, f32) -> Option<(usize, f32)>,
-    >(
+    fn closest_in<F: FnMut(&Ray4, std::ops::Range<usize>, f32) -> Option<(usize, f32)>>(
         &self,
-        stack: &mut S,
+        stack: &mut [MaybeUninit<(u32, f32)>],
         o: Vec3,
         d: Vec3,
         tmin: f32,
@@ -285,25 +239,46 @@ impl Bvh4 {
         let mut tmax = tmax;
         let mut best = None;
         let mut cur = 0u32;
+        // Entries below `sp` are initialised.
+        let mut sp = 0usize;
         loop {
             if cur & LEAF_BIT != 0 {
-                if let Some((prim, t)) = hit(leaf_range(cur), tmax) {
+                if let Some((prim, t)) = hit(&ray.simd, leaf_range(cur), tmax) {
                     tmax = t;
                     best = Some((prim, t));
                 }
             } else {
                 let node = &self.nodes[cur as usize];
-                let (tnear, mut mask) = ray.test(node, tmin, tmax);
+                let (tnear, mask) = ray.test(node, tmin, tmax);
                 if mask != 0 {
-                    // Push the crossed children farthest first, so the
-                    // nearest is popped next.
+                    // One or two crossed children (the common cases) need
+                    // no sort: descend into the only one, or push the
+                    // farther of two. Ties go to the later slot, as in the
+                    // general case below.
+                    let a = mask.trailing_zeros() as usize;
+                    let rest = mask & (mask - 1);
+                    if rest == 0 {
+                        cur = node.child[a];
+                        continue;
+                    }
                     let tn = tnear.to_array();
+                    if rest & (rest - 1) == 0 {
+                        let b = rest.trailing_zeros() as usize;
+                        let (near, far) = if tn[b] <= tn[a] { (b, a) } else { (a, b) };
+                        stack[sp].write((node.child[far], tn[far]));
+                        sp += 1;
+                        cur = node.child[near];
+                        continue;
+                    }
+                    // Three or four: insertion by entry distance,
+                    // descending; the nearest is visited now and the others
+                    // wait, farthest deepest.
+                    let mut mask = mask;
                     let mut kids = [(0u32, 0.0f32); 4];
                     let mut n = 0;
                     while mask != 0 {
                         let i = mask.trailing_zeros() as usize;
                         mask &= mask - 1;
-                        // Insertion by entry distance, descending.
                         let entry = (node.child[i], tn[i]);
                         let mut k = n;
                         while k > 0 && kids[k - 1].1 < entry.1 {
@@ -313,9 +288,9 @@ impl Bvh4 {
                         kids[k] = entry;
                         n += 1;
                     }
-                    // The nearest is visited now; the others wait.
                     for &kid in &kids[..n - 1] {
-                        stack.push(kid);
+                        stack[sp].write(kid);
+                        sp += 1;
                     }
                     cur = kids[n - 1].0;
                     continue;
@@ -323,9 +298,12 @@ impl Bvh4 {
             }
             // Next pending child still nearer than the closest hit so far.
             loop {
-                let Some((r, t)) = stack.pop() else {
+                if sp == 0 {
                     return best;
-                };
+                }
+                sp -= 1;
+                // SAFETY: every entry below the old `sp` was written.
+                let (r, t) = unsafe { stack[sp].assume_init() };
                 if t <= tmax {
                     cur = r;
                     break;
@@ -334,10 +312,11 @@ impl Bvh4 {
         }
     }
 
-    /// Any hit: true as soon as `blocks(leaf)` says a primitive of a leaf
-    /// (primitive range) blocks the ray within `[tmin, tmax]`.
+    /// Any hit: true as soon as `blocks(ray, leaf)` says a primitive of a
+    /// leaf (primitive range; `ray` is the query ray splatted to four
+    /// lanes) blocks the ray within `[tmin, tmax]`.
     #[inline(always)]
-    pub fn any<F: FnMut(std::ops::Range<usize>) -> bool>(
+    pub fn any<F: FnMut(&Ray4, std::ops::Range<usize>) -> bool>(
         &self,
         o: Vec3,
         d: Vec3,
@@ -348,18 +327,23 @@ impl Bvh4 {
         if self.nodes.is_empty() {
             return false;
         }
-        if self.fits_array_stack() {
-            let mut stack = ArrayStack::<u32, STACK>::new();
-            self.any_with(&mut stack, o, d, tmin, tmax, blocks)
+        let mut local = [const { MaybeUninit::uninit() }; STACK];
+        let mut heap;
+        let stack: &mut [MaybeUninit<u32>] = if self.stack_need() <= STACK {
+            &mut local
         } else {
-            self.any_with(&mut Vec::new(), o, d, tmin, tmax, blocks)
-        }
+            heap = vec![MaybeUninit::uninit(); self.stack_need()];
+            &mut heap
+        };
+        self.any_in(stack, o, d, tmin, tmax, blocks)
     }
 
+    /// The any-hit traversal on a stack of at least [`Self::stack_need`]
+    /// entries.
     #[inline(always)]
-    fn any_with<S: PushPop<u32>, F: FnMut(std::ops::Range<usize>) -> bool>(
+    fn any_in<F: FnMut(&Ray4, std::ops::Range<usize>) -> bool>(
         &self,
-        stack: &mut S,
+        stack: &mut [MaybeUninit<u32>],
         o: Vec3,
         d: Vec3,
         tmin: f32,
@@ -368,9 +352,10 @@ impl Bvh4 {
     ) -> bool {
         let ray = BoxRay::new(o, d);
         let mut cur = 0u32;
+        let mut sp = 0usize;
         loop {
             if cur & LEAF_BIT != 0 {
-                if blocks(leaf_range(cur)) {
+                if blocks(&ray.simd, leaf_range(cur)) {
                     return true;
                 }
             } else {
@@ -382,16 +367,19 @@ impl Bvh4 {
                     while mask != 0 {
                         let i = mask.trailing_zeros() as usize;
                         mask &= mask - 1;
-                        stack.push(node.child[i]);
+                        stack[sp].write(node.child[i]);
+                        sp += 1;
                     }
                     cur = node.child[first];
                     continue;
                 }
             }
-            match stack.pop() {
-                Some(r) => cur = r,
-                None => return false,
+            if sp == 0 {
+                return false;
             }
+            sp -= 1;
+            // SAFETY: every entry below the old `sp` was written.
+            cur = unsafe { stack[sp].assume_init() };
         }
     }
 }

@@ -12,8 +12,8 @@ pub const LANES: usize = 4;
 
 /// A ray splatted across the lanes.
 pub struct Ray4 {
-    o: [Vec4; 3],
-    d: [Vec4; 3],
+    pub(super) o: [Vec4; 3],
+    pub(super) d: [Vec4; 3],
 }
 
 impl Ray4 {
