@@ -472,7 +472,7 @@ impl Geometry {
                     let (lane, t, u, v) = self.packs[pack as usize].intersect(ray4, tmin, tmax)?;
                     (leaf.start + lane, t, u, v)
                 } else {
-                    self.leaf_closest(leaf, o, d, tmin, tmax)?
+                    self.leaf_closest(leaf, ray, tmax)?
                 };
                 // The traversal keeps the last hit returned, so `uv` is its.
                 uv = (u, v);
@@ -494,12 +494,12 @@ impl Geometry {
     fn leaf_closest(
         &self,
         leaf: std::ops::Range<usize>,
-        o: Vec3,
-        d: Vec3,
-        tmin: f32,
+        ray: &Ray,
         tmax: f32,
     ) -> Option<(usize, f32, f32, f32)> {
-        let (oa, da) = (Vec3A::from(o), Vec3A::from(d));
+        // The ray is passed by reference: values passed here would be kept
+        // (spilled) through the whole traversal.
+        let (oa, da, tmin) = (Vec3A::from(ray.o), Vec3A::from(ray.d), ray.tmin);
         let mut best = None;
         let mut tmax = tmax;
         for id in leaf {
@@ -526,7 +526,7 @@ impl Geometry {
                 if pack != NO_PACK {
                     self.packs[pack as usize].occludes(ray4, tmin, tmax)
                 } else {
-                    self.leaf_blocks(leaf, o, d, tmin, tmax)
+                    self.leaf_blocks(leaf, ray)
                 }
             },
         )
@@ -535,15 +535,9 @@ impl Geometry {
     /// True when a primitive of the leaf is hit with `tmin < t < tmax`;
     /// out of line for the same reason as [`Self::leaf_closest`].
     #[inline(never)]
-    fn leaf_blocks(
-        &self,
-        leaf: std::ops::Range<usize>,
-        o: Vec3,
-        d: Vec3,
-        tmin: f32,
-        tmax: f32,
-    ) -> bool {
-        let (oa, da) = (Vec3A::from(o), Vec3A::from(d));
+    fn leaf_blocks(&self, leaf: std::ops::Range<usize>, ray: &Ray) -> bool {
+        let (oa, da) = (Vec3A::from(ray.o), Vec3A::from(ray.d));
+        let (tmin, tmax) = (ray.tmin, ray.tmax);
         leaf.into_iter()
             .any(|id| self.intersect_prim(&self.prims[id], oa, da, tmin, tmax).0 < tmax)
     }

@@ -106,11 +106,12 @@ impl BoxRay {
         BoxRay {
             simd,
             inv: [Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z)],
-            near: [
-                usize::from(d.x < 0.0),
-                usize::from(d.y < 0.0),
-                usize::from(d.z < 0.0),
-            ],
+            // The sign bits in one `movmskps` (`d` has no zero left, so
+            // they agree with `d < 0`).
+            near: {
+                let neg = d.is_negative_bitmask() as usize;
+                [neg & 1, (neg >> 1) & 1, (neg >> 2) & 1]
+            },
         }
     }
 
@@ -260,7 +261,9 @@ impl Bvh4 {
                     best = Some((prim, t));
                 }
             } else {
-                let node = &self.nodes[cur as usize];
+                // SAFETY: inner-node references are indices into `nodes`,
+                // written by `Collapser::node` and never changed after.
+                let node = unsafe { self.nodes.get_unchecked(cur as usize) };
                 let (tnear, mask) = ray.test(node, tmin, tmax);
                 if mask != 0 {
                     // One or two crossed children (the common cases) need
@@ -371,7 +374,9 @@ impl Bvh4 {
                     return true;
                 }
             } else {
-                let node = &self.nodes[cur as usize];
+                // SAFETY: inner-node references are indices into `nodes`,
+                // written by `Collapser::node` and never changed after.
+                let node = unsafe { self.nodes.get_unchecked(cur as usize) };
                 let (_, mut mask) = ray.test(node, tmin, tmax);
                 if mask != 0 {
                     let first = mask.trailing_zeros() as usize;

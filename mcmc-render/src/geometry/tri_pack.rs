@@ -69,9 +69,10 @@ impl TriPack {
         p
     }
 
-    /// The nearest triangle hit with `tmin < t < tmax`: `(lane, t, u, v)`.
+    /// The lanes hit with `tmin < t < tmax` (a non-zero bit mask) with
+    /// every lane's `t`, unnormalised barycentrics and `1 / det`.
     #[inline(always)]
-    pub fn intersect(&self, ray: &Ray4, tmin: f32, tmax: f32) -> Option<(usize, f32, f32, f32)> {
+    fn hits(&self, ray: &Ray4, tmin: f32, tmax: f32) -> Option<(u32, Vec4, Vec4, Vec4, Vec4)> {
         let pv = cross(&ray.d, &self.e2);
         let det = dot(&self.e1, &pv);
         let tv = [
@@ -100,10 +101,14 @@ impl TriPack {
         let inv = Vec4::ONE / det;
         let t = dot(&self.e2, &qv) * inv;
         let hit = inside & t.cmpgt(Vec4::splat(tmin)) & t.cmplt(Vec4::splat(tmax));
-        let mut mask = hit.bitmask();
-        if mask == 0 {
-            return None;
-        }
+        let mask = hit.bitmask();
+        (mask != 0).then_some((mask, t, su, sv, inv))
+    }
+
+    /// The nearest triangle hit with `tmin < t < tmax`: `(lane, t, u, v)`.
+    #[inline(always)]
+    pub fn intersect(&self, ray: &Ray4, tmin: f32, tmax: f32) -> Option<(usize, f32, f32, f32)> {
+        let (mut mask, t, su, sv, inv) = self.hits(ray, tmin, tmax)?;
         let ts = t.to_array();
         let mut lane = mask.trailing_zeros() as usize;
         mask &= mask - 1;
@@ -117,10 +122,11 @@ impl TriPack {
         Some((lane, ts[lane], su[lane] * inv[lane], sv[lane] * inv[lane]))
     }
 
-    /// True when some triangle is hit with `tmin < t < tmax`.
+    /// True when some triangle is hit with `tmin < t < tmax` (the same
+    /// arithmetic as [`Self::intersect`], without choosing the nearest).
     #[inline(always)]
     pub fn occludes(&self, ray: &Ray4, tmin: f32, tmax: f32) -> bool {
-        self.intersect(ray, tmin, tmax).is_some()
+        self.hits(ray, tmin, tmax).is_some()
     }
 }
 
