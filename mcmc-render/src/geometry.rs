@@ -467,9 +467,8 @@ impl Geometry {
             ray.tmax,
             #[inline(always)]
             |ray4, leaf, tmax| {
-                let pack = self.leaf_pack[leaf.start];
-                let (prim, t, u, v) = if pack != NO_PACK {
-                    let (lane, t, u, v) = self.packs[pack as usize].intersect(ray4, tmin, tmax)?;
+                let (prim, t, u, v) = if let Some(pack) = self.leaf_pack_of(&leaf) {
+                    let (lane, t, u, v) = pack.intersect(ray4, tmin, tmax)?;
                     (leaf.start + lane, t, u, v)
                 } else {
                     self.leaf_closest(leaf, ray, tmax)?
@@ -485,6 +484,16 @@ impl Geometry {
             u: uv.0,
             v: uv.1,
         })
+    }
+
+    /// The triangle pack of a BVH leaf, if it has one.
+    #[inline(always)]
+    fn leaf_pack_of(&self, leaf: &std::ops::Range<usize>) -> Option<&TriPack> {
+        // SAFETY: BVH leaves are non-empty ranges of `prims`, and
+        // `leaf_pack` has one entry per primitive (both set in `build`).
+        let pack = unsafe { *self.leaf_pack.get_unchecked(leaf.start) };
+        // SAFETY: entries other than `NO_PACK` index `packs` (`build`).
+        (pack != NO_PACK).then(|| unsafe { self.packs.get_unchecked(pack as usize) })
     }
 
     /// Closest hit `(prim, t, u, v)` with `tmin < t < tmax` among a leaf's
@@ -522,9 +531,8 @@ impl Geometry {
             tmax,
             #[inline(always)]
             |ray4, leaf| {
-                let pack = self.leaf_pack[leaf.start];
-                if pack != NO_PACK {
-                    self.packs[pack as usize].occludes(ray4, tmin, tmax)
+                if let Some(pack) = self.leaf_pack_of(&leaf) {
+                    pack.occludes(ray4, tmin, tmax)
                 } else {
                     self.leaf_blocks(leaf, ray)
                 }
