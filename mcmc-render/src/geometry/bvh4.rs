@@ -532,3 +532,111 @@ fn subtree_counts(bvh2: &Bvh2) -> Vec<u32> {
     }
     count
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lcg(s: &mut u64) -> f32 {
+        *s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((*s >> 40) as f32) / (1u64 << 24) as f32
+    }
+
+    /// Möller–Trumbore hit distance in `(tmin, tmax)`, if any.
+    fn tri_hit(o: Vec3, d: Vec3, [a, b, c]: [Vec3; 3], tmin: f32, tmax: f32) -> Option<f32> {
+        let (e1, e2) = (b - a, c - a);
+        let pv = d.cross(e2);
+        let det = e1.dot(pv);
+        if det == 0.0 {
+            return None;
+        }
+        let inv = 1.0 / det;
+        let tv = o - a;
+        let u = tv.dot(pv) * inv;
+        let qv = tv.cross(e1);
+        let v = d.dot(qv) * inv;
+        let t = e2.dot(qv) * inv;
+        (u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > tmin && t < tmax).then_some(t)
+    }
+
+    /// The traversals find exactly what a brute-force loop over all
+    /// primitives finds (same closest primitive and distance, same any-hit
+    /// answer) for random triangles and rays, from a single primitive to
+    /// trees several levels deep, with leaves merged or not.
+    #[test]
+    fn traversals_match_brute_force() {
+        let mut s = 3u64;
+        for (n, leaf) in [
+            (1, 4),
+            (3, 4),
+            (5, 4),
+            (37, 4),
+            (37, 1),
+            (2000, 4),
+            (2000, 8),
+        ] {
+            let tris: Vec<[Vec3; 3]> = (0..n)
+                .map(|_| {
+                    let c = Vec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 10.0;
+                    [0, 1, 2].map(|_| {
+                        c + Vec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) - Vec3::splat(0.5)
+                    })
+                })
+                .collect();
+            let aabbs: Vec<Aabb> = tris
+                .iter()
+                .map(|t| {
+                    let mut b = Aabb::from_point(t[0].into());
+                    b.extend(t[1].into()).extend(t[2].into());
+                    b
+                })
+                .collect();
+            let mut params = BvhBuildParams::very_slow_build();
+            params.max_prims_per_leaf = leaf;
+            let (bvh, order) = Bvh4::build(&aabbs, params);
+            let mut sorted = order.clone();
+            sorted.sort_unstable();
+            assert!(
+                sorted.iter().copied().eq(0..n as u32),
+                "order is a permutation"
+            );
+            let stored: Vec<[Vec3; 3]> = order.iter().map(|&i| tris[i as usize]).collect();
+            let mut hits = 0;
+            for k in 0..3000 {
+                let o = Vec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 12.0 - Vec3::ONE;
+                // Aimed near a random triangle (slightly beyond its edges
+                // too), so that most rays hit something.
+                let [a, b, c] = tris[(lcg(&mut s) * n as f32) as usize % n];
+                let (u, v) = (lcg(&mut s) * 1.4 - 0.2, lcg(&mut s) * 1.4 - 0.2);
+                let mut d = a + (b - a) * u + (c - a) * v - o;
+                // Some axis-parallel rays (zero direction components).
+                if k % 7 == 0 {
+                    d.x = 0.0;
+                }
+                if k % 11 == 0 {
+                    d.y = 0.0;
+                }
+                let d = d.normalize();
+                let (tmin, tmax) = (0.0, if k % 2 == 0 { f32::INFINITY } else { 8.0 });
+                let want = stored
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, &t)| tri_hit(o, d, t, tmin, tmax).map(|h| (i, h)))
+                    .min_by(|a, b| a.1.total_cmp(&b.1));
+                let got = bvh.closest(o, d, tmin, tmax, |_, leaf, tmax| {
+                    leaf.filter_map(|i| tri_hit(o, d, stored[i], tmin, tmax).map(|h| (i, h)))
+                        .min_by(|a, b| a.1.total_cmp(&b.1))
+                });
+                assert_eq!(got, want, "n={n} ray {k}");
+                let blocked = bvh.any(o, d, tmin, tmax, |_, mut leaf| {
+                    leaf.any(|i| tri_hit(o, d, stored[i], tmin, tmax).is_some())
+                });
+                assert_eq!(blocked, want.is_some(), "n={n} ray {k}");
+                hits += usize::from(want.is_some());
+            }
+            assert!(hits > 300, "n={n}: too few hits to test ({hits})");
+        }
+    }
+}
