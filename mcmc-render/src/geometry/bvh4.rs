@@ -88,8 +88,10 @@ fn leaf_range(r: u32) -> std::ops::Range<usize> {
 struct BoxRay {
     simd: Ray4,
     inv: [Vec4; 3],
-    /// `bounds` index of the near plane per axis (the far one is `near ^ 1`).
-    near: [usize; 3],
+    /// Byte offsets in `Node::bounds` of the near and far planes of x, y
+    /// and z: byte offsets rather than indices save two instructions per
+    /// offset and node (no scaling, no reload of the index for it).
+    planes: [usize; 6],
 }
 
 impl BoxRay {
@@ -107,10 +109,20 @@ impl BoxRay {
             simd,
             inv: [Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z)],
             // The sign bits in one `movmskps` (`d` has no zero left, so
-            // they agree with `d < 0`).
-            near: {
+            // they agree with `d < 0`); a negative direction meets the
+            // maximum (the second plane of the axis) first.
+            planes: {
+                const V: usize = std::mem::size_of::<Vec4>();
                 let neg = d.is_negative_bitmask() as usize;
-                [neg & 1, (neg >> 1) & 1, (neg >> 2) & 1]
+                let (nx, ny, nz) = (neg & 1, (neg >> 1) & 1, (neg >> 2) & 1);
+                [
+                    nx * V,
+                    (nx ^ 1) * V,
+                    (2 + ny) * V,
+                    (2 + (ny ^ 1)) * V,
+                    (4 + nz) * V,
+                    (4 + (nz ^ 1)) * V,
+                ]
             },
         }
     }
@@ -120,14 +132,20 @@ impl BoxRay {
     #[inline(always)]
     fn test(&self, node: &Node, tmin: f32, tmax: f32) -> (Vec4, u32) {
         let b = &node.bounds;
-        let [nx, ny, nz] = self.near;
+        let p = |k: usize| {
+            let off = self.planes[k];
+            debug_assert!(off % std::mem::size_of::<Vec4>() == 0 && off < std::mem::size_of_val(b));
+            // SAFETY: `planes` holds offsets of whole `Vec4`s inside
+            // `bounds` (set in `new`), so the read is in bounds and aligned.
+            unsafe { *b.as_ptr().cast::<u8>().add(off).cast::<Vec4>() }
+        };
         let o = &self.simd.o;
-        let t0x = (b[nx] - o[0]) * self.inv[0];
-        let t1x = (b[nx ^ 1] - o[0]) * self.inv[0];
-        let t0y = (b[2 + ny] - o[1]) * self.inv[1];
-        let t1y = (b[2 + (ny ^ 1)] - o[1]) * self.inv[1];
-        let t0z = (b[4 + nz] - o[2]) * self.inv[2];
-        let t1z = (b[4 + (nz ^ 1)] - o[2]) * self.inv[2];
+        let t0x = (p(0) - o[0]) * self.inv[0];
+        let t1x = (p(1) - o[0]) * self.inv[0];
+        let t0y = (p(2) - o[1]) * self.inv[1];
+        let t1y = (p(3) - o[1]) * self.inv[1];
+        let t0z = (p(4) - o[2]) * self.inv[2];
+        let t1z = (p(5) - o[2]) * self.inv[2];
         let tnear = t0x.max(t0y).max(t0z).max(Vec4::splat(tmin));
         // pbrt-v4's conservative far distance: 1 + 2γ(3).
         let tfar = t1x.min(t1y).min(t1z) * (1.0 + 2.0 * super::gamma(3));
