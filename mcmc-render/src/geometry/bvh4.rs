@@ -2,7 +2,9 @@
 //! obvhs builds.
 //!
 //! obvhs builds the tree (PLOC plus reinsertion, in parallel); this module
-//! only re-lays it out for one ray at a time on a CPU: every node holds the
+//! re-lays it out for one ray at a time on a CPU (which binary subtrees
+//! become four-wide nodes, which become leaves, chosen by the surface-area
+//! heuristic over the whole binary tree, see [`plan`]): every node holds the
 //! boxes of its four children as structure-of-arrays lanes, so one ray
 //! tests all four with a handful of 4-wide SIMD operations (glam's `Vec4`
 //! is SSE2 on x86-64), and children are visited nearest first so the
@@ -29,9 +31,10 @@ pub const MAX_LEAF_PRIMS: u32 = 8;
 const LEAF_BIT: u32 = 1 << 31;
 /// Bits of a leaf reference holding its first primitive.
 const FIRST_BITS: u32 = 28;
-/// Cost of a node test relative to a leaf test (≈ 50 against ≈ 160
-/// instructions in callgrind profiles of the Cornell box), for the
-/// collapse's surface-area heuristic.
+/// Cost of a node test relative to a leaf test, for the collapse's
+/// surface-area heuristic (≈ 45 against ≈ 115–160 instructions in callgrind
+/// profiles of the Cornell box; 0.4 was worse there when leaves were merged
+/// by a local rule).
 const NODE_COST: f32 = 0.3;
 /// A child slot without a child.
 const EMPTY: u32 = u32::MAX;
@@ -134,7 +137,9 @@ impl BoxRay {
         let b = &node.bounds;
         let p = |k: usize| {
             let off = self.planes[k];
-            debug_assert!(off % std::mem::size_of::<Vec4>() == 0 && off < std::mem::size_of_val(b));
+            debug_assert!(
+                off.is_multiple_of(std::mem::size_of::<Vec4>()) && off < std::mem::size_of_val(b)
+            );
             // SAFETY: `planes` holds offsets of whole `Vec4`s inside
             // `bounds` (set in `new`), so the read is in bounds and aligned.
             unsafe { *b.as_ptr().cast::<u8>().add(off).cast::<Vec4>() }
@@ -183,9 +188,8 @@ impl Bvh4 {
         params.max_prims_per_leaf = params.max_prims_per_leaf.clamp(1, MAX_LEAF_PRIMS);
         let bvh2 = obvhs::bvh2::builder::build_bvh2(aabbs, params, &mut Default::default());
         let mut c = Collapser {
-            count: subtree_counts(&bvh2),
+            plans: plan(&bvh2, params.max_prims_per_leaf),
             bvh2: &bvh2,
-            max_leaf: params.max_prims_per_leaf,
             nodes: Vec::with_capacity(bvh2.nodes.len() / 3 + 1),
             order: Vec::with_capacity(aabbs.len()),
             depth: 1,
@@ -419,13 +423,98 @@ impl Bvh4 {
     }
 }
 
-/// Re-lays a binary BVH out as four-wide nodes.
+/// How the collapse lays out one binary subtree (surface-area costs: a
+/// leaf test costs 1 per unit of box area, a node test `NODE_COST`).
+#[derive(Clone, Copy, Debug)]
+struct Plan {
+    /// The subtree becomes one leaf (else a four-wide node).
+    leaf: bool,
+    /// Primitives in the subtree.
+    count: u32,
+    /// `best[k]`: least cost of the subtree spread over at most `k` slots
+    /// of its parent (`k` = 1..4; `best[1]` = the subtree as one child).
+    best: [f32; 5],
+    /// `split[k]`: slots given to the left child for `best[k]` (0: the
+    /// subtree takes one slot).
+    split: [u8; 5],
+    /// Slots of the left child when the subtree is a node of its own.
+    node_split: u8,
+}
+
+/// Chooses, bottom-up, which binary nodes become four-wide nodes and
+/// which become leaves, and which descendants fill each node's four slots,
+/// minimising the surface-area cost (dynamic programming over the binary
+/// tree, as in Ylitie et al. 2017 for eight-wide trees). A subtree of at
+/// most `max_leaf` primitives may become one leaf: a leaf of up to four
+/// triangles costs one SIMD test whatever their number.
+fn plan(bvh2: &Bvh2, max_leaf: u32) -> Vec<Plan> {
+    // Pre-order without recursion, then children before parents.
+    let mut pre = Vec::with_capacity(bvh2.nodes.len());
+    let mut stack = vec![0usize];
+    while let Some(i) = stack.pop() {
+        pre.push(i);
+        let n = &bvh2.nodes[i];
+        if !n.is_leaf() {
+            stack.push(n.first_index as usize);
+            stack.push(n.first_index as usize + 1);
+        }
+    }
+    let none = Plan {
+        leaf: true,
+        count: 0,
+        best: [f32::INFINITY; 5],
+        split: [0; 5],
+        node_split: 0,
+    };
+    let mut plans = vec![none; bvh2.nodes.len()];
+    for &i in pre.iter().rev() {
+        let n = &bvh2.nodes[i];
+        let area = n.aabb().half_area().max(0.0);
+        let mut p = none;
+        if n.is_leaf() {
+            p.count = n.prim_count;
+            p.best = [area; 5];
+        } else {
+            let f = n.first_index as usize;
+            let (l, r) = (plans[f], plans[f + 1]);
+            p.count = l.count.saturating_add(r.count);
+            // As a node: its four slots shared between the two children.
+            let (mut node_cost, mut node_split) = (f32::INFINITY, 1);
+            for j in 1..4 {
+                let c = l.best[j] + r.best[4 - j];
+                if c < node_cost {
+                    (node_cost, node_split) = (c, j as u8);
+                }
+            }
+            let node_cost = area * NODE_COST + node_cost;
+            let leaf_cost = if p.count <= max_leaf {
+                area
+            } else {
+                f32::INFINITY
+            };
+            p.leaf = leaf_cost <= node_cost;
+            p.node_split = node_split;
+            let one = leaf_cost.min(node_cost);
+            for k in 1..5 {
+                p.best[k] = one;
+                for j in 1..k {
+                    let c = l.best[j] + r.best[k - j];
+                    if c < p.best[k] {
+                        p.best[k] = c;
+                        p.split[k] = j as u8;
+                    }
+                }
+            }
+        }
+        plans[i] = p;
+    }
+    plans
+}
+
+/// Re-lays a binary BVH out as four-wide nodes following [`plan`].
 struct Collapser<'a> {
     bvh2: &'a Bvh2,
-    /// Primitives under each binary node.
-    count: Vec<u32>,
-    /// Largest subtree that becomes one leaf.
-    max_leaf: u32,
+    plans: Vec<Plan>,
     nodes: Vec<Node>,
     /// Input primitive indices in leaf order.
     order: Vec<u32>,
@@ -434,33 +523,9 @@ struct Collapser<'a> {
 }
 
 impl Collapser<'_> {
-    /// True when the binary node `i` becomes one leaf rather than a node:
-    /// a binary leaf, or a subtree of at most `max_leaf` primitives whose
-    /// leaves fill most of its box. A leaf of up to four triangles costs
-    /// one SIMD test whatever their number, so by the surface-area
-    /// heuristic merging pays when `A·C_leaf < A·C_node + ΣAᵢ·C_leaf`
-    /// (`A` the subtree's box area, `Aᵢ` its leaves'); otherwise the node
-    /// test culls the leaves that a ray crossing the box misses.
+    /// True when the binary node `i` becomes one leaf rather than a node.
     fn is_leaf(&self, i: usize) -> bool {
-        let n = &self.bvh2.nodes[i];
-        if n.is_leaf() {
-            return true;
-        }
-        if self.count[i] > self.max_leaf {
-            return false;
-        }
-        let mut stack = vec![i];
-        let mut leaf_area = 0.0;
-        while let Some(k) = stack.pop() {
-            let m = &self.bvh2.nodes[k];
-            if m.is_leaf() {
-                leaf_area += m.aabb().half_area();
-            } else {
-                stack.push(m.first_index as usize);
-                stack.push(m.first_index as usize + 1);
-            }
-        }
-        n.aabb().half_area() * (1.0 - NODE_COST) < leaf_area
+        self.plans[i].leaf
     }
 
     /// The leaf reference for the binary subtree `i`, whose primitives are
@@ -485,30 +550,29 @@ impl Collapser<'_> {
         LEAF_BIT | ((count - 1) << FIRST_BITS) | first
     }
 
+    /// Appends to `out` the binary subtrees that fill `k` slots for `i`.
+    fn pieces(&self, i: usize, k: usize, out: &mut Vec<usize>) {
+        let j = self.plans[i].split[k] as usize;
+        if j == 0 {
+            out.push(i);
+        } else {
+            let f = self.bvh2.nodes[i].first_index as usize;
+            self.pieces(f, j, out);
+            self.pieces(f + 1, k - j, out);
+        }
+    }
+
     /// Appends the four-wide node for the binary inner node `i` (and, after
-    /// it, its subtree); returns its index. The binary node's children are
-    /// opened, largest surface first, until four remain or all are leaves.
-    /// `level` is the new node's depth (root = 1).
+    /// it, its subtree); returns its index. `level` is the new node's depth
+    /// (root = 1).
     fn node(&mut self, i: usize, level: usize) -> u32 {
         self.depth = self.depth.max(level);
-        let first = self.bvh2.nodes[i].first_index as usize;
-        let mut kids = vec![first, first + 1];
-        while kids.len() < 4 {
-            let widest = kids
-                .iter()
-                .enumerate()
-                .filter(|(_, k)| !self.bvh2.nodes[**k].is_leaf())
-                .max_by(|a, b| {
-                    let ha = self.bvh2.nodes[*a.1].aabb().half_area();
-                    let hb = self.bvh2.nodes[*b.1].aabb().half_area();
-                    ha.total_cmp(&hb)
-                })
-                .map(|(slot, _)| slot);
-            let Some(slot) = widest else { break };
-            let open = self.bvh2.nodes[kids[slot]].first_index as usize;
-            kids[slot] = open;
-            kids.push(open + 1);
-        }
+        let f = self.bvh2.nodes[i].first_index as usize;
+        let j = self.plans[i].node_split as usize;
+        let mut kids = Vec::with_capacity(4);
+        self.pieces(f, j, &mut kids);
+        self.pieces(f + 1, 4 - j, &mut kids);
+        debug_assert!((2..=4).contains(&kids.len()));
         let me = self.nodes.len();
         self.nodes.push(Node::EMPTY);
         let mut node = Node::EMPTY;
@@ -523,32 +587,6 @@ impl Collapser<'_> {
         self.nodes[me] = node;
         me as u32
     }
-}
-
-/// Primitives under every node of a binary BVH reachable from its root.
-fn subtree_counts(bvh2: &Bvh2) -> Vec<u32> {
-    // Pre-order without recursion, then children before parents.
-    let mut pre = Vec::with_capacity(bvh2.nodes.len());
-    let mut stack = vec![0usize];
-    while let Some(i) = stack.pop() {
-        pre.push(i);
-        let n = &bvh2.nodes[i];
-        if !n.is_leaf() {
-            stack.push(n.first_index as usize);
-            stack.push(n.first_index as usize + 1);
-        }
-    }
-    let mut count = vec![0u32; bvh2.nodes.len()];
-    for &i in pre.iter().rev() {
-        let n = &bvh2.nodes[i];
-        count[i] = if n.is_leaf() {
-            n.prim_count
-        } else {
-            let f = n.first_index as usize;
-            count[f].saturating_add(count[f + 1])
-        };
-    }
-    count
 }
 
 #[cfg(test)]
