@@ -15,7 +15,7 @@ use glam::{Mat4, Vec3, Vec3A};
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
 use std::time::{Duration, Instant};
-use tri_pack::{Ray4, TriPack};
+use tri_pack::TriPack;
 
 /// A ray with origin, unit direction and a maximum distance.
 #[derive(Clone, Copy, Debug)]
@@ -576,29 +576,27 @@ impl Geometry {
     /// Closest hit along `ray`, if any.
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
         let (o, d, tmin) = (ray.o, ray.d, ray.tmin);
-        let (oa, da) = (Vec3A::from(o), Vec3A::from(d));
-        let ray4 = Ray4::new(o, d);
         let mut uv = (0.0, 0.0);
-        let (prim, t) = self.bvh.closest(o, d, tmin, ray.tmax, |leaf, tmax| {
-            // The traversal keeps the last hit returned, so `uv` is its.
-            let pack = self.leaf_pack[leaf.start];
-            if pack != NO_PACK {
-                let (lane, t, u, v) = self.packs[pack as usize].intersect(&ray4, tmin, tmax)?;
+        // The leaf test is inlined into the traversal loop (a call per leaf
+        // and the ray kept in memory for it cost more than the test).
+        let (prim, t) = self.bvh.closest(
+            o,
+            d,
+            tmin,
+            ray.tmax,
+            #[inline(always)]
+            |ray4, leaf, tmax| {
+                let (prim, t, u, v) = if let Some(pack) = self.leaf_pack_of(&leaf) {
+                    let (lane, t, u, v) = pack.intersect(ray4, tmin, tmax)?;
+                    (leaf.start + lane, t, u, v)
+                } else {
+                    self.leaf_closest(leaf, ray, tmax)?
+                };
+                // The traversal keeps the last hit returned, so `uv` is its.
                 uv = (u, v);
-                return Some((leaf.start + lane, t));
-            }
-            let mut best = None;
-            let mut tmax = tmax;
-            for id in leaf {
-                let (t, u, v) = self.intersect_prim(&self.prims[id], oa, da, tmin, tmax);
-                if t < tmax {
-                    tmax = t;
-                    uv = (u, v);
-                    best = Some((id, t));
-                }
-            }
-            best
-        })?;
+                Some((prim, t))
+            },
+        )?;
         Some(Hit {
             t,
             prim: prim as u32,
@@ -607,19 +605,68 @@ impl Geometry {
         })
     }
 
+    /// The triangle pack of a BVH leaf, if it has one.
+    #[inline(always)]
+    fn leaf_pack_of(&self, leaf: &std::ops::Range<usize>) -> Option<&TriPack> {
+        // SAFETY: BVH leaves are non-empty ranges of `prims`, and
+        // `leaf_pack` has one entry per primitive (both set in `build`).
+        let pack = unsafe { *self.leaf_pack.get_unchecked(leaf.start) };
+        // SAFETY: entries other than `NO_PACK` index `packs` (`build`).
+        (pack != NO_PACK).then(|| unsafe { self.packs.get_unchecked(pack as usize) })
+    }
+
+    /// Closest hit `(prim, t, u, v)` with `tmin < t < tmax` among a leaf's
+    /// primitives, one by one. Kept out of line so that the set-up of the
+    /// sphere and disk tests is not hoisted into every ray's traversal.
+    #[inline(never)]
+    fn leaf_closest(
+        &self,
+        leaf: std::ops::Range<usize>,
+        ray: &Ray,
+        tmax: f32,
+    ) -> Option<(usize, f32, f32, f32)> {
+        // The ray is passed by reference: values passed here would be kept
+        // (spilled) through the whole traversal.
+        let (oa, da, tmin) = (Vec3A::from(ray.o), Vec3A::from(ray.d), ray.tmin);
+        let mut best = None;
+        let mut tmax = tmax;
+        for id in leaf {
+            let (t, u, v) = self.intersect_prim(&self.prims[id], oa, da, tmin, tmax);
+            if t < tmax {
+                tmax = t;
+                best = Some((id, t, u, v));
+            }
+        }
+        best
+    }
+
     /// True when something blocks `ray` strictly before `ray.tmax`.
     pub fn occluded(&self, ray: &Ray) -> bool {
         let (o, d, tmin, tmax) = (ray.o, ray.d, ray.tmin, ray.tmax);
-        let (oa, da) = (Vec3A::from(o), Vec3A::from(d));
-        let ray4 = Ray4::new(o, d);
-        self.bvh.any(o, d, tmin, tmax, |leaf| {
-            let pack = self.leaf_pack[leaf.start];
-            if pack != NO_PACK {
-                return self.packs[pack as usize].occludes(&ray4, tmin, tmax);
-            }
-            leaf.into_iter()
-                .any(|id| self.intersect_prim(&self.prims[id], oa, da, tmin, tmax).0 < tmax)
-        })
+        self.bvh.any(
+            o,
+            d,
+            tmin,
+            tmax,
+            #[inline(always)]
+            |ray4, leaf| {
+                if let Some(pack) = self.leaf_pack_of(&leaf) {
+                    pack.occludes(ray4, tmin, tmax)
+                } else {
+                    self.leaf_blocks(leaf, ray)
+                }
+            },
+        )
+    }
+
+    /// True when a primitive of the leaf is hit with `tmin < t < tmax`;
+    /// out of line for the same reason as [`Self::leaf_closest`].
+    #[inline(never)]
+    fn leaf_blocks(&self, leaf: std::ops::Range<usize>, ray: &Ray) -> bool {
+        let (oa, da) = (Vec3A::from(ray.o), Vec3A::from(ray.d));
+        let (tmin, tmax) = (ray.tmin, ray.tmax);
+        leaf.into_iter()
+            .any(|id| self.intersect_prim(&self.prims[id], oa, da, tmin, tmax).0 < tmax)
     }
 
     /// True when the segment between two surface points is unobstructed

@@ -12,8 +12,8 @@ pub const LANES: usize = 4;
 
 /// A ray splatted across the lanes.
 pub struct Ray4 {
-    o: [Vec4; 3],
-    d: [Vec4; 3],
+    pub(super) o: [Vec4; 3],
+    pub(super) d: [Vec4; 3],
 }
 
 impl Ray4 {
@@ -27,13 +27,15 @@ impl Ray4 {
     }
 }
 
-/// Up to four triangles `v0 + u·e1 + v·e2`; unused lanes hold a
-/// degenerate triangle (all zero), which the determinant test rejects.
+/// Up to four triangles `v0 + u·e1 + v·e2`, with their unnormalised
+/// normals `n = e2 × e1`; unused lanes hold a degenerate triangle (all
+/// zero), which the determinant test rejects.
 #[derive(Clone, Copy, Debug)]
 pub struct TriPack {
     v0: [Vec4; 3],
     e1: [Vec4; 3],
     e2: [Vec4; 3],
+    n: [Vec4; 3],
 }
 
 #[inline(always)]
@@ -58,35 +60,45 @@ impl TriPack {
             v0: [Vec4::ZERO; 3],
             e1: [Vec4::ZERO; 3],
             e2: [Vec4::ZERO; 3],
+            n: [Vec4::ZERO; 3],
         };
         for (lane, &(v0, e1, e2)) in tris.iter().enumerate() {
+            let n = e2.cross(e1);
             for axis in 0..3 {
                 p.v0[axis][lane] = v0[axis];
                 p.e1[axis][lane] = e1[axis];
                 p.e2[axis][lane] = e2[axis];
+                p.n[axis][lane] = n[axis];
             }
         }
         p
     }
 
-    /// The nearest triangle hit with `tmin < t < tmax`: `(lane, t, u, v)`.
+    /// The lanes hit with `tmin < t < tmax` (a non-zero bit mask) with
+    /// every lane's `t`, unnormalised barycentrics and `1 / det`.
     #[inline(always)]
-    pub fn intersect(&self, ray: &Ray4, tmin: f32, tmax: f32) -> Option<(usize, f32, f32, f32)> {
-        let pv = cross(&ray.d, &self.e2);
-        let det = dot(&self.e1, &pv);
-        let tv = [
-            ray.o[0] - self.v0[0],
-            ray.o[1] - self.v0[1],
-            ray.o[2] - self.v0[2],
+    fn hits(&self, ray: &Ray4, tmin: f32, tmax: f32) -> Option<(u32, Vec4, Vec4, Vec4, Vec4)> {
+        // Möller–Trumbore rewritten by the scalar triple product around
+        // the stored normal (one cross product per ray instead of two):
+        // with w = v0 − o and c = d × w,
+        //   det = e1·(d × e2) = d·n,   det·u = e2·c,   det·v = −e1·c,
+        //   det·t = e2·((o − v0) × e1) = w·n.
+        let w = [
+            self.v0[0] - ray.o[0],
+            self.v0[1] - ray.o[1],
+            self.v0[2] - ray.o[2],
         ];
-        let qv = cross(&tv, &self.e1);
-        let su = dot(&tv, &pv);
-        let sv = dot(&ray.d, &qv);
+        let c = cross(&ray.d, &w);
+        let det = dot(&ray.d, &self.n);
+        let su = dot(&self.e2, &c);
+        let sv_neg = dot(&self.e1, &c);
         // Barycentric tests scaled by |det| (as the scalar test does), so
-        // the division is paid once for the four lanes.
-        let neg = det.cmplt(Vec4::ZERO);
-        let au = Vec4::select(neg, -su, su);
-        let av = Vec4::select(neg, -sv, sv);
+        // the division is paid once for the four lanes. Multiplying by ±1
+        // with det's sign bit negates exactly where `det < 0`, in fewer
+        // operations than a select; where the two differ (det = −0 or
+        // NaN) `adet > 0` fails anyway.
+        let s = Vec4::ONE.copysign(det);
+        let (au, av) = (su * s, sv_neg * -s);
         let adet = det.abs();
         let finite = adet.cmplt(Vec4::INFINITY);
         let inside: BVec4A = adet.cmpgt(Vec4::ZERO)
@@ -98,12 +110,16 @@ impl TriPack {
             return None;
         }
         let inv = Vec4::ONE / det;
-        let t = dot(&self.e2, &qv) * inv;
+        let t = dot(&w, &self.n) * inv;
         let hit = inside & t.cmpgt(Vec4::splat(tmin)) & t.cmplt(Vec4::splat(tmax));
-        let mut mask = hit.bitmask();
-        if mask == 0 {
-            return None;
-        }
+        let mask = hit.bitmask();
+        (mask != 0).then_some((mask, t, su, -sv_neg, inv))
+    }
+
+    /// The nearest triangle hit with `tmin < t < tmax`: `(lane, t, u, v)`.
+    #[inline(always)]
+    pub fn intersect(&self, ray: &Ray4, tmin: f32, tmax: f32) -> Option<(usize, f32, f32, f32)> {
+        let (mut mask, t, su, sv, inv) = self.hits(ray, tmin, tmax)?;
         let ts = t.to_array();
         let mut lane = mask.trailing_zeros() as usize;
         mask &= mask - 1;
@@ -117,10 +133,11 @@ impl TriPack {
         Some((lane, ts[lane], su[lane] * inv[lane], sv[lane] * inv[lane]))
     }
 
-    /// True when some triangle is hit with `tmin < t < tmax`.
+    /// True when some triangle is hit with `tmin < t < tmax` (the same
+    /// arithmetic as [`Self::intersect`], without choosing the nearest).
     #[inline(always)]
     pub fn occludes(&self, ray: &Ray4, tmin: f32, tmax: f32) -> bool {
-        self.intersect(ray, tmin, tmax).is_some()
+        self.hits(ray, tmin, tmax).is_some()
     }
 }
 
