@@ -1,5 +1,5 @@
 //! Scene geometry: triangles, analytic spheres and disks in one BVH (built
-//! by obvhs, traversed as a four-wide BVH, see [`bvh4`]), with closest-hit
+//! by obvhs, traversed as a four-wide BVH, see the `bvh4` module), with closest-hit
 //! and occlusion queries.
 //!
 //! Self-intersection is avoided the pbrt-v4 way, without any scene-scale
