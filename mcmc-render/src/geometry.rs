@@ -465,12 +465,15 @@ impl Geometry {
         })
     }
 
-    /// Bytes used by the BVH nodes, the primitive array and the index array.
+    /// Bytes used by the acceleration structures: the BVH nodes, the
+    /// primitive array, the triangle packs and their index, and the
+    /// per-primitive cache of flat triangles.
     pub fn bvh_bytes(&self) -> usize {
         self.bvh.bytes()
             + std::mem::size_of_val(self.prims.as_slice())
             + std::mem::size_of_val(self.packs.as_slice())
             + std::mem::size_of_val(self.leaf_pack.as_slice())
+            + std::mem::size_of_val(self.flat.as_slice())
     }
 
     /// Number of primitives in the BVH.
