@@ -35,13 +35,18 @@ impl Rgb {
     }
 
     /// True when every channel is exactly zero.
+    #[inline]
     pub fn is_black(self) -> bool {
-        self.r == 0.0 && self.g == 0.0 && self.b == 0.0
+        // `&`, not `&&`: three compares and no branches (the channels are
+        // already loaded, so short-circuiting saves nothing).
+        (self.r == 0.0) & (self.g == 0.0) & (self.b == 0.0)
     }
 
     /// True when every channel is finite (no NaN, no infinity).
+    #[inline]
     pub fn is_finite(self) -> bool {
-        self.r.is_finite() && self.g.is_finite() && self.b.is_finite()
+        // Branch-free, as in `is_black`.
+        self.r.is_finite() & self.g.is_finite() & self.b.is_finite()
     }
 
     /// Largest channel.

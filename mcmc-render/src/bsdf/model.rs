@@ -187,17 +187,41 @@ impl Bsdf {
 
     /// `(eval(wo, wi, mode), pdf(wo, wi, mode))` in one call, sharing the
     /// work (half vector, D, G1, Fresnel) — what MIS needs at every vertex.
+    #[inline]
     pub fn eval_pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> (Rgb, f32) {
+        match self {
+            Bsdf::TwoSided(inner) => {
+                let (wo, wi) = to_front(wo, wi);
+                inner.one_sided().eval_pdf_one_sided(wo, wi, mode)
+            }
+            b => b.eval_pdf_one_sided(wo, wi, mode),
+        }
+    }
+
+    /// [`Bsdf::eval_pdf`] of a model that is not [`Bsdf::TwoSided`]. Kept
+    /// apart (not recursive) so that it and its callers can be inlined.
+    #[inline]
+    fn eval_pdf_one_sided(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> (Rgb, f32) {
         match self {
             Bsdf::Diffuse(b) => (b.eval(wo, wi), b.pdf(wo, wi)),
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) => (Rgb::BLACK, 0.0),
             Bsdf::RoughConductor(b) => b.eval_pdf(wo, wi),
             Bsdf::RoughDielectric(b) => b.eval_pdf(wo, wi, mode),
-            Bsdf::TwoSided(inner) => {
-                let (wo, wi) = to_front(wo, wi);
-                inner.eval_pdf(wo, wi, mode)
-            }
+            // Excluded by `one_sided`.
+            Bsdf::TwoSided(_) => (Rgb::BLACK, 0.0),
         }
+    }
+
+    /// The model under any number of [`Bsdf::TwoSided`] wrappers. Nesting
+    /// adds nothing: once the outer wrapper has mirrored `wo` to the front,
+    /// an inner one never flips again (`from_desc` also collapses it).
+    #[inline]
+    fn one_sided(&self) -> &Bsdf {
+        let mut b = self;
+        while let Bsdf::TwoSided(inner) = b {
+            b = inner;
+        }
+        b
     }
 
     /// Importance-samples `wi` given `wo`. `u_lobe` chooses between lobes
@@ -205,7 +229,47 @@ impl Bsdf {
     /// chooses the direction within the lobe (`u.0` first). Models with a
     /// single lobe ignore `u_lobe`; delta models ignore `u`. Returns `None`
     /// when no direction carries energy (e.g. `wo` below a one-sided surface).
+    #[inline]
     pub fn sample(
+        &self,
+        wo: Vec3,
+        u_lobe: f32,
+        u: (f32, f32),
+        mode: TransportMode,
+    ) -> Option<BsdfSample> {
+        // Diffuse, one- or two-sided (most surfaces of most scenes), inline
+        // in the caller's loop; the other models out of line, so that their
+        // code does not crowd the loop.
+        match self {
+            Bsdf::Diffuse(b) => b.sample(wo, u, mode),
+            Bsdf::TwoSided(inner) if let Bsdf::Diffuse(b) = &**inner => {
+                two_sided_sample(wo, |wo| b.sample(wo, u, mode))
+            }
+            _ => self.sample_general(wo, u_lobe, u, mode),
+        }
+    }
+
+    /// [`Bsdf::sample`] for every model (the slow path of its dispatch).
+    #[inline(never)]
+    fn sample_general(
+        &self,
+        wo: Vec3,
+        u_lobe: f32,
+        u: (f32, f32),
+        mode: TransportMode,
+    ) -> Option<BsdfSample> {
+        match self {
+            Bsdf::TwoSided(inner) => two_sided_sample(wo, |wo| {
+                inner.one_sided().sample_one_sided(wo, u_lobe, u, mode)
+            }),
+            b => b.sample_one_sided(wo, u_lobe, u, mode),
+        }
+    }
+
+    /// [`Bsdf::sample`] of a model that is not [`Bsdf::TwoSided`] (not
+    /// recursive, so the path tracer's loop can inline it).
+    #[inline]
+    fn sample_one_sided(
         &self,
         wo: Vec3,
         u_lobe: f32,
@@ -218,19 +282,8 @@ impl Bsdf {
             Bsdf::RoughConductor(b) => b.sample(wo, u, mode),
             Bsdf::Dielectric(b) => b.sample(wo, u_lobe, mode),
             Bsdf::RoughDielectric(b) => b.sample(wo, u_lobe, u, mode),
-            Bsdf::TwoSided(inner) => {
-                let flip = wo.z < 0.0;
-                let wo = if flip {
-                    Vec3::new(wo.x, wo.y, -wo.z)
-                } else {
-                    wo
-                };
-                let mut s = inner.sample(wo, u_lobe, u, mode)?;
-                if flip {
-                    s.wi.z = -s.wi.z;
-                }
-                Some(s)
-            }
+            // Excluded by `one_sided`.
+            Bsdf::TwoSided(_) => None,
         }
     }
 
@@ -253,11 +306,13 @@ impl Bsdf {
     /// True when every lobe is a Dirac delta (smooth conductor, mirror,
     /// smooth dielectric): `eval` and `pdf` are then identically zero and
     /// only `sample` transports light.
+    #[inline]
     pub fn is_delta(&self) -> bool {
-        match self {
+        match self.one_sided() {
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) => true,
             Bsdf::Diffuse(_) | Bsdf::RoughConductor(_) | Bsdf::RoughDielectric(_) => false,
-            Bsdf::TwoSided(inner) => inner.is_delta(),
+            // Excluded by `one_sided`.
+            Bsdf::TwoSided(_) => false,
         }
     }
 
@@ -269,6 +324,26 @@ impl Bsdf {
             b => b.is_delta(),
         }
     }
+}
+
+/// Samples a one-sided model with `wo` mirrored to the front (z negated
+/// when below), mirroring the sampled direction back.
+#[inline]
+fn two_sided_sample(
+    wo: Vec3,
+    one_sided: impl FnOnce(Vec3) -> Option<BsdfSample>,
+) -> Option<BsdfSample> {
+    let flip = wo.z < 0.0;
+    let wo = if flip {
+        Vec3::new(wo.x, wo.y, -wo.z)
+    } else {
+        wo
+    };
+    let mut s = one_sided(wo)?;
+    if flip {
+        s.wi.z = -s.wi.z;
+    }
+    Some(s)
 }
 
 /// Mitsuba 3's two-sided mapping: when `wo` is below the surface, negate the

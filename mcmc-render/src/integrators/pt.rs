@@ -77,12 +77,14 @@ impl PathTracer {
                 && let Some(ds) = lights.sample_direct(geometry, sp.p, u_sel, u_light)
             {
                 let wi = frame.to_local(ds.wi);
-                let f = bsdf.eval(wo, wi, TransportMode::Radiance);
+                // One dispatch for both: the glossy models share the half
+                // vector, D and G1, and the two-sided mapping is done once.
+                let (f, bsdf_pdf) = bsdf.eval_pdf(wo, wi, TransportMode::Radiance);
                 if !f.is_black() && geometry.visible(&sp, &ds.p) {
                     let w = if ds.is_delta {
                         1.0
                     } else {
-                        power_heuristic(ds.pdf, bsdf.pdf(wo, wi, TransportMode::Radiance))
+                        power_heuristic(ds.pdf, bsdf_pdf)
                     };
                     l += beta * f * ds.le * (wi.z.abs() * w / ds.pdf);
                 }
