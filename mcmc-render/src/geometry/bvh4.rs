@@ -311,7 +311,10 @@ impl Bvh4 {
                     if rest & (rest - 1) == 0 {
                         let b = rest.trailing_zeros() as usize;
                         let (near, far) = if tn[b] <= tn[a] { (b, a) } else { (a, b) };
-                        stack[sp].write((node.child[far], tn[far]));
+                        debug_assert!(sp < stack.len());
+                        // SAFETY: `sp < 3 · depth <= stack.len()`: at most three pending
+                        // siblings per level of the current path (see `STACK`).
+                        unsafe { stack.get_unchecked_mut(sp) }.write((node.child[far], tn[far]));
                         sp += 1;
                         cur = node.child[near];
                         continue;
@@ -335,7 +338,10 @@ impl Bvh4 {
                         n += 1;
                     }
                     for &kid in &kids[..n - 1] {
-                        stack[sp].write(kid);
+                        debug_assert!(sp < stack.len());
+                        // SAFETY: `sp < 3 · depth <= stack.len()`: at most three pending
+                        // siblings per level of the current path (see `STACK`).
+                        unsafe { stack.get_unchecked_mut(sp) }.write(kid);
                         sp += 1;
                     }
                     cur = kids[n - 1].0;
@@ -348,8 +354,9 @@ impl Bvh4 {
                     return best;
                 }
                 sp -= 1;
-                // SAFETY: every entry below the old `sp` was written.
-                let (r, t) = unsafe { stack[sp].assume_init() };
+                // SAFETY: every entry below the old `sp` was written (and
+                // lies in `stack`).
+                let (r, t) = unsafe { stack.get_unchecked(sp).assume_init() };
                 if t <= tmax {
                     cur = r;
                     break;
@@ -415,7 +422,10 @@ impl Bvh4 {
                     while mask != 0 {
                         let i = mask.trailing_zeros() as usize;
                         mask &= mask - 1;
-                        stack[sp].write(node.child[i]);
+                        debug_assert!(sp < stack.len());
+                        // SAFETY: `sp < 3 · depth <= stack.len()`: at most three pending
+                        // siblings per level of the current path (see `STACK`).
+                        unsafe { stack.get_unchecked_mut(sp) }.write(node.child[i]);
                         sp += 1;
                     }
                     cur = node.child[first];
@@ -426,8 +436,9 @@ impl Bvh4 {
                 return false;
             }
             sp -= 1;
-            // SAFETY: every entry below the old `sp` was written.
-            cur = unsafe { stack[sp].assume_init() };
+            // SAFETY: every entry below the old `sp` was written (and lies
+            // in `stack`).
+            cur = unsafe { stack.get_unchecked(sp).assume_init() };
         }
     }
 }
