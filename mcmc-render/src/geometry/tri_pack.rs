@@ -130,7 +130,11 @@ impl TriPack {
                 lane = l;
             }
         }
-        Some((lane, ts[lane], su[lane] * inv[lane], sv[lane] * inv[lane]))
+        // Barycentrics of all lanes (the same products lane by lane), then
+        // one load each: picking single lanes out of three vectors took a
+        // jump table on the lane and three shuffles.
+        let (u, v) = ((su * inv).to_array(), (sv * inv).to_array());
+        Some((lane, ts[lane], u[lane], v[lane]))
     }
 
     /// True when some triangle is hit with `tmin < t < tmax` (the same
