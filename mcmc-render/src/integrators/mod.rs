@@ -123,11 +123,25 @@ pub trait Integrator: Send + Sync {
         film: &mut Film,
         stats: &mut SampleStats,
     ) {
-        for y in y0..y1 {
-            for x in x0..x1 {
-                for _ in 0..spp {
-                    self.sample(scene, Some((x, y)), source, film, stats);
-                }
+        for_each_tile_sample((x0, y0, x1, y1), spp, |x, y| {
+            self.sample(scene, Some((x, y)), source, film, stats);
+        });
+    }
+}
+
+/// Calls `f(x, y)` `spp` times for every pixel of the tile
+/// `[x0, x1) × [y0, y1)`, in the order [`Integrator::render_pixels`]
+/// documents (rows top to bottom, pixels left to right).
+#[inline(always)]
+pub(crate) fn for_each_tile_sample(
+    (x0, y0, x1, y1): (u32, u32, u32, u32),
+    spp: u32,
+    mut f: impl FnMut(u32, u32),
+) {
+    for y in y0..y1 {
+        for x in x0..x1 {
+            for _ in 0..spp {
+                f(x, y);
             }
         }
     }

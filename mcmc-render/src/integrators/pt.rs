@@ -4,7 +4,9 @@
 //! emitters seen directly, 2 = direct light), Russian roulette from
 //! `rr_depth` with continuation probability `min(max(throughput)·η², 0.95)`.
 
-use super::{FilmSink, Integrator, SampleDomain, SampleStats, rr_probability};
+use super::{
+    FilmSink, Integrator, SampleDomain, SampleStats, for_each_tile_sample, rr_probability,
+};
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
 use crate::film::Film;
@@ -173,18 +175,14 @@ impl Integrator for PathTracer {
     fn render_pixels(
         &self,
         scene: &Scene,
-        (x0, y0, x1, y1): (u32, u32, u32, u32),
+        tile: (u32, u32, u32, u32),
         spp: u32,
         source: &mut PixelSource,
         film: &mut Film,
         stats: &mut SampleStats,
     ) {
-        for y in y0..y1 {
-            for x in x0..x1 {
-                for _ in 0..spp {
-                    self.sample_pixel(scene, (x, y), source, film, stats);
-                }
-            }
-        }
+        for_each_tile_sample(tile, spp, |x, y| {
+            self.sample_pixel(scene, (x, y), source, film, stats);
+        });
     }
 }
