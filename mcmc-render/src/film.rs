@@ -317,6 +317,7 @@ impl Film {
 
     /// Adds a camera sample at raster position `p` with radiance `l`.
     /// Non-finite radiance is dropped (and should be counted by the caller).
+    #[inline(always)]
     pub fn add_sample(&mut self, p: Vec2, l: Rgb) {
         if !l.is_finite() || !p.is_finite() {
             return;

@@ -577,6 +577,7 @@ impl Geometry {
     }
 
     /// Closest hit along `ray`, if any.
+    #[inline(always)]
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
         let (o, d, tmin) = (ray.o, ray.d, ray.tmin);
         let mut uv = (0.0, 0.0);
@@ -644,6 +645,7 @@ impl Geometry {
     }
 
     /// True when something blocks `ray` strictly before `ray.tmax`.
+    #[inline(always)]
     pub fn occluded(&self, ray: &Ray) -> bool {
         let (o, d, tmin, tmax) = (ray.o, ray.d, ray.tmin, ray.tmax);
         self.bvh.any(
@@ -684,6 +686,7 @@ impl Geometry {
     /// slab around `b`'s plane; this form needs no rounding steps. A
     /// relative margin (pbrt's `ShadowEpsilon`) covers the rounding of the
     /// hit distances as before.
+    #[inline(always)]
     pub fn visible(&self, a: &SurfacePoint, b: &SurfacePoint) -> bool {
         let from = a.spawn_origin(b.p);
         let delta = b.p - from;
@@ -722,7 +725,7 @@ impl Geometry {
     }
 
     /// The surface point of a hit, with its error bound and normals.
-    #[inline]
+    #[inline(always)]
     pub fn surface_point(&self, ray: &Ray, hit: &Hit) -> SurfacePoint {
         // Flat triangles, the common case, need only their cached entry.
         let flat = &self.flat[hit.prim as usize];

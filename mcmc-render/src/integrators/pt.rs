@@ -4,9 +4,7 @@
 //! emitters seen directly, 2 = direct light), Russian roulette from
 //! `rr_depth` with continuation probability `min(max(throughput)·η², 0.95)`.
 
-use super::{
-    FilmSink, Integrator, SampleDomain, SampleStats, for_each_tile_sample, rr_probability,
-};
+use super::{FilmSink, Integrator, SampleDomain, SampleStats, rr_probability};
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
 use crate::film::Film;
@@ -33,6 +31,7 @@ impl PathTracer {
     /// Generic over the source so that the render driver's loop
     /// ([`Integrator::render_pixels`]) draws its numbers without virtual
     /// calls; `S = dyn RandomSource` serves everything else.
+    #[inline(always)]
     pub fn li<S: RandomSource + ?Sized>(&self, scene: &Scene, ray: Ray, source: &mut S) -> Rgb {
         // Mitsuba: max_depth 0 renders nothing, not even visible emitters.
         if self.max_depth == 0 {
@@ -129,7 +128,7 @@ impl PathTracer {
 impl PathTracer {
     /// One camera sample for pixel `(px, py)`: [`Integrator::sample`] for
     /// any source and film (monomorphised in [`Integrator::render_pixels`]).
-    #[inline]
+    #[inline(always)]
     fn sample_pixel<S: RandomSource + ?Sized, F: FilmSink + ?Sized>(
         &self,
         scene: &Scene,
@@ -172,6 +171,12 @@ impl Integrator for PathTracer {
         }
     }
 
+    /// On x86-64 CPUs with AVX2, FMA and BMI (`x86-64-v3`, detected once at
+    /// run time) the tile runs in a copy of the loop compiled for them, with
+    /// the traversal, hit points, light sampling and film inlined into it;
+    /// elsewhere in the baseline copy. Rust never fuses or reorders float
+    /// operations on its own, so both copies compute the same bits (tested
+    /// against the `dyn` path, which is always the baseline code).
     fn render_pixels(
         &self,
         scene: &Scene,
@@ -181,8 +186,65 @@ impl Integrator for PathTracer {
         film: &mut Film,
         stats: &mut SampleStats,
     ) {
-        for_each_tile_sample(tile, spp, |x, y| {
-            self.sample_pixel(scene, (x, y), source, film, stats);
-        });
+        #[cfg(target_arch = "x86_64")]
+        if has_x86_64_v3() {
+            // SAFETY: the CPU has every feature the function is compiled for.
+            unsafe { self.render_pixels_x86_64_v3(scene, tile, spp, source, film, stats) };
+            return;
+        }
+        self.render_pixels_inline(scene, tile, spp, source, film, stats);
+    }
+}
+
+/// True when the CPU supports the `x86-64-v3` features the fast tile loop
+/// is compiled for (checked once; `is_x86_feature_detected!` caches).
+#[cfg(target_arch = "x86_64")]
+fn has_x86_64_v3() -> bool {
+    std::arch::is_x86_feature_detected!("avx2")
+        && std::arch::is_x86_feature_detected!("fma")
+        && std::arch::is_x86_feature_detected!("bmi1")
+        && std::arch::is_x86_feature_detected!("bmi2")
+        && std::arch::is_x86_feature_detected!("lzcnt")
+        && std::arch::is_x86_feature_detected!("popcnt")
+}
+
+impl PathTracer {
+    /// The tile loop, inlined into each of its compiled copies. It is
+    /// written out rather than passed as a closure to
+    /// [`super::for_each_tile_sample`]: the closure would be one function
+    /// shared by both copies, compiled for the baseline.
+    #[inline(always)]
+    fn render_pixels_inline(
+        &self,
+        scene: &Scene,
+        (x0, y0, x1, y1): (u32, u32, u32, u32),
+        spp: u32,
+        source: &mut PixelSource,
+        film: &mut Film,
+        stats: &mut SampleStats,
+    ) {
+        for y in y0..y1 {
+            for x in x0..x1 {
+                for _ in 0..spp {
+                    self.sample_pixel(scene, (x, y), source, film, stats);
+                }
+            }
+        }
+    }
+
+    /// The tile loop compiled for `x86-64-v3` (the hot callees are
+    /// `#[inline(always)]`, so they are compiled for it too).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx,avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+    fn render_pixels_x86_64_v3(
+        &self,
+        scene: &Scene,
+        tile: (u32, u32, u32, u32),
+        spp: u32,
+        source: &mut PixelSource,
+        film: &mut Film,
+        stats: &mut SampleStats,
+    ) {
+        self.render_pixels_inline(scene, tile, spp, source, film, stats);
     }
 }

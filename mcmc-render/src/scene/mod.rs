@@ -335,6 +335,7 @@ impl Scene {
     }
 
     /// Closest surface hit along `ray`.
+    #[inline(always)]
     pub fn intersect(&self, ray: &Ray) -> Option<Interaction> {
         let hit: Hit = self.geometry.intersect(ray)?;
         Some(Interaction {
