@@ -19,7 +19,8 @@
 mod common;
 
 use common::{
-    image_mean, load_str as load, mean_se, point_light_on_a_plane, repo_scene_tilted_text,
+    furnace_sphere, image_mean, load_str as load, mean_se, point_light_on_a_plane,
+    repo_scene_tilted_text,
 };
 use mcmc_render::color::Rgb;
 use mcmc_render::integrators::Integrator;
@@ -275,25 +276,8 @@ fn bdpt_images_are_bit_identical_across_thread_counts() {
 fn bdpt_furnace_matches_le_over_one_minus_albedo() {
     // Inside a closed diffuse sphere of albedo a that emits Le everywhere on
     // its inner side, every pixel is Le / (1 − a) = 2 (unbounded depth with
-    // Russian roulette). 8 batches; 4σ bound and a check that 4σ < 1%.
-    let text = r#"<scene version="3.0.0">
-    <integrator type="path"><integer name="max_depth" value="-1"/></integrator>
-    <sensor type="perspective">
-        <float name="fov" value="70"/>
-        <transform name="to_world"><lookat origin="0,0,0" target="0,0,1" up="0,1,0"/></transform>
-        <film type="hdrfilm">
-            <integer name="width" value="16"/><integer name="height" value="12"/>
-            <rfilter type="box"/>
-        </film>
-    </sensor>
-    <shape type="sphere">
-        <float name="radius" value="1"/>
-        <boolean name="flip_normals" value="true"/>
-        <bsdf type="diffuse"><rgb name="reflectance" value="0.5"/></bsdf>
-        <emitter type="area"><rgb name="radiance" value="1"/></emitter>
-    </shape>
-</scene>"#;
-    let scene = load(text);
+    // Russian roulette). 4σ bound and a check that 4σ < 1%.
+    let scene = load(&furnace_sphere([0.0; 3], 1.0, 0.5, 1.0));
     let it = scene.integrator;
     for heuristic in [MisHeuristic::Power, MisHeuristic::Balance] {
         let bdpt = Bdpt {

@@ -334,6 +334,40 @@ impl MeanAgreement {
     }
 }
 
+/// A closed sphere seen from inside: diffuse albedo `a`, uniform emission
+/// `le` on its inner side, so every pixel is `le / (1 − a)` (unbounded
+/// depth with Russian roulette).
+pub fn furnace_sphere(center: [f64; 3], radius: f64, albedo: f32, le: f32) -> String {
+    let [x, y, z] = center;
+    format!(
+        r#"<scene version="3.0.0">
+    <integrator type="path"><integer name="max_depth" value="-1"/></integrator>
+    <sensor type="perspective">
+        <float name="fov" value="70"/>
+        <float name="near_clip" value="{near}"/>
+        <float name="far_clip" value="{far}"/>
+        <transform name="to_world">
+            <lookat origin="{x},{y},{z}" target="{x},{y},{z2}" up="0,1,0"/>
+        </transform>
+        <film type="hdrfilm">
+            <integer name="width" value="16"/><integer name="height" value="12"/>
+            <rfilter type="box"/>
+        </film>
+    </sensor>
+    <shape type="sphere">
+        <point name="center" x="{x}" y="{y}" z="{z}"/>
+        <float name="radius" value="{radius}"/>
+        <boolean name="flip_normals" value="true"/>
+        <bsdf type="diffuse"><rgb name="reflectance" value="{albedo}"/></bsdf>
+        <emitter type="area"><rgb name="radiance" value="{le}"/></emitter>
+    </shape>
+</scene>"#,
+        z2 = z + radius * 0.5,
+        near = radius * 1e-3,
+        far = radius * 10.0
+    )
+}
+
 /// A diffuse plane (albedo ρ = 0.5) under a point light (intensity 3, height
 /// h = 2), seen by a narrow camera, direct light only, and its exact image
 /// mean: the closed form `L = ρ/π · I cos θ / d² = ρ/π · I h / d³` at the
