@@ -2,40 +2,9 @@
 //! non-zero exit status, never a panic. Plus the happy paths of `render`,
 //! `info` and `compare` on a tiny scene.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod cli_support;
 
-const BIN: &str = env!("CARGO_BIN_EXE_mcmc-render");
-
-/// A fresh directory for one test.
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("mcmc-render-cli-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn run(args: &[&str], cwd: &Path) -> Output {
-    Command::new(BIN)
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("the binary runs")
-}
-
-/// Asserts a clean failure: non-zero status, exactly one stderr line
-/// containing every `needles`, and no panic message.
-fn assert_clean_failure(out: &Output, needles: &[&str]) {
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "expected failure, stderr: {stderr}");
-    assert_ne!(out.status.code(), Some(101), "panicked: {stderr}");
-    assert!(!stderr.contains("panicked"), "panicked: {stderr}");
-    let lines: Vec<&str> = stderr.lines().filter(|l| !l.trim().is_empty()).collect();
-    assert_eq!(lines.len(), 1, "expected one line, got: {stderr}");
-    for n in needles {
-        assert!(lines[0].contains(n), "'{n}' missing from: {}", lines[0]);
-    }
-}
+use cli_support::{assert_clean_failure, run, scratch, write};
 
 /// A tiny valid scene: a diffuse floor lit by a rectangle, `extra` added inside `<scene>`.
 fn scene_text(film: &str, extra: &str) -> String {
@@ -58,12 +27,6 @@ fn scene_text(film: &str, extra: &str) -> String {
 }
 
 const SMALL_FILM: &str = r#"<film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="6"/></film>"#;
-
-fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, text).unwrap();
-    p
-}
 
 #[test]
 fn malformed_xml_is_refused_with_its_line() {
