@@ -78,23 +78,21 @@ fn dump_and_replay(dir: &Path, mlt: &[&str], name: &str, sampler: &str) -> Strin
     stdout
 }
 
+/// A short PSSMLT run over path tracing.
+const SMALL_PSSMLT: &[&str] = &[
+    "--integrator",
+    "pssmlt",
+    "--chains",
+    "16",
+    "--mutations-per-pixel",
+    "20",
+];
+
 #[test]
 fn pssmlt_over_pt_dumps_and_replays_a_nonfinite_path() {
     let dir = scratch("replay-pt");
     write(&dir, "inf.xml", &overflow_scene("3e38"));
-    let stdout = dump_and_replay(
-        &dir,
-        &[
-            "--integrator",
-            "pssmlt",
-            "--chains",
-            "16",
-            "--mutations-per-pixel",
-            "20",
-        ],
-        "p",
-        "pt",
-    );
+    let stdout = dump_and_replay(&dir, SMALL_PSSMLT, "p", "pt");
     assert!(stdout.contains("ln I                NaN"), "{stdout}");
     assert!(
         stdout.contains("contribution        non-finite"),
@@ -104,19 +102,7 @@ fn pssmlt_over_pt_dumps_and_replays_a_nonfinite_path() {
 
     // The same scene at radiance 1: no NaN/inf, hence no dump.
     write(&dir, "one.xml", &overflow_scene("1"));
-    render_mlt(
-        &dir,
-        "one.xml",
-        &[
-            "--integrator",
-            "pssmlt",
-            "--chains",
-            "16",
-            "--mutations-per-pixel",
-            "20",
-        ],
-        "one.exr",
-    );
+    render_mlt(&dir, "one.xml", SMALL_PSSMLT, "one.exr");
     let j = json(&dir.join("one.json"));
     assert_eq!(j["nonfinite_contributions"], 0);
     assert!(j["nonfinite_dump"].is_null());
