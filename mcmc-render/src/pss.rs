@@ -27,10 +27,13 @@ use crate::integrators::bdpt::{
     Bdpt, SubpathBuffers, connect, generate_camera_subpath, generate_light_subpath,
 };
 use crate::integrators::pt::PathTracer;
+use crate::markov::{CANDIDATE_STREAM, ChainFamily, ChainSettings, MltError};
 use crate::sampling::{RandomSource, Stream, to_unit_f32};
 use crate::scene::Scene;
+use crate::settings::check;
 use glam::Vec2;
 use mcmc_core::kernel::{AdaptiveTorusStep, Independent, Kernel, Mixture, TorusStep};
+use mcmc_core::rng::stream_rng;
 use mcmc_core::space::{PrimarySampleSpace, SmallStep, TorusPoint};
 use mcmc_core::target::{Evaluation, Target};
 use std::cell::RefCell;
@@ -359,5 +362,124 @@ impl Mutation {
             (1.0 - p, small),
             (p, Box::new(Independent::new(PrimarySampleSpace))),
         ])
+    }
+}
+
+/// The settings of a Markov-chain render in primary sample space.
+pub type PssmltSettings = ChainSettings<Mutation>;
+
+/// A family of PSS targets over one scene: one path sampler for PSSMLT,
+/// one per path depth for MMLT. Its chains move on the torus with the
+/// [`Mutation`] kernel; start-up candidates are fresh uniform points.
+pub struct PssFamily<'a, F> {
+    /// One target per member.
+    pub targets: Vec<PssTarget<'a, F>>,
+}
+
+impl<'a, F: PssPathSampler> PssFamily<'a, F> {
+    /// The family of `samplers` on `scene`.
+    pub fn new(scene: &'a Scene, samplers: Vec<F>) -> Self {
+        PssFamily {
+            targets: samplers
+                .into_iter()
+                .map(|sampler| PssTarget { scene, sampler })
+                .collect(),
+        }
+    }
+}
+
+/// The primary-sample point of start-up candidate `i` of `seed`.
+pub fn bootstrap_point(seed: u64, i: usize) -> TorusPoint {
+    TorusPoint::fresh(stream_rng(seed, CANDIDATE_STREAM + i as u64))
+}
+
+impl<'a, F: PssPathSampler> ChainFamily for PssFamily<'a, F> {
+    type State = TorusPoint;
+    type Target = PssTarget<'a, F>;
+    type Mutation = Mutation;
+    type Kernel = Mixture<TorusPoint, PathSample>;
+
+    fn members(&self) -> usize {
+        self.targets.len()
+    }
+    fn target(&self, member: usize) -> &Self::Target {
+        &self.targets[member]
+    }
+    fn kernel(&self, mutation: &Mutation, _member: usize) -> Result<Self::Kernel, MltError> {
+        Ok(mutation.kernel()?)
+    }
+    fn independent_probability(&self, mutation: &Mutation) -> f64 {
+        mutation.large_step_probability
+    }
+    fn is_independent(&self, component: usize) -> bool {
+        component == LARGE_STEP_COMPONENT
+    }
+    fn candidate(&self, seed: u64, index: u64) -> TorusPoint {
+        bootstrap_point(seed, index as usize)
+    }
+    fn reference_log_density(&self, _state: &TorusPoint) -> f64 {
+        // Uniform on the unit torus.
+        0.0
+    }
+    fn coordinates(&self, state: &TorusPoint) -> Option<Vec<f64>> {
+        Some(state.materialize())
+    }
+}
+
+crate::choice! {
+    /// The small step's law, by name.
+    pub enum SmallStepLaw {
+        /// Kelemen et al. 2002 (`s1`, `s2`).
+        Kelemen = "kelemen",
+        /// pbrt-v4's Gaussian (`sigma`).
+        Gaussian = "gaussian",
+        /// Hachisuka & Jensen's adaptive power step.
+        Adaptive = "adaptive",
+    }
+}
+
+crate::settings! {
+    /// The PSS mutation's parameters, as integrators expose them.
+    pub struct MutationParams {
+        /// Small-step law: kelemen (Kelemen et al. 2002), gaussian (pbrt-v4) or adaptive.
+        pub small_step: SmallStepLaw = SmallStepLaw::Kelemen;
+        /// Kelemen's smallest step.
+        pub s1: f64 = 1.0 / 1024.0, check check::positive;
+        /// Kelemen's largest step.
+        pub s2: f64 = 1.0 / 64.0, check check::positive;
+        /// Standard deviation of the Gaussian small step.
+        pub sigma: f64 = 0.01, check check::positive;
+        /// Probability of a large (independent) step.
+        pub large_step_probability: f64 = 0.3, check check::probability;
+    }
+}
+
+impl MutationParams {
+    /// pbrt-v4's `mlt` mutation: the Gaussian small step.
+    pub fn gaussian() -> Self {
+        MutationParams {
+            small_step: SmallStepLaw::Gaussian,
+            ..MutationParams::default()
+        }
+    }
+
+    /// The mutation these parameters describe, checked (e.g. `s1 < s2`).
+    pub fn mutation(&self) -> Result<Mutation, String> {
+        let small = match self.small_step {
+            SmallStepLaw::Kelemen => SmallStepKind::Kelemen {
+                s1: self.s1,
+                s2: self.s2,
+            },
+            SmallStepLaw::Gaussian => SmallStepKind::Gaussian { sigma: self.sigma },
+            SmallStepLaw::Adaptive => SmallStepKind::Adaptive,
+        };
+        let mutation = Mutation {
+            small,
+            large_step_probability: self.large_step_probability,
+        };
+        mutation
+            .kernel::<()>()
+            .map_err(|e| format!("MLT mutation: {e}"))?;
+        Ok(mutation)
     }
 }

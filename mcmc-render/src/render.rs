@@ -12,7 +12,8 @@
 //! result always holds whole passes and is normalised by what it holds.
 
 use crate::film::{Film, Filter};
-use crate::integrators::{Integrator, SampleDomain, SampleStats};
+use crate::integrators::{Integrator, Rendered, RunSettings, SampleDomain, SampleStats};
+use crate::observer::Observer;
 use crate::sampling::{IndependentSource, PixelSource};
 use crate::scene::Scene;
 use rand::SeedableRng;
@@ -39,19 +40,6 @@ pub struct RenderSettings {
     /// Seed of every random stream.
     pub seed: u64,
 }
-
-/// Notified while rendering (progress bars, previews).
-pub trait RenderObserver: Sync {
-    /// A work unit finished `samples` samples (called from worker threads).
-    fn unit_done(&self, _samples: u64) {}
-    /// A pass finished; `film` holds everything so far, developed with
-    /// [`RenderResult::paths_per_pixel`]-style normalisation `paths_per_pixel`.
-    fn pass_done(&self, _film: &Film, _spp_done: u64, _paths_per_pixel: f64) {}
-}
-
-/// An observer that ignores everything.
-pub struct NoObserver;
-impl RenderObserver for NoObserver {}
 
 /// The outcome of a render.
 #[derive(Clone, Debug)]
@@ -105,7 +93,7 @@ pub fn render(
     integrator: &dyn Integrator,
     settings: &RenderSettings,
     stop: &AtomicBool,
-    observer: &dyn RenderObserver,
+    observer: &dyn Observer,
 ) -> RenderResult {
     let (width, height) = (scene.film.width, scene.film.height);
     let filter = Arc::new(Filter::new(scene.film.filter, width, height));
@@ -194,7 +182,7 @@ pub fn render(
                             &mut tile,
                             &mut st,
                         );
-                        observer.unit_done(((x1 - x0) * (y1 - y0)) as u64 * spp as u64);
+                        observer.progress(((x1 - x0) * (y1 - y0)) as u64 * spp as u64);
                         (tile, st)
                     })
                     .collect();
@@ -229,7 +217,7 @@ pub fn render(
                                     integrator.sample(scene, Some((x, y)), &mut src, f, &mut st);
                                 }
                             }
-                            observer.unit_done(width as u64 * spp as u64);
+                            observer.progress(width as u64 * spp as u64);
                         }
                         st
                     })
@@ -265,7 +253,7 @@ pub fn render(
                                 integrator.sample(scene, None, &mut src, f, &mut st);
                             }
                             done += batch;
-                            observer.unit_done(batch);
+                            observer.progress(batch);
                         }
                         st
                     })
@@ -290,7 +278,7 @@ pub fn render(
         spp_done += spp as u64;
         pass += 1;
         let ppp = if splats { spp_done as f64 } else { 0.0 };
-        observer.pass_done(&film, spp_done, ppp);
+        observer.snapshot(&|| film.develop(ppp), spp_done * pixels);
     }
     let paths_per_pixel = if splats { spp_done as f64 } else { 0.0 };
     RenderResult {
@@ -301,5 +289,58 @@ pub fn render(
         seconds: start.elapsed().as_secs_f64(),
         interrupted,
         stats,
+    }
+}
+
+/// Renders `scene` with a per-pixel `integrator` to `run`'s budget (the
+/// scene's `sample_count` when neither samples nor time are given) and
+/// reports it for the registry.
+pub fn run_per_pixel(
+    scene: &Scene,
+    integrator: &dyn Integrator,
+    run: &RunSettings,
+    stop: &AtomicBool,
+    observer: &dyn Observer,
+) -> Rendered {
+    let spp = match (run.spp, run.time_budget) {
+        (Some(n), _) => Some(n),
+        (None, Some(_)) => None,
+        (None, None) => Some(scene.sample_count),
+    };
+    let settings = RenderSettings {
+        spp,
+        time_budget: run.time_budget,
+        seed: run.seed,
+    };
+    let r = render(scene, integrator, &settings, stop, observer);
+    let samples_per_second = if r.seconds > 0.0 {
+        r.samples as f64 / r.seconds
+    } else {
+        0.0
+    };
+    let statistics = serde_json::json!({
+        "samples_per_second": samples_per_second,
+        "spp": r.spp_done,
+        "nonfinite_samples": r.stats.nonfinite,
+        "bvh_build_seconds": scene.geometry.build_time.as_secs_f64(),
+        "triangles": scene.geometry.triangles,
+    });
+    Rendered {
+        image: r.image(),
+        seconds: r.seconds,
+        samples: r.samples,
+        interrupted: r.interrupted,
+        statistics: match statistics {
+            serde_json::Value::Object(m) => m,
+            _ => serde_json::Map::new(),
+        },
+        nonfinite_dump: None,
+        summary: format!(
+            "{} spp in {:.2} s ({:.3} M samples/s){}",
+            r.spp_done,
+            r.seconds,
+            samples_per_second / 1e6,
+            if r.interrupted { ", stopped early" } else { "" }
+        ),
     }
 }

@@ -55,9 +55,11 @@ use common::{
 };
 use mcmc_render::color::Rgb;
 use mcmc_render::integrators::Integrator;
-use mcmc_render::integrators::pssmlt::{
-    NoMltObserver, Normalization, PssmltSettings, render_family, render_pssmlt,
-};
+use mcmc_render::integrators::mmlt::render_family;
+use mcmc_render::integrators::pssmlt::render_pssmlt;
+use mcmc_render::markov::Normalization;
+use mcmc_render::observer::NoObserver;
+use mcmc_render::pss::PssmltSettings;
 use mcmc_render::scene::Scene;
 use statrs::distribution::{ContinuousCDF, StudentsT};
 use std::sync::OnceLock;
@@ -171,7 +173,7 @@ fn pssmlt_relmse_falls_as_one_over_n() {
     let stop = AtomicBool::new(false);
     check_rate("pssmlt-pt", |budget, seed| {
         let st = mlt_settings(budget, seed, 2000, 16);
-        render_pssmlt(scene, pt_of(scene), &st, &stop, &NoMltObserver)
+        render_pssmlt(scene, pt_of(scene), &st, &stop, &NoObserver)
             .expect("pssmlt runs")
             .image()
     });
@@ -183,7 +185,7 @@ fn mmlt_relmse_falls_as_one_over_n() {
     let stop = AtomicBool::new(false);
     check_rate("mmlt", |budget, seed| {
         let st = mlt_settings(budget, seed, 1000, 32);
-        render_family(scene, mmlt_depths(scene), &st, &stop, &NoMltObserver)
+        render_family(scene, mmlt_depths(scene), &st, &stop, &NoObserver)
             .expect("mmlt runs")
             .image()
     });

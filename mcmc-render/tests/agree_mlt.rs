@@ -42,9 +42,11 @@ use common::{
     MeanAgreement, bdpt_of, image_mean, mmlt_depths, pt_of, render_image, repo_scene_tilted,
 };
 use mcmc_render::integrators::Integrator;
-use mcmc_render::integrators::pssmlt::{
-    NoMltObserver, Normalization, PssmltSettings, render_family, render_pssmlt,
-};
+use mcmc_render::integrators::mmlt::render_family;
+use mcmc_render::integrators::pssmlt::render_pssmlt;
+use mcmc_render::markov::Normalization;
+use mcmc_render::observer::NoObserver;
+use mcmc_render::pss::PssmltSettings;
 use mcmc_render::scene::Scene;
 use std::sync::OnceLock;
 use std::sync::atomic::AtomicBool;
@@ -93,14 +95,12 @@ fn mlt_reps(scene: &Scene, kind: Mlt, budget: Budget, k: u64, seed0: u64) -> Vec
                 ..PssmltSettings::default()
             };
             let r = match kind {
-                Mlt::PssmltPt => {
-                    render_pssmlt(scene, pt_of(scene), &settings, &stop, &NoMltObserver)
-                }
+                Mlt::PssmltPt => render_pssmlt(scene, pt_of(scene), &settings, &stop, &NoObserver),
                 Mlt::PssmltBdpt => {
-                    render_pssmlt(scene, bdpt_of(scene), &settings, &stop, &NoMltObserver)
+                    render_pssmlt(scene, bdpt_of(scene), &settings, &stop, &NoObserver)
                 }
                 Mlt::Mmlt => {
-                    render_family(scene, mmlt_depths(scene), &settings, &stop, &NoMltObserver)
+                    render_family(scene, mmlt_depths(scene), &settings, &stop, &NoObserver)
                 }
             }
             .expect("mlt runs");

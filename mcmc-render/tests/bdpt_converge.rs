@@ -26,7 +26,8 @@ use mcmc_render::color::Rgb;
 use mcmc_render::integrators::Integrator;
 use mcmc_render::integrators::bdpt::{Bdpt, MisHeuristic};
 use mcmc_render::integrators::pt::PathTracer;
-use mcmc_render::render::{NoObserver, RenderSettings, render};
+use mcmc_render::observer::NoObserver;
+use mcmc_render::render::{RenderSettings, render};
 use mcmc_render::scene::Scene;
 use std::sync::atomic::AtomicBool;
 

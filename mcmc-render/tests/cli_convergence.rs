@@ -4,7 +4,7 @@
 mod cli_support;
 
 use cli_support::{assert_clean_failure, run, run_ok, scratch, write};
-use mcmc_render::convergence::{Record, read_csv, write_csv};
+use mcmc_render::cli::convergence::{Record, read_csv, write_csv};
 use std::path::Path;
 
 /// The Cornell box fixture of the test suite.

@@ -240,9 +240,10 @@ fn ctrl_c_stops_pssmlt_and_writes_a_normalised_partial_render() {
         (partial - b).abs() <= 1e-3 * b,
         "mean {partial} vs b* {b} after {mutations} mutations"
     );
-    // And b* agrees with a completed path-traced render within the
-    // bootstrap's standard error and the path tracer's noise.
-    let se_b = j["b_bootstrap_standard_error"].as_f64().unwrap();
+    // And b agrees with a completed path-traced render within the standard
+    // error of the normalisation that scaled the image (the running
+    // estimate by default) and the path tracer's noise.
+    let se_b = j["scale_standard_error"].as_f64().unwrap();
     let reference = pt_means(&dir, 256, 1000..1001)[0];
     let sigma2 = per_sample_variance(&pt_means(&dir, 2, 2000..2008), 2);
     let sd = (se_b * se_b + sigma2 / 256.0).sqrt();
@@ -285,7 +286,7 @@ fn ctrl_c_ends_a_convergence_study_with_what_it_has() {
         Duration::from_millis(2000),
     );
     assert_eq!(status.code(), Some(0), "{stderr}");
-    let records = mcmc_render::convergence::read_csv(&dir.join("c.csv")).unwrap();
+    let records = mcmc_render::cli::convergence::read_csv(&dir.join("c.csv")).unwrap();
     assert!(!records.is_empty(), "no record before Ctrl-C");
     for r in &records {
         assert_eq!(r.integrator, "pt", "{r:?}");

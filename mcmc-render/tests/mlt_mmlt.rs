@@ -6,9 +6,10 @@ mod common;
 
 use common::{image_mean, mean_se, mmlt_depths, repo_scene_tilted};
 use mcmc_core::runner::with_threads;
-use mcmc_render::integrators::pssmlt::{
-    NoMltObserver, Normalization, PssmltSettings, render_family,
-};
+use mcmc_render::integrators::mmlt::render_family;
+use mcmc_render::markov::Normalization;
+use mcmc_render::observer::NoObserver;
+use mcmc_render::pss::PssmltSettings;
 use mcmc_render::scene::Scene;
 use std::collections::HashMap;
 use std::path::Path;
@@ -38,7 +39,7 @@ fn mmlt_is_bit_identical_across_thread_counts() {
         };
         let stop = AtomicBool::new(false);
         let r = with_threads(threads, || {
-            render_family(&scene, mmlt_depths(&scene), &st, &stop, &NoMltObserver)
+            render_family(&scene, mmlt_depths(&scene), &st, &stop, &NoObserver)
         })
         .expect("mmlt runs");
         r.image()
@@ -71,8 +72,8 @@ fn mmlt_with_kelemen_mis_per_depth_agrees_with_plain_mmlt() {
             mis_large_steps: mis,
             ..PssmltSettings::default()
         };
-        let r = render_family(&scene, mmlt_depths(&scene), &st, &stop, &NoMltObserver)
-            .expect("mmlt runs");
+        let r =
+            render_family(&scene, mmlt_depths(&scene), &st, &stop, &NoObserver).expect("mmlt runs");
         assert_eq!(r.chain_stats.invalid_density, 0);
         image_mean(&r.image())
     };

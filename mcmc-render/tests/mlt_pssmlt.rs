@@ -7,10 +7,11 @@ use mcmc_core::rng::stream_rng;
 use mcmc_core::runner::with_threads;
 use mcmc_core::space::TorusPoint;
 use mcmc_render::color::Rgb;
-use mcmc_render::integrators::pssmlt::{
-    MltError, MltResult, NoMltObserver, PssmltSettings, bootstrap, render_pssmlt,
-};
+use mcmc_render::integrators::pssmlt::{bootstrap, render_pssmlt};
 use mcmc_render::integrators::pt::PathTracer;
+use mcmc_render::markov::{MltError, MltResult};
+use mcmc_render::observer::NoObserver;
+use mcmc_render::pss::PssmltSettings;
 use mcmc_render::pss::{Mutation, PssSource, PssTarget, SmallStepKind};
 use mcmc_render::sampling::{IndependentSource, RandomSource};
 use mcmc_render::scene::Scene;
@@ -63,7 +64,7 @@ fn mean_se(reps: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
 
 fn pssmlt(scene: &Scene, settings: &PssmltSettings) -> MltResult {
     let stop = AtomicBool::new(false);
-    render_pssmlt(scene, pt_of(scene), settings, &stop, &NoMltObserver).expect("pssmlt runs")
+    render_pssmlt(scene, pt_of(scene), settings, &stop, &NoObserver).expect("pssmlt runs")
 }
 
 fn small_settings(seed: u64) -> PssmltSettings {
@@ -177,7 +178,7 @@ fn a_black_scene_is_a_clear_error() {
         pt_of(&scene),
         &small_settings(1),
         &stop,
-        &NoMltObserver,
+        &NoObserver,
     );
     match r {
         Err(e @ MltError::BlackScene { .. }) => {

@@ -193,7 +193,7 @@ fn refusals_name_the_line() {
             "non-uniformly",
         ),
         (r#"<emitter type="envmap"/>"#, "envmap"),
-        (r#"<integrator type="bdpt"/>"#, "bdpt"),
+        (r#"<integrator type="volpath"/>"#, "volpath"),
         (
             r#"<shape type="sphere"><ref id="nothing"/></shape>"#,
             "nothing",

@@ -48,25 +48,29 @@
 //! [`Bdpt::sample_all`], which returns every technique of one sample.
 
 use super::path_vertex::{Vertex, emission_pdf_dir, shading_correction};
+use super::registry::IntegratorSettings;
+use super::{DepthParams, RenderError, Rendered, RunSettings};
 use super::{FilmSink, Integrator, SampleDomain, SampleStats, rr_probability};
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
 use crate::frame::Frame;
 use crate::geometry::Ray;
 use crate::light::Light;
+use crate::observer::Observer;
 use crate::sampling::{RandomSource, Stream};
 use crate::scene::Scene;
 use glam::Vec2;
 use std::cell::RefCell;
+use std::sync::atomic::AtomicBool;
 
-/// How techniques are weighted against each other.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub enum MisHeuristic {
-    /// Veach's balance heuristic `p_i / Σ p_j`.
-    Balance,
-    /// Veach's power heuristic with β = 2, `p_i² / Σ p_j²` (pbrt's default).
-    #[default]
-    Power,
+crate::choice! {
+    /// How techniques are weighted against each other.
+    pub enum MisHeuristic {
+        /// Veach's balance heuristic `p_i / Σ p_j`.
+        Balance = "balance",
+        /// Veach's power heuristic with β = 2, `p_i² / Σ p_j²` (pbrt's default).
+        Power = "power",
+    }
 }
 
 /// Bidirectional path tracer settings.
@@ -620,5 +624,49 @@ impl Integrator for Bdpt {
         });
         // Every camera sample counts towards the pixel's filter weight, black or not.
         film.add_sample(raster, l);
+    }
+}
+
+crate::settings! {
+    /// Bidirectional path tracer settings, as the registry fills them.
+    pub struct BdptSettings {
+        /// MIS heuristic over the techniques: power (β = 2) or balance.
+        pub heuristic: MisHeuristic = MisHeuristic::Power;
+        flatten {
+            /// Path depth.
+            pub depth: DepthParams = DepthParams::default();
+        }
+    }
+}
+
+impl BdptSettings {
+    /// The per-sample integrator these settings describe.
+    pub fn integrator(&self) -> Bdpt {
+        Bdpt {
+            max_depth: self.depth.limit(),
+            rr_depth: self.depth.rr_depth,
+            heuristic: self.heuristic,
+        }
+    }
+}
+
+impl IntegratorSettings for BdptSettings {
+    const NAME: &'static str = "bdpt";
+    const DESCRIPTION: &'static str = "Bidirectional path tracing: every technique of one camera and one light subpath, MIS-weighted.";
+
+    fn render(
+        &self,
+        scene: &Scene,
+        run: &RunSettings,
+        stop: &AtomicBool,
+        observer: &dyn Observer,
+    ) -> Result<Rendered, RenderError> {
+        Ok(crate::render::run_per_pixel(
+            scene,
+            &self.integrator(),
+            run,
+            stop,
+            observer,
+        ))
     }
 }

@@ -5,14 +5,18 @@
 //! when `k ≤ max_depth`. Shading normals are handled with Veach's adjoint
 //! correction, since importance transport is not symmetric under them.
 
+use super::registry::IntegratorSettings;
+use super::{DepthParams, RenderError, Rendered, RunSettings};
 use super::{FilmSink, Integrator, SampleDomain, SampleStats, rr_probability};
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
 use crate::frame::Frame;
 use crate::geometry::Ray;
+use crate::observer::Observer;
 use crate::sampling::RandomSource;
 use crate::scene::Scene;
 use glam::Vec3;
+use std::sync::atomic::AtomicBool;
 
 /// Light tracer settings.
 #[derive(Clone, Copy, Debug)]
@@ -132,5 +136,48 @@ impl Integrator for LightTracer {
                 break;
             }
         }
+    }
+}
+
+crate::settings! {
+    /// Light tracer settings, as the registry fills them.
+    pub struct LtSettings {
+        flatten {
+            /// Path depth.
+            pub depth: DepthParams = DepthParams::default();
+        }
+    }
+}
+
+impl LtSettings {
+    /// The per-sample integrator these settings describe.
+    pub fn integrator(&self) -> LightTracer {
+        LightTracer {
+            max_depth: self.depth.limit(),
+            rr_depth: self.depth.rr_depth,
+        }
+    }
+}
+
+impl IntegratorSettings for LtSettings {
+    const NAME: &'static str = "lt";
+    const ALIASES: &'static [&'static str] = &["ptracer"];
+    const DESCRIPTION: &'static str =
+        "Light tracing: paths from the emitters connected to the camera (Mitsuba's `ptracer`).";
+
+    fn render(
+        &self,
+        scene: &Scene,
+        run: &RunSettings,
+        stop: &AtomicBool,
+        observer: &dyn Observer,
+    ) -> Result<Rendered, RenderError> {
+        Ok(crate::render::run_per_pixel(
+            scene,
+            &self.integrator(),
+            run,
+            stop,
+            observer,
+        ))
     }
 }

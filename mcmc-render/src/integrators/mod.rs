@@ -1,6 +1,20 @@
-//! Integrators, one file each, behind one per-sample interface so that the
-//! render driver (and later PSSMLT/MMLT, which replay a sample from a
-//! primary-sample vector) can run any of them.
+//! Integrators, one file each, in one [`registry`].
+//!
+//! Each file declares its settings struct (plain data with documented
+//! defaults, see [`crate::settings`]) and implements
+//! [`registry::IntegratorSettings`] for it: a name, a one-line description
+//! and how to render with those settings. Two drivers do the rendering:
+//!
+//! - the per-pixel driver ([`crate::render`]) runs the Monte Carlo
+//!   integrators (`pt`, `lt`, `bdpt`), one sample at a time through the
+//!   per-sample [`Integrator`] interface below;
+//! - the Markov-chain driver ([`crate::markov`]) runs every Metropolis-type
+//!   integrator (`pssmlt`, `mmlt`) from a [`crate::markov::ChainFamily`].
+//!
+//! Library users render through [`registry::configure`] (or an
+//! integrator's settings struct directly) and
+//! [`registry::Configured::render`]; `docs/architecture.md` says how to add
+//! an integrator.
 //!
 //! # Order in which random numbers are consumed
 //!
@@ -35,15 +49,102 @@
 
 pub mod bdpt;
 pub mod lt;
+pub mod mmlt;
 pub mod path_vertex;
 pub mod pssmlt;
 pub mod pt;
+pub mod registry;
 
 use crate::color::Rgb;
 use crate::film::Film;
+use crate::markov::MltError;
+use crate::pss_dump::PssDump;
 use crate::sampling::{PixelSource, RandomSource};
 use crate::scene::Scene;
 use glam::Vec2;
+use serde_json::{Map, Value};
+use std::time::Duration;
+
+/// The budget and seed of one render, whatever the integrator.
+#[derive(Clone, Debug)]
+pub struct RunSettings {
+    /// Samples per pixel for the per-pixel integrators (light paths per
+    /// pixel for `lt`). `None`: until the time budget is spent, or the
+    /// scene's `sample_count` without one. (Metropolis integrators take
+    /// their budget from their `mutations_per_pixel` setting.)
+    pub spp: Option<u32>,
+    /// Wall-clock budget.
+    pub time_budget: Option<Duration>,
+    /// Seed of every random stream.
+    pub seed: u64,
+    /// Least time between two [`crate::observer::Observer::snapshot`]s of
+    /// the Markov-chain driver (the per-pixel driver offers one per pass).
+    pub snapshot_every: Duration,
+}
+
+impl RunSettings {
+    /// The default time between snapshots (previews).
+    pub const DEFAULT_SNAPSHOT_EVERY: Duration = Duration::from_secs(5);
+}
+
+impl Default for RunSettings {
+    fn default() -> Self {
+        RunSettings {
+            spp: None,
+            time_budget: None,
+            seed: 0,
+            snapshot_every: Self::DEFAULT_SNAPSHOT_EVERY,
+        }
+    }
+}
+
+/// Why a render could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    /// The settings or the scene do not allow this integrator to run.
+    #[error("{0}")]
+    Invalid(String),
+    /// The Markov-chain driver could not run.
+    #[error(transparent)]
+    Chain(#[from] MltError),
+}
+
+/// What a render produced, whatever the integrator.
+#[derive(Clone, Debug)]
+pub struct Rendered {
+    /// The image, row-major, `scene.film.width × height`.
+    pub image: Vec<Rgb>,
+    /// Wall-clock seconds, start-up included.
+    pub seconds: f64,
+    /// Camera samples, light paths or mutations done.
+    pub samples: u64,
+    /// Stopped (stop flag or time budget) before the requested work.
+    pub interrupted: bool,
+    /// The integrator's run statistics for the JSON sidecar, in order.
+    pub statistics: Map<String, Value>,
+    /// The coordinates of the first NaN/inf contribution, for `--replay`.
+    pub nonfinite_dump: Option<PssDump>,
+    /// One line for the terminal.
+    pub summary: String,
+}
+
+crate::settings! {
+    /// Path depth in Mitsuba's semantics, shared by every integrator (and
+    /// carried over from a scene's `<integrator>` element of another type).
+    pub struct DepthParams {
+        /// Longest path in segments: -1 unbounded, 1 emitters seen directly, 2 direct light.
+        pub max_depth: i64 = -1, check crate::settings::check::depth;
+        /// Depth from which Russian roulette applies.
+        pub rr_depth: u32 = 5, check crate::settings::check::positive_count;
+    }
+}
+
+impl DepthParams {
+    /// `max_depth` as the integrators take it (`u32::MAX` unbounded).
+    pub fn limit(&self) -> u32 {
+        crate::settings::depth_limit(self.max_depth)
+    }
+}
 
 /// Where an integrator's contributions go.
 pub trait FilmSink {

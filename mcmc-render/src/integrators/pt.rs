@@ -4,16 +4,20 @@
 //! emitters seen directly, 2 = direct light), Russian roulette from
 //! `rr_depth` with continuation probability `min(max(throughput)·η², 0.95)`.
 
+use super::registry::IntegratorSettings;
+use super::{DepthParams, RenderError, Rendered, RunSettings};
 use super::{FilmSink, Integrator, SampleDomain, SampleStats, rr_probability};
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
 use crate::film::Film;
 use crate::frame::Frame;
 use crate::geometry::Ray;
+use crate::observer::Observer;
 use crate::sampling::{PixelSource, RandomSource};
 use crate::scene::Scene;
 use crate::warp::power_heuristic;
 use glam::Vec2;
+use std::sync::atomic::AtomicBool;
 
 /// Path tracer settings.
 #[derive(Clone, Copy, Debug)]
@@ -246,5 +250,48 @@ impl PathTracer {
         stats: &mut SampleStats,
     ) {
         self.render_pixels_inline(scene, tile, spp, source, film, stats);
+    }
+}
+
+crate::settings! {
+    /// Path tracer settings, as the registry fills them.
+    pub struct PtSettings {
+        flatten {
+            /// Path depth.
+            pub depth: DepthParams = DepthParams::default();
+        }
+    }
+}
+
+impl PtSettings {
+    /// The per-sample integrator these settings describe.
+    pub fn integrator(&self) -> PathTracer {
+        PathTracer {
+            max_depth: self.depth.limit(),
+            rr_depth: self.depth.rr_depth,
+        }
+    }
+}
+
+impl IntegratorSettings for PtSettings {
+    const NAME: &'static str = "pt";
+    const ALIASES: &'static [&'static str] = &["path"];
+    const DESCRIPTION: &'static str =
+        "Path tracing with next-event estimation and MIS (Mitsuba's `path`).";
+
+    fn render(
+        &self,
+        scene: &Scene,
+        run: &RunSettings,
+        stop: &AtomicBool,
+        observer: &dyn Observer,
+    ) -> Result<Rendered, RenderError> {
+        Ok(crate::render::run_per_pixel(
+            scene,
+            &self.integrator(),
+            run,
+            stop,
+            observer,
+        ))
     }
 }

@@ -6,8 +6,8 @@ use super::mesh;
 use super::named;
 use super::xml::{Child, Loc, Param, Plugin, Value};
 use super::{
-    CameraDesc, FilmDesc, FilterKind, FovAxis, IntegratorDesc, PointLightDesc, SceneDesc,
-    SceneError, ShapeDesc, ShapeGeometry,
+    CameraDesc, FilmDesc, FilterKind, FovAxis, IntegratorDesc, IntegratorElement, PointLightDesc,
+    SceneDesc, SceneError, ShapeDesc, ShapeGeometry,
 };
 use crate::bsdf::{BsdfDesc, MicrofacetKind};
 use crate::color::Rgb;
@@ -265,32 +265,54 @@ impl Loader {
         self.desc.bsdfs.len() - 1
     }
 
+    /// Keeps the `<integrator>` element for the registry, which checks it
+    /// here (an unknown type or parameter, or a bad value, fails the load
+    /// at its line), and reads the path depth settings every integrator
+    /// shares.
     fn integrator(&mut self, p: &Plugin) -> Result<(), SceneError> {
-        if p.kind != "path" {
-            return Err(err(
-                &p.loc,
-                format!("unsupported integrator \"{}\" (supported: path)", p.kind),
-            ));
-        }
         no_children(p)?;
-        let mut props = Props::new(p);
-        let max_depth = props.int("max_depth", -1)?;
-        let rr_depth = props.int("rr_depth", 5)?;
-        props.finish()?;
-        if max_depth < -1 {
-            return Err(err(&p.loc, "max_depth must be -1 (unbounded) or >= 0"));
+        let mut params = Vec::with_capacity(p.params.len());
+        for param in &p.params {
+            let text = match &param.value {
+                Value::Float(v) => v.to_string(),
+                Value::Integer(v) => v.to_string(),
+                Value::Boolean(v) => v.to_string(),
+                Value::String(v) => v.clone(),
+                other => {
+                    return Err(err(
+                        &param.loc,
+                        format!(
+                            "integrator parameter '{}' is a <{}>; integrators take <integer>, <float>, <boolean> or <string>",
+                            param.name,
+                            other.tag()
+                        ),
+                    ));
+                }
+            };
+            params.push((param.name.clone(), text));
         }
-        if rr_depth <= 0 {
-            return Err(err(&p.loc, "rr_depth must be > 0"));
-        }
-        self.desc.integrator = IntegratorDesc {
-            max_depth: if max_depth < 0 {
-                u32::MAX
-            } else {
-                max_depth as u32
-            },
-            rr_depth: rr_depth.min(u32::MAX as i64) as u32,
+        let element = IntegratorElement {
+            kind: p.kind.clone(),
+            params,
+            loc: p.loc.to_string(),
         };
+        let configured =
+            crate::integrators::registry::from_element(&element).map_err(|e| err(&p.loc, e))?;
+        let depth = |name: &str| {
+            configured
+                .params()
+                .into_iter()
+                .find(|d| d.name == name)
+                .and_then(|d| d.value.as_i64())
+        };
+        let defaults = IntegratorDesc::default();
+        self.desc.integrator = IntegratorDesc {
+            max_depth: depth("max_depth").map_or(defaults.max_depth, crate::settings::depth_limit),
+            rr_depth: depth("rr_depth")
+                .and_then(|v| u32::try_from(v).ok())
+                .unwrap_or(defaults.rr_depth),
+        };
+        self.desc.integrator_element = Some(element);
         Ok(())
     }
 

@@ -134,6 +134,18 @@ impl Default for IntegratorDesc {
     }
 }
 
+/// The scene file's `<integrator>` element as written: the registry
+/// ([`crate::integrators::registry`]) turns it into settings.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct IntegratorElement {
+    /// The `type` attribute (a registered name or alias).
+    pub kind: String,
+    /// Parameters in file order, as text.
+    pub params: Vec<(String, String)>,
+    /// Where it was written (`file:line`).
+    pub loc: String,
+}
+
 /// A point light.
 #[derive(Clone, Debug)]
 pub struct PointLightDesc {
@@ -194,6 +206,8 @@ pub struct SceneDesc {
     pub film: FilmDesc,
     /// Integrator settings.
     pub integrator: IntegratorDesc,
+    /// The `<integrator>` element, if the file has one.
+    pub integrator_element: Option<IntegratorElement>,
     /// Samples per pixel (`independent` sampler's `sample_count`, default 4).
     pub sample_count: u32,
 }
@@ -225,8 +239,10 @@ pub struct Scene {
     pub camera: Camera,
     /// Film settings.
     pub film: FilmDesc,
-    /// Integrator settings.
+    /// The path depth settings of the file's `<integrator>` element.
     pub integrator: IntegratorDesc,
+    /// The `<integrator>` element, if the file has one.
+    pub integrator_element: Option<IntegratorElement>,
     /// Samples per pixel the file asks for.
     pub sample_count: u32,
     /// Zero-area triangles dropped while loading.
@@ -329,6 +345,7 @@ impl Scene {
             camera,
             film: desc.film,
             integrator: desc.integrator,
+            integrator_element: desc.integrator_element,
             sample_count: desc.sample_count.max(1),
             dropped_degenerate: dropped,
         })

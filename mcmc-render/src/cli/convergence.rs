@@ -9,19 +9,127 @@
 //! such point after each `k·T/K`. The time of a record is the wall-clock
 //! time since that integrator started, start-up (bootstrap) included.
 
+use super::{ParamFlags, STOP, check_writable, parse_defines, stop_on_ctrl_c};
 use crate::color::Rgb;
 use crate::compare::compare;
-use crate::film::Film;
-use crate::integrators::bdpt::{Bdpt, MisHeuristic};
-use crate::integrators::pssmlt::{MltObserver, PssmltSettings, render_family, render_pssmlt};
-use crate::integrators::{Integrator, lt::LightTracer, pt::PathTracer};
-use crate::pss::MmltDepth;
-use crate::render::{RenderObserver, RenderSettings, render};
+use crate::image_io::read_exr;
+use crate::integrators::RunSettings;
+use crate::integrators::registry::{self, Configured};
+use crate::observer::Observer;
 use crate::scene::Scene;
-use std::path::Path;
+use clap::Args;
+use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
+
+/// Flags of `convergence`.
+#[derive(Args)]
+pub struct ConvergenceArgs {
+    /// Mitsuba 3 XML scene.
+    #[arg(required_unless_present = "replot")]
+    scene: Option<PathBuf>,
+    /// Reference EXR (e.g. a long `render --integrator pt` run).
+    #[arg(long, required_unless_present = "replot")]
+    reference: Option<PathBuf>,
+    /// Only redraw the plot of an existing CSV (written beside it as PNG).
+    #[arg(long, value_name = "CSV", conflicts_with_all = ["scene", "reference"])]
+    replot: Option<PathBuf>,
+    /// Plot title (default: the scene's or CSV's file stem).
+    #[arg(long)]
+    title: Option<String>,
+    /// Comma-separated integrators, each `NAME[+MODIFIER]...` (see `variant`).
+    #[arg(long, default_value = "pt,pssmlt")]
+    integrators: String,
+    /// Seconds per integrator.
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
+    time: f64,
+    /// Checkpoints per integrator.
+    #[arg(long, default_value_t = 8)]
+    checkpoints: u32,
+    /// Seed.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Output CSV; the plot goes beside it as PNG.
+    #[arg(long, default_value = "convergence.csv")]
+    out: PathBuf,
+    /// Override a `<default name=…>` value: -D name=value.
+    #[arg(short = 'D', value_name = "NAME=VALUE")]
+    define: Vec<String>,
+    /// Parameters, applied to every integrator that has them.
+    #[command(flatten)]
+    params: ParamFlags,
+}
+
+/// `mcmc-render convergence …`.
+pub fn command(args: ConvergenceArgs) -> Result<(), String> {
+    let stem = |p: &Path| {
+        p.file_stem()
+            .map_or_else(String::new, |s| s.to_string_lossy().into_owned())
+    };
+    if let Some(csv) = &args.replot {
+        let records = read_csv(csv)?;
+        let names = integrators_of(&records);
+        let title = args.title.clone().unwrap_or_else(|| stem(csv));
+        let png = csv.with_extension("png");
+        write_plot(&png, &records, &names, &title)?;
+        println!("{}", png.display());
+        return Ok(());
+    }
+    // clap requires both unless --replot is given.
+    let (Some(scene), Some(reference)) = (&args.scene, &args.reference) else {
+        return Err("convergence needs SCENE and --reference (or --replot CSV)".into());
+    };
+    let title = args.title.clone().unwrap_or_else(|| stem(scene));
+    check_writable(&args.out)?;
+    let defines = parse_defines(&args.define)?;
+    let loaded = Scene::load(scene, &defines).map_err(|e| e.to_string())?;
+    let (rw, rh, r) = read_exr(reference)?;
+    if (rw, rh) != (loaded.film.width, loaded.film.height) {
+        return Err(format!(
+            "reference is {rw}x{rh}, the scene renders {}x{}",
+            loaded.film.width, loaded.film.height
+        ));
+    }
+    let names: Vec<String> = args
+        .integrators
+        .split(',')
+        .map(|s| s.trim().to_string())
+        .collect();
+    let threads = args.threads.unwrap_or(0);
+    let study = Study {
+        integrators: names.clone(),
+        seconds: args.time,
+        checkpoints: args.checkpoints,
+        seed: args.seed,
+        assignments: args.params.assignments()?,
+    };
+    stop_on_ctrl_c();
+    let records = mcmc_core::runner::with_threads(threads, || run(&loaded, &r, &study, &STOP))?;
+    write_csv(&args.out, &records)?;
+    write_plot(&args.out.with_extension("png"), &records, &names, &title)?;
+    if !STOP.load(Ordering::SeqCst) {
+        for name in names
+            .iter()
+            .filter(|n| !records.iter().any(|r| &r.integrator == *n))
+        {
+            eprintln!(
+                "warning: {name} has no record: its start-up (bootstrap) outlasted --time {}",
+                args.time
+            );
+        }
+    }
+    for rec in &records {
+        println!(
+            "{:8} {:8.2} s {:>12} relMSE {:.4e} RMSE {:.4e}",
+            rec.integrator, rec.seconds, rec.samples, rec.rel_mse, rec.rmse
+        );
+    }
+    Ok(())
+}
 
 /// One checkpoint of one integrator.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -45,11 +153,10 @@ struct Recorder<'a> {
     start: Instant,
     step: f64,
     state: Mutex<(u32, Vec<Record>)>,
-    pixels: u64,
 }
 
 impl Recorder<'_> {
-    fn offer(&self, samples: u64, image: impl FnOnce() -> Vec<Rgb>, force: bool) {
+    fn offer(&self, samples: u64, image: &dyn Fn() -> Vec<Rgb>, force: bool) {
         let t = self.start.elapsed().as_secs_f64();
         let mut g = self.state.lock().unwrap_or_else(|p| p.into_inner());
         let next = g.0 as f64 * self.step;
@@ -75,30 +182,17 @@ impl Recorder<'_> {
     }
 }
 
-impl RenderObserver for Recorder<'_> {
-    fn pass_done(&self, film: &Film, spp_done: u64, paths_per_pixel: f64) {
-        self.offer(
-            spp_done * self.pixels,
-            || film.develop(paths_per_pixel),
-            false,
-        );
+impl Observer for Recorder<'_> {
+    fn snapshot(&self, image: &dyn Fn() -> Vec<Rgb>, samples: u64) {
+        self.offer(samples, image, false);
     }
 }
-
-impl MltObserver for Recorder<'_> {
-    fn preview(&self, image: &[Rgb], mutations: u64) {
-        self.offer(mutations, || image.to_vec(), false);
-    }
-}
-
-/// Integrators the study knows.
-pub const KNOWN: &[&str] = &["pt", "lt", "bdpt", "pssmlt", "pssmlt-bdpt", "mmlt"];
 
 /// What a convergence study runs.
 #[derive(Clone, Debug)]
 pub struct Study {
-    /// Integrator names (see [`KNOWN`]), each optionally with MLT
-    /// modifiers (`mmlt+running`, see [`crate::mlt_cli::mlt_variant`]).
+    /// Integrator names, each optionally with modifiers (`mmlt+running`,
+    /// see [`variant`]).
     pub integrators: Vec<String>,
     /// Seconds per integrator.
     pub seconds: f64,
@@ -106,10 +200,90 @@ pub struct Study {
     pub checkpoints: u32,
     /// Seed.
     pub seed: u64,
-    /// PSSMLT settings (budget, seed and preview interval are overridden).
-    pub mlt: PssmltSettings,
-    /// MMLT settings (its default small step differs from PSSMLT's).
-    pub mmlt: PssmltSettings,
+    /// Parameter assignments from the command line, applied to every
+    /// integrator that has the parameter.
+    pub assignments: Vec<(String, String)>,
+}
+
+/// The assignments a modifier of [`variant`] stands for.
+fn modifier(m: &str, name: &str) -> Result<Vec<(String, String)>, String> {
+    let pair = |k: &str, v: &str| (k.to_string(), v.to_string());
+    let (key, value) = match m.split_once('=') {
+        Some((k, v)) => (k, Some(v)),
+        None => (m, None),
+    };
+    let value_of = |what: &str| {
+        value.ok_or_else(|| format!("modifier `{m}` of `{name}` needs a value ({what})"))
+    };
+    Ok(match key {
+        "running" | "bootstrap" => vec![pair("normalization", key)],
+        "mis" => vec![pair("kelemen_mis", "true")],
+        "kelemen" => vec![
+            pair("small_step", "kelemen"),
+            pair("s1", "0.0009765625"),
+            pair("s2", "0.015625"),
+        ],
+        "gaussian" => vec![pair("small_step", "gaussian"), pair("sigma", "0.01")],
+        "sigma" => vec![
+            pair("small_step", "gaussian"),
+            pair("sigma", value_of("the Gaussian small step's sigma")?),
+        ],
+        "plarge" => vec![pair(
+            "large_step_probability",
+            value_of("large-step probability")?,
+        )],
+        "candidates" => vec![pair("bootstrap", value_of("bootstrap candidates")?)],
+        "alloc" => vec![pair(
+            "depth_allocation",
+            value_of("depth allocation exponent")?,
+        )],
+        _ => match value {
+            Some(v) => vec![pair(key, v)],
+            None => {
+                return Err(format!(
+                    "unknown modifier `{m}` in `{name}` (known: running, bootstrap, mis, kelemen, gaussian, sigma=S, plarge=P, candidates=N, alloc=G, or any PARAMETER=VALUE)"
+                ));
+            }
+        },
+    })
+}
+
+/// Configures an integrator of the study from its name
+/// `BASE[+MODIFIER]...`, so that variants of one integrator can be compared
+/// within one run: `BASE` is a registered name (or `pssmlt-bdpt`, PSSMLT
+/// over BDPT); a modifier is `PARAMETER=VALUE` or one of the short forms
+/// `running`, `bootstrap` (normalisation), `mis` (Kelemen's MIS of large
+/// steps), `kelemen` (s1 = 1/1024, s2 = 1/64), `gaussian` (sigma 0.01),
+/// `sigma=S` (Gaussian), `plarge=P`, `candidates=N` (bootstrap candidates),
+/// `alloc=G` (chains per depth `∝ b_d^G`). The scene's `<integrator>` and
+/// `assignments` (where the integrator has the parameter) come first.
+pub fn variant(
+    name: &str,
+    scene: &Scene,
+    assignments: &[(String, String)],
+) -> Result<Box<dyn Configured>, String> {
+    let mut parts = name.split('+');
+    let head = parts.next().unwrap_or_default();
+    let mut own: Vec<(String, String)> = Vec::new();
+    let base = if head == "pssmlt-bdpt" {
+        own.push(("base".into(), "bdpt".into()));
+        "pssmlt"
+    } else {
+        head
+    };
+    for m in parts {
+        own.extend(modifier(m, name)?);
+    }
+    let defaults = (registry::find(base)?.new)();
+    let known: Vec<&str> = defaults.params().iter().map(|p| p.name).collect();
+    let mut all: Vec<(String, String)> = assignments
+        .iter()
+        .filter(|(k, _)| known.contains(&k.as_str()))
+        .cloned()
+        .collect();
+    all.extend(own);
+    registry::configure(scene.integrator_element.as_ref(), Some(base), &all)
+        .map_err(|e| format!("`{name}`: {e}"))
 }
 
 /// Runs the study on `scene` against `reference`. Setting `stop` ends the
@@ -125,8 +299,7 @@ pub fn run(
         seconds,
         checkpoints,
         seed,
-        mlt,
-        mmlt,
+        assignments,
     } = study;
     let (seconds, checkpoints, seed) = (*seconds, *checkpoints, *seed);
     if !(seconds > 0.0 && seconds.is_finite()) {
@@ -134,6 +307,8 @@ pub fn run(
             "--time must be a positive number of seconds, got {seconds}"
         ));
     }
+    let budget = Duration::try_from_secs_f64(seconds)
+        .map_err(|_| format!("--time {seconds} is too large"))?;
     if checkpoints == 0 {
         return Err("--checkpoints must be at least 1".into());
     }
@@ -144,90 +319,44 @@ pub fn run(
             reference.len()
         ));
     }
-    for name in integrators {
-        let (base, _) = crate::mlt_cli::mlt_variant(name, mlt)?;
-        if !KNOWN.contains(&base.as_str()) {
-            return Err(format!(
-                "integrator `{name}` is not available for convergence (known: {})",
-                KNOWN.join(", ")
-            ));
+    for (k, _) in assignments {
+        let anyone = integrators.iter().any(|n| {
+            let base = n.split('+').next().unwrap_or_default();
+            let base = if base == "pssmlt-bdpt" {
+                "pssmlt"
+            } else {
+                base
+            };
+            registry::find(base).is_ok_and(|r| (r.new)().params().iter().any(|p| p.name == k))
+        });
+        if !anyone {
+            return Err(format!("no integrator of the study has a parameter `{k}`"));
         }
     }
+    let configured: Vec<Box<dyn Configured>> = integrators
+        .iter()
+        .map(|n| variant(n, scene, assignments))
+        .collect::<Result<_, _>>()?;
     let mut all = Vec::new();
-    let budget = Duration::from_secs_f64(seconds);
     let step = seconds / checkpoints as f64;
-    for name in integrators {
+    for (name, integrator) in integrators.iter().zip(&configured) {
         let rec = Recorder {
             name,
             reference,
             start: Instant::now(),
             step,
             state: Mutex::new((1, Vec::new())),
-            pixels,
         };
-        let it = scene.integrator;
-        let bdpt = Bdpt {
-            max_depth: it.max_depth,
-            rr_depth: it.rr_depth,
-            heuristic: MisHeuristic::Power,
+        let run = RunSettings {
+            spp: None,
+            time_budget: Some(budget),
+            seed,
+            snapshot_every: Duration::from_secs_f64(step / 4.0),
         };
-        // `BASE+MODIFIER...` names variants of the MLT settings.
-        let family = if name.split('+').next() == Some("mmlt") {
-            mmlt
-        } else {
-            mlt
-        };
-        let (base, mlt) = crate::mlt_cli::mlt_variant(name, family)?;
-        match base.as_str() {
-            "pt" | "lt" | "bdpt" => {
-                let integ: Box<dyn Integrator> = match base.as_str() {
-                    "pt" => Box::new(PathTracer {
-                        max_depth: it.max_depth,
-                        rr_depth: it.rr_depth,
-                    }),
-                    "lt" => Box::new(LightTracer {
-                        max_depth: it.max_depth,
-                        rr_depth: it.rr_depth,
-                    }),
-                    _ => Box::new(bdpt),
-                };
-                let settings = RenderSettings {
-                    spp: None,
-                    time_budget: Some(budget),
-                    seed,
-                };
-                let r = render(scene, integ.as_ref(), &settings, stop, &rec);
-                rec.offer(r.samples, || r.image(), true);
-            }
-            _ => {
-                let settings = PssmltSettings {
-                    mutations_per_pixel: None,
-                    time_budget: Some(budget),
-                    seed,
-                    preview_every: Duration::from_secs_f64(step / 4.0),
-                    ..mlt
-                };
-                let pt = PathTracer {
-                    max_depth: it.max_depth,
-                    rr_depth: it.rr_depth,
-                };
-                let r = match base.as_str() {
-                    "pssmlt" => render_pssmlt(scene, pt, &settings, stop, &rec),
-                    "pssmlt-bdpt" => render_pssmlt(scene, bdpt, &settings, stop, &rec),
-                    _ => {
-                        if it.max_depth == u32::MAX {
-                            return Err("mmlt needs a finite max_depth".into());
-                        }
-                        let depths: Vec<MmltDepth> = (1..=it.max_depth as usize)
-                            .map(|depth| MmltDepth { bdpt, depth })
-                            .collect();
-                        render_family(scene, depths, &settings, stop, &rec)
-                    }
-                }
-                .map_err(|e| e.to_string())?;
-                rec.offer(r.mutations, || r.image(), true);
-            }
-        }
+        let r = integrator
+            .render(scene, &run, stop, &rec)
+            .map_err(|e| e.to_string())?;
+        rec.offer(r.samples, &|| r.image.clone(), true);
         let (_, records) = rec.state.into_inner().unwrap_or_else(|p| p.into_inner());
         all.extend(records);
         // Ctrl-C ends the study: the integrators not started yet are skipped.
@@ -471,4 +600,100 @@ fn write_rgb8_png(path: &Path, w: u32, h: u32, rgb: &[u8]) -> Result<(), String>
     enc.set_depth(png::BitDepth::Eight);
     let mut writer = enc.write_header().map_err(|e| e.to_string())?;
     writer.write_image_data(rgb).map_err(|e| e.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::integrators::mmlt::Mmlt;
+    use crate::integrators::pssmlt::{MltBase, Pssmlt};
+    use crate::markov::Normalization;
+    use crate::pss::SmallStepLaw;
+
+    fn scene() -> Scene {
+        let text = r#"<scene version="3.0.0">
+            <integrator type="path"><integer name="max_depth" value="5"/></integrator>
+            <sensor type="perspective"><film type="hdrfilm">
+                <integer name="width" value="4"/><integer name="height" value="4"/>
+            </film></sensor>
+            <shape type="rectangle"><emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>
+        </scene>"#;
+        Scene::load_str(text, Path::new("s.xml"), Path::new(".")).expect("test scene")
+    }
+
+    fn settings<T: 'static + Clone>(c: &dyn Configured) -> T {
+        c.as_any().downcast_ref::<T>().expect("type").clone()
+    }
+
+    #[test]
+    fn variant_modifiers_set_the_settings() {
+        let s = scene();
+        let m: Mmlt = settings(
+            variant(
+                "mmlt+running+mis+plarge=0.1+chains=10+candidates=50+alloc=0.5",
+                &s,
+                &[],
+            )
+            .expect("valid variant")
+            .as_ref(),
+        );
+        assert_eq!(m.chain.normalization, Normalization::Running);
+        assert!(m.chain.kelemen_mis);
+        assert_eq!(m.mutation.large_step_probability, 0.1);
+        assert_eq!((m.chain.chains, m.chain.bootstrap), (10, 50));
+        assert_eq!(m.chain.depth_allocation, 0.5);
+        // The scene's max_depth carries over from its `path` element.
+        assert_eq!(m.depth.max_depth, 5);
+        let g: Pssmlt = settings(variant("pssmlt+sigma=0.02", &s, &[]).unwrap().as_ref());
+        assert_eq!(
+            (g.mutation.small_step, g.mutation.sigma),
+            (SmallStepLaw::Gaussian, 0.02)
+        );
+        let b: Pssmlt = settings(variant("pssmlt-bdpt+bootstrap", &s, &[]).unwrap().as_ref());
+        assert_eq!(
+            (b.base, b.chain.normalization),
+            (MltBase::Bdpt, Normalization::Bootstrap)
+        );
+        // Command-line assignments reach only the integrators that have them.
+        let flags = [("sigma".to_string(), "0.03".to_string())];
+        let p: Pssmlt = settings(variant("pssmlt", &s, &flags).unwrap().as_ref());
+        assert_eq!(p.mutation.sigma, 0.03);
+        assert_eq!(variant("pt", &s, &flags).unwrap().name(), "pt");
+        for bad in [
+            "mmlt+fast",
+            "mmlt+plarge=x",
+            "mmlt+plarge=2",
+            "mmlt+chains=0",
+            "mmlt+sigma=inf",
+            "nope",
+        ] {
+            assert!(variant(bad, &s, &[]).is_err(), "{bad} accepted");
+        }
+    }
+
+    #[test]
+    fn metropolis_defaults_are_the_documented_ones() {
+        let p = Pssmlt::default();
+        assert_eq!(p.mutation.small_step, SmallStepLaw::Kelemen);
+        assert_eq!((p.mutation.s1, p.mutation.s2), (1.0 / 1024.0, 1.0 / 64.0));
+        let m = Mmlt::default();
+        assert_eq!(
+            (m.mutation.small_step, m.mutation.sigma),
+            (SmallStepLaw::Gaussian, 0.01)
+        );
+        for c in [&p.chain, &m.chain] {
+            assert_eq!(c.normalization, Normalization::Running);
+            assert_eq!(
+                (c.bootstrap, c.chains, c.mutations_per_pixel),
+                (100_000, 1000, None)
+            );
+        }
+        assert_eq!(m.mutation.large_step_probability, 0.3);
+        // `auto` mutations per pixel: 100 without a time budget.
+        let run = RunSettings::default();
+        assert_eq!(
+            p.chain.chain_settings((), &run).mutations_per_pixel,
+            Some(100)
+        );
+    }
 }

@@ -1,0 +1,295 @@
+//! The `mcmc-render` command line: argument parsing, progress bars, file
+//! naming and the subcommands. The library never depends on this module.
+//!
+//! - `mcmc-render`: renders the embedded default scene to `render.exr` and `render.png`.
+//! - `mcmc-render render SCENE.xml [--integrator NAME] [--set NAME=VALUE]… [--spp N | --time S]
+//!   [--seed K] [--threads T] [--out FILE.exr] [-D name=value]…`: the integrator is the
+//!   flag's, else the scene's `<integrator>`, else `pt`
+//! - `mcmc-render render SCENE.xml --replay DUMP.pss`: re-trace a NaN/inf
+//!   primary-sample dump of `pssmlt` or `mmlt`
+//! - `mcmc-render convergence SCENE.xml --reference REF.exr [--integrators …]
+//!   [--time S] [--checkpoints K] [--out FILE.csv]`, or `convergence --replot FILE.csv`
+//! - `mcmc-render compare REF.exr TEST.exr [--json]`
+//! - `mcmc-render info SCENE.xml`
+//! - `mcmc-render integrators`: every integrator with its parameters and defaults
+//!
+//! Ctrl-C (SIGINT) during `render` stops early and writes what was rendered
+//! so far (normalised by it), with `"interrupted": true` in the JSON, and
+//! exits with status 0; a second Ctrl-C exits at once with status 130.
+//! Every failure prints one line `error: …` on stderr
+//! and exits with status 1 (2 for unusable arguments).
+
+pub mod convergence;
+mod info;
+mod progress;
+mod render_cmd;
+
+use crate::compare::compare;
+use crate::image_io::read_exr;
+use clap::{Args, Parser, Subcommand};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// Set by Ctrl-C: finish with what has been rendered.
+static STOP: AtomicBool = AtomicBool::new(false);
+
+#[derive(Parser)]
+#[command(
+    name = "mcmc-render",
+    version,
+    about = "Physically based renderer (Mitsuba 3 XML subset)"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+/// The older named flags of the Metropolis integrators. Each is the
+/// assignment of the parameter named in its help (`--sigma 0.02` is
+/// `--set sigma=0.02`), checked by the integrator's settings.
+#[derive(Args, Clone, Debug, Default)]
+pub struct ParamFlags {
+    /// Set an integrator parameter (repeatable); `mcmc-render integrators` lists them.
+    #[arg(long = "set", value_name = "NAME=VALUE")]
+    set: Vec<String>,
+    /// MLT small step: kelemen, gaussian or adaptive (`small_step`).
+    #[arg(long, value_name = "LAW")]
+    small_step: Option<String>,
+    /// Kelemen's smallest step (`s1`).
+    #[arg(long, allow_negative_numbers = true)]
+    s1: Option<String>,
+    /// Kelemen's largest step (`s2`).
+    #[arg(long, allow_negative_numbers = true)]
+    s2: Option<String>,
+    /// Gaussian small-step standard deviation (`sigma`).
+    #[arg(long, allow_negative_numbers = true)]
+    sigma: Option<String>,
+    /// Probability of a large step (`large_step_probability`).
+    #[arg(long, allow_negative_numbers = true)]
+    large_step_probability: Option<String>,
+    /// Bootstrap candidates (`bootstrap`).
+    #[arg(long, allow_negative_numbers = true)]
+    bootstrap: Option<String>,
+    /// Number of Markov chains (`chains`).
+    #[arg(long, allow_negative_numbers = true)]
+    chains: Option<String>,
+    /// Mutations per pixel (`mutations_per_pixel`).
+    #[arg(long, allow_negative_numbers = true)]
+    mutations_per_pixel: Option<String>,
+    /// Kelemen's MIS combination of large steps (`kelemen_mis=true`).
+    #[arg(long)]
+    kelemen_mis: bool,
+    /// Image normalisation: running or bootstrap (`normalization`).
+    #[arg(long, value_name = "KIND")]
+    normalization: Option<String>,
+    /// Path sampler under PSSMLT: pt or bdpt (`base`).
+    #[arg(long, value_name = "BASE")]
+    mlt_base: Option<String>,
+    /// Longest path in segments (`max_depth`; default: the scene's).
+    #[arg(long, allow_negative_numbers = true)]
+    max_depth: Option<String>,
+}
+
+impl ParamFlags {
+    /// The flags as parameter assignments, named flags first, then `--set`
+    /// in order (so `--set` wins).
+    pub fn assignments(&self) -> Result<Vec<(String, String)>, String> {
+        let named = [
+            ("small_step", &self.small_step),
+            ("s1", &self.s1),
+            ("s2", &self.s2),
+            ("sigma", &self.sigma),
+            ("large_step_probability", &self.large_step_probability),
+            ("bootstrap", &self.bootstrap),
+            ("chains", &self.chains),
+            ("mutations_per_pixel", &self.mutations_per_pixel),
+            ("normalization", &self.normalization),
+            ("base", &self.mlt_base),
+            ("max_depth", &self.max_depth),
+        ];
+        let mut out: Vec<(String, String)> = named
+            .into_iter()
+            .filter_map(|(k, v)| v.as_ref().map(|v| (k.to_string(), v.clone())))
+            .collect();
+        if self.kelemen_mis {
+            out.push(("kelemen_mis".into(), "true".into()));
+        }
+        for s in &self.set {
+            out.push(crate::integrators::registry::parse_assignment(s)?);
+        }
+        Ok(out)
+    }
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene file.
+    Render(render_cmd::RenderArgs),
+    /// Compare a test EXR against a reference EXR.
+    Compare {
+        /// Reference image.
+        reference: PathBuf,
+        /// Test image.
+        test: PathBuf,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Error against time of several integrators at equal time budgets (CSV + log-log PNG).
+    Convergence(convergence::ConvergenceArgs),
+    /// Describe what a scene file loads to.
+    Info {
+        /// Mitsuba 3 XML scene.
+        scene: PathBuf,
+        /// Override a `<default name=…>` value: -D name=value.
+        #[arg(short = 'D', value_name = "NAME=VALUE")]
+        define: Vec<String>,
+    },
+    /// List the integrators with their parameters and defaults.
+    Integrators,
+}
+
+/// Runs the command line and exits.
+pub fn main() {
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => {
+            // Help and version are not errors.
+            if matches!(
+                e.kind(),
+                clap::error::ErrorKind::DisplayHelp | clap::error::ErrorKind::DisplayVersion
+            ) {
+                let _ = e.print();
+                std::process::exit(0);
+            }
+            // clap's message is a paragraph (e.g. "required arguments were
+            // not provided:" then the arguments) before the usage; keep the
+            // paragraph, on one line.
+            let msg = e.to_string();
+            let para: Vec<&str> = msg
+                .lines()
+                .map(str::trim)
+                .take_while(|l| !l.is_empty())
+                .collect();
+            let line = if para.is_empty() {
+                "error: invalid arguments".to_string()
+            } else {
+                para.join(" ")
+            };
+            eprintln!("{line}");
+            std::process::exit(2);
+        }
+    };
+    if let Err(e) = run(cli) {
+        eprintln!("error: {e}");
+        std::process::exit(1);
+    }
+}
+
+fn run(cli: Cli) -> Result<(), String> {
+    match cli.command {
+        None => render_cmd::default_scene(),
+        Some(Command::Render(args)) => render_cmd::run(args),
+        Some(Command::Compare {
+            reference,
+            test,
+            json,
+        }) => compare_images(&reference, &test, json),
+        Some(Command::Convergence(args)) => convergence::command(args),
+        Some(Command::Info { scene, define }) => {
+            let defines = parse_defines(&define)?;
+            let s = crate::scene::Scene::load(&scene, &defines).map_err(|e| e.to_string())?;
+            info::print_info(&scene, &s)
+        }
+        Some(Command::Integrators) => {
+            info::print_integrators();
+            Ok(())
+        }
+    }
+}
+
+fn compare_images(reference: &Path, test: &Path, json: bool) -> Result<(), String> {
+    let (rw, rh, r) = read_exr(reference)?;
+    let (tw, th, t) = read_exr(test)?;
+    if (rw, rh) != (tw, th) {
+        return Err(format!("image sizes differ: {rw}x{rh} vs {tw}x{th}"));
+    }
+    let c = compare(&r, &t)?;
+    if json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&c).map_err(|e| e.to_string())?
+        );
+    } else {
+        println!("relMSE              {:.6e}", c.rel_mse);
+        println!("RMSE                {:.6e}", c.rmse);
+        println!(
+            "mean rel. diff      R {:+.4}%  G {:+.4}%  B {:+.4}%",
+            100.0 * c.mean_rel_diff[0],
+            100.0 * c.mean_rel_diff[1],
+            100.0 * c.mean_rel_diff[2]
+        );
+        println!(
+            "reference mean      {:.6} {:.6} {:.6}",
+            c.ref_mean[0], c.ref_mean[1], c.ref_mean[2]
+        );
+        println!(
+            "test mean           {:.6} {:.6} {:.6}",
+            c.test_mean[0], c.test_mean[1], c.test_mean[2]
+        );
+        println!(
+            "non-finite pixels   reference {}  test {}",
+            c.ref_nonfinite, c.test_nonfinite
+        );
+    }
+    Ok(())
+}
+
+/// Ctrl-C sets [`STOP`]: the run finishes with what it has and writes it.
+/// A second Ctrl-C (e.g. during an MLT bootstrap, which does not poll the
+/// flag) exits at once with status 130.
+fn stop_on_ctrl_c() {
+    // Ignore a failure to install the handler (e.g. set twice): rendering
+    // still works, only Ctrl-C falls back to the default action.
+    let _ = ctrlc::set_handler(|| {
+        if STOP.swap(true, Ordering::SeqCst) {
+            eprintln!("error: interrupted twice; exiting without writing");
+            std::process::exit(130);
+        }
+    });
+}
+
+fn parse_defines(defs: &[String]) -> Result<HashMap<String, String>, String> {
+    defs.iter()
+        .map(|d| {
+            d.split_once('=')
+                .map(|(k, v)| (k.to_string(), v.to_string()))
+                .ok_or_else(|| format!("-D expects NAME=VALUE, got \"{d}\""))
+        })
+        .collect()
+}
+
+/// Fails early (before a long render) when the output cannot be written.
+fn check_writable(out: &Path) -> Result<(), String> {
+    let existed = out.exists();
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(out)
+        .map_err(|e| format!("cannot write output {}: {e}", out.display()))?;
+    if !existed {
+        let _ = std::fs::remove_file(out);
+    }
+    Ok(())
+}
+
+/// The worker threads: `threads`, or every core.
+fn thread_count(threads: Option<usize>) -> Result<usize, String> {
+    match threads {
+        Some(0) => Err("--threads must be at least 1".into()),
+        Some(n) => Ok(n),
+        None => Ok(std::thread::available_parallelism().map_or(1, |n| n.get())),
+    }
+}

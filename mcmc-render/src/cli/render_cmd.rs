@@ -1,0 +1,237 @@
+//! `render` (and the no-argument default render): choose and configure the
+//! integrator, run it with a progress bar, write EXR, PNG, JSON sidecar and
+//! the NaN dump; `--replay` re-traces a dump.
+
+use super::progress::CliObserver;
+use super::{ParamFlags, STOP, check_writable, parse_defines, stop_on_ctrl_c, thread_count};
+use crate::image_io::{write_exr, write_png};
+use crate::integrators::registry::{self, Configured};
+use crate::integrators::{Rendered, RunSettings};
+use crate::pss_dump::{read_pss, replay, write_pss};
+use crate::scene::Scene;
+use clap::Args;
+use serde_json::{Map, Value, json};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// The embedded default scene.
+const DEFAULT_SCENE: &str = include_str!("../../scenes/default.xml");
+
+/// Flags of `render`.
+#[derive(Args)]
+pub struct RenderArgs {
+    /// Mitsuba 3 XML scene.
+    scene: PathBuf,
+    /// Integrator (default: the scene's `<integrator>`, else pt); `mcmc-render integrators` lists them.
+    #[arg(long)]
+    integrator: Option<String>,
+    /// Samples per pixel (light paths per pixel for lt); default: the scene's sample_count.
+    #[arg(long, allow_negative_numbers = true)]
+    spp: Option<i64>,
+    /// Time budget in seconds (renders until then unless --spp is reached first).
+    #[arg(long, allow_negative_numbers = true)]
+    time: Option<f64>,
+    /// Seed of the random streams.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Output EXR; the PNG preview and JSON statistics go beside it.
+    #[arg(long, default_value = "render.exr")]
+    out: PathBuf,
+    /// Override a `<default name=…>` value: -D name=value.
+    #[arg(short = 'D', value_name = "NAME=VALUE")]
+    define: Vec<String>,
+    /// Do not show a progress bar.
+    #[arg(long)]
+    quiet: bool,
+    /// Re-trace one primary-sample vector (a NaN/inf dump) and print it.
+    #[arg(long, value_name = "FILE")]
+    replay: Option<PathBuf>,
+    #[command(flatten)]
+    params: ParamFlags,
+}
+
+/// One render as the command line runs it.
+struct Job<'a> {
+    scene: &'a Scene,
+    scene_name: &'a str,
+    integrator: &'a dyn Configured,
+    run: RunSettings,
+    threads: usize,
+    out: &'a Path,
+    quiet: bool,
+}
+
+/// `mcmc-render` with no arguments: the embedded scene with its integrator.
+pub fn default_scene() -> Result<(), String> {
+    let scene = Scene::load_str(DEFAULT_SCENE, Path::new("<default scene>"), Path::new("."))
+        .map_err(|e| e.to_string())?;
+    let integrator = registry::configure(scene.integrator_element.as_ref(), None, &[])?;
+    render_job(&Job {
+        scene: &scene,
+        scene_name: "<default scene>",
+        integrator: integrator.as_ref(),
+        run: RunSettings {
+            spp: Some(scene.sample_count),
+            ..RunSettings::default()
+        },
+        threads: thread_count(None)?,
+        out: Path::new("render.exr"),
+        quiet: false,
+    })
+}
+
+/// `mcmc-render render …`.
+pub fn run(args: RenderArgs) -> Result<(), String> {
+    let spp = match args.spp {
+        Some(n) if n <= 0 => return Err(format!("--spp must be a positive integer, got {n}")),
+        Some(n) => Some(u32::try_from(n).map_err(|_| format!("--spp {n} is too large"))?),
+        None => None,
+    };
+    let time_budget = match args.time {
+        Some(t) if !(t > 0.0 && t.is_finite()) => {
+            return Err(format!(
+                "--time must be a positive number of seconds, got {t}"
+            ));
+        }
+        Some(t) => {
+            Some(Duration::try_from_secs_f64(t).map_err(|_| format!("--time {t} is too large"))?)
+        }
+        None => None,
+    };
+    let threads = thread_count(args.threads)?;
+    let defines = parse_defines(&args.define)?;
+    if let Some(file) = &args.replay {
+        // Replay writes nothing: no output check.
+        let scene = Scene::load(&args.scene, &defines).map_err(|e| e.to_string())?;
+        return print_replay(&scene, file);
+    }
+    check_writable(&args.out)?;
+    let scene = Scene::load(&args.scene, &defines).map_err(|e| e.to_string())?;
+    let integrator = registry::configure(
+        scene.integrator_element.as_ref(),
+        args.integrator.as_deref(),
+        &args.params.assignments()?,
+    )?;
+    render_job(&Job {
+        scene: &scene,
+        scene_name: &args.scene.display().to_string(),
+        integrator: integrator.as_ref(),
+        run: RunSettings {
+            spp,
+            time_budget,
+            seed: args.seed,
+            ..RunSettings::default()
+        },
+        threads,
+        out: &args.out,
+        quiet: args.quiet,
+    })
+}
+
+fn render_job(job: &Job<'_>) -> Result<(), String> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(job.threads)
+        .build()
+        .map_err(|e| format!("cannot start {} threads: {e}", job.threads))?;
+    stop_on_ctrl_c();
+    let scene = job.scene;
+    let (w, h) = (scene.film.width, scene.film.height);
+    let png = job.out.with_extension("png");
+    let observer = CliObserver::new(
+        job.integrator.planned_samples(scene, &job.run),
+        job.run.time_budget,
+        job.quiet,
+        png.clone(),
+        (w, h),
+    );
+    let result = pool.install(|| job.integrator.render(scene, &job.run, &STOP, &observer));
+    observer.finish();
+    let rendered = result.map_err(|e| e.to_string())?;
+    write_exr(job.out, w, h, &rendered.image)?;
+    write_png(&png, w, h, &rendered.image)?;
+    let dump = match &rendered.nonfinite_dump {
+        Some(d) => {
+            let path = job.out.with_extension("nonfinite.pss");
+            write_pss(&path, d)?;
+            Some(path.display().to_string())
+        }
+        None => None,
+    };
+    let json_path = job.out.with_extension("json");
+    let text =
+        serde_json::to_string_pretty(&sidecar(job, &rendered, dump)).map_err(|e| e.to_string())?;
+    std::fs::write(&json_path, text + "\n")
+        .map_err(|e| format!("cannot write {}: {e}", json_path.display()))?;
+    if !job.quiet {
+        eprintln!("{} -> {}", rendered.summary, job.out.display());
+    }
+    Ok(())
+}
+
+/// The run statistics written beside the image: what ran (scene,
+/// integrator, its settings, budget), then the integrator's statistics.
+fn sidecar(job: &Job<'_>, r: &Rendered, dump: Option<String>) -> Value {
+    let mut m = Map::new();
+    let scene = job.scene;
+    m.insert("scene".into(), json!(job.scene_name));
+    m.insert("integrator".into(), json!(job.integrator.name()));
+    m.insert("seconds".into(), json!(r.seconds));
+    m.insert("samples".into(), json!(r.samples));
+    m.insert("width".into(), json!(scene.film.width));
+    m.insert("height".into(), json!(scene.film.height));
+    m.insert("seed".into(), json!(job.run.seed));
+    m.insert("threads".into(), json!(job.threads));
+    m.insert(
+        "time_budget".into(),
+        json!(job.run.time_budget.map(|b| b.as_secs_f64())),
+    );
+    m.insert("interrupted".into(), json!(r.interrupted));
+    m.extend(r.statistics.clone());
+    m.insert("nonfinite_dump".into(), json!(dump));
+    m.insert(
+        "settings".into(),
+        Value::Object(job.integrator.settings_json()),
+    );
+    Value::Object(m)
+}
+
+/// Re-traces a dump and prints what its path contributes.
+fn print_replay(scene: &Scene, file: &Path) -> Result<(), String> {
+    let dump = read_pss(file)?;
+    let r = replay(scene, &dump).map_err(|e| format!("{}: {e}", file.display()))?;
+    println!("sampler             {}", dump.sampler.name());
+    println!(
+        "coordinates read    {} (file has {})",
+        r.coordinates_read,
+        dump.coords.len()
+    );
+    for t in &r.traces {
+        let e = &t.evaluation;
+        if let Some(d) = t.target_depth {
+            println!("mmlt depth          {d}");
+        }
+        println!("depth               {}", e.payload.depth);
+        println!("ln I                {}", e.log_density);
+        // PssTarget maps a NaN or infinite contribution to ln I = NaN.
+        println!(
+            "contribution        {}",
+            if e.log_density.is_nan() {
+                "non-finite"
+            } else if e.log_density == f64::NEG_INFINITY {
+                "zero"
+            } else {
+                "finite"
+            }
+        );
+        for s in &e.payload.splats {
+            println!(
+                "splat               raster ({}, {})  L = ({}, {}, {})",
+                s.p.x, s.p.y, s.l.r, s.l.g, s.l.b
+            );
+        }
+    }
+    Ok(())
+}

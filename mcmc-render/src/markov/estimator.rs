@@ -1,0 +1,204 @@
+//! The Markov-chain driver's estimator: expected-value splatting of every
+//! transition into its member's film (optionally with Kelemen's MIS of the
+//! independent proposals), per-member normalisation, and the image as the
+//! sum of the members' images.
+
+use super::{ChainFamily, Normalization};
+use crate::color::Rgb;
+use crate::film::Film;
+use crate::pss::PathSample;
+use mcmc_core::chain::Transition;
+use mcmc_core::startup::RunningNormalization;
+
+/// Proposals and acceptances of one path depth.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct DepthAcceptance {
+    /// Proposals of this depth (valid ones).
+    pub proposed: u64,
+    /// Accepted proposals of this depth.
+    pub accepted: u64,
+}
+
+/// What one member of a family (an MMLT depth; the single PSSMLT target)
+/// ran and contributes.
+#[derive(Clone, Debug)]
+pub struct FamilyResult {
+    /// Splat film of this member's chains, not yet scaled.
+    pub film: Film,
+    /// Mutations done by this member's chains.
+    pub mutations: u64,
+    /// Chains this member ran.
+    pub chains: usize,
+    /// The scale applied to this member's developed film: its `b_d`
+    /// (bootstrap or running, see [`Normalization`]), or 1 with Kelemen's
+    /// MIS (where `b_d` is inside the splat weights).
+    pub scale: f64,
+    /// The standard error of [`FamilyResult::scale`] (0 with Kelemen's MIS).
+    pub scale_standard_error: f64,
+    /// Bootstrap `b_d` and its standard error.
+    pub bootstrap_b: (f64, f64),
+    /// Running `⟨b_d⟩` (bootstrap and large steps) and its standard error.
+    pub running_b: (f64, f64),
+}
+
+impl FamilyResult {
+    /// This member's image: its film over its own mutations per pixel,
+    /// times its scale (see [`super::run`] for why per member).
+    pub fn image(&self) -> Vec<Rgb> {
+        develop(&self.film, self.mutations, self.scale)
+    }
+}
+
+/// The pixel-wise sum of images of equal size.
+pub(crate) fn sum_images(images: impl Iterator<Item = Vec<Rgb>>) -> Vec<Rgb> {
+    let mut out: Option<Vec<Rgb>> = None;
+    for img in images {
+        match out.as_mut() {
+            None => out = Some(img),
+            Some(o) => {
+                for (a, b) in o.iter_mut().zip(img) {
+                    *a += b;
+                }
+            }
+        }
+    }
+    out.unwrap_or_default()
+}
+
+/// The image of a splat film after `mutations` mutations, scaled by `scale`.
+pub fn develop(film: &Film, mutations: u64, scale: f64) -> Vec<Rgb> {
+    let pixels = film.width as f64 * film.height as f64;
+    if mutations == 0 {
+        return vec![Rgb::BLACK; pixels as usize];
+    }
+    let ppp = mutations as f64 / pixels;
+    film.develop(ppp)
+        .into_iter()
+        .map(|c| c * scale as f32)
+        .collect()
+}
+
+/// A member's accumulated films, normalisation estimates and counts, and
+/// the settings that turn them into its image.
+pub(crate) struct MemberTotals<'a> {
+    pub films: Vec<Film>,
+    pub running: Vec<RunningNormalization>,
+    pub mutations: Vec<u64>,
+    pub bootstrap_b: &'a [(f64, f64)],
+    pub chains: &'a [usize],
+    pub mis: bool,
+    pub normalization: Normalization,
+}
+
+impl MemberTotals<'_> {
+    /// Each member's result, with its scale from the chosen normalisation.
+    pub fn results(self) -> Vec<FamilyResult> {
+        let MemberTotals {
+            films,
+            running,
+            mutations,
+            bootstrap_b,
+            chains,
+            mis,
+            normalization,
+        } = self;
+        films
+            .into_iter()
+            .enumerate()
+            .map(|(d, film)| {
+                let running_b = (running[d].b(), running[d].standard_error());
+                let (scale, scale_standard_error) = if mis {
+                    (1.0, 0.0)
+                } else {
+                    match normalization {
+                        Normalization::Bootstrap => bootstrap_b[d],
+                        Normalization::Running => running_b,
+                    }
+                };
+                FamilyResult {
+                    film,
+                    mutations: mutations[d],
+                    chains: chains[d],
+                    scale,
+                    scale_standard_error,
+                    bootstrap_b: bootstrap_b[d],
+                    running_b,
+                }
+            })
+            .collect()
+    }
+}
+
+/// Splat weights of one member.
+pub(crate) struct Weights {
+    /// Kelemen's MIS of the independent proposals.
+    pub mis: bool,
+    /// Probability of an independent proposal.
+    pub p_independent: f64,
+    /// The member's bootstrap `b_d`.
+    pub b: f64,
+}
+
+impl Weights {
+    /// Splat weight (without the factor `b` unless MIS) of a state with
+    /// contribution `i` carrying expected-value weight `a`.
+    fn of(&self, a: f64, independent: bool, i: f64) -> f64 {
+        if self.mis {
+            (a + f64::from(u8::from(independent))) / (i / self.b + self.p_independent)
+        } else {
+            a / i
+        }
+    }
+}
+
+fn splat_all(film: &mut Film, s: &PathSample, w: f64) {
+    if w > 0.0 && w.is_finite() {
+        for sp in &s.splats {
+            film.splat(sp.p, sp.l * w as f32);
+        }
+    }
+}
+
+/// The per-task accumulators the estimator writes.
+pub(crate) struct Accumulators<'a> {
+    pub film: &'a mut Film,
+    pub running: &'a mut RunningNormalization,
+    pub per_depth: &'a mut Vec<DepthAcceptance>,
+    pub first_nonfinite: &'a mut Option<Vec<f64>>,
+}
+
+/// Expected-value splatting and statistics of one transition.
+pub(crate) fn observe<F: ChainFamily>(
+    family: &F,
+    t: &Transition<'_, F::State, PathSample>,
+    w: &Weights,
+    acc: &mut Accumulators<'_>,
+) {
+    let independent = family.is_independent(t.component);
+    if let Some(y) = t.proposal {
+        if independent {
+            // ln I(y) − ln p₀(y); NaN counts as zero.
+            acc.running
+                .add(y.log_density - family.reference_log_density(&y.state));
+        }
+        if y.log_density.is_nan() || y.log_density == f64::INFINITY {
+            if acc.first_nonfinite.is_none() {
+                *acc.first_nonfinite = family.coordinates(&y.state);
+            }
+        } else if y.log_density > f64::NEG_INFINITY {
+            let d = y.payload.depth as usize;
+            if acc.per_depth.len() <= d {
+                acc.per_depth.resize(d + 1, DepthAcceptance::default());
+            }
+            acc.per_depth[d].proposed += 1;
+            acc.per_depth[d].accepted += u64::from(t.accepted);
+            // `I(y)` itself (ln I is its logarithm): saves an `exp` per state.
+            let i = y.payload.luminance();
+            splat_all(acc.film, &y.payload, w.of(t.alpha, independent, i));
+        }
+        // A black proposal (I = 0) contributes nothing, in either weighting.
+    }
+    let x = t.current;
+    let ix = x.payload.luminance();
+    splat_all(acc.film, &x.payload, w.of(1.0 - t.alpha, false, ix));
+}

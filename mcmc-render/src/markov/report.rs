@@ -1,0 +1,90 @@
+//! A Markov-chain run as the registry reports it: the image, the JSON
+//! statistics of the sidecar, the NaN dump and the terminal line.
+
+use super::MltResult;
+use crate::integrators::Rendered;
+use crate::pss_dump::{DumpSampler, PssDump};
+use serde_json::{Value, json};
+
+fn rate(n: u64, seconds: f64) -> f64 {
+    if seconds > 0.0 {
+        n as f64 / seconds
+    } else {
+        0.0
+    }
+}
+
+/// The report of `result`. `sampler` and `max_depth` go into the NaN dump;
+/// with `members_are_depths` member `d` is labelled path depth `d + 1`
+/// (MMLT), else 0.
+pub fn rendered(
+    result: &MltResult,
+    sampler: DumpSampler,
+    max_depth: u32,
+    members_are_depths: bool,
+) -> Rendered {
+    let cs = &result.chain_stats;
+    let mutations_per_second = rate(result.mutations, result.seconds - result.bootstrap_seconds);
+    let statistics = json!({
+        "bootstrap_seconds": result.bootstrap_seconds,
+        "mutations": result.mutations,
+        "mutations_per_second": mutations_per_second,
+        "mutations_per_pixel": result.mutations_per_pixel,
+        "b_bootstrap": result.bootstrap_b.0,
+        "b_bootstrap_standard_error": result.bootstrap_b.1,
+        "b_running": result.running_b.0,
+        "b_running_standard_error": result.running_b.1,
+        "scale": result.scale,
+        "scale_standard_error": result.scale_standard_error,
+        "acceptance": cs.acceptance_rate(),
+        "acceptance_per_component": cs.components.iter().map(|c| json!({
+            "name": c.name,
+            "proposed": c.proposed,
+            "accepted": c.accepted,
+            "acceptance": c.acceptance_rate(),
+        })).collect::<Vec<_>>(),
+        "acceptance_per_depth": result.per_depth,
+        "families": result.families.iter().enumerate().map(|(d, f)| json!({
+            "depth": if members_are_depths { d + 1 } else { 0 },
+            "chains": f.chains,
+            "mutations": f.mutations,
+            "b_bootstrap": f.bootstrap_b.0,
+            "b_bootstrap_standard_error": f.bootstrap_b.1,
+            "b_running": f.running_b.0,
+            "b_running_standard_error": f.running_b.1,
+            "scale": f.scale,
+        })).collect::<Vec<_>>(),
+        "nonfinite_contributions": cs.invalid_density,
+        "nonfinite_bootstrap_candidates": result.bootstrap_invalid,
+    });
+    let statistics = match statistics {
+        Value::Object(m) => m,
+        _ => unreachable!("json! of an object literal is an object"),
+    };
+    Rendered {
+        image: result.image(),
+        seconds: result.seconds,
+        samples: result.mutations,
+        interrupted: result.interrupted,
+        statistics,
+        nonfinite_dump: result.first_nonfinite.as_ref().map(|coords| PssDump {
+            sampler,
+            max_depth: Some(max_depth),
+            coords: coords.clone(),
+        }),
+        summary: format!(
+            "{} mutations in {:.2} s ({:.3} M mutations/s, bootstrap {:.2} s), b = {:.5} ± {:.5}{}",
+            result.mutations,
+            result.seconds,
+            mutations_per_second / 1e6,
+            result.bootstrap_seconds,
+            result.scale,
+            result.scale_standard_error,
+            if result.interrupted {
+                ", stopped early"
+            } else {
+                ""
+            },
+        ),
+    }
+}
