@@ -1,7 +1,9 @@
 //! PSSMLT on `mcmc-core`: unbiased start-up, extreme primary samples,
-//! black scenes, thread-count determinism and Kelemen's MIS variant.
-//! Agreement with path tracing on the repo's Cornell variants is
-//! `agree_mlt.rs`.
+//! black scenes, thread-count determinism (also of replica sets under the
+//! driver's exchange path) and Kelemen's MIS variant. Agreement with path
+//! tracing on the repo's Cornell variants is `agree_mlt.rs`.
+
+mod common;
 
 use mcmc_core::rng::stream_rng;
 use mcmc_core::runner::with_threads;
@@ -222,6 +224,46 @@ fn images_are_bit_identical_across_thread_counts() {
         assert!(one == bits(5, 42), "{small:?}: 1 vs 5 threads differ");
         assert!(one != bits(2, 43), "{small:?}: seed ignored");
     }
+}
+
+#[test]
+fn replica_sets_are_bit_identical_across_thread_counts() {
+    // The driver's exchange path: 12 sets of three powered levels with
+    // even–odd swaps, spread over 5 tasks.
+    let scene = cornell(16, 0.0, 5);
+    let family = common::tempered::TemperedPss::new(&scene, pt_of(&scene), &[1.0, 0.6, 0.3]);
+    let run = |threads: usize, seed: u64| {
+        let mut st = small_settings(seed);
+        st.bootstrap = 2000;
+        st.chains = 36;
+        st.tasks = 5;
+        st.mutations_per_pixel = Some(12);
+        let stop = AtomicBool::new(false);
+        let r = with_threads(threads, || {
+            mcmc_render::markov::run(&scene, &family, &st, &stop, &NoObserver).expect("runs")
+        });
+        let bits: Vec<u32> = r
+            .image()
+            .iter()
+            .flat_map(|p| [p.r.to_bits(), p.g.to_bits(), p.b.to_bits()])
+            .collect();
+        (bits, r.exchange.expect("exchange counts"))
+    };
+    let (one, exchange) = run(1, 42);
+    assert!(
+        exchange.pairs.iter().any(|p| p.accepted > 0),
+        "no swap accepted: {exchange:?}"
+    );
+    assert!(one.iter().any(|&b| b != 0), "black image");
+    assert!(
+        run(2, 42) == (one.clone(), exchange.clone()),
+        "1 vs 2 threads differ"
+    );
+    assert!(
+        run(3, 42) == (one.clone(), exchange),
+        "1 vs 3 threads differ"
+    );
+    assert!(run(2, 43).0 != one, "seed ignored");
 }
 
 #[test]

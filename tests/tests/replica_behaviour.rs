@@ -348,3 +348,42 @@ fn the_observer_sees_exactly_level_one_transitions() {
         assert!(last.is_some());
     }
 }
+
+#[test]
+fn the_level_observer_sees_every_level_and_changes_nothing() {
+    for kind in MOVES {
+        let mut plain = ensemble(kind, 4, 6);
+        let mut observed = ensemble(kind, 4, 6);
+        let mut seen = [0usize; 4];
+        let mut last = [f64::NAN; 4];
+        for i in 0..200 {
+            if i == 50 {
+                plain.freeze();
+                observed.freeze();
+            }
+            plain.sweep();
+            observed.sweep_observed_levels(&mut |level, t| {
+                seen[level] += 1;
+                last[level] = t.current.state[0];
+            });
+            for l in 0..4 {
+                assert_eq!(
+                    plain.current(l).state[0].to_bits(),
+                    observed.current(l).state[0].to_bits(),
+                    "{kind}: sweep {i}, level {l}"
+                );
+            }
+        }
+        assert_eq!(plain.statistics(), observed.statistics(), "{kind}");
+        // One mutation per level and sweep (EES may replace a mutation by
+        // a jump, which is not reported).
+        for (l, &n) in seen.iter().enumerate() {
+            if kind.ends_with("ees") {
+                assert!(n <= 200 && n > 0, "{kind}: level {l}: {n}");
+            } else {
+                assert_eq!(n, 200, "{kind}: level {l}");
+            }
+        }
+        assert!(last.iter().all(|x| x.is_finite()), "{kind}: {last:?}");
+    }
+}

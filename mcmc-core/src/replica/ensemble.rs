@@ -16,6 +16,9 @@ use rayon::prelude::*;
 /// A sweep observer of level 0's transitions.
 pub type Observer<'a, S, P> = dyn FnMut(&Transition<'_, S, P>) + Send + 'a;
 
+/// A sweep observer of every level's transitions, with the level.
+pub type LevelObserver<'a, S, P> = dyn FnMut(usize, &Transition<'_, S, P>) + Send + 'a;
+
 /// `(partner, α, accepted)` of an attempted jump.
 type JumpRecord = Option<(usize, f64, bool)>;
 
@@ -67,7 +70,7 @@ pub struct ReplicaExchange<S, F: ReplicaFamily<S>, A> {
 
 impl<S, F, A> ReplicaExchange<S, F, A>
 where
-    S: Clone + Send + Sync,
+    S: Clone + Send,
     F: ReplicaFamily<S> + Sync,
     F::Payload: Send + Sync,
     A: Algorithm<S, F::Payload> + Send,
@@ -229,6 +232,39 @@ where
                 }
             }
         }
+        self.end_sweep();
+    }
+
+    /// One sweep on the calling thread that reports every level's mutation
+    /// transition, with its level, to `observer` (a renderer splats each
+    /// level into its own film). Same streams, same result as
+    /// [`ReplicaExchange::sweep`]; equi-energy jumps are not reported.
+    pub fn sweep_observed_levels(&mut self, observer: &mut LevelObserver<'_, S, F::Payload>) {
+        let m = self.levels();
+        match self.exchange.schedule() {
+            Schedule::AfterAllMutations => {
+                for level in 0..m {
+                    self.mutate_reporting(level, observer);
+                }
+                self.run_exchange(None);
+            }
+            Schedule::BeforeEachMutation => {
+                for level in (0..m).rev() {
+                    self.run_exchange(Some(level));
+                    self.mutate_reporting(level, observer);
+                }
+            }
+            Schedule::AfterEachMutation => {
+                for level in (0..m).rev() {
+                    self.mutate_reporting(level, observer);
+                    self.run_exchange(Some(level));
+                }
+            }
+        }
+        self.end_sweep();
+    }
+
+    fn end_sweep(&mut self) {
         self.cache.clear();
         let mut cx = ExchangeContext {
             family: &self.family,
@@ -241,6 +277,18 @@ where
         };
         self.exchange.end_sweep(&mut cx);
         self.stats.end_sweep();
+    }
+
+    fn mutate_reporting(&mut self, level: usize, observer: &mut LevelObserver<'_, S, F::Payload>) {
+        let jump = step_level(
+            &self.family,
+            &*self.exchange,
+            level,
+            &mut self.chains[level],
+            &mut self.algorithms[level],
+            &mut |t| observer(level, t),
+        );
+        self.record_jump(level, jump);
     }
 
     fn run_exchange(&mut self, level: Option<usize>) {

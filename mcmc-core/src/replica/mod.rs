@@ -53,7 +53,7 @@ mod stats;
 
 pub use adaptive_equi_energy::AdaptiveEquiEnergy;
 pub use context::{ExchangeContext, swap_log_acceptance};
-pub use ensemble::ReplicaExchange;
+pub use ensemble::{LevelObserver, ReplicaExchange};
 pub use equi_energy::{EquiEnergyMove, equi_energy_pair_probabilities};
 pub use equi_energy_sampler::EquiEnergySampler;
 pub use even_odd::EvenOdd;

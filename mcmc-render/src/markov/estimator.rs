@@ -35,6 +35,9 @@ pub struct FamilyResult {
     pub scale: f64,
     /// The standard error of [`FamilyResult::scale`] (0 with Kelemen's MIS).
     pub scale_standard_error: f64,
+    /// The weight of this member's image in the final image
+    /// ([`ChainFamily::image_weight`]; 0: not filmed).
+    pub image_weight: f64,
     /// Bootstrap `b_d` and its standard error.
     pub bootstrap_b: (f64, f64),
     /// Running `⟨b_d⟩` (bootstrap and large steps) and its standard error.
@@ -43,9 +46,10 @@ pub struct FamilyResult {
 
 impl FamilyResult {
     /// This member's image: its film over its own mutations per pixel,
-    /// times its scale (see [`super::run`] for why per member).
+    /// times its scale and image weight (see [`super::run`] for why per
+    /// member).
     pub fn image(&self) -> Vec<Rgb> {
-        develop(&self.film, self.mutations, self.scale)
+        develop(&self.film, self.mutations, self.scale * self.image_weight)
     }
 }
 
@@ -86,6 +90,7 @@ pub(crate) struct MemberTotals<'a> {
     pub mutations: Vec<u64>,
     pub bootstrap_b: &'a [(f64, f64)],
     pub chains: &'a [usize],
+    pub image_weights: &'a [f64],
     pub mis: bool,
     pub normalization: Normalization,
 }
@@ -99,6 +104,7 @@ impl MemberTotals<'_> {
             mutations,
             bootstrap_b,
             chains,
+            image_weights,
             mis,
             normalization,
         } = self;
@@ -121,6 +127,7 @@ impl MemberTotals<'_> {
                     chains: chains[d],
                     scale,
                     scale_standard_error,
+                    image_weight: image_weights[d],
                     bootstrap_b: bootstrap_b[d],
                     running_b,
                 }
@@ -159,12 +166,20 @@ fn splat_all(film: &mut Film, s: &PathSample, w: f64) {
     }
 }
 
-/// The per-task accumulators the estimator writes.
-pub(crate) struct Accumulators<'a> {
-    pub film: &'a mut Film,
+/// What the transitions of a work unit's chains count, whatever their member.
+#[derive(Default)]
+pub(crate) struct TransitionCounts {
+    /// Proposals and acceptances per path depth.
+    pub per_depth: Vec<DepthAcceptance>,
+    /// The coordinates of the first NaN/inf proposal.
+    pub first_nonfinite: Option<Vec<f64>>,
+}
+
+/// Where one member's transitions go: its film (`None` for a member whose
+/// image weight is 0) and its running normalisation.
+pub(crate) struct MemberSink<'a> {
+    pub film: Option<&'a mut Film>,
     pub running: &'a mut RunningNormalization,
-    pub per_depth: &'a mut Vec<DepthAcceptance>,
-    pub first_nonfinite: &'a mut Option<Vec<f64>>,
 }
 
 /// Expected-value splatting and statistics of one transition.
@@ -172,33 +187,38 @@ pub(crate) fn observe<F: ChainFamily>(
     family: &F,
     t: &Transition<'_, F::State, PathSample>,
     w: &Weights,
-    acc: &mut Accumulators<'_>,
+    sink: &mut MemberSink<'_>,
+    counts: &mut TransitionCounts,
 ) {
     let independent = family.is_independent(t.component);
     if let Some(y) = t.proposal {
         if independent {
             // ln I(y) − ln p₀(y); NaN counts as zero.
-            acc.running
+            sink.running
                 .add(y.log_density - family.reference_log_density(&y.state));
         }
         if y.log_density.is_nan() || y.log_density == f64::INFINITY {
-            if acc.first_nonfinite.is_none() {
-                *acc.first_nonfinite = family.coordinates(&y.state);
+            if counts.first_nonfinite.is_none() {
+                counts.first_nonfinite = family.coordinates(&y.state);
             }
         } else if y.log_density > f64::NEG_INFINITY {
             let d = y.payload.depth as usize;
-            if acc.per_depth.len() <= d {
-                acc.per_depth.resize(d + 1, DepthAcceptance::default());
+            if counts.per_depth.len() <= d {
+                counts.per_depth.resize(d + 1, DepthAcceptance::default());
             }
-            acc.per_depth[d].proposed += 1;
-            acc.per_depth[d].accepted += u64::from(t.accepted);
-            // `I(y)` itself (ln I is its logarithm): saves an `exp` per state.
-            let i = y.payload.luminance();
-            splat_all(acc.film, &y.payload, w.of(t.alpha, independent, i));
+            counts.per_depth[d].proposed += 1;
+            counts.per_depth[d].accepted += u64::from(t.accepted);
+            if let Some(film) = sink.film.as_deref_mut() {
+                // `I(y)` itself (ln I is its logarithm): saves an `exp` per state.
+                let i = y.payload.luminance();
+                splat_all(film, &y.payload, w.of(t.alpha, independent, i));
+            }
         }
         // A black proposal (I = 0) contributes nothing, in either weighting.
     }
-    let x = t.current;
-    let ix = x.payload.luminance();
-    splat_all(acc.film, &x.payload, w.of(1.0 - t.alpha, false, ix));
+    if let Some(film) = sink.film.as_deref_mut() {
+        let x = t.current;
+        let ix = x.payload.luminance();
+        splat_all(film, &x.payload, w.of(1.0 - t.alpha, false, ix));
+    }
 }

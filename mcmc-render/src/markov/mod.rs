@@ -51,6 +51,7 @@
 pub mod estimator;
 pub mod report;
 mod startup;
+mod work;
 
 use crate::color::Rgb;
 use crate::film::{Film, Filter};
@@ -58,21 +59,23 @@ use crate::integrators::RunSettings;
 use crate::observer::Observer;
 use crate::pss::PathSample;
 use crate::scene::Scene;
-use estimator::{Accumulators, MemberTotals, Weights, observe, sum_images};
 pub use estimator::{DepthAcceptance, FamilyResult, develop};
+use estimator::{MemberTotals, Weights, sum_images};
 use mcmc_core::chain::Chain;
 use mcmc_core::kernel::Kernel;
 use mcmc_core::mh::MetropolisHastings;
-use mcmc_core::rng::stream_rng;
+use mcmc_core::replica::{ExchangeMove, ReplicaExchange};
+use mcmc_core::rng::{splitmix64, stream_rng};
 use mcmc_core::startup::{Bootstrap, RunningNormalization};
 use mcmc_core::stats::ChainStatistics;
 use mcmc_core::target::Target;
-use rayon::prelude::*;
+use serde::Serialize;
 use startup::{RESAMPLE_STREAM, allocate_chains, candidate_log_weights, index_bootstrap};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 use thiserror::Error;
+use work::{ChainSlot, Members, ReplicaSlot, Task, Units};
 
 /// Why a Markov-chain render could not run.
 #[derive(Debug, Error)]
@@ -201,6 +204,92 @@ pub trait ChainFamily: Sync {
     /// Numbers that reproduce a state (the NaN dump for `--replay`), if
     /// the space has them.
     fn coordinates(&self, state: &Self::State) -> Option<Vec<f64>>;
+    /// The exchange move of a family whose members are the levels of a
+    /// replica ladder (tempered targets, roughened scenes), made anew for
+    /// each replica set. With a move, chains come in replica sets of one
+    /// chain per member, and each set runs `mcmc-core`'s
+    /// [`ReplicaExchange`]; without one (the default), every chain stays
+    /// with its member.
+    fn exchange_move(&self) -> Option<Box<dyn ExchangeMove<Self::State, PathSample>>> {
+        None
+    }
+    /// The weight of member `member`'s image in the final image: 1 (the
+    /// default) for members whose targets split the image (the depths of
+    /// MMLT); 0 for members that only help the others mix (the hot levels
+    /// of a ladder), which are then not filmed.
+    fn image_weight(&self, _member: usize) -> f64 {
+        1.0
+    }
+}
+
+/// Exchange counts summed over a run's replica sets.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ExchangeSummary {
+    /// The exchange move's name.
+    pub name: String,
+    /// Sweeps of all sets.
+    pub sweeps: u64,
+    /// Round trips of replicas between the first and last level.
+    pub round_trips: u64,
+    /// Attempted pairs `(i, j)`, `i ≤ j`, with their counts.
+    pub pairs: Vec<ExchangePair>,
+}
+
+/// Exchanges between two members.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ExchangePair {
+    /// Lower member.
+    pub i: usize,
+    /// Upper member (`i` itself counts identity draws of importance-sampled moves).
+    pub j: usize,
+    /// Exchanges attempted.
+    pub attempted: u64,
+    /// Exchanges accepted.
+    pub accepted: u64,
+    /// Mean acceptance probability.
+    pub mean_alpha: f64,
+}
+
+impl ExchangeSummary {
+    fn new(name: String) -> Self {
+        ExchangeSummary {
+            name,
+            sweeps: 0,
+            round_trips: 0,
+            pairs: Vec::new(),
+        }
+    }
+
+    /// Adds the counts of one replica set.
+    fn add<S: Clone + Send, F, A>(&mut self, set: &ReplicaExchange<S, F, A>)
+    where
+        F: mcmc_core::replica::ReplicaFamily<S> + Sync,
+        F::Payload: Send + Sync,
+        A: mcmc_core::chain::Algorithm<S, F::Payload> + Send,
+    {
+        let stats = set.statistics();
+        self.sweeps += stats.sweeps;
+        self.round_trips += set.index_process().total_round_trips();
+        for (i, j, p) in stats.attempted_pairs() {
+            let n = p.attempted as f64;
+            match self.pairs.iter_mut().find(|q| (q.i, q.j) == (i, j)) {
+                Some(q) => {
+                    let total = q.attempted as f64 + n;
+                    q.mean_alpha = (q.mean_alpha * q.attempted as f64 + p.sum_alpha) / total;
+                    q.attempted += p.attempted;
+                    q.accepted += p.accepted;
+                }
+                None => self.pairs.push(ExchangePair {
+                    i,
+                    j,
+                    attempted: p.attempted,
+                    accepted: p.accepted,
+                    mean_alpha: p.sum_alpha / n,
+                }),
+            }
+        }
+        self.pairs.sort_by_key(|q| (q.i, q.j));
+    }
 }
 
 /// The driver's settings (pbrt-v4's `mlt` defaults where they apply),
@@ -275,6 +364,8 @@ pub struct MltResult {
     pub running_b: (f64, f64),
     /// Statistics of all chains (per kernel component, NaN/inf count).
     pub chain_stats: ChainStatistics,
+    /// Exchange counts, for families with an exchange move.
+    pub exchange: Option<ExchangeSummary>,
     /// Acceptance per path depth (index = depth).
     pub per_depth: Vec<DepthAcceptance>,
     /// Bootstrap candidates with a NaN/inf contribution.
@@ -300,31 +391,6 @@ impl MltResult {
 fn quadrature(errors: impl Iterator<Item = f64>) -> f64 {
     errors.map(|e| e * e).sum::<f64>().sqrt()
 }
-
-type FamilyChain<F> = Chain<
-    <F as ChainFamily>::State,
-    PathSample,
-    MetropolisHastings<<F as ChainFamily>::Kernel, <F as ChainFamily>::State, PathSample>,
->;
-
-struct ChainSlot<F: ChainFamily> {
-    chain: FamilyChain<F>,
-    remaining: Option<u64>,
-}
-
-/// A work unit: chains of one family member, run one after another.
-struct Task<F: ChainFamily> {
-    member: usize,
-    chains: Vec<ChainSlot<F>>,
-    film: Film,
-    running: RunningNormalization,
-    per_depth: Vec<DepthAcceptance>,
-    mutations: u64,
-    first_nonfinite: Option<Vec<f64>>,
-}
-
-/// Mutations per chain per round (bounds the time between snapshots).
-const ROUND: u64 = 256;
 
 /// The start-up of every member: its bootstrap and the running estimate
 /// seeded with its candidates.
@@ -433,7 +499,20 @@ pub fn run<F: ChainFamily>(
         .iter()
         .map(|&(b, _)| if b > 0.0 { b.powf(gamma) } else { 0.0 })
         .collect();
-    let chains_of = allocate_chains(settings.chains, &shares);
+    let exchange = family.exchange_move().is_some();
+    // With an exchange move every set holds one chain per member.
+    let sets = (settings.chains / members).max(1);
+    let chains_of = if exchange {
+        if let Some(d) = bootstrap_b.iter().position(|b| b.0 <= 0.0) {
+            return Err(MltError::Setting(format!(
+                "member {d} of the replica ladder had no contributing bootstrap path; \
+                 its chains cannot start (raise `bootstrap`)"
+            )));
+        }
+        vec![sets; members]
+    } else {
+        allocate_chains(settings.chains, &shares)
+    };
     let mut starts: Vec<Vec<usize>> = Vec::with_capacity(members);
     for (d, boot) in boots.iter().enumerate() {
         let mut rng = stream_rng(seed, RESAMPLE_STREAM + 1 + d as u64);
@@ -446,50 +525,14 @@ pub fn run<F: ChainFamily>(
     }
     let bootstrap_seconds = start.elapsed().as_secs_f64();
 
-    // Chains, numbered member by member, grouped into tasks of one member
-    // each (about `settings.tasks` in all) in contiguous blocks.
     let total = settings.mutations_per_pixel.map(|m| m * pixels);
-    let per_chain = |c: usize| {
-        total.map(|t| {
-            let n = settings.chains as u64;
-            t / n + u64::from((c as u64) < t % n)
-        })
-    };
     let filter = Arc::new(Filter::new(scene.film.filter, width, height));
-    let mut tasks: Vec<Task<F>> = Vec::new();
-    let mut c = 0usize;
-    for (d, member_starts) in starts.iter().enumerate() {
-        let n = member_starts.len();
-        if n == 0 {
-            continue;
-        }
-        let k = ((settings.tasks * n + settings.chains / 2) / settings.chains).clamp(1, n);
-        let first = tasks.len();
-        for _ in 0..k {
-            tasks.push(Task {
-                member: d,
-                chains: Vec::new(),
-                film: Film::new(width, height, filter.clone()),
-                running: RunningNormalization::new(),
-                per_depth: Vec::new(),
-                mutations: 0,
-                first_nonfinite: None,
-            });
-        }
-        for (i, &candidate) in member_starts.iter().enumerate() {
-            let chain = Chain::new(
-                family.target(d),
-                family.candidate(seed, candidate as u64),
-                MetropolisHastings::new(family.kernel(&settings.mutation, d)?),
-                stream_rng(seed, c as u64),
-            )?;
-            tasks[first + i * k / n].chains.push(ChainSlot {
-                chain,
-                remaining: per_chain(c),
-            });
-            c += 1;
-        }
-    }
+    let new_film = || Film::new(width, height, filter.clone());
+    let mut tasks = if exchange {
+        replica_tasks(family, settings, &starts, sets, total, &new_film)?
+    } else {
+        chain_tasks(family, settings, &starts, total, &new_film)?
+    };
 
     let p_independent = family.independent_probability(&settings.mutation);
     let weights: Vec<Weights> = bootstrap_b
@@ -500,77 +543,35 @@ pub fn run<F: ChainFamily>(
             b,
         })
         .collect();
+    let image_weights: Vec<f64> = (0..members).map(|d| family.image_weight(d)).collect();
     // Snapshots and the final image gather the same per-member films.
     let gather = |tasks: &[Task<F>]| {
         let mut totals = MemberTotals {
-            films: (0..members)
-                .map(|_| Film::new(width, height, filter.clone()))
-                .collect(),
+            films: (0..members).map(|_| new_film()).collect(),
             running: boot_running.clone(),
             mutations: vec![0; members],
             bootstrap_b: &bootstrap_b,
             chains: &chains_of,
+            image_weights: &image_weights,
             mis: settings.mis_large_steps,
             normalization: settings.normalization,
         };
         for t in tasks {
-            totals.films[t.member].add_film(&t.film);
-            totals.running[t.member].merge(&t.running);
-            totals.mutations[t.member] += t.mutations;
+            for (i, &m) in t.members.iter().enumerate() {
+                if let Some(film) = &t.films[i] {
+                    totals.films[m].add_film(film);
+                }
+                totals.running[m].merge(&t.running[i]);
+                totals.mutations[m] += t.mutations[i];
+            }
         }
         totals.results()
     };
+    let stopped = || stop.load(Ordering::Relaxed) || out_of_time();
     let mut interrupted = false;
     let mut last_preview = Instant::now();
-    loop {
-        let all_done = tasks
-            .iter()
-            .all(|t| t.chains.iter().all(|c| c.remaining == Some(0)));
-        if all_done {
-            break;
-        }
-        if stop.load(Ordering::Relaxed) || out_of_time() {
-            interrupted = true;
-            break;
-        }
-        let aborted = AtomicBool::new(false);
-        tasks.par_iter_mut().for_each(|task| {
-            let Task {
-                member,
-                chains,
-                film,
-                running,
-                per_depth,
-                mutations,
-                first_nonfinite,
-            } = task;
-            let target = family.target(*member);
-            let w = &weights[*member];
-            let mut acc = Accumulators {
-                film,
-                running,
-                per_depth,
-                first_nonfinite,
-            };
-            for slot in chains.iter_mut() {
-                if aborted.load(Ordering::Relaxed) || stop.load(Ordering::Relaxed) || out_of_time()
-                {
-                    aborted.store(true, Ordering::Relaxed);
-                    return;
-                }
-                let n = slot.remaining.map_or(ROUND, |r| r.min(ROUND));
-                for _ in 0..n {
-                    slot.chain
-                        .step_with(target, |t| observe(family, t, w, &mut acc));
-                }
-                if let Some(r) = slot.remaining.as_mut() {
-                    *r -= n;
-                }
-                *mutations += n;
-                observer.progress(n);
-            }
-        });
-        if aborted.load(Ordering::Relaxed) {
+    while !tasks.iter().all(Task::done) {
+        if stopped() || !work::run_round(&mut tasks, family, &weights, &stopped, observer) {
             interrupted = true;
             break;
         }
@@ -588,44 +589,145 @@ pub fn run<F: ChainFamily>(
     let families = gather(&tasks);
     let mutations: u64 = families.iter().map(|f| f.mutations).sum();
     let mut chain_stats: Option<ChainStatistics> = None;
-    let mut per_depth: Vec<DepthAcceptance> = Vec::new();
-    let mut first_nonfinite = None;
+    let mut exchange_summary = None;
     for t in &tasks {
-        for s in &t.chains {
-            match chain_stats.as_mut() {
-                Some(cs) => cs.merge(s.chain.stats()),
-                None => chain_stats = Some(s.chain.stats().clone()),
-            }
-        }
-        if per_depth.len() < t.per_depth.len() {
-            per_depth.resize(t.per_depth.len(), DepthAcceptance::default());
-        }
-        for (d, a) in t.per_depth.iter().enumerate() {
-            per_depth[d].proposed += a.proposed;
-            per_depth[d].accepted += a.accepted;
-        }
-        if first_nonfinite.is_none() {
-            first_nonfinite.clone_from(&t.first_nonfinite);
-        }
+        t.collect_statistics(&mut chain_stats, &mut exchange_summary);
     }
+    let first_nonfinite = tasks.iter().find_map(|t| t.counts.first_nonfinite.clone());
     let running_b = (
         families.iter().map(|f| f.running_b.0).sum(),
         quadrature(families.iter().map(|f| f.running_b.1)),
     );
     Ok(MltResult {
-        scale: families.iter().map(|f| f.scale).sum(),
-        scale_standard_error: quadrature(families.iter().map(|f| f.scale_standard_error)),
+        scale: families.iter().map(|f| f.image_weight * f.scale).sum(),
+        scale_standard_error: quadrature(
+            families
+                .iter()
+                .map(|f| f.image_weight * f.scale_standard_error),
+        ),
+        per_depth: work::per_depth(&tasks),
         families,
         mutations,
         mutations_per_pixel: mutations as f64 / pixels as f64,
         bootstrap_b: (b_star, b_star_se),
         running_b,
         chain_stats: chain_stats.unwrap_or_else(|| ChainStatistics::new(Vec::new())),
-        per_depth,
+        exchange: exchange_summary,
         bootstrap_invalid: invalid,
         first_nonfinite,
         bootstrap_seconds,
         seconds: start.elapsed().as_secs_f64(),
         interrupted,
     })
+}
+
+/// `total` split over `n` parts, part `k`'s share (the first `total % n`
+/// parts take one more).
+fn share(total: u64, n: usize, k: usize) -> u64 {
+    let n = n as u64;
+    total / n + u64::from((k as u64) < total % n)
+}
+
+/// Independent chains, numbered member by member, grouped into tasks of
+/// one member each (about `settings.tasks` in all) in contiguous blocks.
+fn chain_tasks<'f, F: ChainFamily>(
+    family: &'f F,
+    settings: &ChainSettings<F::Mutation>,
+    starts: &[Vec<usize>],
+    total: Option<u64>,
+    new_film: &dyn Fn() -> Film,
+) -> Result<Vec<Task<'f, F>>, MltError> {
+    let seed = settings.seed;
+    let mut tasks: Vec<Task<F>> = Vec::new();
+    let mut c = 0usize;
+    for (d, member_starts) in starts.iter().enumerate() {
+        let n = member_starts.len();
+        if n == 0 {
+            continue;
+        }
+        let k = ((settings.tasks * n + settings.chains / 2) / settings.chains).clamp(1, n);
+        let first = tasks.len();
+        for _ in 0..k {
+            tasks.push(Task::new(
+                vec![d],
+                family,
+                new_film,
+                Units::Chains(Vec::new()),
+            ));
+        }
+        for (i, &candidate) in member_starts.iter().enumerate() {
+            let chain = Chain::new(
+                family.target(d),
+                family.candidate(seed, candidate as u64),
+                MetropolisHastings::new(family.kernel(&settings.mutation, d)?),
+                stream_rng(seed, c as u64),
+            )?;
+            let Units::Chains(chains) = &mut tasks[first + i * k / n].units else {
+                unreachable!("chain tasks hold chains");
+            };
+            chains.push(ChainSlot {
+                chain,
+                remaining: total.map(|t| share(t, settings.chains, c)),
+            });
+            c += 1;
+        }
+    }
+    Ok(tasks)
+}
+
+/// Stream offset from which replica set `k`'s seed is derived (its level
+/// `l` then draws from `stream_rng(set seed, l)`).
+const REPLICA_SET_STREAM: u64 = 1 << 42;
+
+/// `sets` replica sets (set `k` starts level `l` from `starts[l][k]`) in
+/// about `settings.tasks` tasks of contiguous sets; the mutations are
+/// shared out as sweeps of one mutation per member.
+fn replica_tasks<'f, F: ChainFamily>(
+    family: &'f F,
+    settings: &ChainSettings<F::Mutation>,
+    starts: &[Vec<usize>],
+    sets: usize,
+    total: Option<u64>,
+    new_film: &dyn Fn() -> Film,
+) -> Result<Vec<Task<'f, F>>, MltError> {
+    let seed = settings.seed;
+    let members = family.members();
+    let sweeps = total.map(|t| t.div_ceil(members as u64));
+    let k = settings.tasks.clamp(1, sets);
+    let mut tasks: Vec<Task<F>> = (0..k)
+        .map(|_| {
+            Task::new(
+                (0..members).collect(),
+                family,
+                new_film,
+                Units::Replicas(Vec::new()),
+            )
+        })
+        .collect();
+    for set in 0..sets {
+        let initial = (0..members)
+            .map(|l| family.candidate(seed, starts[l][set] as u64))
+            .collect();
+        let algorithms = (0..members)
+            .map(|l| {
+                Ok(MetropolisHastings::new(
+                    family.kernel(&settings.mutation, l)?,
+                ))
+            })
+            .collect::<Result<_, MltError>>()?;
+        let exchange = family
+            .exchange_move()
+            .ok_or_else(|| MltError::Setting("the family's exchange move vanished".into()))?;
+        let set_seed = splitmix64(seed ^ splitmix64(REPLICA_SET_STREAM + set as u64));
+        let ensemble =
+            ReplicaExchange::new(Members(family), initial, algorithms, exchange, set_seed)?;
+        let Units::Replicas(slots) = &mut tasks[set * k / sets].units else {
+            unreachable!("replica tasks hold replica sets");
+        };
+        slots.push(ReplicaSlot {
+            set: ensemble,
+            remaining: sweeps.map(|t| share(t, sets, set)),
+        });
+    }
+    Ok(tasks)
 }

@@ -57,10 +57,13 @@ pub fn rendered(
         "nonfinite_contributions": cs.invalid_density,
         "nonfinite_bootstrap_candidates": result.bootstrap_invalid,
     });
-    let statistics = match statistics {
+    let mut statistics = match statistics {
         Value::Object(m) => m,
         _ => unreachable!("json! of an object literal is an object"),
     };
+    if let Some(exchange) = &result.exchange {
+        statistics.insert("exchange".into(), json!(exchange));
+    }
     Rendered {
         image: result.image(),
         seconds: result.seconds,

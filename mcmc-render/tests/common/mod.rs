@@ -414,3 +414,5 @@ pub fn point_light_on_a_plane() -> (Scene, f64) {
     expected /= (w * hgt * 256) as f64;
     (scene, expected)
 }
+
+pub mod tempered;

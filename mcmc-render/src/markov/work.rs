@@ -1,0 +1,255 @@
+//! The driver's work units: tasks of independent chains (one family
+//! member each) or of replica sets (one chain per member, coupled by an
+//! exchange move), each with its films, normalisation estimates and
+//! counters, run in rounds.
+
+use super::estimator::{DepthAcceptance, MemberSink, TransitionCounts, Weights, observe};
+use super::{ChainFamily, ExchangeSummary};
+use crate::film::Film;
+use crate::observer::Observer;
+use crate::pss::PathSample;
+use mcmc_core::chain::{Chain, Transition};
+use mcmc_core::mh::MetropolisHastings;
+use mcmc_core::replica::{ReplicaExchange, ReplicaFamily};
+use mcmc_core::startup::RunningNormalization;
+use mcmc_core::stats::ChainStatistics;
+use mcmc_core::target::{Evaluation, Target};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// Mutations per chain per round (bounds the time between snapshots).
+const ROUND: u64 = 256;
+
+/// The metropolised kernel of a family's chains.
+pub(crate) type FamilyAlgorithm<F> =
+    MetropolisHastings<<F as ChainFamily>::Kernel, <F as ChainFamily>::State, PathSample>;
+
+/// A family's members seen as the levels of an `mcmc-core` replica family.
+pub(crate) struct Members<'f, F>(pub &'f F);
+
+impl<F: ChainFamily> ReplicaFamily<F::State> for Members<'_, F> {
+    type Payload = PathSample;
+
+    fn levels(&self) -> usize {
+        self.0.members()
+    }
+
+    fn evaluate(&self, level: usize, state: &F::State) -> Evaluation<PathSample> {
+        self.0.target(level).evaluate(state)
+    }
+}
+
+/// One replica set: a chain per member and the family's exchange move.
+pub(crate) type ReplicaSet<'f, F> =
+    ReplicaExchange<<F as ChainFamily>::State, Members<'f, F>, FamilyAlgorithm<F>>;
+
+/// A chain and the mutations it still has to do (`None`: until stopped).
+pub(crate) struct ChainSlot<F: ChainFamily> {
+    pub chain: Chain<F::State, PathSample, FamilyAlgorithm<F>>,
+    pub remaining: Option<u64>,
+}
+
+/// A replica set and the sweeps it still has to do (`None`: until stopped).
+pub(crate) struct ReplicaSlot<'f, F: ChainFamily> {
+    pub set: ReplicaSet<'f, F>,
+    pub remaining: Option<u64>,
+}
+
+/// What a task runs.
+pub(crate) enum Units<'f, F: ChainFamily> {
+    /// Independent chains, all of the task's single member.
+    Chains(Vec<ChainSlot<F>>),
+    /// Replica sets over all members.
+    Replicas(Vec<ReplicaSlot<'f, F>>),
+}
+
+/// A work unit: its chains or replica sets, run one after another, and
+/// what they accumulate for the members they serve.
+pub(crate) struct Task<'f, F: ChainFamily> {
+    /// The members this task serves; slot `i` of the vectors below is
+    /// member `members[i]`.
+    pub members: Vec<usize>,
+    /// Splat films (`None` for members whose image weight is 0).
+    pub films: Vec<Option<Film>>,
+    /// Running normalisation estimates.
+    pub running: Vec<RunningNormalization>,
+    /// Mutations done.
+    pub mutations: Vec<u64>,
+    /// Per-depth acceptance and the first NaN/inf proposal.
+    pub counts: TransitionCounts,
+    /// The chains or replica sets.
+    pub units: Units<'f, F>,
+}
+
+impl<'f, F: ChainFamily> Task<'f, F> {
+    /// An empty task serving `members`, with a film (made by `film`) for
+    /// each member of non-zero image weight.
+    pub fn new(
+        members: Vec<usize>,
+        family: &F,
+        film: &dyn Fn() -> Film,
+        units: Units<'f, F>,
+    ) -> Self {
+        let n = members.len();
+        Task {
+            films: members
+                .iter()
+                .map(|&m| (family.image_weight(m) != 0.0).then(film))
+                .collect(),
+            members,
+            running: vec![RunningNormalization::new(); n],
+            mutations: vec![0; n],
+            counts: TransitionCounts::default(),
+            units,
+        }
+    }
+
+    /// Whether every unit has done its share.
+    pub fn done(&self) -> bool {
+        match &self.units {
+            Units::Chains(c) => c.iter().all(|s| s.remaining == Some(0)),
+            Units::Replicas(r) => r.iter().all(|s| s.remaining == Some(0)),
+        }
+    }
+
+    /// One round: up to [`ROUND`] mutations of every chain (sweeps of
+    /// every replica set). Returns `false` when `abort` (polled between
+    /// units) cut it short.
+    pub fn run_round(
+        &mut self,
+        family: &F,
+        weights: &[Weights],
+        abort: &(dyn Fn() -> bool + Sync),
+        observer: &dyn Observer,
+    ) -> bool {
+        let Task {
+            members,
+            films,
+            running,
+            mutations,
+            counts,
+            units,
+        } = self;
+        match units {
+            Units::Chains(chains) => {
+                let member = members[0];
+                let target = family.target(member);
+                let w = &weights[member];
+                let mut sink = MemberSink {
+                    film: films[0].as_mut(),
+                    running: &mut running[0],
+                };
+                for slot in chains.iter_mut() {
+                    if abort() {
+                        return false;
+                    }
+                    let n = slot.remaining.map_or(ROUND, |r| r.min(ROUND));
+                    for _ in 0..n {
+                        slot.chain
+                            .step_with(target, |t| observe(family, t, w, &mut sink, counts));
+                    }
+                    if let Some(r) = slot.remaining.as_mut() {
+                        *r -= n;
+                    }
+                    mutations[0] += n;
+                    observer.progress(n);
+                }
+            }
+            Units::Replicas(sets) => {
+                let levels = members.len() as u64;
+                let round = (ROUND / levels).max(1);
+                for slot in sets.iter_mut() {
+                    if abort() {
+                        return false;
+                    }
+                    let n = slot.remaining.map_or(round, |r| r.min(round));
+                    let mut observe_level =
+                        |level: usize, t: &Transition<'_, F::State, PathSample>| {
+                            let mut sink = MemberSink {
+                                film: films[level].as_mut(),
+                                running: &mut running[level],
+                            };
+                            observe(family, t, &weights[level], &mut sink, counts);
+                        };
+                    for _ in 0..n {
+                        slot.set.sweep_observed_levels(&mut observe_level);
+                    }
+                    if let Some(r) = slot.remaining.as_mut() {
+                        *r -= n;
+                    }
+                    mutations.iter_mut().for_each(|m| *m += n);
+                    observer.progress(n * levels);
+                }
+            }
+        }
+        true
+    }
+
+    /// Adds this task's chain statistics into `stats` and its exchange
+    /// counts into `exchange`.
+    pub fn collect_statistics(
+        &self,
+        stats: &mut Option<ChainStatistics>,
+        exchange: &mut Option<ExchangeSummary>,
+    ) {
+        let mut add = |s: &ChainStatistics| match stats.as_mut() {
+            Some(cs) => cs.merge(s),
+            None => *stats = Some(s.clone()),
+        };
+        match &self.units {
+            Units::Chains(chains) => chains.iter().for_each(|c| add(c.chain.stats())),
+            Units::Replicas(sets) => {
+                for slot in sets {
+                    (0..slot.set.levels()).for_each(|l| add(slot.set.chain_statistics(l)));
+                    exchange
+                        .get_or_insert_with(|| {
+                            ExchangeSummary::new(slot.set.statistics().move_name.clone())
+                        })
+                        .add(&slot.set);
+                }
+            }
+        }
+    }
+}
+
+/// Runs one round of every task in parallel; `false` when stopped early.
+pub(crate) fn run_round<F: ChainFamily>(
+    tasks: &mut [Task<'_, F>],
+    family: &F,
+    weights: &[Weights],
+    stop: &(dyn Fn() -> bool + Sync),
+    observer: &dyn Observer,
+) -> bool
+where
+    F::Kernel: Send,
+{
+    use rayon::prelude::*;
+    let aborted = AtomicBool::new(false);
+    let abort = || {
+        if aborted.load(Ordering::Relaxed) || stop() {
+            aborted.store(true, Ordering::Relaxed);
+            true
+        } else {
+            false
+        }
+    };
+    tasks.par_iter_mut().for_each(|task| {
+        task.run_round(family, weights, &abort, observer);
+    });
+    !aborted.load(Ordering::Relaxed)
+}
+
+/// Per-depth acceptance summed over tasks.
+pub(crate) fn per_depth<F: ChainFamily>(tasks: &[Task<'_, F>]) -> Vec<DepthAcceptance> {
+    let mut out: Vec<DepthAcceptance> = Vec::new();
+    for t in tasks {
+        let d = &t.counts.per_depth;
+        if out.len() < d.len() {
+            out.resize(d.len(), DepthAcceptance::default());
+        }
+        for (o, a) in out.iter_mut().zip(d) {
+            o.proposed += a.proposed;
+            o.accepted += a.accepted;
+        }
+    }
+    out
+}

@@ -1,0 +1,115 @@
+//! A test family for the Markov-chain driver's exchange path: PSSMLT over
+//! the path tracer with a ladder of powers `I(u)^β_l` (`β_0 = 1`), coupled
+//! by even–odd swaps; only level 0 is filmed. The powers flatten the
+//! target without changing the splats, so level 0's image is PSSMLT's.
+
+use mcmc_core::kernel::Mixture;
+use mcmc_core::replica::{EvenOdd, ExchangeContext, ExchangeMove, Schedule};
+use mcmc_core::space::TorusPoint;
+use mcmc_core::target::{Evaluation, Target};
+use mcmc_render::integrators::pt::PathTracer;
+use mcmc_render::markov::{ChainFamily, MltError};
+use mcmc_render::pss::{LARGE_STEP_COMPONENT, Mutation, PathSample, PssTarget, bootstrap_point};
+use mcmc_render::scene::Scene;
+
+/// `β · ln I(u)`; `−∞` and NaN pass through (`0·(−∞) = −∞`).
+pub struct PoweredPss<'a> {
+    pub inner: PssTarget<'a, PathTracer>,
+    pub beta: f64,
+}
+
+impl Target<TorusPoint> for PoweredPss<'_> {
+    type Payload = PathSample;
+
+    fn evaluate(&self, state: &TorusPoint) -> Evaluation<PathSample> {
+        let e = self.inner.trace(state);
+        let log_density = if e.log_density.is_finite() {
+            self.beta * e.log_density
+        } else {
+            e.log_density
+        };
+        Evaluation::new(log_density, e.payload)
+    }
+}
+
+/// The ladder. With `blind` the levels swap neighbours without the
+/// acceptance test (a control: level 0 then no longer samples `I`).
+pub struct TemperedPss<'a> {
+    pub levels: Vec<PoweredPss<'a>>,
+    pub blind: bool,
+}
+
+/// Swaps every neighbour pair after each sweep, always.
+struct BlindSwap;
+
+impl<S, P: Clone> ExchangeMove<S, P> for BlindSwap {
+    fn name(&self) -> String {
+        "blind".into()
+    }
+    fn schedule(&self) -> Schedule {
+        Schedule::AfterAllMutations
+    }
+    fn exchange(&mut self, _level: Option<usize>, cx: &mut ExchangeContext<'_, S, P>) {
+        for i in 1..cx.levels() {
+            cx.swap(i - 1, i);
+        }
+    }
+}
+
+impl<'a> TemperedPss<'a> {
+    /// PSSMLT over `pt` on `scene` at the inverse temperatures `betas`.
+    pub fn new(scene: &'a Scene, pt: PathTracer, betas: &[f64]) -> Self {
+        TemperedPss {
+            levels: betas
+                .iter()
+                .map(|&beta| PoweredPss {
+                    inner: PssTarget { scene, sampler: pt },
+                    beta,
+                })
+                .collect(),
+            blind: false,
+        }
+    }
+}
+
+impl<'a> ChainFamily for TemperedPss<'a> {
+    type State = TorusPoint;
+    type Target = PoweredPss<'a>;
+    type Mutation = Mutation;
+    type Kernel = Mixture<TorusPoint, PathSample>;
+
+    fn members(&self) -> usize {
+        self.levels.len()
+    }
+    fn target(&self, member: usize) -> &PoweredPss<'a> {
+        &self.levels[member]
+    }
+    fn kernel(&self, mutation: &Mutation, _member: usize) -> Result<Self::Kernel, MltError> {
+        Ok(mutation.kernel()?)
+    }
+    fn independent_probability(&self, mutation: &Mutation) -> f64 {
+        mutation.large_step_probability
+    }
+    fn is_independent(&self, component: usize) -> bool {
+        component == LARGE_STEP_COMPONENT
+    }
+    fn candidate(&self, seed: u64, index: u64) -> TorusPoint {
+        bootstrap_point(seed, index as usize)
+    }
+    fn reference_log_density(&self, _state: &TorusPoint) -> f64 {
+        0.0
+    }
+    fn coordinates(&self, state: &TorusPoint) -> Option<Vec<f64>> {
+        Some(state.materialize())
+    }
+    fn exchange_move(&self) -> Option<Box<dyn ExchangeMove<TorusPoint, PathSample>>> {
+        if self.blind {
+            Some(Box::new(BlindSwap))
+        } else {
+            Some(Box::new(EvenOdd::new()))
+        }
+    }
+    fn image_weight(&self, member: usize) -> f64 {
+        if member == 0 { 1.0 } else { 0.0 }
+    }
+}
