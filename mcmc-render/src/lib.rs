@@ -46,6 +46,7 @@ pub mod integrators;
 pub mod light;
 pub mod markov;
 pub mod observer;
+pub mod path_classes;
 pub mod pss;
 pub mod pss_dump;
 pub mod render;

@@ -89,7 +89,14 @@ pub struct Splat {
     pub p: Vec2,
     /// Radiance (RGB).
     pub l: Rgb,
+    /// The class of the technique that made it, below [`PATH_CLASSES`]
+    /// (RELT's path classes, [`crate::path_classes`]); 0 where a sampler
+    /// does not classify.
+    pub class: u8,
 }
+
+/// Number of path classes a [`Splat`] can carry.
+pub const PATH_CLASSES: usize = 6;
 
 /// What evaluating a primary-sample vector produces besides `ln π`.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -136,14 +143,14 @@ impl PssPathSampler for PathTracer {
         );
         let ray = scene.camera.generate_ray(p);
         let l = self.li(scene, ray, source);
-        out.push(Splat { p, l });
+        out.push(Splat { p, l, class: 0 });
         ((source.consumed(0) - 2) / PT_NUMBERS_PER_VERTEX) as u32
     }
 }
 
 /// A raster position uniform over the image from two numbers, strictly
 /// inside it.
-fn raster_of(scene: &Scene, source: &mut PssSource<'_>) -> Vec2 {
+pub(crate) fn raster_of(scene: &Scene, source: &mut PssSource<'_>) -> Vec2 {
     let (w, h) = (scene.film.width as f32, scene.film.height as f32);
     let (ux, uy) = source.next_2d();
     Vec2::new(
@@ -174,6 +181,7 @@ impl PssPathSampler for Bdpt {
                 out.push(Splat {
                     p: c.raster,
                     l: c.l,
+                    class: 0,
                 });
             });
             // Longest subpaths built: an upper bound of the depth reached.
@@ -247,6 +255,7 @@ impl PssPathSampler for MmltDepth {
                 out.push(Splat {
                     p: if c.splat { c.raster } else { raster },
                     l: c.l * n as f32,
+                    class: 0,
                 });
             }
         });

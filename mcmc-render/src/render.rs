@@ -335,6 +335,7 @@ pub fn run_per_pixel(
             _ => serde_json::Map::new(),
         },
         nonfinite_dump: None,
+        layers: Vec::new(),
         summary: format!(
             "{} spp in {:.2} s ({:.3} M samples/s){}",
             r.spp_done,

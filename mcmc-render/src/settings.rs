@@ -183,6 +183,14 @@ pub mod check {
             Err("must be > 0".into())
         }
     }
+    /// `≥ 1`.
+    pub fn at_least_one(v: &f64) -> Result<(), String> {
+        if *v >= 1.0 {
+            Ok(())
+        } else {
+            Err("must be ≥ 1".into())
+        }
+    }
     /// `≥ 0`.
     pub fn non_negative(v: &f64) -> Result<(), String> {
         if *v >= 0.0 {

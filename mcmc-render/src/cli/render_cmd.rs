@@ -152,6 +152,9 @@ fn render_job(job: &Job<'_>) -> Result<(), String> {
     let rendered = result.map_err(|e| e.to_string())?;
     write_exr(job.out, w, h, &rendered.image)?;
     write_png(&png, w, h, &rendered.image)?;
+    for (name, image) in &rendered.layers {
+        write_exr(&job.out.with_extension(format!("{name}.exr")), w, h, image)?;
+    }
     let dump = match &rendered.nonfinite_dump {
         Some(d) => {
             let path = job.out.with_extension("nonfinite.pss");

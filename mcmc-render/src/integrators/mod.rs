@@ -54,6 +54,7 @@ pub mod path_vertex;
 pub mod pssmlt;
 pub mod pt;
 pub mod registry;
+pub mod relt;
 
 use crate::color::Rgb;
 use crate::film::Film;
@@ -124,6 +125,9 @@ pub struct Rendered {
     pub statistics: Map<String, Value>,
     /// The coordinates of the first NaN/inf contribution, for `--replay`.
     pub nonfinite_dump: Option<PssDump>,
+    /// Named partial images that sum to the image (RELT's per-replica
+    /// images); the CLI writes each as `<out>.NAME.exr`.
+    pub layers: Vec<(String, Vec<Rgb>)>,
     /// One line for the terminal.
     pub summary: String,
 }

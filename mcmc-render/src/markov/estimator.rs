@@ -9,6 +9,7 @@ use crate::film::Film;
 use crate::pss::PathSample;
 use mcmc_core::chain::Transition;
 use mcmc_core::startup::RunningNormalization;
+use std::sync::Arc;
 
 /// Proposals and acceptances of one path depth.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
@@ -142,8 +143,10 @@ pub(crate) struct Weights {
     pub mis: bool,
     /// Probability of an independent proposal.
     pub p_independent: f64,
-    /// The member's bootstrap `b_d`.
-    pub b: f64,
+    /// The member.
+    pub member: usize,
+    /// Every member's bootstrap `b̂_d`.
+    pub b_hat: Arc<[f64]>,
 }
 
 impl Weights {
@@ -151,7 +154,8 @@ impl Weights {
     /// contribution `i` carrying expected-value weight `a`.
     fn of(&self, a: f64, independent: bool, i: f64) -> f64 {
         if self.mis {
-            (a + f64::from(u8::from(independent))) / (i / self.b + self.p_independent)
+            let b = self.b_hat[self.member];
+            (a + f64::from(u8::from(independent))) / (i / b + self.p_independent)
         } else {
             a / i
         }
@@ -162,6 +166,33 @@ fn splat_all(film: &mut Film, s: &PathSample, w: f64) {
     if w > 0.0 && w.is_finite() {
         for sp in &s.splats {
             film.splat(sp.p, sp.l * w as f32);
+        }
+    }
+}
+
+/// Films a state of expected-value weight `a` with the family's per-class
+/// factors, or with `1/I(x)` (Kelemen's MIS aside) when it has none.
+fn film_state<F: ChainFamily>(
+    family: &F,
+    film: &mut Film,
+    s: &PathSample,
+    w: &Weights,
+    a: f64,
+    independent: bool,
+) {
+    match family.class_weights(w.member, s, &w.b_hat) {
+        None => {
+            // `I(y)` itself (ln I is its logarithm): saves an `exp` per state.
+            let i = s.luminance();
+            splat_all(film, s, w.of(a, independent, i));
+        }
+        Some(factors) => {
+            for sp in &s.splats {
+                let f = a * factors[usize::from(sp.class)];
+                if f > 0.0 && f.is_finite() {
+                    film.splat(sp.p, sp.l * f as f32);
+                }
+            }
         }
     }
 }
@@ -209,16 +240,12 @@ pub(crate) fn observe<F: ChainFamily>(
             counts.per_depth[d].proposed += 1;
             counts.per_depth[d].accepted += u64::from(t.accepted);
             if let Some(film) = sink.film.as_deref_mut() {
-                // `I(y)` itself (ln I is its logarithm): saves an `exp` per state.
-                let i = y.payload.luminance();
-                splat_all(film, &y.payload, w.of(t.alpha, independent, i));
+                film_state(family, film, &y.payload, w, t.alpha, independent);
             }
         }
         // A black proposal (I = 0) contributes nothing, in either weighting.
     }
     if let Some(film) = sink.film.as_deref_mut() {
-        let x = t.current;
-        let ix = x.payload.luminance();
-        splat_all(film, &x.payload, w.of(1.0 - t.alpha, false, ix));
+        film_state(family, film, &t.current.payload, w, 1.0 - t.alpha, false);
     }
 }

@@ -57,7 +57,7 @@ use crate::color::Rgb;
 use crate::film::{Film, Filter};
 use crate::integrators::RunSettings;
 use crate::observer::Observer;
-use crate::pss::PathSample;
+use crate::pss::{PATH_CLASSES, PathSample};
 use crate::scene::Scene;
 pub use estimator::{DepthAcceptance, FamilyResult, develop};
 use estimator::{MemberTotals, Weights, sum_images};
@@ -70,7 +70,10 @@ use mcmc_core::startup::{Bootstrap, RunningNormalization};
 use mcmc_core::stats::ChainStatistics;
 use mcmc_core::target::Target;
 use serde::Serialize;
-use startup::{RESAMPLE_STREAM, allocate_chains, candidate_log_weights, index_bootstrap};
+use startup::{
+    RESAMPLE_STREAM, allocate_chains, candidate_log_weights, index_bootstrap,
+    shared_candidate_log_weights,
+};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -89,6 +92,15 @@ pub enum MltError {
         candidates: usize,
         /// Candidates with a NaN or infinite contribution.
         invalid: usize,
+    },
+    /// A member of a replica ladder had no contributing bootstrap
+    /// candidate, so its chains cannot start.
+    #[error(
+        "member {member} of the replica ladder had no contributing bootstrap path, so its chains cannot start (raise `bootstrap`)"
+    )]
+    EmptyMember {
+        /// The member.
+        member: usize,
     },
     /// A setting is out of range.
     #[error("invalid MLT setting: {0}")]
@@ -219,6 +231,31 @@ pub trait ChainFamily: Sync {
     /// of a ladder), which are then not filmed.
     fn image_weight(&self, _member: usize) -> f64 {
         1.0
+    }
+    /// `ln q_member(x)` from a state's payload alone, for families whose
+    /// targets are all functions of one shared evaluation (RELT's path
+    /// classes). Returning `Some` promises that a payload serves every
+    /// member unchanged; the driver then evaluates each start-up candidate
+    /// once for all members, exchanges trace no rays, and every independent
+    /// proposal of a replica set updates every member's running
+    /// normalisation. `None` (the default): each member evaluates its own
+    /// target.
+    fn member_log_density(&self, _member: usize, _payload: &PathSample) -> Option<f64> {
+        None
+    }
+    /// Per-class splat factors of member `member` for a state with payload
+    /// `payload` (a splat of class `c` gets `α · factors[c]` before the
+    /// member's scale `b_d`), given every member's bootstrap `b̂`: MIS over
+    /// members, or classes reserved to one member. `None` (the default):
+    /// the expected-value factor `1/I(x)` for every splat. Not combined
+    /// with Kelemen's MIS.
+    fn class_weights(
+        &self,
+        _member: usize,
+        _payload: &PathSample,
+        _b_hat: &[f64],
+    ) -> Option<[f64; PATH_CLASSES]> {
+        None
     }
 }
 
@@ -364,6 +401,8 @@ pub struct MltResult {
     pub running_b: (f64, f64),
     /// Statistics of all chains (per kernel component, NaN/inf count).
     pub chain_stats: ChainStatistics,
+    /// Statistics of each member's chains (`None`: it ran none).
+    pub member_stats: Vec<Option<ChainStatistics>>,
     /// Exchange counts, for families with an exchange move.
     pub exchange: Option<ExchangeSummary>,
     /// Acceptance per path depth (index = depth).
@@ -401,9 +440,32 @@ struct Startup {
 }
 
 /// Bootstraps every member with `count` candidates each; candidate `j`
-/// belongs to member `j / count`.
+/// belongs to member `j / count`. A family whose members share one
+/// evaluation ([`ChainFamily::member_log_density`]) instead weighs the
+/// same `count` candidates for every member, each traced once.
 fn start_up<F: ChainFamily>(family: &F, count: usize, seed: u64) -> Result<Startup, MltError> {
     let members = family.members();
+    if let Some(log_w) = shared_candidate_log_weights(family, count, seed) {
+        let boots: Vec<Bootstrap<usize, ()>> = log_w
+            .iter()
+            .map(|w| index_bootstrap(w, 0))
+            .collect::<Result<_, _>>()?;
+        let running = log_w
+            .iter()
+            .map(|w| {
+                let mut r = RunningNormalization::new();
+                w.iter().for_each(|&lw| r.add(lw));
+                r
+            })
+            .collect();
+        // A NaN path is invalid for every member: count it once.
+        let invalid = boots[0].invalid_candidates();
+        return Ok(Startup {
+            boots,
+            running,
+            invalid,
+        });
+    }
     let log_w = candidate_log_weights(family, count, seed);
     let boots: Vec<Bootstrap<usize, ()>> = (0..members)
         .map(|d| index_bootstrap(&log_w[d * count..(d + 1) * count], d * count))
@@ -503,11 +565,8 @@ pub fn run<F: ChainFamily>(
     // With an exchange move every set holds one chain per member.
     let sets = (settings.chains / members).max(1);
     let chains_of = if exchange {
-        if let Some(d) = bootstrap_b.iter().position(|b| b.0 <= 0.0) {
-            return Err(MltError::Setting(format!(
-                "member {d} of the replica ladder had no contributing bootstrap path; \
-                 its chains cannot start (raise `bootstrap`)"
-            )));
+        if let Some(member) = bootstrap_b.iter().position(|b| b.0 <= 0.0) {
+            return Err(MltError::EmptyMember { member });
         }
         vec![sets; members]
     } else {
@@ -535,12 +594,13 @@ pub fn run<F: ChainFamily>(
     };
 
     let p_independent = family.independent_probability(&settings.mutation);
-    let weights: Vec<Weights> = bootstrap_b
-        .iter()
-        .map(|&(b, _)| Weights {
+    let b_hat: Arc<[f64]> = bootstrap_b.iter().map(|b| b.0).collect();
+    let weights: Vec<Weights> = (0..members)
+        .map(|member| Weights {
             mis: settings.mis_large_steps,
             p_independent,
-            b,
+            member,
+            b_hat: b_hat.clone(),
         })
         .collect();
     let image_weights: Vec<f64> = (0..members).map(|d| family.image_weight(d)).collect();
@@ -588,10 +648,17 @@ pub fn run<F: ChainFamily>(
 
     let families = gather(&tasks);
     let mutations: u64 = families.iter().map(|f| f.mutations).sum();
-    let mut chain_stats: Option<ChainStatistics> = None;
+    let mut member_stats: Vec<Option<ChainStatistics>> = vec![None; members];
     let mut exchange_summary = None;
     for t in &tasks {
-        t.collect_statistics(&mut chain_stats, &mut exchange_summary);
+        t.collect_statistics(&mut member_stats, &mut exchange_summary);
+    }
+    let mut chain_stats: Option<ChainStatistics> = None;
+    for s in member_stats.iter().flatten() {
+        match chain_stats.as_mut() {
+            Some(cs) => cs.merge(s),
+            None => chain_stats = Some(s.clone()),
+        }
     }
     let first_nonfinite = tasks.iter().find_map(|t| t.counts.first_nonfinite.clone());
     let running_b = (
@@ -612,6 +679,7 @@ pub fn run<F: ChainFamily>(
         bootstrap_b: (b_star, b_star_se),
         running_b,
         chain_stats: chain_stats.unwrap_or_else(|| ChainStatistics::new(Vec::new())),
+        member_stats,
         exchange: exchange_summary,
         bootstrap_invalid: invalid,
         first_nonfinite,

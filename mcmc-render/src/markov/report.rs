@@ -14,6 +14,18 @@ fn rate(n: u64, seconds: f64) -> f64 {
     }
 }
 
+/// Each member's share of the image's mean luminance (NaN for a black
+/// image).
+fn image_shares(result: &MltResult) -> Vec<f64> {
+    let means: Vec<f64> = result
+        .families
+        .iter()
+        .map(|f| f.image().iter().map(|c| f64::from(c.luminance())).sum())
+        .collect();
+    let total: f64 = means.iter().sum();
+    means.iter().map(|m| m / total).collect()
+}
+
 /// The report of `result`. `sampler` and `max_depth` go into the NaN dump;
 /// with `members_are_depths` member `d` is labelled path depth `d + 1`
 /// (MMLT), else 0.
@@ -24,6 +36,7 @@ pub fn rendered(
     members_are_depths: bool,
 ) -> Rendered {
     let cs = &result.chain_stats;
+    let image_shares = image_shares(result);
     let mutations_per_second = rate(result.mutations, result.seconds - result.bootstrap_seconds);
     let statistics = json!({
         "bootstrap_seconds": result.bootstrap_seconds,
@@ -48,6 +61,8 @@ pub fn rendered(
             "depth": if members_are_depths { d + 1 } else { 0 },
             "chains": f.chains,
             "mutations": f.mutations,
+            "acceptance": result.member_stats[d].as_ref().map(|s| s.acceptance_rate()),
+            "image_share": image_shares[d],
             "b_bootstrap": f.bootstrap_b.0,
             "b_bootstrap_standard_error": f.bootstrap_b.1,
             "b_running": f.running_b.0,
@@ -75,6 +90,7 @@ pub fn rendered(
             max_depth: Some(max_depth),
             coords: coords.clone(),
         }),
+        layers: Vec::new(),
         summary: format!(
             "{} mutations in {:.2} s ({:.3} M mutations/s, bootstrap {:.2} s), b = {:.5} ± {:.5}{}",
             result.mutations,

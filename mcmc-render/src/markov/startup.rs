@@ -5,6 +5,7 @@
 use super::{ChainFamily, MltError};
 use mcmc_core::rng::stream_rng;
 use mcmc_core::startup::Bootstrap;
+use mcmc_core::target::Target;
 use rayon::prelude::*;
 
 /// Stream offset of the resampling of chain starts (apart from the chains'
@@ -23,6 +24,36 @@ pub(crate) fn candidate_log_weights<F: ChainFamily>(
         .into_par_iter()
         .map(|j| family.candidate_log_weight(j / count, &family.candidate(seed, j as u64)))
         .collect()
+}
+
+/// For a family whose members share one evaluation
+/// ([`ChainFamily::member_log_density`]): `ln q_d(x_i) − ln p₀(x_i)` of the
+/// same `count` candidates for every member `d` (outer index), each traced
+/// once with member 0's target. `None` when the family does not share.
+pub(crate) fn shared_candidate_log_weights<F: ChainFamily>(
+    family: &F,
+    count: usize,
+    seed: u64,
+) -> Option<Vec<Vec<f64>>> {
+    let members = family.members();
+    let probe = family.target(0).evaluate(&family.candidate(seed, 0));
+    family.member_log_density(0, &probe.payload)?;
+    let per_candidate: Vec<Vec<f64>> = (0..count)
+        .into_par_iter()
+        .map(|i| {
+            let x = family.candidate(seed, i as u64);
+            let e = family.target(0).evaluate(&x);
+            let reference = family.reference_log_density(&x);
+            (0..members)
+                .map(|d| family.member_log_density(d, &e.payload).unwrap_or(f64::NAN) - reference)
+                .collect()
+        })
+        .collect();
+    Some(
+        (0..members)
+            .map(|d| per_candidate.iter().map(|w| w[d]).collect())
+            .collect(),
+    )
 }
 
 /// The `mcmc-core` bootstrap over candidate indices `offset..offset +

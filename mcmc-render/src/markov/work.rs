@@ -11,6 +11,7 @@ use crate::pss::PathSample;
 use mcmc_core::chain::{Chain, Transition};
 use mcmc_core::mh::MetropolisHastings;
 use mcmc_core::replica::{ReplicaExchange, ReplicaFamily};
+use mcmc_core::sample::Sample;
 use mcmc_core::startup::RunningNormalization;
 use mcmc_core::stats::ChainStatistics;
 use mcmc_core::target::{Evaluation, Target};
@@ -35,6 +36,27 @@ impl<F: ChainFamily> ReplicaFamily<F::State> for Members<'_, F> {
 
     fn evaluate(&self, level: usize, state: &F::State) -> Evaluation<PathSample> {
         self.0.target(level).evaluate(state)
+    }
+
+    fn log_density_of(&self, level: usize, sample: &Sample<F::State, PathSample>) -> f64 {
+        self.0
+            .member_log_density(level, &sample.payload)
+            .unwrap_or_else(|| self.evaluate(level, &sample.state).log_density)
+    }
+
+    fn retarget(&self, level: usize, sample: &mut Sample<F::State, PathSample>, log_density: f64) {
+        if self.0.member_log_density(level, &sample.payload).is_some() {
+            // The payload serves every member (the hook's promise).
+            sample.log_density = log_density;
+        } else {
+            let e = self.evaluate(level, &sample.state);
+            sample.payload = e.payload;
+            sample.log_density = if e.log_density.is_nan() {
+                e.log_density
+            } else {
+                log_density
+            };
+        }
     }
 }
 
@@ -169,6 +191,7 @@ impl<'f, F: ChainFamily> Task<'f, F> {
                                 running: &mut running[level],
                             };
                             observe(family, t, &weights[level], &mut sink, counts);
+                            share_independent_draw(family, level, t, running);
                         };
                     for _ in 0..n {
                         slot.set.sweep_observed_levels(&mut observe_level);
@@ -184,22 +207,24 @@ impl<'f, F: ChainFamily> Task<'f, F> {
         true
     }
 
-    /// Adds this task's chain statistics into `stats` and its exchange
-    /// counts into `exchange`.
+    /// Adds this task's chain statistics into `stats` (per member) and its
+    /// exchange counts into `exchange`.
     pub fn collect_statistics(
         &self,
-        stats: &mut Option<ChainStatistics>,
+        stats: &mut [Option<ChainStatistics>],
         exchange: &mut Option<ExchangeSummary>,
     ) {
-        let mut add = |s: &ChainStatistics| match stats.as_mut() {
+        let mut add = |member: usize, s: &ChainStatistics| match stats[member].as_mut() {
             Some(cs) => cs.merge(s),
-            None => *stats = Some(s.clone()),
+            None => stats[member] = Some(s.clone()),
         };
         match &self.units {
-            Units::Chains(chains) => chains.iter().for_each(|c| add(c.chain.stats())),
+            Units::Chains(chains) => chains
+                .iter()
+                .for_each(|c| add(self.members[0], c.chain.stats())),
             Units::Replicas(sets) => {
                 for slot in sets {
-                    (0..slot.set.levels()).for_each(|l| add(slot.set.chain_statistics(l)));
+                    (0..slot.set.levels()).for_each(|l| add(l, slot.set.chain_statistics(l)));
                     exchange
                         .get_or_insert_with(|| {
                             ExchangeSummary::new(slot.set.statistics().move_name.clone())
@@ -207,6 +232,29 @@ impl<'f, F: ChainFamily> Task<'f, F> {
                         .add(&slot.set);
                 }
             }
+        }
+    }
+}
+
+/// An independent proposal of member `level` is a draw from the reference
+/// measure for every member: where the family computes the other members'
+/// densities from the payload, it updates their running normalisation too.
+fn share_independent_draw<F: ChainFamily>(
+    family: &F,
+    level: usize,
+    t: &Transition<'_, F::State, PathSample>,
+    running: &mut [RunningNormalization],
+) {
+    let Some(y) = t.proposal else { return };
+    if !family.is_independent(t.component) {
+        return;
+    }
+    let reference = family.reference_log_density(&y.state);
+    for (member, r) in running.iter_mut().enumerate() {
+        if member != level
+            && let Some(ln_q) = family.member_log_density(member, &y.payload)
+        {
+            r.add(ln_q - reference);
         }
     }
 }

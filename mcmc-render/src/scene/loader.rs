@@ -274,7 +274,8 @@ impl Loader {
         let mut params = Vec::with_capacity(p.params.len());
         for param in &p.params {
             let text = match &param.value {
-                Value::Float(v) => v.to_string(),
+                // At full precision: integrator parameters are `f64`.
+                Value::Float(v) => param.text.clone().unwrap_or_else(|| v.to_string()),
                 Value::Integer(v) => v.to_string(),
                 Value::Boolean(v) => v.to_string(),
                 Value::String(v) => v.clone(),

@@ -71,6 +71,10 @@ pub struct Param {
     pub name: String,
     /// The parsed value.
     pub value: Value,
+    /// The `value` attribute as written (defaults substituted), for
+    /// consumers that parse it at their own precision (integrator
+    /// parameters take `<float>` as `f64`; [`Value::Float`] is `f32`).
+    pub text: Option<String>,
     /// Where it was written.
     pub loc: Loc,
 }
@@ -327,7 +331,16 @@ impl Parser {
                         return Err(err(&loc, format!("parameter '{name}' given twice")));
                     }
                     let value = self.value(child, ctag, &loc)?;
-                    plugin.params.push(Param { name, value, loc });
+                    let text = self
+                        .attr(child, "value", &loc)
+                        .ok()
+                        .map(|t| t.trim().to_string());
+                    plugin.params.push(Param {
+                        name,
+                        value,
+                        text,
+                        loc,
+                    });
                 }
                 other => {
                     return Err(err(

@@ -1,0 +1,383 @@
+//! Replica exchange light transport (Kitaoka, Kitamura and Kishino 2009)
+//! on the Markov-chain driver; spec `seed002-relt.md`.
+//!
+//! - **State**: a primary-sample point; one BDPT evaluation gives every
+//!   technique's splat tagged by its path class `L0 … L5`
+//!   ([`crate::path_classes`]), kept with the state, so that every
+//!   replica's density comes from it without tracing.
+//! - **Replicas** (family members, ordered easy to hard): *uniform*
+//!   (`q = 1`, independent proposals, always accepted), *full*
+//!   (`L0 + L2 + L3 + L4 + L5`), *indirect* (`L0 + L3 + L4 + L5`) and
+//!   *specific* (`L0 + δ·L5`), each value measured by `X + Y + Z` (or
+//!   luminance). Replicas 2–4 take Kelemen small steps with their own
+//!   sizes and no large step.
+//! - **Exchanges**: `mcmc-core`'s moves between the replicas of each set
+//!   (neighbour swaps by default; `none` is the paper's Fig. 8).
+//! - **Estimator** (the paper's §5.1.4 form of Eq. 23): `L0` only from the
+//!   specific replica (`b_4 · L0/q_4`), the rest by the power heuristic
+//!   over the other replicas with the start-up `b̂_k`
+//!   (`(q_k/b̂_k)^{β−1} / (b̂_k Σ_l (q_l/b̂_l)^β)` per state, times the
+//!   running `b_k`). Every uniform draw updates every replica's running
+//!   `b_k`.
+//! - **Start-up**: the driver's per-member importance resampling of one
+//!   shared pool of uniform candidates (not yet the paper's population
+//!   annealing). A replica whose `b̂` is zero is dropped and reported.
+
+use super::registry::IntegratorSettings;
+use super::{DepthParams, RenderError, Rendered, RunSettings};
+use crate::integrators::bdpt::{Bdpt, MisHeuristic};
+use crate::markov::{self, ChainFamily, ChainParams, MltError, MltResult};
+use crate::observer::Observer;
+use crate::path_classes::{ClassScalar, ClassifiedBdpt, class_values};
+use crate::pss::{
+    LARGE_STEP_COMPONENT, Mutation, PATH_CLASSES, PathSample, PssTarget, SmallStepKind,
+    bootstrap_point,
+};
+use crate::pss_dump::DumpSampler;
+use crate::scene::Scene;
+use crate::settings::check;
+use mcmc_core::kernel::Mixture;
+use mcmc_core::replica::{EvenOdd, ExchangeMove, IsPermutation, IsSwap, NeighbourSwap};
+use mcmc_core::space::TorusPoint;
+use mcmc_core::target::{Evaluation, Target};
+use serde_json::json;
+use std::sync::atomic::AtomicBool;
+
+crate::choice! {
+    /// The exchange move between replicas.
+    pub enum ReltExchange {
+        /// Swap every neighbouring pair after the hotter one mutated.
+        Neighbour = "neighbour",
+        /// Even or odd neighbour pairs, alternately.
+        EvenOdd = "even_odd",
+        /// Importance-sampled permutation of all replicas.
+        IsPermutation = "is_permutation",
+        /// Importance-sampled swap of one pair.
+        IsSwap = "is_swap",
+        /// No exchanges: every replica mixes alone (the paper's Fig. 8).
+        None = "none",
+    }
+}
+
+crate::settings! {
+    /// RELT settings (defaults from spec seed002 §11).
+    pub struct Relt {
+        /// Scalar of a class contribution: xyz_sum (the paper's X+Y+Z) or luminance.
+        pub target: ClassScalar = ClassScalar::XyzSum;
+        /// δ, the weight of indirect paths (L5) in the specific replica's target (the paper gives none).
+        pub delta: f64 = 0.01, check check::positive;
+        /// Run the specific (L0 + δ·L5) replica.
+        pub specific_replica: bool = true;
+        /// Largest Kelemen step of the full-path replica (smallest: s2/16).
+        pub s2_full: f64 = 1.0 / 64.0, check check::probability;
+        /// Largest Kelemen step of the indirect-path replica.
+        pub s2_indirect: f64 = 1.0 / 64.0, check check::probability;
+        /// Largest Kelemen step of the specific-path replica.
+        pub s2_specific: f64 = 1.0 / 96.0, check check::probability;
+        /// Exchange move: neighbour, even_odd, is_permutation, is_swap or none.
+        pub exchange: ReltExchange = ReltExchange::Neighbour;
+        /// Exponent β ≥ 1 of the power heuristic over replicas (1: balance).
+        pub mis_power: f64 = 1.0, check check::at_least_one;
+        flatten {
+            /// Path depth.
+            pub depth: DepthParams = DepthParams::default();
+            /// The driver (`kelemen_mis` does not apply; `depth_allocation`
+            /// only without exchanges).
+            pub chain: ChainParams = ChainParams::default();
+        }
+    }
+}
+
+/// One replica: its name and how its density weighs the classes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Replica {
+    /// Name in statistics and layer files.
+    pub name: &'static str,
+    /// `d_k` over `(L0 … L5)`; `None`: the uniform replica (`q = 1`).
+    pub weights: Option<[f64; PATH_CLASSES]>,
+    /// Largest Kelemen step (unused by the uniform replica).
+    pub s2: f64,
+}
+
+impl Replica {
+    /// `q_k` of a state with class values `v` (NaN stays NaN).
+    fn density(&self, v: &[f64; PATH_CLASSES]) -> f64 {
+        match self.weights {
+            None if v[0].is_nan() => f64::NAN,
+            None => 1.0,
+            Some(d) => d.iter().zip(v).map(|(d, l)| d * l).sum(),
+        }
+    }
+
+    /// The replica's kernel configuration.
+    fn mutation(&self) -> Mutation {
+        let small = SmallStepKind::Kelemen {
+            s1: self.s2 / 16.0,
+            s2: self.s2,
+        };
+        Mutation {
+            small,
+            large_step_probability: if self.weights.is_none() { 1.0 } else { 0.0 },
+        }
+    }
+}
+
+impl Relt {
+    /// The replicas, easy to hard (the specific one last, if on).
+    pub fn replicas(&self) -> Vec<Replica> {
+        let mut r = vec![
+            Replica {
+                name: "uniform",
+                weights: None,
+                s2: self.s2_full,
+            },
+            Replica {
+                name: "full",
+                weights: Some([1.0, 0.0, 1.0, 1.0, 1.0, 1.0]),
+                s2: self.s2_full,
+            },
+            Replica {
+                name: "indirect",
+                weights: Some([1.0, 0.0, 0.0, 1.0, 1.0, 1.0]),
+                s2: self.s2_indirect,
+            },
+        ];
+        if self.specific_replica {
+            r.push(Replica {
+                name: "specific",
+                weights: Some([1.0, 0.0, 0.0, 0.0, 0.0, self.delta]),
+                s2: self.s2_specific,
+            });
+        }
+        r
+    }
+}
+
+/// One replica's target: `ln q_k` of the classified BDPT sample.
+pub struct ReplicaTarget<'a> {
+    pss: PssTarget<'a, ClassifiedBdpt>,
+    replica: Replica,
+    scalar: ClassScalar,
+}
+
+fn log_of(q: f64) -> f64 {
+    if q > 0.0 && q.is_finite() {
+        q.ln()
+    } else if q == 0.0 {
+        f64::NEG_INFINITY
+    } else {
+        f64::NAN
+    }
+}
+
+impl Target<TorusPoint> for ReplicaTarget<'_> {
+    type Payload = PathSample;
+
+    fn evaluate(&self, state: &TorusPoint) -> Evaluation<PathSample> {
+        let e = self.pss.trace(state);
+        let v = class_values(&e.payload.splats, self.scalar);
+        Evaluation::new(log_of(self.replica.density(&v)), e.payload)
+    }
+}
+
+/// The RELT family: one member per replica.
+pub struct ReltFamily<'a> {
+    targets: Vec<ReplicaTarget<'a>>,
+    scalar: ClassScalar,
+    exchange: ReltExchange,
+    mis_power: f64,
+    /// Index of the specific replica, whose member alone films `L0`.
+    specific: Option<usize>,
+    /// A custom exchange move in place of `exchange`.
+    custom_exchange: Option<MakeExchange>,
+}
+
+/// Makes a fresh exchange move for one replica set.
+pub type MakeExchange = fn(usize) -> Box<dyn ExchangeMove<TorusPoint, PathSample>>;
+
+impl<'a> ReltFamily<'a> {
+    /// The family of `replicas` over BDPT on `scene`.
+    pub fn new(scene: &'a Scene, bdpt: Bdpt, replicas: &[Replica], settings: &Relt) -> Self {
+        ReltFamily {
+            targets: replicas
+                .iter()
+                .map(|&replica| ReplicaTarget {
+                    pss: PssTarget {
+                        scene,
+                        sampler: ClassifiedBdpt(bdpt),
+                    },
+                    replica,
+                    scalar: settings.target,
+                })
+                .collect(),
+            scalar: settings.target,
+            exchange: settings.exchange,
+            mis_power: settings.mis_power,
+            specific: replicas.iter().position(|r| r.name == "specific"),
+            custom_exchange: None,
+        }
+    }
+
+    /// The family with the exchange move `make(replicas)` (any move of
+    /// `mcmc-core`'s, or a user's own) in place of the settings' choice.
+    pub fn with_exchange(mut self, make: MakeExchange) -> Self {
+        self.custom_exchange = Some(make);
+        self
+    }
+
+    /// The replicas of the family.
+    pub fn replicas(&self) -> Vec<Replica> {
+        self.targets.iter().map(|t| t.replica).collect()
+    }
+}
+
+impl<'a> ChainFamily for ReltFamily<'a> {
+    type State = TorusPoint;
+    type Target = ReplicaTarget<'a>;
+    type Mutation = ();
+    type Kernel = Mixture<TorusPoint, PathSample>;
+
+    fn members(&self) -> usize {
+        self.targets.len()
+    }
+    fn target(&self, member: usize) -> &ReplicaTarget<'a> {
+        &self.targets[member]
+    }
+    fn kernel(&self, _mutation: &(), member: usize) -> Result<Self::Kernel, MltError> {
+        Ok(self.targets[member].replica.mutation().kernel()?)
+    }
+    fn independent_probability(&self, _mutation: &()) -> f64 {
+        // Only for Kelemen's MIS, which RELT does not use.
+        0.0
+    }
+    fn is_independent(&self, component: usize) -> bool {
+        component == LARGE_STEP_COMPONENT
+    }
+    fn candidate(&self, seed: u64, index: u64) -> TorusPoint {
+        bootstrap_point(seed, index as usize)
+    }
+    fn reference_log_density(&self, _state: &TorusPoint) -> f64 {
+        0.0
+    }
+    fn coordinates(&self, state: &TorusPoint) -> Option<Vec<f64>> {
+        Some(state.materialize())
+    }
+    fn exchange_move(&self) -> Option<Box<dyn ExchangeMove<TorusPoint, PathSample>>> {
+        let m = self.members();
+        if let Some(make) = self.custom_exchange {
+            return Some(make(m));
+        }
+        match self.exchange {
+            ReltExchange::Neighbour => Some(Box::new(NeighbourSwap::new())),
+            ReltExchange::EvenOdd => Some(Box::new(EvenOdd::new())),
+            // At most four replicas: well within the permutation DP's limit.
+            ReltExchange::IsPermutation => Some(Box::new(
+                IsPermutation::new(m).expect("IS permutations of at most 4 replicas"),
+            )),
+            ReltExchange::IsSwap => Some(Box::new(IsSwap::new())),
+            ReltExchange::None => None,
+        }
+    }
+    fn member_log_density(&self, member: usize, payload: &PathSample) -> Option<f64> {
+        let v = class_values(&payload.splats, self.scalar);
+        Some(log_of(self.targets[member].replica.density(&v)))
+    }
+    fn class_weights(
+        &self,
+        member: usize,
+        payload: &PathSample,
+        b_hat: &[f64],
+    ) -> Option<[f64; PATH_CLASSES]> {
+        let v = class_values(&payload.splats, self.scalar);
+        let q = |k: usize| self.targets[k].replica.density(&v);
+        let mut w = [0.0; PATH_CLASSES];
+        if Some(member) == self.specific {
+            // L0 from the specific replica alone: b_4 · L0 / q_4.
+            w[0] = 1.0 / q(member);
+            return Some(w);
+        }
+        let beta = self.mis_power;
+        let denominator: f64 = (0..self.members())
+            .filter(|&l| Some(l) != self.specific)
+            .map(|l| (q(l) / b_hat[l]).powf(beta))
+            .sum();
+        let factor = (q(member) / b_hat[member]).powf(beta - 1.0) / (b_hat[member] * denominator);
+        w.fill(factor);
+        if self.specific.is_some() {
+            w[0] = 0.0;
+        }
+        Some(w)
+    }
+}
+
+impl IntegratorSettings for Relt {
+    const NAME: &'static str = "relt";
+    const DESCRIPTION: &'static str = "Replica exchange light transport (Kitaoka et al. 2009): PSS replicas over BDPT path classes, exchanged and combined by MIS.";
+
+    fn validate(&self) -> Result<(), String> {
+        if self.chain.kelemen_mis {
+            return Err(
+                "relt combines its replicas by its own MIS; kelemen_mis does not apply".into(),
+            );
+        }
+        for r in self.replicas() {
+            r.mutation()
+                .kernel::<()>()
+                .map_err(|e| format!("relt {} replica: {e}", r.name))?;
+        }
+        Ok(())
+    }
+
+    fn planned_samples(&self, scene: &Scene, run: &RunSettings) -> Option<u64> {
+        self.chain.planned_mutations(scene, run)
+    }
+
+    fn render(
+        &self,
+        scene: &Scene,
+        run: &RunSettings,
+        stop: &AtomicBool,
+        observer: &dyn Observer,
+    ) -> Result<Rendered, RenderError> {
+        IntegratorSettings::validate(self).map_err(RenderError::Invalid)?;
+        let bdpt = Bdpt {
+            max_depth: self.depth.limit(),
+            rr_depth: self.depth.rr_depth,
+            heuristic: MisHeuristic::Power,
+        };
+        let settings = self.chain.chain_settings((), run);
+        let mut replicas = self.replicas();
+        let mut dropped = Vec::new();
+        let result = loop {
+            let family = ReltFamily::new(scene, bdpt, &replicas, self);
+            match markov::run(scene, &family, &settings, stop, observer) {
+                // A replica no bootstrap path reached cannot start: drop
+                // it (spec seed002 §5) and run the others.
+                Err(MltError::EmptyMember { member }) if member > 0 => {
+                    dropped.push(replicas.remove(member).name);
+                }
+                other => break other?,
+            }
+        };
+        Ok(report(&result, &replicas, &dropped, self.depth.limit()))
+    }
+}
+
+/// The registry's report of a RELT run, with each replica's statistics
+/// and image.
+fn report(result: &MltResult, replicas: &[Replica], dropped: &[&str], max_depth: u32) -> Rendered {
+    let mut rendered = markov::report::rendered(result, DumpSampler::Bdpt, max_depth, false);
+    rendered.statistics.insert(
+        "replicas".into(),
+        json!(replicas.iter().map(|r| r.name).collect::<Vec<_>>()),
+    );
+    rendered
+        .statistics
+        .insert("dropped_replicas".into(), json!(dropped));
+    rendered.layers = replicas
+        .iter()
+        .zip(&result.families)
+        .map(|(r, f)| (format!("replica-{}", r.name), f.image()))
+        .collect();
+    rendered
+}
