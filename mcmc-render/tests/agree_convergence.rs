@@ -54,9 +54,11 @@ use common::{
     rel_weights, render_image, repo_scene_tilted,
 };
 use mcmc_render::color::Rgb;
-use mcmc_render::integrators::Integrator;
 use mcmc_render::integrators::mmlt::render_family;
 use mcmc_render::integrators::pssmlt::render_pssmlt;
+use mcmc_render::integrators::registry::IntegratorSettings;
+use mcmc_render::integrators::relt::Relt;
+use mcmc_render::integrators::{Integrator, RunSettings};
 use mcmc_render::markov::Normalization;
 use mcmc_render::observer::NoObserver;
 use mcmc_render::pss::PssmltSettings;
@@ -188,5 +190,27 @@ fn mmlt_relmse_falls_as_one_over_n() {
         render_family(scene, mmlt_depths(scene), &st, &stop, &NoObserver)
             .expect("mmlt runs")
             .image()
+    });
+}
+
+#[test]
+fn relt_relmse_falls_as_one_over_n() {
+    // 8 replica sets of four (32 chains), 16 mutations per pixel per
+    // replica at N, the bootstrap scaled alongside.
+    let scene = &reference().scene;
+    let stop = AtomicBool::new(false);
+    check_rate("relt", |budget, seed| {
+        let mut relt = Relt::default();
+        relt.depth.max_depth = 5;
+        relt.chain.bootstrap = 2000 * budget as usize;
+        relt.chain.chains = 32;
+        relt.chain.mutations_per_pixel = Some(64 * budget);
+        let run = RunSettings {
+            seed,
+            ..RunSettings::default()
+        };
+        relt.render(scene, &run, &stop, &NoObserver)
+            .expect("relt runs")
+            .image
     });
 }

@@ -47,6 +47,7 @@ mod is_permutation;
 mod is_swap;
 mod neighbour;
 pub mod permutation_dp;
+pub mod population_annealing;
 mod rings;
 pub mod schedule;
 mod stats;
