@@ -19,14 +19,18 @@
 //!   (`(q_k/b̂_k)^{β−1} / (b̂_k Σ_l (q_l/b̂_l)^β)` per state, times the
 //!   running `b_k`). Every uniform draw updates every replica's running
 //!   `b_k`.
-//! - **Start-up**: the driver's per-member importance resampling of one
-//!   shared pool of uniform candidates (not yet the paper's population
-//!   annealing). A replica whose `b̂` is zero is dropped and reported.
+//! - **Start-up**: one shared pool of uniform candidates gives every
+//!   replica's initial running `b_k`; population annealing (Algorithm 2,
+//!   `mcmc_core::replica::population_annealing`) from the uniform replica
+//!   through full, indirect and specific gives the chains' start states
+//!   and the `b̂_k` of the MIS weights (`annealing_particles = 0`: each
+//!   replica resamples its start from the pool instead). A replica whose
+//!   bootstrap `b̂` is zero is dropped and reported.
 
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
 use crate::integrators::bdpt::{Bdpt, MisHeuristic};
-use crate::markov::{self, ChainFamily, ChainParams, MltError, MltResult};
+use crate::markov::{self, Annealing, ChainFamily, ChainParams, MltError, MltResult};
 use crate::observer::Observer;
 use crate::path_classes::{ClassScalar, ClassifiedBdpt, class_values};
 use crate::pss::{
@@ -78,6 +82,10 @@ crate::settings! {
         pub exchange: ReltExchange = ReltExchange::Neighbour;
         /// Exponent β ≥ 1 of the power heuristic over replicas (1: balance).
         pub mis_power: f64 = 1.0, check check::at_least_one;
+        /// Particles of the population-annealing start-up (0: start every replica from its own bootstrap).
+        pub annealing_particles: usize = 10_000;
+        /// Metropolis–Hastings steps per particle and replica in the annealing.
+        pub annealing_sweeps: usize = 1;
         flatten {
             /// Path depth.
             pub depth: DepthParams = DepthParams::default();
@@ -190,6 +198,8 @@ pub struct ReltFamily<'a> {
     specific: Option<usize>,
     /// A custom exchange move in place of `exchange`.
     custom_exchange: Option<MakeExchange>,
+    /// The start-up's population annealing.
+    annealing: Option<Annealing>,
 }
 
 /// Makes a fresh exchange move for one replica set.
@@ -215,6 +225,10 @@ impl<'a> ReltFamily<'a> {
             mis_power: settings.mis_power,
             specific: replicas.iter().position(|r| r.name == "specific"),
             custom_exchange: None,
+            annealing: (settings.annealing_particles > 0).then_some(Annealing {
+                particles: settings.annealing_particles,
+                sweeps: settings.annealing_sweeps,
+            }),
         }
     }
 
@@ -277,6 +291,9 @@ impl<'a> ChainFamily for ReltFamily<'a> {
             ReltExchange::IsSwap => Some(Box::new(IsSwap::new())),
             ReltExchange::None => None,
         }
+    }
+    fn annealing(&self) -> Option<Annealing> {
+        self.annealing
     }
     fn member_log_density(&self, member: usize, payload: &PathSample) -> Option<f64> {
         let v = class_values(&payload.splats, self.scalar);

@@ -64,6 +64,7 @@ use estimator::{MemberTotals, Weights, sum_images};
 use mcmc_core::chain::Chain;
 use mcmc_core::kernel::Kernel;
 use mcmc_core::mh::MetropolisHastings;
+use mcmc_core::replica::population_annealing::{PopulationAnnealing, anneal};
 use mcmc_core::replica::{ExchangeMove, ReplicaExchange};
 use mcmc_core::rng::{splitmix64, stream_rng};
 use mcmc_core::startup::{Bootstrap, RunningNormalization};
@@ -257,6 +258,74 @@ pub trait ChainFamily: Sync {
     ) -> Option<[f64; PATH_CLASSES]> {
         None
     }
+    /// Start-up by population annealing over the members, in order
+    /// (`mcmc_core::replica::population_annealing`): member 0's particles
+    /// are resampled from its bootstrap, every later member's are annealed
+    /// from the previous one with the members' kernels; they start the
+    /// chains and give `b̂_k = b̂_0 · Π ratios`. For ladders whose members
+    /// are ordered easy to hard (RELT). `None` (the default): every member
+    /// starts from its own bootstrap.
+    fn annealing(&self) -> Option<Annealing> {
+        None
+    }
+}
+
+/// Population annealing settings of a start-up.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Annealing {
+    /// Particles (≥ 1).
+    pub particles: usize,
+    /// Metropolis–Hastings steps per particle and member.
+    pub sweeps: usize,
+}
+
+/// One member's population-annealing estimate, as reported.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct AnnealedMember {
+    /// `b_k / b_{k−1}` (1 for member 0).
+    pub ratio: f64,
+    /// Its relative standard error.
+    pub relative_error: f64,
+    /// Acceptance of the member's MH sweeps (NaN for member 0).
+    pub acceptance: f64,
+}
+
+/// Stream offset from which the annealing's seed is derived.
+const ANNEALING_STREAM: u64 = 1 << 43;
+
+/// Population annealing over `family`'s members from `count` particles
+/// resampled from member 0's bootstrap.
+fn anneal_members<F: ChainFamily>(
+    family: &F,
+    mutation: &F::Mutation,
+    boot: &Bootstrap<usize, ()>,
+    settings: Annealing,
+    seed: u64,
+) -> Result<PopulationAnnealing<F::State, PathSample>, MltError> {
+    for d in 0..family.members() {
+        family.kernel(mutation, d)?;
+    }
+    let mut rng = stream_rng(seed, ANNEALING_STREAM);
+    let initial = boot
+        .resample(settings.particles.max(1), &mut rng)?
+        .into_iter()
+        .map(|x| {
+            let state = family.candidate(seed, x.state as u64);
+            let e = family.target(0).evaluate(&state);
+            mcmc_core::sample::Sample {
+                state,
+                log_density: e.log_density,
+                payload: e.payload,
+            }
+        })
+        .collect();
+    Ok(anneal(
+        &Members(family),
+        initial,
+        |k| MetropolisHastings::new(family.kernel(mutation, k).expect("checked above")),
+        settings.sweeps,
+        splitmix64(seed ^ splitmix64(ANNEALING_STREAM)),
+    )?)
 }
 
 /// Exchange counts summed over a run's replica sets.
@@ -405,6 +474,8 @@ pub struct MltResult {
     pub member_stats: Vec<Option<ChainStatistics>>,
     /// Exchange counts, for families with an exchange move.
     pub exchange: Option<ExchangeSummary>,
+    /// Population annealing per member, for families that anneal.
+    pub annealing: Option<Vec<AnnealedMember>>,
     /// Acceptance per path depth (index = depth).
     pub per_depth: Vec<DepthAcceptance>,
     /// Bootstrap candidates with a NaN/inf contribution.
@@ -548,7 +619,31 @@ pub fn run<F: ChainFamily>(
         running: boot_running,
         invalid,
     } = start_up(family, count, seed)?;
-    let bootstrap_b: Vec<(f64, f64)> = boots.iter().map(|b| (b.b(), b.standard_error())).collect();
+    let mut bootstrap_b: Vec<(f64, f64)> =
+        boots.iter().map(|b| (b.b(), b.standard_error())).collect();
+    let exchange = family.exchange_move().is_some();
+    if exchange && let Some(member) = bootstrap_b.iter().position(|b| b.0 <= 0.0) {
+        return Err(MltError::EmptyMember { member });
+    }
+    // Population annealing, if the family asks for it, replaces the
+    // members' `b̂` and start states.
+    let annealed = match family.annealing() {
+        Some(a) => Some(anneal_members(
+            family,
+            &settings.mutation,
+            &boots[0],
+            a,
+            seed,
+        )?),
+        None => None,
+    };
+    if let Some(pa) = &annealed {
+        let b0 = bootstrap_b[0].0;
+        for (k, b) in bootstrap_b.iter_mut().enumerate() {
+            let v = b0 * pa.log_b(k).exp();
+            *b = (v, v * pa.relative_error(k));
+        }
+    }
     let b_star: f64 = bootstrap_b.iter().map(|b| b.0).sum();
     if b_star == 0.0 || !b_star.is_finite() {
         return Err(MltError::BlackScene {
@@ -561,26 +656,31 @@ pub fn run<F: ChainFamily>(
         .iter()
         .map(|&(b, _)| if b > 0.0 { b.powf(gamma) } else { 0.0 })
         .collect();
-    let exchange = family.exchange_move().is_some();
     // With an exchange move every set holds one chain per member.
     let sets = (settings.chains / members).max(1);
     let chains_of = if exchange {
-        if let Some(member) = bootstrap_b.iter().position(|b| b.0 <= 0.0) {
-            return Err(MltError::EmptyMember { member });
-        }
         vec![sets; members]
     } else {
         allocate_chains(settings.chains, &shares)
     };
-    let mut starts: Vec<Vec<usize>> = Vec::with_capacity(members);
+    let mut starts: Vec<Vec<F::State>> = Vec::with_capacity(members);
     for (d, boot) in boots.iter().enumerate() {
-        let mut rng = stream_rng(seed, RESAMPLE_STREAM + 1 + d as u64);
-        let s = if chains_of[d] == 0 {
-            Vec::new()
-        } else {
-            boot.resample(chains_of[d], &mut rng)?
-        };
-        starts.push(s.into_iter().map(|x| x.state).collect());
+        let n = chains_of[d];
+        starts.push(match &annealed {
+            // Spread over the member's (resampled, moved) particles.
+            Some(pa) => {
+                let ps = &pa.levels[d].particles;
+                (0..n).map(|i| ps[i * ps.len() / n].state.clone()).collect()
+            }
+            None if n == 0 => Vec::new(),
+            None => {
+                let mut rng = stream_rng(seed, RESAMPLE_STREAM + 1 + d as u64);
+                boot.resample(n, &mut rng)?
+                    .into_iter()
+                    .map(|x| family.candidate(seed, x.state as u64))
+                    .collect()
+            }
+        });
     }
     let bootstrap_seconds = start.elapsed().as_secs_f64();
 
@@ -681,6 +781,16 @@ pub fn run<F: ChainFamily>(
         chain_stats: chain_stats.unwrap_or_else(|| ChainStatistics::new(Vec::new())),
         member_stats,
         exchange: exchange_summary,
+        annealing: annealed.map(|pa| {
+            pa.levels
+                .iter()
+                .map(|l| AnnealedMember {
+                    ratio: l.log_ratio.exp(),
+                    relative_error: l.ratio_relative_error,
+                    acceptance: l.acceptance,
+                })
+                .collect()
+        }),
         bootstrap_invalid: invalid,
         first_nonfinite,
         bootstrap_seconds,
@@ -701,7 +811,7 @@ fn share(total: u64, n: usize, k: usize) -> u64 {
 fn chain_tasks<'f, F: ChainFamily>(
     family: &'f F,
     settings: &ChainSettings<F::Mutation>,
-    starts: &[Vec<usize>],
+    starts: &[Vec<F::State>],
     total: Option<u64>,
     new_film: &dyn Fn() -> Film,
 ) -> Result<Vec<Task<'f, F>>, MltError> {
@@ -723,10 +833,10 @@ fn chain_tasks<'f, F: ChainFamily>(
                 Units::Chains(Vec::new()),
             ));
         }
-        for (i, &candidate) in member_starts.iter().enumerate() {
+        for (i, start) in member_starts.iter().enumerate() {
             let chain = Chain::new(
                 family.target(d),
-                family.candidate(seed, candidate as u64),
+                start.clone(),
                 MetropolisHastings::new(family.kernel(&settings.mutation, d)?),
                 stream_rng(seed, c as u64),
             )?;
@@ -753,7 +863,7 @@ const REPLICA_SET_STREAM: u64 = 1 << 42;
 fn replica_tasks<'f, F: ChainFamily>(
     family: &'f F,
     settings: &ChainSettings<F::Mutation>,
-    starts: &[Vec<usize>],
+    starts: &[Vec<F::State>],
     sets: usize,
     total: Option<u64>,
     new_film: &dyn Fn() -> Film,
@@ -773,9 +883,7 @@ fn replica_tasks<'f, F: ChainFamily>(
         })
         .collect();
     for set in 0..sets {
-        let initial = (0..members)
-            .map(|l| family.candidate(seed, starts[l][set] as u64))
-            .collect();
+        let initial = (0..members).map(|l| starts[l][set].clone()).collect();
         let algorithms = (0..members)
             .map(|l| {
                 Ok(MetropolisHastings::new(

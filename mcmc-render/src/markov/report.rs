@@ -79,6 +79,9 @@ pub fn rendered(
     if let Some(exchange) = &result.exchange {
         statistics.insert("exchange".into(), json!(exchange));
     }
+    if let Some(annealing) = &result.annealing {
+        statistics.insert("annealing".into(), json!(annealing));
+    }
     Rendered {
         image: result.image(),
         seconds: result.seconds,
