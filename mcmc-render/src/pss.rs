@@ -420,19 +420,32 @@ impl<'a, F: PssPathSampler> ChainFamily for PssFamily<'a, F> {
     fn independent_probability(&self, mutation: &Mutation) -> f64 {
         mutation.large_step_probability
     }
-    fn is_independent(&self, component: usize) -> bool {
-        component == LARGE_STEP_COMPONENT
-    }
-    fn candidate(&self, seed: u64, index: u64) -> TorusPoint {
-        bootstrap_point(seed, index as usize)
-    }
-    fn reference_log_density(&self, _state: &TorusPoint) -> f64 {
-        // Uniform on the unit torus.
-        0.0
-    }
-    fn coordinates(&self, state: &TorusPoint) -> Option<Vec<f64>> {
-        Some(state.materialize())
-    }
+    crate::primary_sample_space_family!();
+}
+
+/// The [`ChainFamily`] methods every family on primary sample space
+/// shares, for use inside its `impl ChainFamily` (with `State =
+/// TorusPoint` and a [`Mutation`] kernel): the large step
+/// ([`LARGE_STEP_COMPONENT`]) is the independent proposal, start-up
+/// candidates are [`bootstrap_point`]s, the reference density is uniform,
+/// and a state's coordinates reproduce it for `--replay`.
+#[macro_export]
+macro_rules! primary_sample_space_family {
+    () => {
+        fn is_independent(&self, component: usize) -> bool {
+            component == $crate::pss::LARGE_STEP_COMPONENT
+        }
+        fn candidate(&self, seed: u64, index: u64) -> Self::State {
+            $crate::pss::bootstrap_point(seed, index as usize)
+        }
+        fn reference_log_density(&self, _state: &Self::State) -> f64 {
+            // Uniform on the unit torus.
+            0.0
+        }
+        fn coordinates(&self, state: &Self::State) -> Option<Vec<f64>> {
+            Some(state.materialize())
+        }
+    };
 }
 
 crate::choice! {

@@ -213,26 +213,10 @@ where
     /// jumps are not reported; read [`ReplicaExchange::current`] after the
     /// sweep for the state.
     pub fn sweep_observed(&mut self, observer: &mut Observer<'_, S, F::Payload>) {
-        let m = self.levels();
-        match self.exchange.schedule() {
-            Schedule::AfterAllMutations => {
-                self.mutate_all(observer);
-                self.run_exchange(None);
-            }
-            Schedule::BeforeEachMutation => {
-                for level in (0..m).rev() {
-                    self.run_exchange(Some(level));
-                    self.mutate_one(level, observer);
-                }
-            }
-            Schedule::AfterEachMutation => {
-                for level in (0..m).rev() {
-                    self.mutate_one(level, observer);
-                    self.run_exchange(Some(level));
-                }
-            }
-        }
-        self.end_sweep();
+        self.sweep_scheduled(|re, level| match level {
+            None => re.mutate_all(observer),
+            Some(level) => re.mutate_one(level, observer),
+        });
     }
 
     /// One sweep on the calling thread that reports every level's mutation
@@ -240,23 +224,30 @@ where
     /// level into its own film). Same streams, same result as
     /// [`ReplicaExchange::sweep`]; equi-energy jumps are not reported.
     pub fn sweep_observed_levels(&mut self, observer: &mut LevelObserver<'_, S, F::Payload>) {
+        self.sweep_scheduled(|re, level| match level {
+            None => (0..re.levels()).for_each(|l| re.mutate_reporting(l, observer)),
+            Some(level) => re.mutate_reporting(level, observer),
+        });
+    }
+
+    /// A sweep in the exchange move's schedule; `mutate(self, None)`
+    /// mutates every level, `mutate(self, Some(l))` level `l`.
+    fn sweep_scheduled(&mut self, mut mutate: impl FnMut(&mut Self, Option<usize>)) {
         let m = self.levels();
         match self.exchange.schedule() {
             Schedule::AfterAllMutations => {
-                for level in 0..m {
-                    self.mutate_reporting(level, observer);
-                }
+                mutate(self, None);
                 self.run_exchange(None);
             }
             Schedule::BeforeEachMutation => {
                 for level in (0..m).rev() {
                     self.run_exchange(Some(level));
-                    self.mutate_reporting(level, observer);
+                    mutate(self, Some(level));
                 }
             }
             Schedule::AfterEachMutation => {
                 for level in (0..m).rev() {
-                    self.mutate_reporting(level, observer);
+                    mutate(self, Some(level));
                     self.run_exchange(Some(level));
                 }
             }

@@ -33,10 +33,7 @@ use crate::integrators::bdpt::{Bdpt, MisHeuristic};
 use crate::markov::{self, Annealing, ChainFamily, ChainParams, MltError, MltResult};
 use crate::observer::Observer;
 use crate::path_classes::{ClassScalar, ClassifiedBdpt, class_values};
-use crate::pss::{
-    LARGE_STEP_COMPONENT, Mutation, PATH_CLASSES, PathSample, PssTarget, SmallStepKind,
-    bootstrap_point,
-};
+use crate::pss::{Mutation, PATH_CLASSES, PathSample, PssTarget, SmallStepKind};
 use crate::pss_dump::DumpSampler;
 use crate::scene::Scene;
 use crate::settings::check;
@@ -264,18 +261,7 @@ impl<'a> ChainFamily for ReltFamily<'a> {
         // Only for Kelemen's MIS, which RELT does not use.
         0.0
     }
-    fn is_independent(&self, component: usize) -> bool {
-        component == LARGE_STEP_COMPONENT
-    }
-    fn candidate(&self, seed: u64, index: u64) -> TorusPoint {
-        bootstrap_point(seed, index as usize)
-    }
-    fn reference_log_density(&self, _state: &TorusPoint) -> f64 {
-        0.0
-    }
-    fn coordinates(&self, state: &TorusPoint) -> Option<Vec<f64>> {
-        Some(state.materialize())
-    }
+    crate::primary_sample_space_family!();
     fn exchange_move(&self) -> Option<Box<dyn ExchangeMove<TorusPoint, PathSample>>> {
         let m = self.members();
         if let Some(make) = self.custom_exchange {

@@ -9,7 +9,7 @@ use mcmc_core::space::TorusPoint;
 use mcmc_core::target::{Evaluation, Target};
 use mcmc_render::integrators::pt::PathTracer;
 use mcmc_render::markov::{ChainFamily, MltError};
-use mcmc_render::pss::{LARGE_STEP_COMPONENT, Mutation, PathSample, PssTarget, bootstrap_point};
+use mcmc_render::pss::{Mutation, PathSample, PssTarget};
 use mcmc_render::scene::Scene;
 
 /// `β · ln I(u)`; `−∞` and NaN pass through (`0·(−∞) = −∞`).
@@ -90,18 +90,7 @@ impl<'a> ChainFamily for TemperedPss<'a> {
     fn independent_probability(&self, mutation: &Mutation) -> f64 {
         mutation.large_step_probability
     }
-    fn is_independent(&self, component: usize) -> bool {
-        component == LARGE_STEP_COMPONENT
-    }
-    fn candidate(&self, seed: u64, index: u64) -> TorusPoint {
-        bootstrap_point(seed, index as usize)
-    }
-    fn reference_log_density(&self, _state: &TorusPoint) -> f64 {
-        0.0
-    }
-    fn coordinates(&self, state: &TorusPoint) -> Option<Vec<f64>> {
-        Some(state.materialize())
-    }
+    mcmc_render::primary_sample_space_family!();
     fn exchange_move(&self) -> Option<Box<dyn ExchangeMove<TorusPoint, PathSample>>> {
         if self.blind {
             Some(Box::new(BlindSwap))
