@@ -2,16 +2,19 @@
 //! preview (the `png` crate).
 
 use crate::color::Rgb;
+use crate::output::write_atomically;
 use std::path::Path;
 
-/// Writes a linear-RGB EXR (32-bit float channels).
+/// Writes a linear-RGB EXR (32-bit float channels), atomically.
 pub fn write_exr(path: &Path, width: u32, height: u32, pixels: &[Rgb]) -> Result<(), String> {
     let w = width as usize;
-    exr::prelude::write_rgb_file(path, w, height as usize, |x, y| {
-        let p = pixels[y * w + x];
-        (p.r, p.g, p.b)
+    write_atomically(path, |tmp| {
+        exr::prelude::write_rgb_file(tmp, w, height as usize, |x, y| {
+            let p = pixels[y * w + x];
+            (p.r, p.g, p.b)
+        })
+        .map_err(|e| format!("cannot write {}: {e}", path.display()))
     })
-    .map_err(|e| format!("cannot write {}: {e}", path.display()))
 }
 
 /// Reads the first RGB(A) layer of an EXR file as linear RGB.
@@ -44,10 +47,22 @@ fn srgb_encode(v: f32) -> u8 {
     (s * 255.0 + 0.5) as u8
 }
 
-/// Writes an 8-bit sRGB PNG preview (linear values clamped to [0, 1]).
+/// Writes an 8-bit sRGB PNG preview (linear values clamped to [0, 1]),
+/// atomically.
 pub fn write_png(path: &Path, width: u32, height: u32, pixels: &[Rgb]) -> Result<(), String> {
+    write_atomically(path, |tmp| write_png_to(tmp, path, width, height, pixels))
+}
+
+/// The PNG encoding of [`write_png`] into `file_path` (errors name `path`).
+fn write_png_to(
+    file_path: &Path,
+    path: &Path,
+    width: u32,
+    height: u32,
+    pixels: &[Rgb],
+) -> Result<(), String> {
     let fail = |e: &dyn std::fmt::Display| format!("cannot write {}: {e}", path.display());
-    let file = std::fs::File::create(path).map_err(|e| fail(&e))?;
+    let file = std::fs::File::create(file_path).map_err(|e| fail(&e))?;
     let mut enc = png::Encoder::new(std::io::BufWriter::new(file), width, height);
     enc.set_color(png::ColorType::Rgb);
     enc.set_depth(png::BitDepth::Eight);

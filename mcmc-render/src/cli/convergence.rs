@@ -84,7 +84,9 @@ pub fn command(args: ConvergenceArgs) -> Result<(), String> {
         return Err("convergence needs SCENE and --reference (or --replot CSV)".into());
     };
     let title = args.title.clone().unwrap_or_else(|| stem(scene));
-    check_writable(&args.out)?;
+    // Flags first, then files.
+    let threads = super::thread_count(args.threads)?;
+    check_writable(&args.out, "csv")?;
     let defines = parse_defines(&args.define)?;
     let loaded = Scene::load(scene, &defines).map_err(|e| e.to_string())?;
     let (rw, rh, r) = read_exr(reference)?;
@@ -99,7 +101,6 @@ pub fn command(args: ConvergenceArgs) -> Result<(), String> {
         .split(',')
         .map(|s| s.trim().to_string())
         .collect();
-    let threads = args.threads.unwrap_or(0);
     let study = Study {
         integrators: names.clone(),
         seconds: args.time,
@@ -308,7 +309,7 @@ pub fn run(
         ));
     }
     let budget = Duration::try_from_secs_f64(seconds)
-        .map_err(|_| format!("--time {seconds} is too large"))?;
+        .map_err(|_| format!("--time {seconds:e} is too large"))?;
     if checkpoints == 0 {
         return Err("--checkpoints must be at least 1".into());
     }
@@ -376,7 +377,7 @@ pub fn write_csv(path: &Path, records: &[Record]) -> Result<(), String> {
             r.integrator, r.seconds, r.samples, r.rel_mse, r.rmse
         ));
     }
-    std::fs::write(path, text).map_err(|e| format!("cannot write {}: {e}", path.display()))
+    crate::output::write_bytes(path, text.as_bytes())
 }
 
 /// Reads records written by [`write_csv`] (for re-plotting a study).
@@ -593,13 +594,15 @@ pub fn write_plot(
 }
 
 fn write_rgb8_png(path: &Path, w: u32, h: u32, rgb: &[u8]) -> Result<(), String> {
-    let file =
-        std::fs::File::create(path).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
-    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w, h);
-    enc.set_color(png::ColorType::Rgb);
-    enc.set_depth(png::BitDepth::Eight);
-    let mut writer = enc.write_header().map_err(|e| e.to_string())?;
-    writer.write_image_data(rgb).map_err(|e| e.to_string())
+    crate::output::write_atomically(path, |tmp| {
+        let file = std::fs::File::create(tmp)
+            .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+        let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w, h);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        let mut writer = enc.write_header().map_err(|e| e.to_string())?;
+        writer.write_image_data(rgb).map_err(|e| e.to_string())
+    })
 }
 
 #[cfg(test)]

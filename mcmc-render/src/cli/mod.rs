@@ -270,8 +270,20 @@ fn parse_defines(defs: &[String]) -> Result<HashMap<String, String>, String> {
         .collect()
 }
 
-/// Fails early (before a long render) when the output cannot be written.
-fn check_writable(out: &Path) -> Result<(), String> {
+/// Fails early (before a long render) when the output cannot be written,
+/// or when its name does not end in `.ext`: the outputs beside it (PNG
+/// preview, JSON statistics, layers) are named by replacing the
+/// extension, so with any other name one of them would overwrite it.
+fn check_writable(out: &Path, ext: &str) -> Result<(), String> {
+    match out.extension().and_then(|e| e.to_str()) {
+        Some(e) if e.eq_ignore_ascii_case(ext) => {}
+        _ => {
+            return Err(format!(
+                "--out {} must end in .{ext} (the other outputs are written beside it under the same name)",
+                out.display()
+            ));
+        }
+    }
     let existed = out.exists();
     std::fs::OpenOptions::new()
         .write(true)
@@ -285,11 +297,17 @@ fn check_writable(out: &Path) -> Result<(), String> {
     Ok(())
 }
 
-/// The worker threads: `threads`, or every core.
+/// The worker threads: `threads`, or every core. At most 8 per core (and
+/// at least 64 allowed): more only costs time to start them.
 fn thread_count(threads: Option<usize>) -> Result<usize, String> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let limit = (8 * cores).max(64);
     match threads {
         Some(0) => Err("--threads must be at least 1".into()),
+        Some(n) if n > limit => Err(format!(
+            "--threads {n} is more than {limit} (8 per core of the {cores} here, at least 64)"
+        )),
         Some(n) => Ok(n),
-        None => Ok(std::thread::available_parallelism().map_or(1, |n| n.get())),
+        None => Ok(cores),
     }
 }

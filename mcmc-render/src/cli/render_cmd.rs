@@ -97,7 +97,7 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
             ));
         }
         Some(t) => {
-            Some(Duration::try_from_secs_f64(t).map_err(|_| format!("--time {t} is too large"))?)
+            Some(Duration::try_from_secs_f64(t).map_err(|_| format!("--time {t:e} is too large"))?)
         }
         None => None,
     };
@@ -108,8 +108,14 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
         let scene = Scene::load(&args.scene, &defines).map_err(|e| e.to_string())?;
         return print_replay(&scene, file);
     }
-    check_writable(&args.out)?;
+    check_writable(&args.out, "exr")?;
     let scene = Scene::load(&args.scene, &defines).map_err(|e| e.to_string())?;
+    // The per-pixel driver's film, its light-path films and the image.
+    let (w, h) = (scene.film.width, scene.film.height);
+    crate::resources::check_memory(
+        &format!("film {w}×{h}"),
+        crate::resources::film_bytes(w, h, 10),
+    )?;
     let integrator = registry::configure(
         scene.integrator_element.as_ref(),
         args.integrator.as_deref(),
@@ -166,8 +172,7 @@ fn render_job(job: &Job<'_>) -> Result<(), String> {
     let json_path = job.out.with_extension("json");
     let text =
         serde_json::to_string_pretty(&sidecar(job, &rendered, dump)).map_err(|e| e.to_string())?;
-    std::fs::write(&json_path, text + "\n")
-        .map_err(|e| format!("cannot write {}: {e}", json_path.display()))?;
+    crate::output::write_bytes(&json_path, (text + "\n").as_bytes())?;
     if !job.quiet {
         eprintln!("{} -> {}", rendered.summary, job.out.display());
     }

@@ -605,6 +605,7 @@ pub fn run<F: ChainFamily>(
         )));
     }
     family.kernel(&settings.mutation, 0)?;
+    check_memory(scene, family, settings)?;
     let start = Instant::now();
     let deadline = settings.time_budget.map(|b| start + b);
     let out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
@@ -797,6 +798,35 @@ pub fn run<F: ChainFamily>(
         seconds: start.elapsed().as_secs_f64(),
         interrupted,
     })
+}
+
+/// Bytes per bootstrap candidate and member (its log weight, the
+/// bootstrap's sample and cumulative weight) and per chain (state, kernel,
+/// statistics; measured ≈ 1 KB for PSSMLT).
+const BYTES_PER_CANDIDATE: u128 = 48;
+const BYTES_PER_CHAIN: u128 = 2048;
+
+/// Refuses a run whose bootstrap, chains and films would not fit in the
+/// memory available.
+fn check_memory<F: ChainFamily>(
+    scene: &Scene,
+    family: &F,
+    settings: &ChainSettings<F::Mutation>,
+) -> Result<(), MltError> {
+    let members = family.members() as u128;
+    let (w, h) = (scene.film.width, scene.film.height);
+    let films = (settings.tasks as u64 + 2) * family.members() as u64;
+    let bytes = settings.bootstrap as u128 * members * BYTES_PER_CANDIDATE
+        + settings.chains as u128 * BYTES_PER_CHAIN
+        + crate::resources::film_bytes(w, h, films);
+    crate::resources::check_memory(
+        &format!(
+            "a Markov-chain render of {w}×{h} with {} bootstrap candidates × {members} members and {} chains",
+            settings.bootstrap, settings.chains
+        ),
+        bytes,
+    )
+    .map_err(MltError::Setting)
 }
 
 /// `total` split over `n` parts, part `k`'s share (the first `total % n`

@@ -1,0 +1,112 @@
+//! Limits on what a user's word can make the CLI do (issue 23): numbers
+//! that would overflow, thread counts, memory estimates before any
+//! allocation, and output names that would let one output overwrite
+//! another. Each gives one line naming the problem, never a panic.
+
+mod cli_support;
+
+use cli_support::{assert_clean_failure, floor_scene, run, scratch, write};
+
+fn setup(name: &str) -> std::path::PathBuf {
+    let dir = scratch(name);
+    write(&dir, "s.xml", &floor_scene(8, 6));
+    dir
+}
+
+#[test]
+fn a_time_budget_too_large_for_a_duration_is_refused() {
+    let dir = setup("limits-time");
+    let out = run(&["render", "s.xml", "--time", "1e300", "--quiet"], &dir);
+    assert_clean_failure(&out, &["--time", "1e300", "too large"]);
+}
+
+#[test]
+fn thousands_of_threads_are_refused() {
+    let dir = setup("limits-threads");
+    let out = run(&["render", "s.xml", "--threads", "100000", "--quiet"], &dir);
+    assert_clean_failure(&out, &["--threads 100000", "per core"]);
+    let out = run(
+        &[
+            "convergence",
+            "s.xml",
+            "--reference",
+            "r.exr",
+            "--threads",
+            "100000",
+        ],
+        &dir,
+    );
+    assert_clean_failure(&out, &["--threads 100000"]);
+}
+
+#[test]
+fn an_output_named_like_its_sidecars_is_refused() {
+    // The JSON statistics (`.json`) and the PNG preview (`.png`) are named
+    // by replacing the extension: `--out x.json` would be overwritten.
+    let dir = setup("limits-out");
+    for name in ["x.json", "x.png", "x"] {
+        let out = run(&["render", "s.xml", "--out", name, "--quiet"], &dir);
+        assert_clean_failure(&out, &[name, "must end in .exr"]);
+        assert!(!dir.join(name).exists(), "{name} was written");
+    }
+    let out = run(
+        &["render", "s.xml", "--out", "X.EXR", "--spp", "1", "--quiet"],
+        &dir,
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = run(
+        &[
+            "convergence",
+            "s.xml",
+            "--reference",
+            "X.EXR",
+            "--out",
+            "c.png",
+        ],
+        &dir,
+    );
+    assert_clean_failure(&out, &["c.png", "must end in .csv"]);
+}
+
+#[test]
+fn memory_beyond_the_machine_is_refused_before_allocating() {
+    let dir = setup("limits-memory");
+    let out = run(
+        &[
+            "render",
+            "s.xml",
+            "--integrator",
+            "pssmlt",
+            "--set",
+            "bootstrap=100000000000",
+            "--quiet",
+        ],
+        &dir,
+    );
+    assert_clean_failure(
+        &out,
+        &["100000000000 bootstrap candidates", "needs", "available"],
+    );
+    let out = run(
+        &[
+            "render",
+            "s.xml",
+            "--integrator",
+            "mmlt",
+            "--set",
+            "max_depth=5",
+            "--set",
+            "chains=10000000000",
+            "--quiet",
+        ],
+        &dir,
+    );
+    assert_clean_failure(&out, &["10000000000 chains", "needs", "available"]);
+    write(&dir, "huge.xml", &floor_scene(65536, 65536));
+    let out = run(&["render", "huge.xml", "--quiet"], &dir);
+    assert_clean_failure(&out, &["film 65536×65536 needs", "available"]);
+}
