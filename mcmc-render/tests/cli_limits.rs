@@ -110,3 +110,38 @@ fn memory_beyond_the_machine_is_refused_before_allocating() {
     let out = run(&["render", "huge.xml", "--quiet"], &dir);
     assert_clean_failure(&out, &["film 65536×65536 needs", "available"]);
 }
+
+#[test]
+fn deeply_nested_plugins_are_refused_not_a_stack_overflow() {
+    let dir = scratch("limits-nesting");
+    let n = 10_000;
+    let text = format!(
+        r#"<scene version="3.0.0">{}{}</scene>"#,
+        r#"<shape type="sphere">"#.repeat(n),
+        "</shape>".repeat(n)
+    );
+    write(&dir, "deep.xml", &text);
+    let out = run(&["render", "deep.xml", "--quiet"], &dir);
+    assert_clean_failure(&out, &["deep.xml:1", "nested more than 32 deep"]);
+}
+
+#[test]
+fn an_include_graph_that_fans_out_is_refused() {
+    // Each of 12 files includes the next one 10 times: 10^11 inclusions
+    // if followed.
+    let dir = scratch("limits-includes");
+    for i in 0..12 {
+        let includes = if i < 11 {
+            format!(r#"<include filename="f{}.xml"/>"#, i + 1).repeat(10)
+        } else {
+            String::new()
+        };
+        write(
+            &dir,
+            &format!("f{i}.xml"),
+            &format!(r#"<scene version="3.0.0">{includes}</scene>"#),
+        );
+    }
+    let out = run(&["render", "f0.xml", "--quiet"], &dir);
+    assert_clean_failure(&out, &["more than 1000 <include>d files"]);
+}

@@ -127,9 +127,19 @@ const PLUGIN_TAGS: &[&str] = &[
 /// Maximum `<include>` nesting (guards against include cycles).
 const MAX_INCLUDE_DEPTH: usize = 16;
 
+/// Maximum `<include>`d files in all (an include graph that fans out would
+/// otherwise be followed exponentially often).
+const MAX_INCLUDES: usize = 1000;
+
+/// Maximum nesting of plugin elements (real scenes nest three or four;
+/// the walk is recursive, so an unbounded depth would overflow the stack).
+const MAX_NESTING: usize = 32;
+
 struct Parser {
     defaults: HashMap<String, String>,
     overrides: HashMap<String, String>,
+    /// Files included so far.
+    includes: usize,
 }
 
 /// Parses a scene file. `overrides` are `$name` values that win over the
@@ -141,6 +151,7 @@ pub fn parse_file(
     let mut parser = Parser {
         defaults: HashMap::new(),
         overrides: overrides.clone(),
+        includes: 0,
     };
     let mut out = Vec::new();
     parser.parse_scene_file(path, 0, &mut out)?;
@@ -153,6 +164,7 @@ pub fn parse_str(text: &str, base: &Path) -> Result<Vec<Child>, SceneError> {
     let mut parser = Parser {
         defaults: HashMap::new(),
         overrides: HashMap::new(),
+        includes: 0,
     };
     let mut out = Vec::new();
     parser.parse_scene_text(text, base, 0, &mut out)?;
@@ -219,6 +231,15 @@ impl Parser {
                     if depth + 1 > MAX_INCLUDE_DEPTH {
                         return Err(err(&loc, "<include> nested too deeply (cycle?)"));
                     }
+                    self.includes += 1;
+                    if self.includes > MAX_INCLUDES {
+                        return Err(err(
+                            &loc,
+                            format!(
+                                "more than {MAX_INCLUDES} <include>d files in all (an include graph that fans out?)"
+                            ),
+                        ));
+                    }
                     let target = path.parent().unwrap_or_else(|| Path::new(".")).join(name);
                     self.parse_scene_file(&target, depth + 1, out)?;
                 }
@@ -226,7 +247,7 @@ impl Parser {
                     return Err(err(&loc, "<ref> is only allowed inside a plugin"));
                 }
                 tag if PLUGIN_TAGS.contains(&tag) => {
-                    out.push(Child::Plugin(self.plugin(&doc, node, &file)?));
+                    out.push(Child::Plugin(self.plugin(&doc, node, &file, 1)?));
                 }
                 other => {
                     return Err(err(
@@ -289,13 +310,21 @@ impl Parser {
         Ok(out)
     }
 
+    /// Plugin element `node`, at `nesting` levels below `<scene>`.
     fn plugin(
         &self,
         doc: &roxmltree::Document,
         node: roxmltree::Node,
         file: &Arc<PathBuf>,
+        nesting: usize,
     ) -> Result<Plugin, SceneError> {
         let loc = loc_of(doc, node, file);
+        if nesting > MAX_NESTING {
+            return Err(err(
+                &loc,
+                format!("plugins nested more than {MAX_NESTING} deep"),
+            ));
+        }
         let tag = node.tag_name().name().to_string();
         check_attrs(node, &["type", "id", "name"], &loc)?;
         let kind = self.attr(node, "type", &loc)?;
@@ -320,9 +349,12 @@ impl Parser {
                     });
                 }
                 t if PLUGIN_TAGS.contains(&t) => {
-                    plugin
-                        .children
-                        .push(Child::Plugin(self.plugin(doc, child, file)?));
+                    plugin.children.push(Child::Plugin(self.plugin(
+                        doc,
+                        child,
+                        file,
+                        nesting + 1,
+                    )?));
                 }
                 "float" | "integer" | "boolean" | "string" | "rgb" | "point" | "vector"
                 | "transform" => {
