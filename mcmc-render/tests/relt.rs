@@ -238,3 +238,44 @@ fn kelemen_mis_is_refused() {
     let e = settings.validate().unwrap_err();
     assert!(e.contains("kelemen_mis"), "{e}");
 }
+
+#[test]
+fn the_ratio_chain_agrees_with_the_running_normalisation() {
+    // On the diffuse box, where the uniform draws estimate every b_k
+    // well: b_k by the chain of ratios (Eq. 10, errors from the spread
+    // between tasks) and by the running estimate agree within 4σ.
+    let scene = repo_scene_tilted("cornell-box.xml", 16, 5);
+    let mut settings = small_settings();
+    settings.chain.normalization = mcmc_render::markov::Normalization::Ratios;
+    settings.chain.mutations_per_pixel = Some(256);
+    let r = small(&scene, 3, settings);
+    let families = r.statistics["families"].as_array().unwrap();
+    for (k, f) in families.iter().enumerate().skip(1) {
+        let ratio_b = f["scale"].as_f64().unwrap();
+        let running = f["b_running"].as_f64().unwrap();
+        let se_running = f["b_running_standard_error"].as_f64().unwrap();
+        let se_ratio = f["scale_standard_error"].as_f64().unwrap();
+        let sigma = se_running.hypot(se_ratio);
+        eprintln!(
+            "replica {k}: ratios {ratio_b:.5} ± {se_ratio:.5}, running {running:.5} ± {se_running:.5}"
+        );
+        assert!(sigma > 0.0 && sigma.is_finite(), "replica {k}: σ = {sigma}");
+        assert!((ratio_b - running).abs() < 4.0 * sigma, "replica {k}");
+    }
+}
+
+#[test]
+fn ratios_need_members_that_share_an_evaluation() {
+    let scene = repo_scene("cornell-box.xml", 8);
+    let mut settings = mcmc_render::integrators::pssmlt::Pssmlt::default();
+    settings.chain.normalization = mcmc_render::markov::Normalization::Ratios;
+    settings.chain.bootstrap = 100;
+    settings.chain.chains = 4;
+    settings.chain.mutations_per_pixel = Some(1);
+    let stop = AtomicBool::new(false);
+    let e = match settings.render(&scene, &RunSettings::default(), &stop, &NoObserver) {
+        Err(e) => e.to_string(),
+        Ok(_) => panic!("pssmlt ran with normalization=ratios"),
+    };
+    assert!(e.contains("normalization=ratios"), "{e}");
+}

@@ -87,7 +87,8 @@ crate::settings! {
             /// Path depth.
             pub depth: DepthParams = DepthParams::default();
             /// The driver (`kelemen_mis` does not apply; `depth_allocation`
-            /// only without exchanges).
+            /// only without exchanges; `normalization=ratios` is the
+            /// paper's Eq. 10 chain, see docs/relt.md).
             pub chain: ChainParams = ChainParams::default();
         }
     }

@@ -94,6 +94,50 @@ pub(crate) struct MemberTotals<'a> {
     pub image_weights: &'a [f64],
     pub mis: bool,
     pub normalization: Normalization,
+    /// Per member `d`, one [`RatioSum`] of `q_{d+1}/q_d` per task that ran
+    /// member `d`'s chains.
+    pub ratios: Vec<Vec<RatioSum>>,
+}
+
+/// Expected-value sums of `q_{d+1}(x)/q_d(x)` over member `d`'s states.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct RatioSum {
+    weight: f64,
+    sum: f64,
+}
+
+impl RatioSum {
+    fn add(&mut self, weight: f64, log_ratio: f64) {
+        if weight > 0.0 {
+            // NaN or +∞ counts as no information: the chain rejected it.
+            let r = log_ratio.exp();
+            if r.is_finite() {
+                self.weight += weight;
+                self.sum += weight * r;
+            }
+        }
+    }
+
+    fn mean(&self) -> f64 {
+        self.sum / self.weight
+    }
+}
+
+/// `b_d / b_{d−1}` from member `d − 1`'s tasks and its standard error from
+/// the spread between tasks (independent chains; `NaN` with fewer than
+/// two tasks).
+fn chained_ratio(tasks: &[RatioSum]) -> (f64, f64) {
+    let weight: f64 = tasks.iter().map(|t| t.weight).sum();
+    let mean = tasks.iter().map(|t| t.sum).sum::<f64>() / weight;
+    let per_task: Vec<f64> = tasks
+        .iter()
+        .filter(|t| t.weight > 0.0)
+        .map(RatioSum::mean)
+        .collect();
+    let k = per_task.len() as f64;
+    let m = per_task.iter().sum::<f64>() / k;
+    let var = per_task.iter().map(|r| (r - m).powi(2)).sum::<f64>() / (k - 1.0);
+    (mean, (var / k).sqrt())
 }
 
 impl MemberTotals<'_> {
@@ -108,7 +152,20 @@ impl MemberTotals<'_> {
             image_weights,
             mis,
             normalization,
+            ratios,
         } = self;
+        // The chain b_d = b_{d−1} · E_{p_{d−1}}[q_d / q_{d−1}] from b_0's
+        // running estimate (Kitaoka et al. Eq. 10), relative errors in
+        // quadrature.
+        let mut chain = (running[0].b(), running[0].standard_error() / running[0].b());
+        let mut chained = Vec::with_capacity(films.len());
+        for d in 0..films.len() {
+            if d > 0 {
+                let (r, se) = chained_ratio(&ratios[d - 1]);
+                chain = (chain.0 * r, chain.1.hypot(se / r));
+            }
+            chained.push((chain.0, chain.0 * chain.1));
+        }
         films
             .into_iter()
             .enumerate()
@@ -120,6 +177,7 @@ impl MemberTotals<'_> {
                     match normalization {
                         Normalization::Bootstrap => bootstrap_b[d],
                         Normalization::Running => running_b,
+                        Normalization::Ratios => chained[d],
                     }
                 };
                 FamilyResult {
@@ -211,6 +269,9 @@ pub(crate) struct TransitionCounts {
 pub(crate) struct MemberSink<'a> {
     pub film: Option<&'a mut Film>,
     pub running: &'a mut RunningNormalization,
+    /// `q_{d+1}/q_d` over this member's states, for families whose members
+    /// share one evaluation.
+    pub ratio: &'a mut RatioSum,
 }
 
 /// Expected-value splatting and statistics of one transition.
@@ -247,5 +308,18 @@ pub(crate) fn observe<F: ChainFamily>(
     }
     if let Some(film) = sink.film.as_deref_mut() {
         film_state(family, film, &t.current.payload, w, 1.0 - t.alpha, false);
+    }
+    // Ratio of the next member's density to this one's, at both states.
+    let next = w.member + 1;
+    if next < family.members()
+        && let Some(ln_next) = family.member_log_density(next, &t.current.payload)
+    {
+        sink.ratio
+            .add(1.0 - t.alpha, ln_next - t.current.log_density);
+        if let Some(y) = t.proposal
+            && let Some(ln_next) = family.member_log_density(next, &y.payload)
+        {
+            sink.ratio.add(t.alpha, ln_next - y.log_density);
+        }
     }
 }

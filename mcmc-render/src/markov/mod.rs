@@ -119,6 +119,11 @@ crate::choice! {
         /// Running estimate over the bootstrap and all independent proposals
         /// so far (the default: lower variance, see [`ChainSettings`]).
         Running = "running",
+        /// For ladders whose members share one evaluation (RELT): member 0
+        /// by the running estimate, then `b_d = b_{d−1} · E[q_d/q_{d−1}]`
+        /// over member `d − 1`'s chain states (Kitaoka et al. Eq. 10),
+        /// with standard errors from the spread between tasks.
+        Ratios = "ratios",
     }
 }
 
@@ -135,7 +140,7 @@ crate::settings! {
         pub chains: usize = 1000, check crate::settings::check::count;
         /// Mutations per pixel (auto: 100, or until the time budget is spent).
         pub mutations_per_pixel: Option<u64> = None, check crate::settings::check::auto_or_at_least_one;
-        /// Image normalisation: running (bootstrap and every large step; lower variance) or bootstrap (pbrt-v4's b*).
+        /// Image normalisation: running (bootstrap and every large step; lower variance), bootstrap (pbrt-v4's b*) or ratios (ladders of shared evaluations: relt).
         pub normalization: Normalization = Normalization::Running;
         /// Kelemen's MIS combination of large steps.
         pub kelemen_mis: bool = false;
@@ -505,6 +510,8 @@ fn quadrature(errors: impl Iterator<Item = f64>) -> f64 {
 /// The start-up of every member: its bootstrap and the running estimate
 /// seeded with its candidates.
 struct Startup {
+    /// The members share one evaluation ([`ChainFamily::member_log_density`]).
+    shared: bool,
     boots: Vec<Bootstrap<usize, ()>>,
     running: Vec<RunningNormalization>,
     invalid: usize,
@@ -532,6 +539,7 @@ fn start_up<F: ChainFamily>(family: &F, count: usize, seed: u64) -> Result<Start
         // A NaN path is invalid for every member: count it once.
         let invalid = boots[0].invalid_candidates();
         return Ok(Startup {
+            shared: true,
             boots,
             running,
             invalid,
@@ -547,6 +555,7 @@ fn start_up<F: ChainFamily>(family: &F, count: usize, seed: u64) -> Result<Start
     }
     let invalid = boots.iter().map(|b| b.invalid_candidates()).sum();
     Ok(Startup {
+        shared: false,
         boots,
         running,
         invalid,
@@ -616,10 +625,16 @@ pub fn run<F: ChainFamily>(
     let seed = settings.seed;
     let count = settings.bootstrap;
     let Startup {
+        shared,
         boots,
         running: boot_running,
         invalid,
     } = start_up(family, count, seed)?;
+    if settings.normalization == Normalization::Ratios && !shared {
+        return Err(MltError::Setting(
+            "normalization=ratios needs a ladder whose members share one evaluation (relt); use running or bootstrap".into(),
+        ));
+    }
     let mut bootstrap_b: Vec<(f64, f64)> =
         boots.iter().map(|b| (b.b(), b.standard_error())).collect();
     let exchange = family.exchange_move().is_some();
@@ -716,9 +731,11 @@ pub fn run<F: ChainFamily>(
             image_weights: &image_weights,
             mis: settings.mis_large_steps,
             normalization: settings.normalization,
+            ratios: vec![Vec::new(); members],
         };
         for t in tasks {
             for (i, &m) in t.members.iter().enumerate() {
+                totals.ratios[m].push(t.ratios[i]);
                 if let Some(film) = &t.films[i] {
                     totals.films[m].add_film(film);
                 }

@@ -68,6 +68,7 @@ pub fn rendered(
             "b_running": f.running_b.0,
             "b_running_standard_error": f.running_b.1,
             "scale": f.scale,
+            "scale_standard_error": f.scale_standard_error,
         })).collect::<Vec<_>>(),
         "nonfinite_contributions": cs.invalid_density,
         "nonfinite_bootstrap_candidates": result.bootstrap_invalid,

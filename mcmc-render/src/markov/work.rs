@@ -3,7 +3,7 @@
 //! exchange move), each with its films, normalisation estimates and
 //! counters, run in rounds.
 
-use super::estimator::{DepthAcceptance, MemberSink, TransitionCounts, Weights, observe};
+use super::estimator::{DepthAcceptance, MemberSink, RatioSum, TransitionCounts, Weights, observe};
 use super::{ChainFamily, ExchangeSummary};
 use crate::film::Film;
 use crate::observer::Observer;
@@ -96,6 +96,8 @@ pub(crate) struct Task<'f, F: ChainFamily> {
     pub running: Vec<RunningNormalization>,
     /// Mutations done.
     pub mutations: Vec<u64>,
+    /// `q_{d+1}/q_d` sums over each member's states.
+    pub ratios: Vec<RatioSum>,
     /// Per-depth acceptance and the first NaN/inf proposal.
     pub counts: TransitionCounts,
     /// The chains or replica sets.
@@ -120,6 +122,7 @@ impl<'f, F: ChainFamily> Task<'f, F> {
             members,
             running: vec![RunningNormalization::new(); n],
             mutations: vec![0; n],
+            ratios: vec![RatioSum::default(); n],
             counts: TransitionCounts::default(),
             units,
         }
@@ -148,6 +151,7 @@ impl<'f, F: ChainFamily> Task<'f, F> {
             films,
             running,
             mutations,
+            ratios,
             counts,
             units,
         } = self;
@@ -159,6 +163,7 @@ impl<'f, F: ChainFamily> Task<'f, F> {
                 let mut sink = MemberSink {
                     film: films[0].as_mut(),
                     running: &mut running[0],
+                    ratio: &mut ratios[0],
                 };
                 for slot in chains.iter_mut() {
                     if abort() {
@@ -189,6 +194,7 @@ impl<'f, F: ChainFamily> Task<'f, F> {
                             let mut sink = MemberSink {
                                 film: films[level].as_mut(),
                                 running: &mut running[level],
+                                ratio: &mut ratios[level],
                             };
                             observe(family, t, &weights[level], &mut sink, counts);
                             share_independent_draw(family, level, t, running);
