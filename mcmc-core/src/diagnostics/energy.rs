@@ -5,16 +5,16 @@
 use super::DiagnosticsError;
 
 /// E-BFMI of one chain's per-draw energies `H_n`:
-/// `mean((H_n − H_{n−1})²) / var(H)` (population variance), ArviZ's
-/// `bfmi`. Stan's `check_energy` uses sums instead of means, i.e. the same
-/// value times `(N − 1)/N`. Values below 0.3 flag a chain whose momentum
-/// resampling moves too little in energy (heavy tails, funnels).
+/// `Σ (H_n − H_{n−1})² / Σ (H_n − H̄)²`, Stan's `check_energy` and ArviZ's
+/// `bfmi` (mean squared jump over the sample variance with `N − 1`: the
+/// same number). Values below 0.3 flag a chain whose momentum resampling
+/// moves too little in energy (heavy tails, funnels).
 ///
 /// ```
 /// use mcmc_core::diagnostics::e_bfmi;
-/// // Alternating energies: large jumps relative to the spread.
+/// // Alternating energies: jumps of 1, spread ½ around the mean.
 /// let b = e_bfmi(&[1.0, 2.0, 1.0, 2.0]).unwrap();
-/// assert!((b - 4.0).abs() < 1e-12);
+/// assert!((b - 3.0).abs() < 1e-12);
 /// ```
 pub fn e_bfmi(energy: &[f64]) -> Result<f64, DiagnosticsError> {
     if energy.len() < 2 {
@@ -30,13 +30,11 @@ pub fn e_bfmi(energy: &[f64]) -> Result<f64, DiagnosticsError> {
             value,
         });
     }
-    let n = energy.len() as f64;
-    let mean = energy.iter().sum::<f64>() / n;
-    let var = energy.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / n;
+    let mean = energy.iter().sum::<f64>() / energy.len() as f64;
+    let spread = energy.iter().map(|e| (e - mean).powi(2)).sum::<f64>();
     let jumps = energy
         .windows(2)
         .map(|w| (w[1] - w[0]).powi(2))
-        .sum::<f64>()
-        / (n - 1.0);
-    Ok(jumps / var)
+        .sum::<f64>();
+    Ok(jumps / spread)
 }
