@@ -1,11 +1,11 @@
-//! Our adaptive HMC, MALA and H²MC side by side with nuts-rs, in one
+//! Our NUTS, adaptive HMC, MALA and H²MC side by side with nuts-rs, in one
 //! process, on the same targets: a 100-d correlated Gaussian and a Bayesian
 //! logistic regression (d = 25, n = 1000, synthetic data).
 //!
 //! ```text
 //! cargo run --release --example hmc_vs_nuts -- --json
 //! cargo run --release --example hmc_vs_nuts -- --chains 4 --warmup 1000 --draws 1000
-//! cargo run --release --example hmc_vs_nuts -- --draws 10000 --samplers hmc,nuts-rs
+//! cargo run --release --example hmc_vs_nuts -- --draws 10000 --samplers nuts,hmc,nuts-rs
 //! ```
 //!
 //! Every sampler runs `chains` chains one after the other on one thread,
@@ -27,7 +27,7 @@ mod targets;
 use mcmc_core::adaptation::MetricAdaptation;
 use mcmc_core::diagnostics::summarize;
 use mcmc_core::gradient::{Differentiable, GradientPayload, GradientTarget};
-use mcmc_core::kernel::{GradientKernelStatistics, H2mc, Hmc, Kernel, Mala, Trajectory};
+use mcmc_core::kernel::{GradientKernelStatistics, H2mc, Hmc, Kernel, Mala, Nuts, Trajectory};
 use mcmc_core::prelude::{Chain, MetropolisHastings, stream_rng};
 use nuts_rs::{
     Chain as NutsChain, CpuLogpFunc, CpuMath, DiagNutsSettings, HasDims, LogpError, Settings,
@@ -71,6 +71,9 @@ struct Options {
     samplers: Vec<String>,
 }
 
+/// Every sampler the comparison knows.
+const SAMPLERS: [&str; 5] = ["nuts", "hmc", "mala", "h2mc", "nuts-rs"];
+
 fn parse() -> Result<Options, String> {
     let mut o = Options {
         json: false,
@@ -80,7 +83,7 @@ fn parse() -> Result<Options, String> {
         seed: 2026,
         hmc_time: None,
         h2mc_tau: 1.0,
-        samplers: ["hmc", "mala", "h2mc", "nuts-rs"]
+        samplers: SAMPLERS
             .map(String::from)
             .to_vec(),
     };
@@ -121,10 +124,11 @@ fn parse() -> Result<Options, String> {
                 if let Some(bad) = o
                     .samplers
                     .iter()
-                    .find(|s| !["hmc", "mala", "h2mc", "nuts-rs"].contains(&s.as_str()))
+                    .find(|s| !SAMPLERS.contains(&s.as_str()))
                 {
                     return Err(format!(
-                        "--samplers: unknown sampler `{bad}` (hmc, mala, h2mc, nuts-rs)"
+                        "--samplers: unknown sampler `{bad}` ({})",
+                        SAMPLERS.join(", ")
                     ));
                 }
             }
@@ -155,6 +159,14 @@ trait Counted {
     fn step(&self) -> f64;
 }
 impl<G: GradientTarget> Counted for Hmc<G> {
+    fn counts(&self) -> &GradientKernelStatistics {
+        self.statistics()
+    }
+    fn step(&self) -> f64 {
+        self.step_size()
+    }
+}
+impl<G: GradientTarget> Counted for Nuts<G> {
     fn counts(&self) -> &GradientKernelStatistics {
         self.statistics()
     }
@@ -441,11 +453,14 @@ fn initial(d: usize, seed: u64, c: usize) -> Vec<f64> {
         .collect()
 }
 
-/// All four samplers on one target.
+/// Every selected sampler on one target.
 fn compare<G: GradientTarget + Clone>(name: &str, g: &G, time: f64, o: &Options) -> Vec<Run> {
     let w = o.warmup;
     let on = |s: &str| o.samplers.iter().any(|x| x == s);
     let mut runs = Vec::new();
+    if on("nuts") {
+        runs.push(run_ours(name, "nuts", g, || nuts(g.clone(), w), o));
+    }
     if on("hmc") {
         runs.push(run_ours(name, "hmc", g, || hmc(g.clone(), time, w), o));
     }
@@ -470,6 +485,14 @@ fn compare<G: GradientTarget + Clone>(name: &str, g: &G, time: f64, o: &Options)
 fn fail(e: &str) -> ! {
     eprintln!("error: {e}");
     std::process::exit(1);
+}
+
+/// Our NUTS with Stan's defaults: warm-up with the step-size heuristic,
+/// dual averaging to 0.8 and diagonal metric windows; maximum depth 10.
+fn nuts<G: GradientTarget>(g: G, warmup: usize) -> Nuts<G> {
+    Nuts::new(g, 1.0)
+        .and_then(|n| n.with_warmup(warmup, 0.8, MetricAdaptation::Diagonal))
+        .expect("valid settings")
 }
 
 /// Our adaptive HMC: Stan-style warm-up (dual averaging to 0.8, diagonal

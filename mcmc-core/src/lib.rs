@@ -14,7 +14,9 @@
 //! - [`startup`]: start-up bias elimination by importance resampling.
 //! - [`runner`]: many chains on rayon, bit-identical for any thread count.
 //! - [`gradient`], [`adaptation`]: differentiable targets and warm-up for
-//!   the gradient kernels (HMC, MALA, H²MC in [`kernel`]).
+//!   the gradient kernels (NUTS, HMC, MALA, H²MC in [`kernel`]).
+//! - [`fit`], [`cmdstan`]: multi-chain NUTS runs with Stan's defaults and
+//!   sampler statistics, written as CmdStan CSV for ArviZ and cmdstanpy.
 //! - [`exact`]: transition matrices on finite spaces for exact tests.
 //! - [`diagnostics`]: rank-normalised split R-hat, bulk and tail ESS, MCSE,
 //!   FFT autocorrelation (Vehtari et al. 2021, checked against ArviZ).
@@ -37,11 +39,13 @@
 
 pub mod adaptation;
 pub mod chain;
+pub mod cmdstan;
 pub mod delayed_rejection;
 pub mod diagnostics;
 pub mod error;
 pub mod exact;
 pub mod expected;
+pub mod fit;
 pub mod gradient;
 pub mod kernel;
 mod linalg;

@@ -100,6 +100,12 @@ impl Warmup {
         self.step.final_step_size()
     }
 
+    /// Restarts dual averaging around `step` (`μ = ln 10·step`), as Stan
+    /// does after its step-size heuristic.
+    pub fn restart_step_size(&mut self, step: f64) {
+        self.step.restart(step);
+    }
+
     /// Records one iteration with acceptance probability `alpha` ending at
     /// `state`. `None` once frozen.
     pub fn observe(&mut self, alpha: f64, state: &[f64]) -> Option<WarmupUpdate> {

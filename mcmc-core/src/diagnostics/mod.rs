@@ -60,6 +60,7 @@
 
 mod autocorr;
 mod draws;
+mod energy;
 mod error;
 mod ess;
 mod mcse;
@@ -70,6 +71,7 @@ mod rhat;
 mod summary;
 
 pub use autocorr::{autocorrelation, autocovariance};
+pub use energy::e_bfmi;
 pub use error::DiagnosticsError;
 pub use ess::{ess_bulk, ess_mean, ess_quantile, ess_sd, ess_tail, ess_unsplit};
 pub use mcse::{mcse_mean, mcse_quantile, mcse_sd};

@@ -232,6 +232,36 @@ impl<G: GradientTarget> Hmc<G> {
         &self.target
     }
 
+    /// One warm-up iteration with acceptance statistic `alpha` ending at
+    /// `state`; returns true when the metric changed.
+    pub(crate) fn adapt(&mut self, alpha: f64, state: &[f64]) -> bool {
+        if let Some(w) = &mut self.warmup
+            && let Some(update) = w.observe(alpha, state)
+        {
+            self.step_size = update.step_size;
+            if let Some(m) = update.metric {
+                self.metric = m;
+                return true;
+            }
+        }
+        false
+    }
+
+    /// Sets the step size and restarts dual averaging around it (after
+    /// Stan's step-size heuristic); no effect on the warm-up once frozen.
+    pub(crate) fn restart_step_size(&mut self, step_size: f64) {
+        self.step_size = step_size;
+        if let Some(w) = &mut self.warmup
+            && !w.is_frozen()
+        {
+            w.restart_step_size(step_size);
+        }
+    }
+
+    pub(crate) fn statistics_mut(&mut self) -> &mut GradientKernelStatistics {
+        &mut self.stats
+    }
+
     pub(crate) fn set_name(&mut self, name: &'static str) {
         self.name = name;
     }
@@ -400,16 +430,8 @@ impl<G: GradientTarget> Kernel<Vec<f64>, GradientPayload> for Hmc<G> {
     }
 
     fn observe(&mut self, observation: &StepObservation<'_, Vec<f64>>) {
-        if !observation.own {
-            return;
-        }
-        if let Some(w) = &mut self.warmup
-            && let Some(update) = w.observe(observation.alpha, observation.state)
-        {
-            self.step_size = update.step_size;
-            if let Some(m) = update.metric {
-                self.metric = m;
-            }
+        if observation.own {
+            self.adapt(observation.alpha, observation.state);
         }
     }
 

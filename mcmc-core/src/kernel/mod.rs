@@ -16,6 +16,7 @@ mod independent;
 pub mod mala;
 pub mod metric;
 mod mixture;
+pub mod nuts;
 mod torus_step;
 
 pub use adaptive_covariance::AdaptiveCovariance;
@@ -27,6 +28,7 @@ pub use independent::Independent;
 pub use mala::Mala;
 pub use metric::Metric;
 pub use mixture::Mixture;
+pub use nuts::{Nuts, NutsDrawStatistics};
 pub use torus_step::{AdaptiveTorusStep, TorusStep};
 
 use crate::rng::ChainRng;

@@ -1,0 +1,227 @@
+//! Multi-chain NUTS runs the way a Stan user starts them: Stan's defaults,
+//! warm-up, draws and per-draw sampler statistics for every chain, E-BFMI,
+//! and CmdStan CSV output ([`crate::cmdstan`]).
+//!
+//! Chains run in parallel on rayon through [`run_chains`]: chain `c` draws
+//! its initial point and every transition from `stream_rng(seed, c)` only,
+//! so a fit is bit-identical for any number of threads.
+
+use crate::adaptation::MetricAdaptation;
+use crate::chain::Chain;
+use crate::diagnostics::{DiagnosticsError, Summary, e_bfmi, summarize};
+use crate::error::{Result, invalid};
+use crate::gradient::{Differentiable, GradientTarget};
+use crate::kernel::{GradientKernelStatistics, Nuts, NutsDrawStatistics};
+use crate::mh::MetropolisHastings;
+use crate::rng::uniform;
+use crate::runner::run_chains;
+use crate::target::Target;
+use std::time::Instant;
+
+/// Settings of a multi-chain NUTS run; [`Default`] is CmdStan's defaults
+/// (4 chains, 1000 warm-up iterations, 1000 draws, `adapt_delta` 0.8,
+/// diagonal metric, maximum depth 10, initial step size 1, initial points
+/// uniform in `[−2, 2]^d`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct NutsSettings {
+    /// Number of chains.
+    pub chains: usize,
+    /// Warm-up (adaptation) iterations per chain; not kept.
+    pub warmup: usize,
+    /// Kept draws per chain.
+    pub draws: usize,
+    /// Seed of every chain's stream.
+    pub seed: u64,
+    /// Target mean `accept_stat` of the step-size adaptation.
+    pub target_accept: f64,
+    /// Which metric the warm-up estimates.
+    pub metric: MetricAdaptation,
+    /// Maximum tree depth.
+    pub max_depth: usize,
+    /// Step size before the warm-up's heuristic.
+    pub initial_step_size: f64,
+    /// Initial points are drawn uniformly in `[−r, r]^d` (Stan: 2).
+    pub init_radius: f64,
+}
+
+impl Default for NutsSettings {
+    fn default() -> Self {
+        NutsSettings {
+            chains: 4,
+            warmup: 1000,
+            draws: 1000,
+            seed: 1,
+            target_accept: 0.8,
+            metric: MetricAdaptation::Diagonal,
+            max_depth: 10,
+            initial_step_size: 1.0,
+            init_radius: 2.0,
+        }
+    }
+}
+
+/// One chain of a fit.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChainFit {
+    /// Kept draws (draws × d).
+    pub draws: Vec<Vec<f64>>,
+    /// `ln π` of every kept draw (CmdStan's `lp__`, up to a constant).
+    pub log_density: Vec<f64>,
+    /// Sampler statistics of every kept draw.
+    pub statistics: Vec<NutsDrawStatistics>,
+    /// Step size after warm-up.
+    pub step_size: f64,
+    /// `M⁻¹` after warm-up, row-major `d×d`.
+    pub inverse_metric: Vec<f64>,
+    /// True when the metric is dense.
+    pub dense_metric: bool,
+    /// Kernel counters over warm-up and sampling.
+    pub kernel: GradientKernelStatistics,
+    /// Wall-clock seconds of warm-up and of sampling.
+    pub seconds: (f64, f64),
+}
+
+impl ChainFit {
+    /// Divergent transitions after warm-up.
+    pub fn divergences(&self) -> usize {
+        self.statistics.iter().filter(|s| s.divergent).count()
+    }
+
+    /// E-BFMI of the kept draws' energies.
+    pub fn e_bfmi(&self) -> std::result::Result<f64, DiagnosticsError> {
+        let energy: Vec<f64> = self.statistics.iter().map(|s| s.energy).collect();
+        e_bfmi(&energy)
+    }
+
+    /// Leapfrog steps after warm-up.
+    pub fn leapfrog_steps(&self) -> u64 {
+        self.statistics.iter().map(|s| s.n_leapfrog as u64).sum()
+    }
+}
+
+/// The chains of a multi-chain NUTS run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Fit {
+    /// The settings the run used.
+    pub settings: NutsSettings,
+    /// One entry per chain, in chain order.
+    pub chains: Vec<ChainFit>,
+}
+
+impl Fit {
+    /// Draws as chains × draws × d (the layout of
+    /// [`summarize`](crate::diagnostics::summarize)).
+    pub fn draws(&self) -> Vec<Vec<Vec<f64>>> {
+        self.chains.iter().map(|c| c.draws.clone()).collect()
+    }
+
+    /// R-hat, bulk and tail ESS, MCSE per coordinate.
+    pub fn summary(&self) -> std::result::Result<Vec<Summary>, DiagnosticsError> {
+        summarize(&self.draws())
+    }
+
+    /// Divergent transitions after warm-up, over all chains.
+    pub fn divergences(&self) -> usize {
+        self.chains.iter().map(ChainFit::divergences).sum()
+    }
+
+    /// Gradient evaluations over all chains, warm-up included.
+    pub fn gradient_evaluations(&self) -> u64 {
+        self.chains
+            .iter()
+            .map(|c| c.kernel.gradient_evaluations + 1)
+            .sum()
+    }
+}
+
+/// Runs `settings.chains` NUTS chains on `target` in parallel. Chain `c`
+/// starts at `init(c)` when given, else at a point uniform in
+/// `[−r, r]^d` from its own stream (up to 100 attempts at a finite
+/// density, as Stan). Errors: invalid settings, or an
+/// initial point whose density or gradient is not finite
+/// ([`CoreError::NonFiniteInitialState`](crate::CoreError::NonFiniteInitialState)).
+///
+/// ```
+/// use mcmc_core::fit::{NutsSettings, sample_nuts};
+/// use mcmc_core::gradient::FiniteDifference;
+/// let g = FiniteDifference::new(|x: &[f64]| -0.5 * x[0] * x[0], 1);
+/// let s = NutsSettings { chains: 2, warmup: 100, draws: 100, ..Default::default() };
+/// let fit = sample_nuts(&g, &s, None::<fn(usize) -> Vec<f64>>).unwrap();
+/// assert_eq!(fit.chains.len(), 2);
+/// assert_eq!(fit.chains[0].draws.len(), 100);
+/// ```
+pub fn sample_nuts<G, I>(target: &G, settings: &NutsSettings, init: Option<I>) -> Result<Fit>
+where
+    G: GradientTarget + Clone + Send + Sync,
+    I: Fn(usize) -> Vec<f64> + Sync,
+{
+    if settings.chains == 0 {
+        return Err(invalid("chains", "must be at least 1"));
+    }
+    if !(settings.init_radius.is_finite() && settings.init_radius >= 0.0) {
+        return Err(invalid("init_radius", "must be finite and non-negative"));
+    }
+    let d = target.dim();
+    let t = Differentiable(target.clone());
+    let chains = run_chains(settings.chains, settings.seed, |c, mut rng| {
+        let start = match &init {
+            Some(f) => f(c),
+            // Like Stan, up to 100 attempts at a point of finite density.
+            None => {
+                let mut x = Vec::new();
+                for _ in 0..100 {
+                    x = (0..d)
+                        .map(|_| settings.init_radius * (2.0 * uniform(&mut rng) - 1.0))
+                        .collect();
+                    if t.evaluate(&x).log_density.is_finite() {
+                        break;
+                    }
+                }
+                x
+            }
+        };
+        if start.len() != d {
+            return Err(crate::CoreError::DimensionMismatch {
+                expected: d,
+                got: start.len(),
+            });
+        }
+        let nuts = Nuts::new(target.clone(), settings.initial_step_size)?
+            .with_max_depth(settings.max_depth)?
+            .with_warmup(settings.warmup, settings.target_accept, settings.metric)?;
+        let mut chain = Chain::new(&t, start, MetropolisHastings::new(nuts), rng)?;
+        let clock = Instant::now();
+        for _ in 0..settings.warmup {
+            chain.step(&t);
+        }
+        chain.freeze();
+        let warm = clock.elapsed().as_secs_f64();
+        let mut fit = ChainFit {
+            draws: Vec::with_capacity(settings.draws),
+            log_density: Vec::with_capacity(settings.draws),
+            statistics: Vec::with_capacity(settings.draws),
+            step_size: 0.0,
+            inverse_metric: Vec::new(),
+            dense_metric: false,
+            kernel: GradientKernelStatistics::default(),
+            seconds: (warm, 0.0),
+        };
+        for _ in 0..settings.draws {
+            chain.step(&t);
+            fit.draws.push(chain.state().clone());
+            fit.log_density.push(chain.current().log_density);
+            fit.statistics.push(chain.algorithm().kernel().last_draw());
+        }
+        fit.seconds.1 = clock.elapsed().as_secs_f64() - warm;
+        let k = chain.algorithm().kernel();
+        fit.step_size = k.step_size();
+        fit.inverse_metric = k.metric().inverse_mass_matrix();
+        fit.dense_metric = k.metric().is_dense();
+        fit.kernel = k.statistics().clone();
+        Ok(fit)
+    });
+    Ok(Fit {
+        settings: settings.clone(),
+        chains: chains.into_iter().collect::<Result<_>>()?,
+    })
+}

@@ -1,0 +1,982 @@
+//! The No-U-Turn Sampler (Hoffman & Gelman 2014) as Stan runs it:
+//! multinomial sampling of the trajectory's points, the generalised U-turn
+//! criterion (Betancourt 2017) including the two extra checks across the
+//! boundary of every merged pair of sub-trees, a maximum tree depth and
+//! divergence detection.
+//!
+//! One transition: draw `p ~ N(0, M)`, then double the trajectory
+//! (forward or backward with probability ½ each) until a U-turn, a
+//! divergence or the maximum depth. Each point `z` of the trajectory has
+//! weight `e^{−H(z)}`; a new sub-tree's sample replaces the running one with
+//! probability `min(1, w_new/w_old)` (biased progressive sampling), inside a
+//! sub-tree with probability `w_right/(w_left + w_right)`. A sub-tree that
+//! U-turns or diverges inside is discarded whole.
+//!
+//! **As a kernel**: the transition is itself reversible with respect to `π`,
+//! so the kernel reports `log_q_ratio = +∞` and the Metropolis–Hastings step
+//! around it always accepts the selected point (which may be the start: the
+//! chain's acceptance rate is 1 by construction; Stan's `accept_stat` is in
+//! [`NutsDrawStatistics`]). That is what lets NUTS run wherever a kernel
+//! runs: a single [`Chain`](crate::chain::Chain), many chains on
+//! [`run_chains`](crate::runner::run_chains), and replica exchange with a
+//! [`TemperedFamily`](crate::gradient::TemperedFamily).
+//!
+//! **Warm-up**: the HMC warm-up (dual averaging of the step size on
+//! `accept_stat`, Stan's windows for a diagonal or dense metric), plus
+//! Stan's step-size heuristic at the start and after each metric update
+//! (double or halve `ε` until the one-step acceptance crosses 0.8).
+//!
+//! **Failures**: a point with `H − H₀ > 1000` (Stan's `max_deltaH`) or a
+//! NaN/infinite density or gradient, or `ln π = −∞`, ends the tree as a
+//! **divergence**; the draw is taken from the part built before it, and the
+//! divergence is counted. Nothing panics.
+
+use super::{Hmc, Kernel, Metric, Proposal, StepObservation};
+use crate::adaptation::MetricAdaptation;
+use crate::error::{Result, invalid};
+use crate::gradient::{GradientPayload, GradientTarget};
+use crate::kernel::GradientKernelStatistics;
+use crate::math::log_sum_exp2;
+use crate::rng::{ChainRng, uniform};
+use crate::sample::Sample;
+
+/// What one NUTS transition did, named as Stan's sampler diagnostics.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct NutsDrawStatistics {
+    /// Mean over the trajectory's new points of `min(1, e^{H₀ − H})`; the
+    /// quantity the step size is adapted on.
+    pub accept_stat: f64,
+    /// Step size used for the transition.
+    pub step_size: f64,
+    /// Depth of the tree (number of doublings completed).
+    pub tree_depth: usize,
+    /// Leapfrog steps (gradient evaluations) of the transition.
+    pub n_leapfrog: usize,
+    /// True when the trajectory diverged.
+    pub divergent: bool,
+    /// Hamiltonian `H = −ln π + ½ pᵀM⁻¹p` at the selected point.
+    pub energy: f64,
+}
+
+/// A point of phase space with its density and gradient.
+#[derive(Clone, Debug, Default)]
+struct Point {
+    x: Vec<f64>,
+    p: Vec<f64>,
+    grad: Vec<f64>,
+    lp: f64,
+}
+
+impl Point {
+    fn copy_from(&mut self, other: &Point) {
+        self.x.clone_from(&other.x);
+        self.p.clone_from(&other.p);
+        self.grad.clone_from(&other.grad);
+        self.lp = other.lp;
+    }
+}
+
+/// The locals of one level of the tree recursion (reused across calls).
+#[derive(Clone, Debug, Default)]
+struct Frame {
+    p_init_end: Vec<f64>,
+    p_sharp_init_end: Vec<f64>,
+    rho_init: Vec<f64>,
+    p_final_beg: Vec<f64>,
+    p_sharp_final_beg: Vec<f64>,
+    rho_final: Vec<f64>,
+    propose_final: Point,
+}
+
+/// Buffers of one transition, kept between transitions so none allocates.
+#[derive(Clone, Debug, Default)]
+struct Workspace {
+    z: Point,
+    z_fwd: Point,
+    z_bck: Point,
+    z_sample: Point,
+    z_propose: Point,
+    // Momentum and velocity M⁻¹p at the four inner/outer ends of the
+    // backward and forward halves, named as Stan (`p_fwd_bck`: backward
+    // end of the forward half).
+    p_fwd_fwd: Vec<f64>,
+    p_sharp_fwd_fwd: Vec<f64>,
+    p_fwd_bck: Vec<f64>,
+    p_sharp_fwd_bck: Vec<f64>,
+    p_bck_fwd: Vec<f64>,
+    p_sharp_bck_fwd: Vec<f64>,
+    p_bck_bck: Vec<f64>,
+    p_sharp_bck_bck: Vec<f64>,
+    // Sums of momenta over the whole trajectory and its two halves.
+    rho: Vec<f64>,
+    rho_fwd: Vec<f64>,
+    rho_bck: Vec<f64>,
+    frames: Vec<Frame>,
+}
+
+/// The generalised no-U-turn criterion for a trajectory whose summed
+/// momentum is `rho_a + rho_b` and whose end velocities are `sharp_minus`
+/// and `sharp_plus`: true while both ends still move along `rho`.
+#[inline]
+pub fn no_u_turn(sharp_minus: &[f64], sharp_plus: &[f64], rho_a: &[f64], rho_b: &[f64]) -> bool {
+    let (mut minus, mut plus) = (0.0, 0.0);
+    for i in 0..rho_a.len() {
+        let r = rho_a[i] + rho_b[i];
+        minus += sharp_minus[i] * r;
+        plus += sharp_plus[i] * r;
+    }
+    minus > 0.0 && plus > 0.0
+}
+
+/// NUTS over `Vec<f64>` with gradient payloads.
+///
+/// ```
+/// use mcmc_core::prelude::*;
+/// use mcmc_core::adaptation::MetricAdaptation;
+/// use mcmc_core::gradient::{Differentiable, FiniteDifference};
+/// use mcmc_core::kernel::Nuts;
+/// let g = FiniteDifference::new(|x: &[f64]| -0.5 * (x[0] * x[0] + 4.0 * x[1] * x[1]), 2);
+/// let target = Differentiable(g);
+/// let nuts = Nuts::new(g, 0.5).unwrap().with_warmup(200, 0.8, MetricAdaptation::Diagonal).unwrap();
+/// let mut chain = Chain::new(&target, vec![0.5, 0.5], MetropolisHastings::new(nuts), stream_rng(1, 0)).unwrap();
+/// for _ in 0..300 { chain.step(&target); }
+/// let last = chain.algorithm().kernel().last_draw();
+/// assert!(last.n_leapfrog >= 1 && !last.divergent);
+/// ```
+#[derive(Clone, Debug)]
+pub struct Nuts<G> {
+    hmc: Hmc<G>,
+    max_depth: usize,
+    max_delta_h: f64,
+    // Run Stan's step-size heuristic before the next transition.
+    init_step_pending: bool,
+    last: NutsDrawStatistics,
+    depth_saturated: u64,
+    // Test control only: always take the newest sub-tree's sample (biased).
+    take_newest: bool,
+    work: Workspace,
+}
+
+impl<G: GradientTarget> Nuts<G> {
+    /// NUTS with initial step size `step_size`, the unit metric, maximum
+    /// tree depth 10 and divergence threshold 1000 (Stan's defaults).
+    pub fn new(target: G, step_size: f64) -> Result<Self> {
+        let mut hmc = Hmc::new(target, step_size, 1)?;
+        hmc.set_name("nuts");
+        Ok(Nuts {
+            hmc,
+            max_depth: 10,
+            max_delta_h: 1000.0,
+            init_step_pending: false,
+            last: NutsDrawStatistics::default(),
+            depth_saturated: 0,
+            take_newest: false,
+            work: Workspace::default(),
+        })
+    }
+
+    /// Uses mass matrix `metric` (given by `M⁻¹`).
+    pub fn with_metric(mut self, metric: Metric) -> Result<Self> {
+        self.hmc = self.hmc.with_metric(metric)?;
+        Ok(self)
+    }
+
+    /// Maximum tree depth (at most `2^depth − 1` leapfrog steps per
+    /// transition); 1 to 30.
+    pub fn with_max_depth(mut self, depth: usize) -> Result<Self> {
+        if !(1..=30).contains(&depth) {
+            return Err(invalid("max_depth", "must lie in 1..=30"));
+        }
+        self.max_depth = depth;
+        Ok(self)
+    }
+
+    /// Energy error `H − H₀` above which the trajectory diverges (1000).
+    pub fn with_divergence_threshold(mut self, threshold: f64) -> Result<Self> {
+        if threshold.is_nan() || threshold <= 0.0 {
+            return Err(invalid("divergence_threshold", "must be positive"));
+        }
+        self.max_delta_h = threshold;
+        Ok(self)
+    }
+
+    /// Warm-up over the first `iterations` transitions: Stan's step-size
+    /// heuristic, dual averaging of the step size towards mean
+    /// `accept_stat` `target_accept` (Stan: 0.8) and the metric windows.
+    pub fn with_warmup(
+        mut self,
+        iterations: usize,
+        target_accept: f64,
+        metric: MetricAdaptation,
+    ) -> Result<Self> {
+        self.hmc = self.hmc.with_warmup(iterations, target_accept, metric)?;
+        self.init_step_pending = iterations > 0;
+        Ok(self)
+    }
+
+    /// Current step size.
+    pub fn step_size(&self) -> f64 {
+        self.hmc.step_size()
+    }
+
+    /// Current metric.
+    pub fn metric(&self) -> &Metric {
+        self.hmc.metric()
+    }
+
+    /// Maximum tree depth.
+    pub fn max_depth(&self) -> usize {
+        self.max_depth
+    }
+
+    /// True while warm-up adaptation is running.
+    pub fn is_adapting(&self) -> bool {
+        self.hmc.is_adapting()
+    }
+
+    /// Statistics of the last transition.
+    pub fn last_draw(&self) -> NutsDrawStatistics {
+        self.last
+    }
+
+    /// Transitions whose tree reached the maximum depth.
+    pub fn depth_saturated(&self) -> u64 {
+        self.depth_saturated
+    }
+
+    /// Transitions (`trajectories`), leapfrog steps, gradient evaluations,
+    /// divergences (every tree ended by a large energy error or a
+    /// non-finite density; `invalid` and `outside_support` say how many of
+    /// these met NaN/∞ or `ln π = −∞`).
+    pub fn statistics(&self) -> &GradientKernelStatistics {
+        self.hmc.statistics()
+    }
+
+    /// The gradient target.
+    pub fn target(&self) -> &G {
+        self.hmc.target()
+    }
+
+    /// A deliberately wrong variant for the tests' control: the newest
+    /// sub-tree's sample always replaces the running one.
+    #[cfg(test)]
+    fn biased(mut self) -> Self {
+        self.take_newest = true;
+        self
+    }
+
+    /// `H = −ln π + ½ pᵀM⁻¹p`, `+∞` when `ln π` is not finite.
+    fn hamiltonian(&mut self, lp: f64, p: &[f64]) -> f64 {
+        if !lp.is_finite() {
+            return f64::INFINITY;
+        }
+        let h = -lp + self.hmc.kinetic_energy(p);
+        if h.is_nan() { f64::INFINITY } else { h }
+    }
+
+    /// Stan's heuristic: from `start`, double (or halve) `ε` while one
+    /// leapfrog step's acceptance stays above (below) 0.8.
+    fn initial_step_size(&mut self, start: &Point, rng: &mut ChainRng) -> f64 {
+        let mut eps = self.hmc.step_size();
+        let mut z = start.clone();
+        let mut direction = 0.0;
+        for _ in 0..100 {
+            z.copy_from(start);
+            self.hmc.metric().sample_momentum(rng, &mut z.p);
+            let h0 = self.hamiltonian(z.lp, &z.p);
+            let (lp, _) = self.hmc.leapfrog(eps, 1, &mut z.x, &mut z.p, &mut z.grad);
+            let delta = h0 - self.hamiltonian(lp, &z.p);
+            let up = delta > 0.8f64.ln();
+            if direction == 0.0 {
+                direction = if up { 2.0 } else { 0.5 };
+            } else if up != (direction > 1.0) {
+                break;
+            }
+            let next = eps * direction;
+            if !(next > 1e-10 && next < 1e7) {
+                break;
+            }
+            eps = next;
+        }
+        eps
+    }
+
+    /// One NUTS transition from `start` (whose momentum is drawn here);
+    /// leaves the selected point in `work.z_sample`.
+    fn transition(&mut self, w: &mut Workspace, rng: &mut ChainRng) -> NutsDrawStatistics {
+        let eps = self.hmc.step_size();
+        let d = w.z.x.len();
+        self.hmc.metric().sample_momentum(rng, &mut w.z.p);
+        for v in [
+            &mut w.p_fwd_fwd,
+            &mut w.p_fwd_bck,
+            &mut w.p_bck_fwd,
+            &mut w.p_bck_bck,
+            &mut w.rho,
+        ] {
+            v.clone_from(&w.z.p);
+        }
+        w.p_sharp_fwd_fwd.resize(d, 0.0);
+        self.hmc.metric().velocity(&w.z.p, &mut w.p_sharp_fwd_fwd);
+        for v in [
+            &mut w.p_sharp_fwd_bck,
+            &mut w.p_sharp_bck_fwd,
+            &mut w.p_sharp_bck_bck,
+        ] {
+            v.clone_from(&w.p_sharp_fwd_fwd);
+        }
+        w.z_fwd.copy_from(&w.z);
+        w.z_bck.copy_from(&w.z);
+        w.z_sample.copy_from(&w.z);
+        w.z_propose.copy_from(&w.z);
+        let h0 = self.hamiltonian(w.z.lp, &w.z.p);
+        let mut builder = Builder {
+            hmc: &mut self.hmc,
+            rng,
+            eps,
+            h0,
+            max_delta_h: self.max_delta_h,
+            n_leapfrog: 0,
+            sum_metro_prob: 0.0,
+            divergent: false,
+            frames: &mut w.frames,
+        };
+        let mut log_sum_weight = 0.0; // ln e^{H₀ − H₀}
+        let mut depth = 0;
+        while depth < self.max_depth {
+            w.rho_fwd.clear();
+            w.rho_fwd.resize(d, 0.0);
+            w.rho_bck.clear();
+            w.rho_bck.resize(d, 0.0);
+            let mut log_sum_weight_subtree = f64::NEG_INFINITY;
+            let valid = if uniform(builder.rng) > 0.5 {
+                // Extend forward: the old tree becomes the backward half.
+                w.z.copy_from(&w.z_fwd);
+                w.rho_bck.clone_from(&w.rho);
+                w.p_bck_fwd.clone_from(&w.p_fwd_fwd);
+                w.p_sharp_bck_fwd.clone_from(&w.p_sharp_fwd_fwd);
+                let valid = builder.build_tree(
+                    depth,
+                    &mut w.z,
+                    &mut w.z_propose,
+                    Ends {
+                        p_sharp_beg: &mut w.p_sharp_fwd_bck,
+                        p_sharp_end: &mut w.p_sharp_fwd_fwd,
+                        rho: &mut w.rho_fwd,
+                        p_beg: &mut w.p_fwd_bck,
+                        p_end: &mut w.p_fwd_fwd,
+                    },
+                    1.0,
+                    &mut log_sum_weight_subtree,
+                );
+                w.z_fwd.copy_from(&w.z);
+                valid
+            } else {
+                // Extend backward: the old tree becomes the forward half.
+                w.z.copy_from(&w.z_bck);
+                w.rho_fwd.clone_from(&w.rho);
+                w.p_fwd_bck.clone_from(&w.p_bck_bck);
+                w.p_sharp_fwd_bck.clone_from(&w.p_sharp_bck_bck);
+                let valid = builder.build_tree(
+                    depth,
+                    &mut w.z,
+                    &mut w.z_propose,
+                    Ends {
+                        p_sharp_beg: &mut w.p_sharp_bck_fwd,
+                        p_sharp_end: &mut w.p_sharp_bck_bck,
+                        rho: &mut w.rho_bck,
+                        p_beg: &mut w.p_bck_fwd,
+                        p_end: &mut w.p_bck_bck,
+                    },
+                    -1.0,
+                    &mut log_sum_weight_subtree,
+                );
+                w.z_bck.copy_from(&w.z);
+                valid
+            };
+            if !valid {
+                break;
+            }
+            depth += 1;
+            // Biased progressive sampling: favour the new sub-tree.
+            if self.take_newest
+                || log_sum_weight_subtree > log_sum_weight
+                || uniform(builder.rng) < (log_sum_weight_subtree - log_sum_weight).exp()
+            {
+                w.z_sample.copy_from(&w.z_propose);
+            }
+            log_sum_weight = log_sum_exp2(log_sum_weight, log_sum_weight_subtree);
+            for i in 0..d {
+                w.rho[i] = w.rho_bck[i] + w.rho_fwd[i];
+            }
+            // The whole trajectory, then across the boundary of its halves
+            // (each half extended by the neighbouring point of the other).
+            let persist = no_u_turn(
+                &w.p_sharp_bck_bck,
+                &w.p_sharp_fwd_fwd,
+                &w.rho_bck,
+                &w.rho_fwd,
+            ) && no_u_turn(
+                &w.p_sharp_bck_bck,
+                &w.p_sharp_fwd_bck,
+                &w.rho_bck,
+                &w.p_fwd_bck,
+            ) && no_u_turn(
+                &w.p_sharp_bck_fwd,
+                &w.p_sharp_fwd_fwd,
+                &w.rho_fwd,
+                &w.p_bck_fwd,
+            );
+            if !persist {
+                break;
+            }
+        }
+        let (n_leapfrog, sum_metro_prob, divergent) = (
+            builder.n_leapfrog,
+            builder.sum_metro_prob,
+            builder.divergent,
+        );
+        NutsDrawStatistics {
+            accept_stat: if n_leapfrog > 0 {
+                sum_metro_prob / n_leapfrog as f64
+            } else {
+                0.0
+            },
+            step_size: eps,
+            tree_depth: depth,
+            n_leapfrog,
+            divergent,
+            energy: self.hamiltonian(w.z_sample.lp, &w.z_sample.p),
+        }
+    }
+}
+
+/// The outputs of a sub-tree at its two ends, named as Stan.
+struct Ends<'a> {
+    p_sharp_beg: &'a mut Vec<f64>,
+    p_sharp_end: &'a mut Vec<f64>,
+    rho: &'a mut Vec<f64>,
+    p_beg: &'a mut Vec<f64>,
+    p_end: &'a mut Vec<f64>,
+}
+
+/// Builds sub-trees of one transition.
+struct Builder<'a, G> {
+    hmc: &'a mut Hmc<G>,
+    rng: &'a mut ChainRng,
+    eps: f64,
+    h0: f64,
+    max_delta_h: f64,
+    n_leapfrog: usize,
+    sum_metro_prob: f64,
+    divergent: bool,
+    frames: &'a mut Vec<Frame>,
+}
+
+impl<G: GradientTarget> Builder<'_, G> {
+    /// Builds a sub-tree of `2^depth` leapfrog steps in direction `sign`
+    /// from `z`, leaving `z` at its far end, its multinomial sample in
+    /// `z_propose`, its end momenta/velocities and summed momentum in
+    /// `ends`, and adding its log weight to `log_sum_weight`. False when it
+    /// diverged or U-turned inside (the sub-tree is then discarded).
+    #[allow(clippy::too_many_arguments)]
+    fn build_tree(
+        &mut self,
+        depth: usize,
+        z: &mut Point,
+        z_propose: &mut Point,
+        ends: Ends<'_>,
+        sign: f64,
+        log_sum_weight: &mut f64,
+    ) -> bool {
+        let d = z.x.len();
+        if depth == 0 {
+            let (lp, _) = self
+                .hmc
+                .leapfrog(sign * self.eps, 1, &mut z.x, &mut z.p, &mut z.grad);
+            z.lp = lp;
+            self.n_leapfrog += 1;
+            {
+                let s = self.hmc.statistics_mut();
+                s.leapfrog_steps += 1;
+                if lp == f64::NEG_INFINITY {
+                    s.outside_support += 1;
+                } else if !lp.is_finite() {
+                    s.invalid += 1;
+                }
+            }
+            let h = if lp.is_finite() {
+                let h = -lp + self.hmc.kinetic_energy(&z.p);
+                if h.is_nan() { f64::INFINITY } else { h }
+            } else {
+                f64::INFINITY
+            };
+            if h - self.h0 > self.max_delta_h {
+                self.divergent = true;
+            }
+            let log_w = self.h0 - h;
+            *log_sum_weight = log_sum_exp2(*log_sum_weight, log_w);
+            self.sum_metro_prob += if log_w > 0.0 { 1.0 } else { log_w.exp() };
+            z_propose.copy_from(z);
+            ends.p_sharp_beg.resize(d, 0.0);
+            self.hmc.metric().velocity(&z.p, ends.p_sharp_beg);
+            ends.p_sharp_end.clone_from(ends.p_sharp_beg);
+            for (r, p) in ends.rho.iter_mut().zip(&z.p) {
+                *r += p;
+            }
+            ends.p_beg.clone_from(&z.p);
+            ends.p_end.clone_from(&z.p);
+            return !self.divergent;
+        }
+        if self.frames.len() < depth {
+            self.frames.resize_with(depth, Frame::default);
+        }
+        let mut f = std::mem::take(&mut self.frames[depth - 1]);
+        let valid = self.build_subtrees(depth, z, z_propose, ends, sign, log_sum_weight, &mut f);
+        self.frames[depth - 1] = f;
+        valid
+    }
+
+    /// The two halves of a sub-tree of depth `depth ≥ 1`, with `f` as locals.
+    #[allow(clippy::too_many_arguments)]
+    fn build_subtrees(
+        &mut self,
+        depth: usize,
+        z: &mut Point,
+        z_propose: &mut Point,
+        ends: Ends<'_>,
+        sign: f64,
+        log_sum_weight: &mut f64,
+        f: &mut Frame,
+    ) -> bool {
+        let d = z.x.len();
+        for r in [&mut f.rho_init, &mut f.rho_final] {
+            r.clear();
+            r.resize(d, 0.0);
+        }
+        let mut log_sum_weight_init = f64::NEG_INFINITY;
+        if !self.build_tree(
+            depth - 1,
+            z,
+            z_propose,
+            Ends {
+                p_sharp_beg: ends.p_sharp_beg,
+                p_sharp_end: &mut f.p_sharp_init_end,
+                rho: &mut f.rho_init,
+                p_beg: ends.p_beg,
+                p_end: &mut f.p_init_end,
+            },
+            sign,
+            &mut log_sum_weight_init,
+        ) {
+            return false;
+        }
+        let mut log_sum_weight_final = f64::NEG_INFINITY;
+        if !self.build_tree(
+            depth - 1,
+            z,
+            &mut f.propose_final,
+            Ends {
+                p_sharp_beg: &mut f.p_sharp_final_beg,
+                p_sharp_end: ends.p_sharp_end,
+                rho: &mut f.rho_final,
+                p_beg: &mut f.p_final_beg,
+                p_end: ends.p_end,
+            },
+            sign,
+            &mut log_sum_weight_final,
+        ) {
+            return false;
+        }
+        // Uniform progressive sampling between the two halves.
+        let log_sum_weight_subtree = log_sum_exp2(log_sum_weight_init, log_sum_weight_final);
+        *log_sum_weight = log_sum_exp2(*log_sum_weight, log_sum_weight_subtree);
+        if log_sum_weight_final > log_sum_weight_subtree
+            || uniform(self.rng) < (log_sum_weight_final - log_sum_weight_subtree).exp()
+        {
+            z_propose.copy_from(&f.propose_final);
+        }
+        for i in 0..d {
+            ends.rho[i] += f.rho_init[i] + f.rho_final[i];
+        }
+        // The merged sub-tree, then each half extended by the neighbouring
+        // point of the other half (Stan's extra checks).
+        no_u_turn(
+            ends.p_sharp_beg,
+            ends.p_sharp_end,
+            &f.rho_init,
+            &f.rho_final,
+        ) && no_u_turn(
+            ends.p_sharp_beg,
+            &f.p_sharp_final_beg,
+            &f.rho_init,
+            &f.p_final_beg,
+        ) && no_u_turn(
+            &f.p_sharp_init_end,
+            ends.p_sharp_end,
+            &f.rho_final,
+            &f.p_init_end,
+        )
+    }
+}
+
+impl<G: GradientTarget> Kernel<Vec<f64>, GradientPayload> for Nuts<G> {
+    fn propose(
+        &mut self,
+        current: &Sample<Vec<f64>, GradientPayload>,
+        proposal: &mut Sample<Vec<f64>, GradientPayload>,
+        rng: &mut ChainRng,
+    ) -> Proposal {
+        let d = self.hmc.target().dim();
+        if current.state.len() != d
+            || current.payload.gradient.len() != d
+            || !current.log_density.is_finite()
+        {
+            return Proposal::failed(0);
+        }
+        let mut w = std::mem::take(&mut self.work);
+        w.z.x.clone_from(&current.state);
+        w.z.grad.clone_from(&current.payload.gradient);
+        w.z.p.resize(d, 0.0);
+        w.z.lp = current.log_density;
+        if self.init_step_pending && self.hmc.is_adapting() {
+            self.init_step_pending = false;
+            let start = w.z.clone();
+            let eps = self.initial_step_size(&start, rng);
+            self.hmc.restart_step_size(eps);
+        }
+        self.hmc.statistics_mut().trajectories += 1;
+        let stats = self.transition(&mut w, rng);
+        if stats.divergent {
+            self.hmc.statistics_mut().divergences += 1;
+        }
+        if stats.tree_depth >= self.max_depth {
+            self.depth_saturated += 1;
+        }
+        self.last = stats;
+        proposal.state.clone_from(&w.z_sample.x);
+        proposal.payload.gradient.clone_from(&w.z_sample.grad);
+        proposal.log_density = w.z_sample.lp;
+        self.work = w;
+        // The transition already is a π-reversible move: always accept.
+        Proposal {
+            log_q_ratio: f64::INFINITY,
+            component: 0,
+            evaluated: true,
+            failed: false,
+        }
+    }
+
+    fn observe(&mut self, observation: &StepObservation<'_, Vec<f64>>) {
+        if observation.own && self.hmc.adapt(self.last.accept_stat, observation.state) {
+            // Stan re-runs its step-size heuristic after a metric update.
+            self.init_step_pending = true;
+        }
+    }
+
+    fn freeze(&mut self) {
+        self.hmc.freeze();
+        self.init_step_pending = false;
+    }
+
+    fn component_names(&self) -> Vec<String> {
+        self.hmc.component_names()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::chain::Chain;
+    use crate::gradient::Differentiable;
+    use crate::mh::MetropolisHastings;
+    use crate::rng::{standard_normal, stream_rng};
+
+    #[test]
+    fn no_u_turn_by_hand() {
+        // Both ends move along ρ = (1, 1): no U-turn.
+        assert!(no_u_turn(
+            &[1.0, 0.0],
+            &[0.0, 1.0],
+            &[0.5, 0.5],
+            &[0.5, 0.5]
+        ));
+        // One end moves against ρ: U-turn.
+        assert!(!no_u_turn(
+            &[1.0, 0.0],
+            &[-1.0, -1.0],
+            &[0.5, 0.5],
+            &[0.5, 0.5]
+        ));
+        // Orthogonal (p♯·ρ = 0) counts as a U-turn (strict inequality).
+        assert!(!no_u_turn(
+            &[1.0, -1.0],
+            &[1.0, 1.0],
+            &[1.0, 1.0],
+            &[0.0, 0.0]
+        ));
+        // ρ is the sum of its two parts.
+        assert!(!no_u_turn(&[1.0], &[1.0], &[2.0], &[-3.0]));
+    }
+
+    /// 1-d standard normal.
+    #[derive(Clone, Copy)]
+    struct Normal1;
+    impl GradientTarget for Normal1 {
+        fn dim(&self) -> usize {
+            1
+        }
+        fn log_density_gradient(&self, x: &[f64], g: &mut [f64]) -> f64 {
+            g[0] = -x[0];
+            -0.5 * x[0] * x[0]
+        }
+    }
+
+    /// The harmonic oscillator worked by hand. From `x = 0` with momentum
+    /// `p₀`, leapfrog with `ε = 2 sin(θ/2)` gives `p_k = p₀ cos(kθ)` exactly
+    /// (the one-step map has `cos θ = 1 − ε²/2` and no `x → p` term from
+    /// `x = 0`). With `θ = 72°`, `cos(kθ) = 1, .309, −.809, −.809, .309`
+    /// for `|k| = 0…4`, and the criterion is sign-only, so `p₀` does not
+    /// matter:
+    /// - depth 1 (`{0, ±1}`): momenta `1, .309`, no U-turn;
+    /// - depth 2 in the same direction (`{0,1,2,3}` or mirrored): the new
+    ///   sub-tree `{2,3}` (both −.809) is valid, the whole has
+    ///   `ρ = 1 + .309 − 2·.809 = −.309 < 0` against the start's `p = 1`:
+    ///   stop at depth 2 after 3 leapfrog steps;
+    /// - depth 2 reversing (`{−2,−1,0,1}` or mirrored): the new sub-tree
+    ///   `{−1,−2}` has `ρ = −.5` against its first point's `.309`: it is
+    ///   invalid and discarded, stop at depth 1 after 3 steps.
+    ///
+    /// So every transition takes exactly 3 steps, depths 1 and 2 each with
+    /// probability ½, and the draw is one of the trajectory's points.
+    #[test]
+    fn tree_building_matches_the_hand_worked_oscillator() {
+        let theta = 72f64.to_radians();
+        let eps = 2.0 * (theta / 2.0).sin();
+        let t = Differentiable(Normal1);
+        let mut nuts = Nuts::new(Normal1, eps).unwrap();
+        let mut rng = stream_rng(3, 0);
+        let start = Sample::evaluate(&t, vec![0.0]);
+        let mut out = start.clone();
+        let mut depths = [0usize; 3];
+        for _ in 0..2000 {
+            nuts.propose(&start, &mut out, &mut rng);
+            let s = nuts.last_draw();
+            assert_eq!(s.n_leapfrog, 3);
+            assert!(!s.divergent);
+            depths[s.tree_depth] += 1;
+            // The draw lies on the orbit: x = p₀ sin(kθ)/√(1 − ε²/4) for
+            // some |k| ≤ 3, i.e. its gradient is consistent and finite.
+            assert_eq!(out.payload.gradient[0], -out.state[0]);
+        }
+        assert_eq!(depths[0], 0);
+        // Binomial(2000, ½): 1000 ± 22; 5 standard deviations.
+        assert!((depths[1] as f64 - 1000.0).abs() < 112.0, "{depths:?}");
+    }
+
+    /// 2-d correlated Gaussian: `x₁ = z₁`, `x₂ = 2(0.8 z₁ + 0.6 z₂)`.
+    #[derive(Clone, Copy)]
+    struct Correlated;
+    impl GradientTarget for Correlated {
+        fn dim(&self) -> usize {
+            2
+        }
+        fn log_density_gradient(&self, x: &[f64], g: &mut [f64]) -> f64 {
+            // Covariance [[1, 1.6], [1.6, 4]], determinant 1.44.
+            let (a, b, c) = (4.0 / 1.44, -1.6 / 1.44, 1.0 / 1.44);
+            g[0] = -(a * x[0] + b * x[1]);
+            g[1] = -(b * x[0] + c * x[1]);
+            -0.5 * (a * x[0] * x[0] + 2.0 * b * x[0] * x[1] + c * x[1] * x[1])
+        }
+    }
+    fn correlated_draw(rng: &mut ChainRng) -> Vec<f64> {
+        let (z1, z2) = (standard_normal(rng), standard_normal(rng));
+        vec![z1, 2.0 * (0.8 * z1 + 0.6 * z2)]
+    }
+    const CORRELATED_MOMENTS: [f64; 5] = [0.0, 0.0, 1.0, 4.0, 1.6];
+
+    /// A banana: `x₁ ~ N(0, 2²)`, `x₂ | x₁ ~ N(½(x₁² − 4), 1)`.
+    #[derive(Clone, Copy)]
+    struct Banana;
+    impl GradientTarget for Banana {
+        fn dim(&self) -> usize {
+            2
+        }
+        fn log_density_gradient(&self, x: &[f64], g: &mut [f64]) -> f64 {
+            let r = x[1] - 0.5 * (x[0] * x[0] - 4.0);
+            g[0] = -x[0] / 4.0 + r * x[0];
+            g[1] = -r;
+            -x[0] * x[0] / 8.0 - 0.5 * r * r
+        }
+    }
+    fn banana_draw(rng: &mut ChainRng) -> Vec<f64> {
+        let x1 = 2.0 * standard_normal(rng);
+        vec![x1, 0.5 * (x1 * x1 - 4.0) + standard_normal(rng)]
+    }
+    // E x₁ = E x₂ = 0, E x₁² = 4, E x₂² = 1 + ¼·Var(x₁²) = 1 + ¼·32 = 9,
+    // E x₁x₂ = ½ E[x₁³] − 2 E[x₁] = 0.
+    const BANANA_MOMENTS: [f64; 5] = [0.0, 0.0, 4.0, 9.0, 0.0];
+
+    /// Geweke-style exact-invariance test: `n` exact draws, each moved by
+    /// `transitions` NUTS transitions; returns the z-scores of
+    /// `x₁, x₂, x₁², x₂², x₁x₂` against their exact means. Each z uses the
+    /// sample standard deviation over the `n` independent end points, so
+    /// under invariance it is N(0, 1) up to O(1/√n).
+    fn geweke<G: GradientTarget + Copy>(
+        g: G,
+        make: impl Fn() -> Nuts<G>,
+        draw: fn(&mut ChainRng) -> Vec<f64>,
+        exact: [f64; 5],
+        n: usize,
+        transitions: usize,
+        seed: u64,
+    ) -> [f64; 5] {
+        let t = Differentiable(g);
+        let mut rng = stream_rng(seed, 0);
+        let (mut sum, mut sq) = ([0.0; 5], [0.0; 5]);
+        for r in 0..n {
+            let x0 = draw(&mut rng);
+            let mut chain = Chain::new(
+                &t,
+                x0,
+                MetropolisHastings::new(make()),
+                stream_rng(seed, 1 + r as u64),
+            )
+            .unwrap();
+            for _ in 0..transitions {
+                chain.step(&t);
+            }
+            let x = chain.state();
+            let f = [x[0], x[1], x[0] * x[0], x[1] * x[1], x[0] * x[1]];
+            for k in 0..5 {
+                sum[k] += f[k];
+                sq[k] += f[k] * f[k];
+            }
+        }
+        let nf = n as f64;
+        let mut z = [0.0; 5];
+        for k in 0..5 {
+            let mean = sum[k] / nf;
+            let var = (sq[k] / nf - mean * mean) * nf / (nf - 1.0);
+            z[k] = (mean - exact[k]) / (var / nf).sqrt();
+        }
+        z
+    }
+
+    // |z| < 4.5: a correct kernel fails one check with probability 6.8e-6;
+    // about 30 checks in this module keep the false-alarm rate below 2e-4.
+    fn assert_invariant(name: &str, z: [f64; 5]) {
+        eprintln!("{name}: z = {z:?}");
+        assert!(z.iter().all(|v| v.abs() < 4.5), "{name}: z = {z:?}");
+    }
+
+    const N: usize = 20_000;
+    // Five transitions from each exact draw: a biased kernel drifts further
+    // from π with every transition, a correct one stays at π.
+    const TRANSITIONS: usize = 5;
+
+    #[test]
+    fn nuts_leaves_a_correlated_gaussian_invariant() {
+        let z = geweke(
+            Correlated,
+            || Nuts::new(Correlated, 0.9).unwrap(),
+            correlated_draw,
+            CORRELATED_MOMENTS,
+            N,
+            TRANSITIONS,
+            1,
+        );
+        assert_invariant("unit metric", z);
+        let dense = Metric::dense(&[vec![1.0, 1.5], vec![1.5, 4.0]]).unwrap();
+        let z = geweke(
+            Correlated,
+            || {
+                Nuts::new(Correlated, 0.9)
+                    .unwrap()
+                    .with_metric(dense.clone())
+                    .unwrap()
+            },
+            correlated_draw,
+            CORRELATED_MOMENTS,
+            N,
+            TRANSITIONS,
+            2,
+        );
+        assert_invariant("dense metric", z);
+        // A small maximum depth truncates most trajectories: still exact.
+        let z = geweke(
+            Correlated,
+            || {
+                Nuts::new(Correlated, 0.3)
+                    .unwrap()
+                    .with_max_depth(2)
+                    .unwrap()
+            },
+            correlated_draw,
+            CORRELATED_MOMENTS,
+            N,
+            TRANSITIONS,
+            3,
+        );
+        assert_invariant("max depth 2", z);
+    }
+
+    #[test]
+    fn nuts_leaves_a_banana_invariant() {
+        let z = geweke(
+            Banana,
+            || Nuts::new(Banana, 0.8).unwrap(),
+            banana_draw,
+            BANANA_MOMENTS,
+            N,
+            TRANSITIONS,
+            4,
+        );
+        assert_invariant("banana unit metric", z);
+        let diag = Metric::diagonal(vec![4.0, 9.0]).unwrap();
+        let z = geweke(
+            Banana,
+            || {
+                Nuts::new(Banana, 0.5)
+                    .unwrap()
+                    .with_metric(diag.clone())
+                    .unwrap()
+            },
+            banana_draw,
+            BANANA_MOMENTS,
+            N,
+            TRANSITIONS,
+            5,
+        );
+        assert_invariant("banana diagonal metric", z);
+    }
+
+    #[test]
+    fn control_biased_tree_selection_fails_the_invariance_test() {
+        // The same settings as the two invariance tests' first cases, with
+        // the newest sub-tree's sample taken regardless of its weight: the
+        // test must see the bias (here |z| ≈ 20 on E x₁²).
+        let z = geweke(
+            Correlated,
+            || Nuts::new(Correlated, 0.9).unwrap().biased(),
+            correlated_draw,
+            CORRELATED_MOMENTS,
+            N,
+            TRANSITIONS,
+            1,
+        );
+        eprintln!("biased: z = {z:?}");
+        assert!(z.iter().any(|v| v.abs() > 4.5), "biased: z = {z:?}");
+        let z = geweke(
+            Banana,
+            || Nuts::new(Banana, 0.8).unwrap().biased(),
+            banana_draw,
+            BANANA_MOMENTS,
+            N,
+            TRANSITIONS,
+            4,
+        );
+        eprintln!("biased banana: z = {z:?}");
+        assert!(z.iter().any(|v| v.abs() > 4.5), "biased banana: z = {z:?}");
+    }
+}
