@@ -83,9 +83,7 @@ fn parse() -> Result<Options, String> {
         seed: 2026,
         hmc_time: None,
         h2mc_tau: 1.0,
-        samplers: SAMPLERS
-            .map(String::from)
-            .to_vec(),
+        samplers: SAMPLERS.map(String::from).to_vec(),
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -121,11 +119,7 @@ fn parse() -> Result<Options, String> {
             }
             "--samplers" => {
                 o.samplers = value("--samplers")?.split(',').map(String::from).collect();
-                if let Some(bad) = o
-                    .samplers
-                    .iter()
-                    .find(|s| !SAMPLERS.contains(&s.as_str()))
-                {
+                if let Some(bad) = o.samplers.iter().find(|s| !SAMPLERS.contains(&s.as_str())) {
                     return Err(format!(
                         "--samplers: unknown sampler `{bad}` ({})",
                         SAMPLERS.join(", ")
