@@ -38,6 +38,7 @@ pub mod camera;
 pub mod cli;
 pub mod color;
 pub mod compare;
+pub mod distribution;
 pub mod film;
 pub mod frame;
 pub mod geometry;
