@@ -54,6 +54,11 @@ impl Rgb {
         self.r.max(self.g).max(self.b)
     }
 
+    /// Smallest of the three channels.
+    pub fn min_channel(self) -> f32 {
+        self.r.min(self.g).min(self.b)
+    }
+
     /// Channel-wise map.
     pub fn map(self, f: impl Fn(f32) -> f32) -> Self {
         Rgb::new(f(self.r), f(self.g), f(self.b))

@@ -39,6 +39,7 @@ pub mod cli;
 pub mod color;
 pub mod compare;
 pub mod distribution;
+pub mod environment;
 pub mod film;
 pub mod frame;
 pub mod geometry;

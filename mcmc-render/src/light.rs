@@ -1,5 +1,12 @@
-//! Emitters: one-sided area lights on any shape and point lights, chosen
-//! in proportion to their power.
+//! Emitters: one-sided area lights on any shape, point lights, and
+//! emitters at infinity (an environment — `envmap` or `constant` — and
+//! `directional` lights), chosen in proportion to their power.
+//!
+//! Emitters at infinity start light paths on a disk of the scene's
+//! bounding-sphere radius `R` facing the sampled direction, at distance `R`
+//! from the centre (pbrt's method): the disk's area density `1/(πR²)` is
+//! the position density, and the geometry term to the first hit has no
+//! `1/d²`. A scene holds at most one environment (as in Mitsuba 3).
 //!
 //! Area lights are sampled uniformly by area (per-triangle area CDF for
 //! meshes); densities are converted to solid angle at the receiving point.
@@ -8,11 +15,12 @@
 //! origins are always sampled by area.
 
 use crate::color::Rgb;
+use crate::environment::Environment;
 use crate::frame::Frame;
 use crate::geometry::{FlatTriangle, Geometry, Surface, SurfacePoint, triangle_area};
-use crate::scene::PointLightDesc;
+use crate::scene::{InfiniteLightDesc, PointLightDesc};
 use crate::warp;
-use glam::{Vec2, Vec3};
+use glam::{Mat3, Vec2, Vec3};
 use std::f32::consts::PI;
 
 /// One emitter.
@@ -34,13 +42,132 @@ pub enum Light {
         /// Centre and radius when the shape is a sphere (cone sampling).
         sphere: Option<(Vec3, f32)>,
     },
-    /// Isotropic point light.
+    /// Point light: isotropic, or a spot light when `spot` is set.
     Point {
         /// Position.
         position: Vec3,
-        /// Radiant intensity.
+        /// Radiant intensity (on the axis, for a spot light).
         intensity: Rgb,
+        /// Mitsuba's `spot` profile, if the light is a spot light.
+        spot: Option<SpotProfile>,
     },
+    /// Parallel light (a Dirac delta in direction), never hit by rays.
+    Directional {
+        /// Unit direction the light travels in.
+        direction: Vec3,
+        /// Irradiance on a surface facing it.
+        irradiance: Rgb,
+    },
+    /// Radiance from every direction at infinity (`envmap`, `constant`).
+    Environment(Box<Environment>),
+}
+
+/// Mitsuba 3's `spot` emission profile: full intensity within `beam_width`
+/// of the axis (the local +z of `to_world`), falling off linearly in the
+/// angle to zero at `cutoff_angle` (measured against Mitsuba 3). Light
+/// paths leave it uniformly in the cone of the cutoff angle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpotProfile {
+    /// World to light frame (a rotation).
+    to_local: Mat3,
+    /// Light frame to world.
+    to_world: Mat3,
+    cos_cutoff: f32,
+    cos_beam: f32,
+    /// Cutoff angle in radians.
+    cutoff: f32,
+    /// `1 / (cutoff − beam_width)` in radians.
+    inv_transition: f32,
+}
+
+impl SpotProfile {
+    /// The profile for angles in degrees and a light-to-world rotation.
+    /// Errors for angles outside (0°, 90°], a beam wider than the cutoff,
+    /// or a `to_world` with scale or shear.
+    pub fn new(to_world: Mat3, cutoff_deg: f32, beam_deg: f32) -> Result<SpotProfile, String> {
+        if !(cutoff_deg > 0.0 && cutoff_deg <= 90.0) {
+            return Err(format!(
+                "'cutoff_angle' must be in (0, 90] degrees, got {cutoff_deg}"
+            ));
+        }
+        if !(beam_deg > 0.0 && beam_deg <= cutoff_deg) {
+            return Err(format!(
+                "'beam_width' must be in (0, cutoff_angle = {cutoff_deg}] degrees, got {beam_deg}"
+            ));
+        }
+        let gram = to_world.transpose() * to_world;
+        if (gram - Mat3::IDENTITY)
+            .to_cols_array()
+            .iter()
+            .any(|e| !(e.abs() < 1e-4))
+        {
+            return Err(
+                "a spot emitter's to_world must be a rotation and translation (no scale or shear)"
+                    .into(),
+            );
+        }
+        let (cutoff, beam) = (cutoff_deg.to_radians(), beam_deg.to_radians());
+        Ok(SpotProfile {
+            to_local: to_world.transpose(),
+            to_world,
+            cos_cutoff: cutoff.cos(),
+            cos_beam: beam.cos(),
+            cutoff,
+            inv_transition: if cutoff > beam {
+                1.0 / (cutoff - beam)
+            } else {
+                0.0
+            },
+        })
+    }
+
+    /// Fraction of the on-axis intensity sent along the unit world direction `w`.
+    pub fn falloff(&self, w: Vec3) -> f32 {
+        let cos = (self.to_local * w).z;
+        if !(cos > self.cos_cutoff) {
+            0.0
+        } else if cos >= self.cos_beam {
+            1.0
+        } else {
+            ((self.cutoff - cos.clamp(-1.0, 1.0).acos()) * self.inv_transition).clamp(0.0, 1.0)
+        }
+    }
+
+    /// Solid angle of the cutoff cone.
+    fn cone_solid_angle(&self) -> f32 {
+        2.0 * PI * (1.0 - self.cos_cutoff)
+    }
+
+    /// A direction uniform in the cutoff cone, with its solid-angle density.
+    pub fn sample(&self, u: (f32, f32)) -> (Vec3, f32) {
+        let cos = 1.0 - u.0 * (1.0 - self.cos_cutoff);
+        let sin = (1.0 - cos * cos).max(0.0).sqrt();
+        let (sp, cp) = (2.0 * PI * u.1).sin_cos();
+        let w = self.to_world * Vec3::new(sin * cp, sin * sp, cos);
+        (w.normalize(), 1.0 / self.cone_solid_angle())
+    }
+
+    /// Density of [`SpotProfile::sample`] at the unit world direction `w`.
+    pub fn pdf(&self, w: Vec3) -> f32 {
+        if (self.to_local * w).z > self.cos_cutoff {
+            1.0 / self.cone_solid_angle()
+        } else {
+            0.0
+        }
+    }
+}
+
+impl Light {
+    /// True for emitters at infinity (directional lights, environments).
+    pub fn at_infinity(&self) -> bool {
+        matches!(self, Light::Directional { .. } | Light::Environment(_))
+    }
+
+    /// True for emitters that are Dirac deltas in position or direction
+    /// (point and directional lights): no ray can hit them.
+    pub fn is_delta(&self) -> bool {
+        matches!(self, Light::Point { .. } | Light::Directional { .. })
+    }
 }
 
 /// A light sample seen from a receiving point (next-event estimation).
@@ -57,8 +184,12 @@ pub struct DirectSample {
     /// Solid-angle density at the receiver, including the selection
     /// probability (for point lights: the selection probability alone).
     pub pdf: f32,
-    /// True for point lights.
+    /// True for point and directional lights.
     pub is_delta: bool,
+    /// True for emitters at infinity: `p` is then a point beyond the
+    /// scene's bounding sphere along `wi`, `dist` is infinite, and
+    /// visibility is a ray that must escape the scene.
+    pub at_infinity: bool,
 }
 
 /// A light-path origin for light tracing.
@@ -76,8 +207,15 @@ pub struct EmissionSample {
     /// True for point lights (their origin is a delta position).
     pub is_delta: bool,
     /// Density of the origin: selection probability times area density
-    /// (for point lights: the selection probability).
+    /// (for point lights: the selection probability; for emitters at
+    /// infinity: the selection probability over the disk's area `πR²`).
     pub pdf_pos: f32,
+    /// Density of `dir`: solid angle for area and point lights and for
+    /// environments, 1 for directional lights (a delta).
+    pub pdf_dir: f32,
+    /// True for emitters at infinity: `p` lies on the disk outside the
+    /// scene, not on a surface (`ng`, `ns` are `dir`).
+    pub at_infinity: bool,
 }
 
 /// The cone a sphere subtends from an outside point.
@@ -98,6 +236,41 @@ pub struct Lights {
     pub lights: Vec<Light>,
     pmf: Vec<f32>,
     cdf: Vec<f32>,
+    /// Index of the environment emitter, if any.
+    environment: Option<u32>,
+    /// Centre and radius of the scene's bounding sphere (emitters at infinity).
+    scene_center: Vec3,
+    scene_radius: f32,
+}
+
+/// Bounding sphere of every shape (centre, radius), at least radius 1e-3.
+fn bounding_sphere(geometry: &Geometry) -> (Vec3, f32) {
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    let mut grow = |p: Vec3| {
+        lo = lo.min(p);
+        hi = hi.max(p);
+    };
+    for shape in &geometry.shapes {
+        match &shape.surface {
+            Surface::Mesh(m) => m.positions.iter().for_each(|&p| grow(p)),
+            Surface::Sphere { center, radius } => {
+                grow(*center - Vec3::splat(*radius));
+                grow(*center + Vec3::splat(*radius));
+            }
+            Surface::Disk { to_world, .. } => {
+                for (x, y) in [(-1.0, -1.0), (-1.0, 1.0), (1.0, -1.0), (1.0, 1.0)] {
+                    grow(to_world.transform_point3(Vec3::new(x, y, 0.0)));
+                }
+            }
+        }
+    }
+    if !(lo.cmple(hi).all()) {
+        return (Vec3::ZERO, 1.0);
+    }
+    let center = (lo + hi) * 0.5;
+    // A little margin, so that disk origins lie strictly outside every shape.
+    let radius = ((hi - lo).length() * 0.5 * 1.01).max(1e-3);
+    (center, radius)
 }
 
 /// A triangle of a mesh emitter picked by area with `u.0` (reused, rescaled
@@ -151,12 +324,19 @@ fn area_direct(
         le: radiance,
         pdf,
         is_delta: false,
+        at_infinity: false,
     })
 }
 
 impl Lights {
-    /// Builds emitters from `(shape, radiance)` pairs and point lights.
-    pub fn new(geometry: &Geometry, area: &[(u32, Rgb)], points: &[PointLightDesc]) -> Lights {
+    /// Builds emitters from `(shape, radiance)` pairs, point lights and
+    /// emitters at infinity (at most one environment: the caller checks).
+    pub fn new(
+        geometry: &Geometry,
+        area: &[(u32, Rgb)],
+        points: &[PointLightDesc],
+        infinite: &[InfiniteLightDesc],
+    ) -> Lights {
         let mut lights = Vec::new();
         for &(shape, radiance) in area {
             let surface = &geometry.shapes[shape as usize].surface;
@@ -201,17 +381,43 @@ impl Lights {
             lights.push(Light::Point {
                 position: p.position,
                 intensity: p.intensity,
+                spot: p.spot,
             });
         }
+        let mut environment = None;
+        for l in infinite {
+            match l {
+                InfiniteLightDesc::Directional {
+                    direction,
+                    irradiance,
+                } => lights.push(Light::Directional {
+                    direction: *direction,
+                    irradiance: *irradiance,
+                }),
+                InfiniteLightDesc::Environment(env) => {
+                    environment = Some(lights.len() as u32);
+                    lights.push(Light::Environment(env.clone()));
+                }
+            }
+        }
+        let (scene_center, scene_radius) = bounding_sphere(geometry);
+        let disk_area = f64::from(PI * scene_radius * scene_radius);
         let power: Vec<f64> = lights
             .iter()
             .map(|l| match l {
                 Light::Area { radiance, area, .. } => {
                     (PI * area * radiance.luminance()).max(0.0) as f64
                 }
-                Light::Point { intensity, .. } => {
-                    (4.0 * PI * intensity.luminance()).max(0.0) as f64
+                Light::Point {
+                    intensity, spot, ..
+                } => {
+                    let solid_angle = spot.map_or(4.0 * PI, |s| s.cone_solid_angle());
+                    (solid_angle * intensity.luminance()).max(0.0) as f64
                 }
+                Light::Directional { irradiance, .. } => {
+                    disk_area * f64::from(irradiance.luminance().max(0.0))
+                }
+                Light::Environment(env) => disk_area * env.radiant_integral().max(0.0),
             })
             .collect();
         let total: f64 = power.iter().sum();
@@ -231,7 +437,61 @@ impl Lights {
         if let Some(last) = cdf.last_mut() {
             *last = 1.0;
         }
-        Lights { lights, pmf, cdf }
+        Lights {
+            lights,
+            pmf,
+            cdf,
+            environment,
+            scene_center,
+            scene_radius,
+        }
+    }
+
+    /// Index of the environment emitter (`envmap` or `constant`), if any.
+    #[inline]
+    pub fn environment(&self) -> Option<u32> {
+        self.environment
+    }
+
+    /// Radiance arriving from the environment along the unit direction `d`
+    /// (pointing away from the scene); black without an environment.
+    #[inline]
+    pub fn environment_radiance(&self, d: Vec3) -> Rgb {
+        match self.environment.map(|i| &self.lights[i as usize]) {
+            Some(Light::Environment(env)) => env.eval(d),
+            _ => Rgb::BLACK,
+        }
+    }
+
+    /// Solid-angle density with which [`Lights::sample_direct`] picks the
+    /// environment along `d` (selection probability included).
+    pub fn pdf_environment(&self, d: Vec3) -> f32 {
+        match self.environment {
+            Some(i) => match &self.lights[i as usize] {
+                Light::Environment(env) => self.pmf[i as usize] * env.pdf(d),
+                _ => 0.0,
+            },
+            None => 0.0,
+        }
+    }
+
+    /// Density of a light-path origin on the disk of an emitter at
+    /// infinity (per unit area, selection excluded): `1/(πR²)`.
+    pub fn infinite_disk_pdf(&self) -> f32 {
+        1.0 / (PI * self.scene_radius * self.scene_radius)
+    }
+
+    /// A point beyond the scene's bounding sphere along `d` from `p`
+    /// (stands in for a point of an emitter at infinity).
+    fn far_point(&self, p: Vec3, d: Vec3) -> SurfacePoint {
+        let reach = (p - self.scene_center).length() + 2.0 * self.scene_radius;
+        SurfacePoint {
+            p: p + d * reach,
+            p_err: Vec3::ZERO,
+            ng: -d,
+            ns: -d,
+            shape: u32::MAX,
+        }
     }
 
     /// True when the scene has no emitter.
@@ -341,6 +601,7 @@ impl Lights {
             Light::Point {
                 position,
                 intensity,
+                spot,
             } => {
                 let delta = *position - p;
                 let dist2 = delta.length_squared();
@@ -349,6 +610,7 @@ impl Lights {
                 }
                 let dist = dist2.sqrt();
                 let wi = delta / dist;
+                let falloff = spot.map_or(1.0, |s| s.falloff(-wi));
                 Some(DirectSample {
                     p: SurfacePoint {
                         p: *position,
@@ -359,9 +621,37 @@ impl Lights {
                     },
                     wi,
                     dist,
-                    le: *intensity / dist2,
+                    le: *intensity * (falloff / dist2),
                     pdf: pmf,
                     is_delta: true,
+                    at_infinity: false,
+                })
+            }
+            Light::Directional {
+                direction,
+                irradiance,
+            } => {
+                let wi = -*direction;
+                Some(DirectSample {
+                    p: self.far_point(p, wi),
+                    wi,
+                    dist: f32::INFINITY,
+                    le: *irradiance,
+                    pdf: pmf,
+                    is_delta: true,
+                    at_infinity: true,
+                })
+            }
+            Light::Environment(env) => {
+                let (wi, le, pdf) = env.sample(u)?;
+                Some(DirectSample {
+                    p: self.far_point(p, wi),
+                    wi,
+                    dist: f32::INFINITY,
+                    le,
+                    pdf: pmf * pdf,
+                    is_delta: false,
+                    at_infinity: true,
                 })
             }
             Light::Area {
@@ -483,6 +773,7 @@ impl Lights {
             le: radiance,
             pdf: pmf * cone.pdf,
             is_delta: false,
+            at_infinity: false,
         }))
     }
 
@@ -508,8 +799,13 @@ impl Lights {
             Light::Point {
                 position,
                 intensity,
+                spot,
             } => {
-                let dir = warp::uniform_sphere(u_dir);
+                let (dir, pdf_dir) = match spot {
+                    Some(s) => s.sample(u_dir),
+                    None => (warp::uniform_sphere(u_dir), 1.0 / (4.0 * PI)),
+                };
+                let le = *intensity * spot.map_or(1.0, |s| s.falloff(dir));
                 Some(EmissionSample {
                     p: SurfacePoint {
                         p: *position,
@@ -519,11 +815,21 @@ impl Lights {
                         shape: u32::MAX,
                     },
                     dir,
-                    weight: *intensity * (4.0 * PI / pmf),
-                    le: *intensity,
+                    weight: le / (pmf * pdf_dir),
+                    le,
                     is_delta: true,
                     pdf_pos: pmf,
+                    pdf_dir,
+                    at_infinity: false,
                 })
+            }
+            Light::Directional {
+                direction,
+                irradiance,
+            } => self.emission_at_infinity(*direction, *irradiance, pmf, 1.0, u_pos),
+            Light::Environment(env) => {
+                let (w, le, pdf) = env.sample(u_dir)?;
+                self.emission_at_infinity(-w, le, pmf, pdf, u_pos)
             }
             Light::Area { radiance, area, .. } => {
                 let (lp, _) = self.sample_area_point(geometry, light, u_pos)?;
@@ -540,8 +846,47 @@ impl Lights {
                     le: *radiance,
                     is_delta: false,
                     pdf_pos: pmf / area,
+                    pdf_dir: local.z * std::f32::consts::FRAC_1_PI,
+                    at_infinity: false,
                 })
             }
         }
+    }
+
+    /// A light path entering the scene along `dir` from an emitter at
+    /// infinity (radiance or irradiance `le`, direction density `pdf_dir`):
+    /// its origin is uniform on the disk of radius `R` perpendicular to
+    /// `dir`, `R` before the scene's centre.
+    fn emission_at_infinity(
+        &self,
+        dir: Vec3,
+        le: Rgb,
+        pmf: f32,
+        pdf_dir: f32,
+        u_pos: (f32, f32),
+    ) -> Option<EmissionSample> {
+        let frame = Frame::from_normal(dir);
+        let d = warp::concentric_disk(u_pos) * self.scene_radius;
+        let p = self.scene_center - dir * self.scene_radius + frame.s * d.x + frame.t * d.y;
+        let pdf_pos = pmf * self.infinite_disk_pdf();
+        if !(pdf_pos > 0.0 && pdf_dir > 0.0) {
+            return None;
+        }
+        Some(EmissionSample {
+            p: SurfacePoint {
+                p,
+                p_err: Vec3::ZERO,
+                ng: dir,
+                ns: dir,
+                shape: u32::MAX,
+            },
+            dir,
+            weight: le / (pdf_pos * pdf_dir),
+            le,
+            is_delta: false,
+            pdf_pos,
+            pdf_dir,
+            at_infinity: true,
+        })
     }
 }

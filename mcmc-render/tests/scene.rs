@@ -320,3 +320,88 @@ fn camera_rays_and_raster_positions_round_trip() {
     }
     assert!((total - 1.0).abs() < 1e-3, "{total}");
 }
+
+#[test]
+fn emitters_at_infinity_load_and_bad_ones_are_refused() {
+    let dir = scratch("infinite");
+    let black = dir.join("black.exr");
+    mcmc_render::image_io::write_exr(&black, 4, 3, &[Rgb::BLACK; 12]).unwrap();
+    let sky = dir.join("sky.exr");
+    mcmc_render::image_io::write_exr(&sky, 4, 3, &[Rgb::new(1.0, 2.0, 3.0); 12]).unwrap();
+    std::fs::write(dir.join("garbage.exr"), b"not an exr file at all").unwrap();
+    std::fs::write(dir.join("sky.png"), b"").unwrap();
+
+    let d = desc_in(
+        &dir,
+        r#"<emitter type="envmap"><string name="filename" value="sky.exr"/><float name="scale" value="2"/></emitter>
+           <emitter type="directional"><vector name="direction" value="0, -2, 0"/></emitter>"#,
+        &[],
+    )
+    .expect("loads");
+    assert_eq!(d.infinite_lights.len(), 2);
+    match &d.infinite_lights[1] {
+        mcmc_render::scene::InfiniteLightDesc::Directional {
+            direction,
+            irradiance,
+        } => {
+            assert_eq!(*direction, Vec3::new(0.0, -1.0, 0.0));
+            assert_eq!(*irradiance, Rgb::WHITE);
+        }
+        other => panic!("{other:?}"),
+    }
+    match &d.infinite_lights[0] {
+        mcmc_render::scene::InfiniteLightDesc::Environment(env) => {
+            // Scale applied: every direction sees 2 × (1, 2, 3).
+            assert_eq!(
+                env.eval(Vec3::new(0.3, 0.8, -0.52).normalize()),
+                Rgb::new(2.0, 4.0, 6.0)
+            );
+        }
+        other => panic!("{other:?}"),
+    }
+
+    let env = |file: &str| {
+        format!(r#"<emitter type="envmap"><string name="filename" value="{file}"/></emitter>"#)
+    };
+    let cases = [
+        (env("missing.exr"), "missing.exr"),
+        (env("garbage.exr"), "garbage.exr"),
+        (env("sky.png"), "only OpenEXR"),
+        (env("black.exr"), "black everywhere"),
+        (
+            format!("{}\n{}", env("sky.exr"), r#"<emitter type="constant"/>"#),
+            "only one environment",
+        ),
+        (
+            r#"<emitter type="constant"><transform name="to_world"><scale value="2"/></transform></emitter>"#.to_string(),
+            "rotation",
+        ),
+        (
+            r#"<emitter type="constant"><rgb name="radiance" value="-1"/></emitter>"#.to_string(),
+            "non-negative",
+        ),
+        (
+            r#"<emitter type="directional"><vector name="direction" value="0,0,1"/><transform name="to_world"><rotate x="1" angle="3"/></transform></emitter>"#.to_string(),
+            "not both",
+        ),
+        (
+            r#"<emitter type="directional"><vector name="direction" value="0,0,0"/></emitter>"#.to_string(),
+            "zero",
+        ),
+        (
+            r#"<emitter type="spot"><float name="cutoff_angle" value="100"/></emitter>"#.to_string(),
+            "cutoff_angle",
+        ),
+        (
+            r#"<emitter type="spot"><float name="beam_width" value="25"/></emitter>"#.to_string(),
+            "beam_width",
+        ),
+        (r#"<emitter type="spot"><float name="radius" value="1"/></emitter>"#.to_string(), "radius"),
+    ];
+    for (body, needle) in cases {
+        let e = desc_in(&dir, &body, &[]).expect_err(&body);
+        assert!(e.contains("scene.xml:"), "{e}");
+        assert!(e.contains(needle), "{body}: {e}");
+        assert_eq!(e.lines().count(), 1, "{e}");
+    }
+}

@@ -47,7 +47,7 @@
 //! [`connect`] for one technique; PSSMLT over BDPT calls
 //! [`Bdpt::sample_all`], which returns every technique of one sample.
 
-use super::path_vertex::{Vertex, emission_pdf_dir, shading_correction};
+use super::path_vertex::{Vertex, shading_correction};
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
 use super::{FilmSink, Integrator, SampleDomain, SampleStats, rr_probability};
@@ -55,7 +55,6 @@ use crate::bsdf::TransportMode;
 use crate::color::Rgb;
 use crate::frame::Frame;
 use crate::geometry::Ray;
-use crate::light::Light;
 use crate::observer::Observer;
 use crate::sampling::{RandomSource, Stream};
 use crate::scene::Scene;
@@ -138,6 +137,17 @@ fn random_walk(
     let mut bounces = 0usize;
     while bounces < max_surface {
         let Some(its) = scene.intersect(&ray) else {
+            // A camera subpath that leaves the scene ends on the
+            // environment, if there is one (technique s = 0 sees it).
+            if mode == TransportMode::Radiance
+                && let Some(env) = scene.lights.environment()
+            {
+                let prev = path.len() - 1;
+                let mut v = Vertex::infinite(env, ray.d, beta, 0.0);
+                v.pdf_fwd = path[prev].convert_density(pdf_fwd, &v);
+                path.push(v);
+                bounces += 1;
+            }
             break;
         };
         let sp = its.sp;
@@ -262,22 +272,28 @@ pub fn generate_light_subpath(
     else {
         return 0;
     };
-    if !(es.pdf_pos > 0.0) {
+    if !(es.pdf_pos > 0.0 && es.pdf_dir > 0.0) {
         return 0;
     }
-    let is_point = matches!(scene.lights.lights[light as usize], Light::Point { .. });
-    let pdf_dir = emission_pdf_dir(is_point, es.p.ns, es.dir);
-    path.push(Vertex::light(
-        scene,
-        light,
-        es.p,
-        es.le / es.pdf_pos,
-        es.pdf_pos,
-    ));
-    if !(pdf_dir > 0.0) {
-        return 1;
-    }
-    let ray = if es.is_delta {
+    // The density `random_walk` turns into the first hit's area density:
+    // solid angle from a point on an emitter, the origin disk's area
+    // density from an emitter at infinity (see `Vertex::convert_density`).
+    let first_pdf = if es.at_infinity {
+        let mut v = Vertex::infinite(light, -es.dir, es.le / es.pdf_pos, 0.0);
+        v.pdf_fwd = v.pdf_light_origin(scene);
+        path.push(v);
+        scene.lights.infinite_disk_pdf()
+    } else {
+        path.push(Vertex::light(
+            scene,
+            light,
+            es.p,
+            es.le / es.pdf_pos,
+            es.pdf_pos,
+        ));
+        es.pdf_dir
+    };
+    let ray = if es.is_delta || es.at_infinity {
         Ray::new(es.p.p, es.dir)
     } else {
         es.p.spawn_ray(es.dir)
@@ -288,7 +304,7 @@ pub fn generate_light_subpath(
         source,
         TransportMode::Importance,
         es.weight,
-        pdf_dir,
+        first_pdf,
         max_vertices - 1,
         roulette,
         path,
@@ -353,7 +369,7 @@ pub fn connect(
         let cs = scene.camera.sample_wi(qs.p())?;
         raster = cs.raster;
         let cam = Vertex::camera(cs.origin, cs.raster, Rgb::splat(cs.we / cs.pdf));
-        let mut l = qs.beta * qs.f(scene, cs.origin, TransportMode::Importance) * cam.beta;
+        let mut l = qs.beta * qs.f(scene, &cam, TransportMode::Importance) * cam.beta;
         if qs.on_surface() {
             l *= cs.wi.dot(qs.sp.ns).abs();
         }
@@ -377,13 +393,17 @@ pub fn connect(
         let ds = scene
             .lights
             .sample_direct(&scene.geometry, pt.p(), u_sel, u_pos)?;
-        let mut lv = Vertex::light(scene, index, ds.p, ds.le / ds.pdf, 0.0);
+        let mut lv = if ds.at_infinity {
+            Vertex::infinite(index, ds.wi, ds.le / ds.pdf, 0.0)
+        } else {
+            Vertex::light(scene, index, ds.p, ds.le / ds.pdf, 0.0)
+        };
         lv.pdf_fwd = lv.pdf_light_origin(scene);
-        let mut l = pt.beta * pt.f(scene, ds.p.p, TransportMode::Radiance) * lv.beta;
+        let mut l = pt.beta * pt.f(scene, &lv, TransportMode::Radiance) * lv.beta;
         if pt.on_surface() {
             l *= ds.wi.dot(pt.sp.ns).abs();
         }
-        if l.is_black() || !scene.geometry.visible(&pt.sp, &ds.p) {
+        if l.is_black() || !scene.light_visible(&pt.sp, &ds) {
             return None;
         }
         sampled = Some(lv);
@@ -395,8 +415,8 @@ pub fn connect(
             return None;
         }
         let l = qs.beta
-            * qs.f(scene, pt.p(), TransportMode::Importance)
-            * pt.f(scene, qs.p(), TransportMode::Radiance)
+            * qs.f(scene, pt, TransportMode::Importance)
+            * pt.f(scene, qs, TransportMode::Radiance)
             * pt.beta;
         if l.is_black() {
             return None;

@@ -69,7 +69,20 @@ impl Integrator for LightTracer {
         };
 
         // The emitter seen directly (a path of one segment).
-        if self.max_depth >= 1
+        if self.max_depth >= 1 && es.at_infinity {
+            // An environment seen by the pinhole along `w`: the camera's
+            // response to the radiance arriving along it, i.e. a point at
+            // distance 1 along `w` with `le / pdf_dir` as its intensity.
+            let w = -es.dir;
+            if !es.is_delta
+                && let Some(cs) = camera.sample_wi(camera.origin() + w)
+                && !geometry.occluded(&Ray::new(cs.origin, w))
+            {
+                let pmf = es.pdf_pos / scene.lights.infinite_disk_pdf();
+                let c = es.le * (cs.we / (cs.pdf * pmf * es.pdf_dir));
+                splat(cs.raster, c, stats);
+            }
+        } else if self.max_depth >= 1
             && !es.is_delta
             && let Some(cs) = camera.sample_wi(es.p.p)
         {
@@ -81,7 +94,7 @@ impl Integrator for LightTracer {
         }
 
         let mut beta = es.weight;
-        let mut ray = if es.is_delta {
+        let mut ray = if es.is_delta || es.at_infinity {
             Ray::new(es.p.p, es.dir)
         } else {
             es.p.spawn_ray(es.dir)

@@ -17,7 +17,7 @@ use crate::geometry::SurfacePoint;
 use crate::light::Light;
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
-use std::f32::consts::{FRAC_1_PI, PI};
+use std::f32::consts::FRAC_1_PI;
 
 /// Marks "no emitter" in [`Vertex::light`].
 pub const NO_LIGHT: u32 = u32::MAX;
@@ -31,6 +31,13 @@ pub enum VertexKind {
     Light,
     /// A scattering point on a surface (possibly on an emitter).
     Surface,
+    /// An emitter at infinity: the end of a camera subpath that escaped
+    /// the scene into the environment, or the origin of a light subpath
+    /// from a directional light or an environment. Its `wo` is the unit
+    /// direction from the scene towards the emitter; it has no position
+    /// (densities towards it are solid-angle densities, densities from it
+    /// are the origin disk's `1/(πR²)` times the cosine at the receiver).
+    Infinite,
 }
 
 /// One vertex of a camera or light subpath.
@@ -42,7 +49,8 @@ pub struct Vertex {
     /// (they are not on a surface: no cosine at them).
     pub sp: SurfacePoint,
     /// Unit world direction towards the previous vertex of its own subpath
-    /// (surface vertices only).
+    /// (surface vertices); for [`VertexKind::Infinite`], the direction from
+    /// the scene towards the emitter.
     pub wo: Vec3,
     /// Subpath throughput up to and including this vertex's arrival
     /// (pbrt's β): for camera subpaths the importance-weighted estimate of
@@ -114,6 +122,32 @@ impl Vertex {
         v
     }
 
+    /// A vertex on emitter `light` at infinity, in unit direction `w` from
+    /// the scene, with throughput `beta` and density `pdf_fwd`.
+    pub fn infinite(light: u32, w: Vec3, beta: Rgb, pdf_fwd: f32) -> Vertex {
+        let mut v = Vertex::EMPTY;
+        v.kind = VertexKind::Infinite;
+        v.wo = w;
+        v.light = light;
+        v.beta = beta;
+        v.pdf_fwd = pdf_fwd;
+        v
+    }
+
+    /// Unit direction from this vertex towards `next` (`None` when they coincide).
+    #[inline]
+    pub fn direction_to(&self, next: &Vertex) -> Option<Vec3> {
+        if next.kind == VertexKind::Infinite {
+            Some(next.wo)
+        } else if self.kind == VertexKind::Infinite {
+            Some(-self.wo)
+        } else {
+            let d = next.p() - self.p();
+            let len2 = d.length_squared();
+            (len2 > 0.0).then(|| d / len2.sqrt())
+        }
+    }
+
     /// A surface vertex reached from direction `wo` (world, pointing back).
     pub fn surface(scene: &Scene, sp: SurfacePoint, wo: Vec3, beta: Rgb) -> Vertex {
         let mut v = Vertex::EMPTY;
@@ -141,7 +175,7 @@ impl Vertex {
     /// endpoints always, surfaces unless their BSDF is purely specular.
     pub fn is_connectible(&self, scene: &Scene) -> bool {
         match self.kind {
-            VertexKind::Camera | VertexKind::Light => true,
+            VertexKind::Camera | VertexKind::Light | VertexKind::Infinite => true,
             VertexKind::Surface => !scene.bsdf(self.sp.shape).is_delta(),
         }
     }
@@ -152,28 +186,23 @@ impl Vertex {
         self.light != NO_LIGHT
     }
 
-    /// True for a point light (a Dirac delta in position).
+    /// True for an emitter origin that is a Dirac delta in position or
+    /// direction (point and directional lights): no path can hit it.
     pub fn is_delta_light(&self, scene: &Scene) -> bool {
-        self.kind == VertexKind::Light
-            && matches!(
-                scene.lights.lights[self.light as usize],
-                Light::Point { .. }
-            )
+        matches!(self.kind, VertexKind::Light | VertexKind::Infinite)
+            && scene.lights.lights[self.light as usize].is_delta()
     }
 
     /// BSDF value (no cosine) for scattering from `wo` towards `next`, with
     /// the adjoint shading-normal correction for importance transport.
     /// Zero for non-surface vertices.
-    pub fn f(&self, scene: &Scene, next: Vec3, mode: TransportMode) -> Rgb {
+    pub fn f(&self, scene: &Scene, next: &Vertex, mode: TransportMode) -> Rgb {
         if self.kind != VertexKind::Surface {
             return Rgb::BLACK;
         }
-        let d = next - self.p();
-        let len2 = d.length_squared();
-        if !(len2 > 0.0) {
+        let Some(wi) = self.direction_to(next) else {
             return Rgb::BLACK;
-        }
-        let wi = d / len2.sqrt();
+        };
         let frame = Frame::from_normal(self.sp.ns);
         let f = scene
             .bsdf(self.sp.shape)
@@ -186,8 +215,21 @@ impl Vertex {
         }
     }
 
-    /// Converts a solid-angle density at this vertex into an area density at `next`.
+    /// Converts a solid-angle density at this vertex into an area density
+    /// at `next`. Towards a vertex at infinity the solid-angle density is
+    /// kept; from one, `pdf` is the origin disk's area density and only the
+    /// cosine at `next` applies.
     pub fn convert_density(&self, pdf: f32, next: &Vertex) -> f32 {
+        if next.kind == VertexKind::Infinite {
+            return pdf;
+        }
+        if self.kind == VertexKind::Infinite {
+            return if next.on_surface() {
+                pdf * next.sp.ng.dot(self.wo).abs()
+            } else {
+                pdf
+            };
+        }
         let w = next.p() - self.p();
         let d2 = w.length_squared();
         if !(d2 > 0.0) {
@@ -210,25 +252,18 @@ impl Vertex {
         next: &Vertex,
         mode: TransportMode,
     ) -> f32 {
-        if self.kind == VertexKind::Light {
+        if matches!(self.kind, VertexKind::Light | VertexKind::Infinite) {
             return self.pdf_light(scene, next);
         }
-        let d = next.p() - self.p();
-        let len2 = d.length_squared();
-        if !(len2 > 0.0) {
+        let Some(wn) = self.direction_to(next) else {
             return 0.0;
-        }
-        let wn = d / len2.sqrt();
+        };
         let pdf = match self.kind {
             VertexKind::Camera => scene.camera.pdf_we(wn).1,
             _ => {
-                let Some(prev) = prev else {
+                let Some(wp) = prev.and_then(|prev| self.direction_to(prev)) else {
                     return 0.0;
                 };
-                let wp = (prev.p() - self.p()).normalize_or_zero();
-                if wp == Vec3::ZERO {
-                    return 0.0;
-                }
                 let frame = Frame::from_normal(self.sp.ns);
                 scene
                     .bsdf(self.sp.shape)
@@ -244,6 +279,9 @@ impl Vertex {
         if !self.is_light() {
             return 0.0;
         }
+        if self.kind == VertexKind::Infinite {
+            return self.convert_density(scene.lights.infinite_disk_pdf(), next);
+        }
         let d = next.p() - self.p();
         let d2 = d.length_squared();
         if !(d2 > 0.0) {
@@ -251,11 +289,14 @@ impl Vertex {
         }
         let w = d / d2.sqrt();
         let pdf_dir = match &scene.lights.lights[self.light as usize] {
-            Light::Point { .. } => 0.25 * FRAC_1_PI,
+            Light::Point { spot: None, .. } => 0.25 * FRAC_1_PI,
+            Light::Point { spot: Some(s), .. } => s.pdf(w),
             Light::Area { .. } => {
                 let c = self.sp.ns.dot(w);
                 if c > 0.0 { c * FRAC_1_PI } else { 0.0 }
             }
+            // Emitters at infinity are `Infinite` vertices (handled above).
+            Light::Directional { .. } | Light::Environment(_) => 0.0,
         };
         let mut pdf = pdf_dir / d2;
         if next.on_surface() {
@@ -265,14 +306,17 @@ impl Vertex {
     }
 
     /// Area density of choosing this emitter point as a light-subpath origin
-    /// (selection probability times position density).
+    /// (selection probability times position density). For an emitter at
+    /// infinity, the density of its direction (pbrt's convention): solid
+    /// angle for an environment, 1 for a directional light (a delta).
     pub fn pdf_light_origin(&self, scene: &Scene) -> f32 {
         if !self.is_light() {
             return 0.0;
         }
         let pmf = scene.lights.pmf(self.light);
         match &scene.lights.lights[self.light as usize] {
-            Light::Point { .. } => pmf,
+            Light::Point { .. } | Light::Directional { .. } => pmf,
+            Light::Environment(env) => pmf * env.pdf(self.wo),
             Light::Area { area, .. } => {
                 if *area > 0.0 {
                     pmf / area
@@ -285,20 +329,16 @@ impl Vertex {
 
     /// Radiance this (emitter) vertex sends towards `to`.
     pub fn le(&self, scene: &Scene, to: &Vertex) -> Rgb {
-        if !self.is_light() || self.kind != VertexKind::Surface {
+        if !self.is_light() {
             return Rgb::BLACK;
         }
-        let w = (to.p() - self.p()).normalize_or_zero();
-        scene.lights.area_radiance(self.light, &self.sp, w)
-    }
-}
-
-/// Density of the emitted direction for an emission sample (cosine
-/// hemisphere for area lights, uniform sphere for point lights).
-pub(crate) fn emission_pdf_dir(is_point: bool, ns: Vec3, dir: Vec3) -> f32 {
-    if is_point {
-        1.0 / (4.0 * PI)
-    } else {
-        ns.dot(dir).max(0.0) * FRAC_1_PI
+        match self.kind {
+            VertexKind::Surface => {
+                let w = (to.p() - self.p()).normalize_or_zero();
+                scene.lights.area_radiance(self.light, &self.sp, w)
+            }
+            VertexKind::Infinite => scene.lights.environment_radiance(self.wo),
+            VertexKind::Camera | VertexKind::Light => Rgb::BLACK,
+        }
     }
 }

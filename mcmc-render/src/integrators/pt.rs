@@ -51,7 +51,21 @@ impl PathTracer {
         let mut prev_delta = true;
         let geometry = &scene.geometry;
         let lights = &scene.lights;
-        while let Some(its) = scene.intersect(&ray) {
+        loop {
+            let Some(its) = scene.intersect(&ray) else {
+                // The ray left the scene: the environment, MIS-weighted
+                // against light sampling as an area emitter is.
+                if lights.environment().is_some() {
+                    let le = lights.environment_radiance(ray.d);
+                    let w = if prev_delta {
+                        1.0
+                    } else {
+                        power_heuristic(prev_pdf, lights.pdf_environment(ray.d))
+                    };
+                    l += beta * le * w;
+                }
+                break;
+            };
             let sp = its.sp;
             let wo_world = -ray.d;
 
@@ -85,7 +99,7 @@ impl PathTracer {
                 // One dispatch for both: the glossy models share the half
                 // vector, D and G1, and the two-sided mapping is done once.
                 let (f, bsdf_pdf) = bsdf.eval_pdf(wo, wi, TransportMode::Radiance);
-                if !f.is_black() && geometry.visible(&sp, &ds.p) {
+                if !f.is_black() && scene.light_visible(&sp, &ds) {
                     let w = if ds.is_delta {
                         1.0
                     } else {

@@ -6,12 +6,14 @@ use super::mesh;
 use super::named;
 use super::xml::{Child, Loc, Param, Plugin, Value};
 use super::{
-    CameraDesc, FilmDesc, FilterKind, FovAxis, IntegratorDesc, IntegratorElement, PointLightDesc,
-    SceneDesc, SceneError, ShapeDesc, ShapeGeometry,
+    CameraDesc, FilmDesc, FilterKind, FovAxis, InfiniteLightDesc, IntegratorDesc,
+    IntegratorElement, PointLightDesc, SceneDesc, SceneError, ShapeDesc, ShapeGeometry,
 };
 use crate::bsdf::{BsdfDesc, MicrofacetKind};
 use crate::color::Rgb;
-use glam::{Mat4, Vec3};
+use crate::environment::{EnvRadiance, Environment, LatLong};
+use crate::light::SpotProfile;
+use glam::{Mat3, Mat4, Vec3};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
@@ -227,18 +229,18 @@ impl Loader {
                 }
                 Ok(())
             }
-            "emitter" => {
-                if p.kind != "point" {
-                    return Err(err(
-                        &p.loc,
-                        format!(
-                            "unsupported emitter \"{}\" at scene level (supported: point; area emitters go inside a <shape>)",
-                            p.kind
-                        ),
-                    ));
-                }
-                self.point_light(p)
-            }
+            "emitter" => match p.kind.as_str() {
+                "point" => self.point_light(p),
+                "spot" => self.spot_light(p),
+                "directional" => self.directional_light(p),
+                "envmap" | "constant" => self.environment(p),
+                other => Err(err(
+                    &p.loc,
+                    format!(
+                        "unsupported emitter \"{other}\" at scene level (supported: point, spot, directional, envmap, constant; area emitters go inside a <shape>)"
+                    ),
+                )),
+            },
             "sensor" => {
                 if self.saw_sensor {
                     return Err(err(&p.loc, "only one <sensor> is supported"));
@@ -472,7 +474,134 @@ impl Loader {
         self.desc.point_lights.push(PointLightDesc {
             position: to_world.transform_point3(position),
             intensity,
+            spot: None,
         });
+        Ok(())
+    }
+
+    /// Mitsuba 3's `spot`: `intensity` (1) on the axis, the local +z of
+    /// `to_world`; `cutoff_angle` (20°), `beam_width` (¾ of the cutoff).
+    fn spot_light(&mut self, p: &Plugin) -> Result<(), SceneError> {
+        no_children(p)?;
+        let mut props = Props::new(p);
+        let intensity = props.rgb("intensity", Rgb::WHITE)?;
+        let cutoff = props.float("cutoff_angle", 20.0)?;
+        let beam = props.float("beam_width", cutoff * 0.75)?;
+        let to_world = props.transform("to_world")?;
+        props.finish()?;
+        if !(intensity.is_finite() && intensity.min_channel() >= 0.0) {
+            return Err(err(
+                &p.loc,
+                format!("'intensity' must be finite and non-negative, got {intensity:?}"),
+            ));
+        }
+        let spot = SpotProfile::new(Mat3::from_mat4(to_world), cutoff, beam)
+            .map_err(|e| err(&p.loc, e))?;
+        self.desc.point_lights.push(PointLightDesc {
+            position: to_world.transform_point3(Vec3::ZERO),
+            intensity,
+            spot: Some(spot),
+        });
+        Ok(())
+    }
+
+    /// Mitsuba 3's `directional`: `irradiance` (1) travelling along
+    /// `direction`, or along the local +z of `to_world` (not both).
+    fn directional_light(&mut self, p: &Plugin) -> Result<(), SceneError> {
+        no_children(p)?;
+        let mut props = Props::new(p);
+        let irradiance = props.rgb("irradiance", Rgb::WHITE)?;
+        let has_direction = p.params.iter().any(|q| q.name == "direction");
+        let has_to_world = p.params.iter().any(|q| q.name == "to_world");
+        if has_direction && has_to_world {
+            return Err(err(
+                &p.loc,
+                "a directional emitter takes 'direction' or 'to_world', not both",
+            ));
+        }
+        let direction = props.point("direction", Vec3::Z)?;
+        let to_world = props.transform("to_world")?;
+        props.finish()?;
+        let direction = to_world
+            .transform_vector3(direction)
+            .try_normalize()
+            .ok_or_else(|| err(&p.loc, "the directional emitter's direction is zero"))?;
+        if !(irradiance.is_finite() && irradiance.min_channel() >= 0.0) {
+            return Err(err(
+                &p.loc,
+                format!("'irradiance' must be finite and non-negative, got {irradiance:?}"),
+            ));
+        }
+        self.desc
+            .infinite_lights
+            .push(InfiniteLightDesc::Directional {
+                direction,
+                irradiance,
+            });
+        Ok(())
+    }
+
+    /// Mitsuba 3's `envmap` (`filename` of a lat-long EXR, `scale` 1,
+    /// `to_world`) and `constant` (`radiance` 1). One per scene.
+    fn environment(&mut self, p: &Plugin) -> Result<(), SceneError> {
+        no_children(p)?;
+        if self
+            .desc
+            .infinite_lights
+            .iter()
+            .any(|l| matches!(l, InfiniteLightDesc::Environment(_)))
+        {
+            return Err(err(
+                &p.loc,
+                "only one environment emitter (envmap or constant) is allowed per scene",
+            ));
+        }
+        let mut props = Props::new(p);
+        let radiance = if p.kind == "constant" {
+            let l = props.rgb("radiance", Rgb::WHITE)?;
+            if !(l.is_finite() && l.min_channel() >= 0.0) {
+                return Err(err(
+                    &p.loc,
+                    format!("'radiance' must be finite and non-negative, got {l:?}"),
+                ));
+            }
+            EnvRadiance::Constant(l)
+        } else {
+            let (filename, loc) = props
+                .opt_string("filename")?
+                .ok_or_else(|| err(&p.loc, "<emitter type=\"envmap\"> needs a 'filename'"))?;
+            let scale = props.float("scale", 1.0)?;
+            if !(scale.is_finite() && scale >= 0.0) {
+                return Err(err(
+                    &p.loc,
+                    format!("'scale' must be finite and non-negative, got {scale}"),
+                ));
+            }
+            let path = self.base_dir.join(&filename);
+            let is_exr = path
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
+            if !is_exr {
+                return Err(err(
+                    &loc,
+                    format!(
+                        "environment map \"{filename}\": only OpenEXR (.exr) files are supported"
+                    ),
+                ));
+            }
+            let (w, h, texels) = crate::image_io::read_exr(&path).map_err(|e| err(&loc, e))?;
+            let texels = texels.into_iter().map(|t| t * scale).collect();
+            let map = LatLong::new(w as usize, h as usize, texels)
+                .map_err(|e| err(&loc, format!("environment map \"{filename}\": {e}")))?;
+            EnvRadiance::Map(Box::new(map))
+        };
+        let to_world = props.transform("to_world")?;
+        props.finish()?;
+        let env =
+            Environment::new(radiance, Mat3::from_mat4(to_world)).map_err(|e| err(&p.loc, e))?;
+        self.desc
+            .infinite_lights
+            .push(InfiniteLightDesc::Environment(Box::new(env)));
         Ok(())
     }
 

@@ -11,7 +11,7 @@ use crate::bsdf::{Bsdf, BsdfDesc};
 use crate::camera::Camera;
 use crate::color::Rgb;
 use crate::geometry::{GeoShape, Geometry, Hit, MeshData, Ray, Surface, SurfacePoint};
-use crate::light::Lights;
+use crate::light::{DirectSample, Lights};
 use glam::{Mat3, Mat4, Vec3};
 use std::collections::HashMap;
 use std::path::Path;
@@ -151,8 +151,24 @@ pub struct IntegratorElement {
 pub struct PointLightDesc {
     /// World position.
     pub position: Vec3,
-    /// Radiant intensity (W/sr per channel).
+    /// Radiant intensity (W/sr per channel; on the axis for a spot light).
     pub intensity: Rgb,
+    /// The `spot` profile, for a spot light.
+    pub spot: Option<crate::light::SpotProfile>,
+}
+
+/// An emitter at infinity, as a scene file describes it.
+#[derive(Clone, Debug)]
+pub enum InfiniteLightDesc {
+    /// `directional`: parallel light.
+    Directional {
+        /// Unit world direction the light travels in.
+        direction: Vec3,
+        /// Irradiance on a surface facing the light.
+        irradiance: Rgb,
+    },
+    /// `envmap` or `constant`.
+    Environment(Box<crate::environment::Environment>),
 }
 
 /// The geometry of a shape in world space.
@@ -200,6 +216,8 @@ pub struct SceneDesc {
     pub bsdfs: Vec<BsdfDesc>,
     /// Point lights.
     pub point_lights: Vec<PointLightDesc>,
+    /// Emitters at infinity (at most one environment).
+    pub infinite_lights: Vec<InfiniteLightDesc>,
     /// Camera.
     pub camera: CameraDesc,
     /// Film.
@@ -280,7 +298,9 @@ impl Scene {
         for d in &desc.bsdfs {
             bsdfs.push(Bsdf::from_desc(d).map_err(SceneError::Invalid)?);
         }
-        let no_geometry = desc.shapes.is_empty() && desc.point_lights.is_empty();
+        let no_geometry = desc.shapes.is_empty()
+            && desc.point_lights.is_empty()
+            && desc.infinite_lights.is_empty();
         let mut geo_shapes = Vec::with_capacity(desc.shapes.len());
         let mut shapes = Vec::with_capacity(desc.shapes.len());
         let mut emitters = Vec::new();
@@ -333,7 +353,12 @@ impl Scene {
             ));
         }
         let geometry = Geometry::build(geo_shapes);
-        let lights = Lights::new(&geometry, &emitters, &desc.point_lights);
+        let lights = Lights::new(
+            &geometry,
+            &emitters,
+            &desc.point_lights,
+            &desc.infinite_lights,
+        );
         let camera = Camera::new(&desc.camera, desc.film.width, desc.film.height)
             .map_err(SceneError::Invalid)?;
         Ok(Scene {
@@ -364,6 +389,17 @@ impl Scene {
     /// The BSDF of a shape.
     pub fn bsdf(&self, shape: u32) -> &Bsdf {
         &self.bsdfs[self.shapes[shape as usize].bsdf as usize]
+    }
+
+    /// True when nothing blocks the light sample `ds` from `sp` (for an
+    /// emitter at infinity: when the ray towards it leaves the scene).
+    #[inline(always)]
+    pub fn light_visible(&self, sp: &SurfacePoint, ds: &DirectSample) -> bool {
+        if ds.at_infinity {
+            !self.geometry.occluded(&sp.spawn_ray(ds.wi))
+        } else {
+            self.geometry.visible(sp, &ds.p)
+        }
     }
 
     /// Radiance emitted from a surface point towards `w` (unit, pointing away).
