@@ -119,6 +119,7 @@ impl Filter {
     pub fn new(kind: FilterKind, width: u32, height: u32) -> Filter {
         let (radius, alpha, bias) = match kind {
             FilterKind::Box => (0.5, 0.0, 0.0),
+            FilterKind::Tent { radius } => (radius, 0.0, 0.0),
             FilterKind::Gaussian { stddev } => {
                 let radius = 4.0 * stddev;
                 let alpha = -1.0 / (2.0 * stddev * stddev);
@@ -156,6 +157,7 @@ impl Filter {
                 }
             }
             FilterKind::Gaussian { .. } => (exp_neg(self.alpha * x * x) - self.bias).max(0.0),
+            FilterKind::Tent { .. } => (1.0 - x.abs() / self.radius).max(0.0),
         }
     }
 
@@ -168,7 +170,8 @@ impl Filter {
     }
 
     /// ∫_0^n f(i + 0.5 − q) dq by the midpoint rule on 64 steps per pixel
-    /// (the filter is smooth, and exact for the box).
+    /// (the Gaussian is smooth; exact for the box, and for the tent up to
+    /// the one step that holds its kink).
     fn integral_1d(&self, i: u32, n: u32) -> f32 {
         let c = i as f32 + 0.5;
         let lo = (c - self.radius).max(0.0);
@@ -529,7 +532,12 @@ mod tests {
     /// normalisation `Z_j` at work), for both filters.
     #[test]
     fn splats_and_samples_develop_to_the_same_constant() {
-        for kind in [FilterKind::Box, FilterKind::Gaussian { stddev: 0.5 }] {
+        for kind in [
+            FilterKind::Box,
+            FilterKind::Gaussian { stddev: 0.5 },
+            FilterKind::Tent { radius: 1.0 },
+            FilterKind::Tent { radius: 2.7 },
+        ] {
             let (w, h) = (7u32, 5u32);
             let filter = Arc::new(Filter::new(kind, w, h));
             let mut samples = Film::new(w, h, filter.clone());

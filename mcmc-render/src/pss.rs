@@ -141,10 +141,14 @@ impl PssPathSampler for PathTracer {
             (ux * w).min(w * (1.0 - f32::EPSILON)),
             (uy * h).min(h * (1.0 - f32::EPSILON)),
         );
-        let ray = scene.camera.generate_ray(p);
+        let (ray, lens_numbers) = if scene.camera.has_lens() {
+            (scene.camera.generate_ray_lens(p, source.next_2d()), 2)
+        } else {
+            (scene.camera.generate_ray(p), 0)
+        };
         let l = self.li(scene, ray, source);
         out.push(Splat { p, l, class: 0 });
-        ((source.consumed(0) - 2) / PT_NUMBERS_PER_VERTEX) as u32
+        ((source.consumed(0) - 2 - lens_numbers) / PT_NUMBERS_PER_VERTEX) as u32
     }
 }
 

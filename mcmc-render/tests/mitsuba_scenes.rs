@@ -81,3 +81,8 @@ fn environment_and_directional_light_match_mitsuba() {
 fn spot_light_matches_mitsuba() {
     check_scene("spot-floor", 32);
 }
+
+#[test]
+fn thin_lens_crop_window_and_tent_filter_match_mitsuba() {
+    check_scene("dof-spheres", 16);
+}

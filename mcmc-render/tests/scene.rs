@@ -310,7 +310,7 @@ fn camera_rays_and_raster_positions_round_trip() {
     for y in 0..h {
         for x in 0..w {
             let ray = cam.generate_ray(Vec2::new(x as f32 + 0.5, y as f32 + 0.5));
-            let (_, pdf_dir) = cam.pdf_we(ray.d);
+            let (_, pdf_dir) = cam.pdf_we(ray.o, ray.d);
             // Solid angle of the pixel: its plane area times cos³ (plane at distance 1).
             let (_, cos) = cam.raster_of(ray.d).unwrap();
             let tan_y = 25f32.to_radians().tan();
@@ -402,6 +402,83 @@ fn emitters_at_infinity_load_and_bad_ones_are_refused() {
         let e = desc_in(&dir, &body, &[]).expect_err(&body);
         assert!(e.contains("scene.xml:"), "{e}");
         assert!(e.contains(needle), "{body}: {e}");
+        assert_eq!(e.lines().count(), 1, "{e}");
+    }
+}
+
+#[test]
+fn thin_lens_crop_and_tent_parse_and_bad_values_are_refused() {
+    let dir = scratch("lens");
+    let sensor = |attrs: &str, film: &str| {
+        format!(
+            r#"<scene version="3.0.0"><sensor type="thinlens">{attrs}<film type="hdrfilm"><integer name="width" value="40"/><integer name="height" value="30"/>{film}</film></sensor></scene>"#
+        )
+    };
+    let load = |text: String| -> Result<SceneDesc, String> {
+        let path = dir.join("lens.xml");
+        std::fs::write(&path, text).unwrap();
+        let tree = xml::parse_file(&path, &HashMap::new()).map_err(|e| e.to_string())?;
+        Loader::new(&dir)
+            .load(&tree, "lens.xml")
+            .map_err(|e| e.to_string())
+    };
+    let d = load(sensor(
+        r#"<float name="aperture_radius" value="0.1"/>"#,
+        r#"<integer name="crop_offset_x" value="5"/><integer name="crop_width" value="10"/><rfilter type="tent"/>"#,
+    ))
+    .expect("loads");
+    assert_eq!(d.camera.aperture_radius, 0.1);
+    assert_eq!(d.camera.focus_distance, d.camera.far_clip);
+    assert_eq!((d.film.width, d.film.height), (10, 30));
+    assert_eq!((d.film.full_width, d.film.full_height), (40, 30));
+    assert_eq!(d.film.crop_offset, (5, 0));
+    assert_eq!(d.film.filter, FilterKind::Tent { radius: 1.0 });
+    let cases = [
+        (sensor("", ""), "aperture_radius"),
+        (
+            sensor(r#"<float name="aperture_radius" value="-1"/>"#, ""),
+            "aperture_radius",
+        ),
+        (
+            sensor(
+                r#"<float name="aperture_radius" value="0.1"/><float name="focus_distance" value="0"/>"#,
+                "",
+            ),
+            "focus_distance",
+        ),
+        (
+            sensor(
+                r#"<float name="aperture_radius" value="0.1"/>"#,
+                r#"<integer name="crop_offset_x" value="35"/><integer name="crop_width" value="10"/>"#,
+            ),
+            "crop window",
+        ),
+        (
+            sensor(
+                r#"<float name="aperture_radius" value="0.1"/>"#,
+                r#"<integer name="crop_height" value="-3"/>"#,
+            ),
+            "crop window",
+        ),
+        (
+            sensor(
+                r#"<float name="aperture_radius" value="0.1"/>"#,
+                r#"<boolean name="sample_border" value="true"/>"#,
+            ),
+            "sample_border",
+        ),
+        (
+            sensor(
+                r#"<float name="aperture_radius" value="0.1"/>"#,
+                r#"<rfilter type="tent"><float name="radius" value="0"/></rfilter>"#,
+            ),
+            "radius",
+        ),
+    ];
+    for (text, needle) in cases {
+        let e = load(text.clone()).expect_err(&text);
+        assert!(e.contains("lens.xml:"), "{e}");
+        assert!(e.contains(needle), "{text}: {e}");
         assert_eq!(e.lines().count(), 1, "{e}");
     }
 }

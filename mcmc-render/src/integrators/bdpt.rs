@@ -31,7 +31,8 @@
 //! Each sample switches [`Stream`]s; a source without streams draws all
 //! numbers from one sequence in the order below.
 //! 1. [`Stream::Camera`]: `next_2d` for the position inside the pixel (when
-//!    the integrator picks the raster position), then for every camera
+//!    the integrator picks the raster position), `next_2d` for the lens
+//!    point (thin-lens cameras only), then for every camera
 //!    surface vertex from which the walk may continue, 4 numbers:
 //!    `next_1d` lobe, `next_2d` direction, `next_1d` Russian roulette.
 //! 2. [`Stream::Light`]: `next_1d` emitter choice, `next_2d` position,
@@ -40,7 +41,9 @@
 //! 3. [`Stream::Connection`]: for every technique `(1, t)` that is within
 //!    the depth limit, in order of increasing `t`: `next_1d` emitter choice
 //!    and `next_2d` position, drawn even when the camera vertex cannot be
-//!    connected. The pinhole connection (`t = 1`) consumes no numbers.
+//!    connected. The pinhole connection (`t = 1`) consumes no numbers; with
+//!    a thin lens it draws `next_2d` for the lens point, when the light
+//!    vertex can be connected.
 //!
 //! Multiplexed MLT (Hachisuka et al. 2014) calls [`generate_camera_subpath`]
 //! and [`generate_light_subpath`] with prescribed lengths and then
@@ -210,9 +213,10 @@ fn random_walk(
 }
 
 /// Generates a camera subpath of at most `max_vertices` vertices (pinhole
-/// included) through raster position `raster` into `path`; returns its length.
-/// Consumes 4 numbers per surface vertex from which the walk continues (the
-/// pixel position is the caller's).
+/// or lens point included) through raster position `raster` into `path`;
+/// returns its length. Consumes 2 numbers for the lens point (thin-lens
+/// cameras only), then 4 per surface vertex from which the walk continues
+/// (the pixel position is the caller's).
 pub fn generate_camera_subpath(
     scene: &Scene,
     raster: Vec2,
@@ -226,9 +230,13 @@ pub fn generate_camera_subpath(
         return 0;
     }
     let camera = &scene.camera;
-    let ray = camera.generate_ray(raster);
-    path.push(Vertex::camera(camera.origin(), raster, Rgb::WHITE));
-    let (_, pdf_dir) = camera.pdf_we(ray.d);
+    let ray = if camera.has_lens() {
+        camera.generate_ray_lens(raster, source.next_2d())
+    } else {
+        camera.generate_ray(raster)
+    };
+    path.push(Vertex::camera(ray.o, raster, Rgb::WHITE));
+    let (_, pdf_dir) = camera.pdf_we(ray.o, ray.d);
     if !(pdf_dir > 0.0) {
         return 1;
     }
@@ -340,7 +348,9 @@ fn geometry_term(scene: &Scene, a: &Vertex, b: &Vertex) -> f32 {
 /// weight. Requires `t ≥ 1`, `s ≤ light.len()`, `t ≤ camera.len()` and
 /// `(s, t) ≠ (1, 1)`; returns `None` otherwise or when the contribution is
 /// zero. For `s = 1` it draws 3 numbers (`next_1d` emitter, `next_2d`
-/// position) from `source` before anything else, whatever the outcome.
+/// position) from `source` before anything else, whatever the outcome;
+/// for `t = 1` with a thin lens, 2 (the lens point) once the light vertex
+/// is found connectible.
 pub fn connect(
     scene: &Scene,
     camera: &[Vertex],
@@ -366,7 +376,11 @@ pub fn connect(
         if !qs.is_connectible(scene) {
             return None;
         }
-        let cs = scene.camera.sample_wi(qs.p())?;
+        let cs = if scene.camera.has_lens() {
+            scene.camera.sample_wi_lens(qs.p(), source.next_2d())?
+        } else {
+            scene.camera.sample_wi(qs.p())?
+        };
         raster = cs.raster;
         let cam = Vertex::camera(cs.origin, cs.raster, Rgb::splat(cs.we / cs.pdf));
         let mut l = qs.beta * qs.f(scene, &cam, TransportMode::Importance) * cam.beta;

@@ -9,6 +9,7 @@ use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
 use super::{FilmSink, Integrator, SampleDomain, SampleStats, rr_probability};
 use crate::bsdf::TransportMode;
+use crate::camera::Camera;
 use crate::color::Rgb;
 use crate::frame::Frame;
 use crate::geometry::Ray;
@@ -33,6 +34,16 @@ fn shading_correction(wo: Vec3, wi: Vec3, ng: Vec3, ns: Vec3) -> f32 {
     let num = wo.dot(ns).abs() * wi.dot(ng).abs();
     let den = wo.dot(ng).abs() * wi.dot(ns).abs();
     if den > 0.0 { num / den } else { 0.0 }
+}
+
+/// The lens point's two numbers for a camera connection: drawn only for a
+/// thin lens (the pinhole's connections consume none).
+fn lens_numbers(camera: &Camera, source: &mut dyn RandomSource) -> (f32, f32) {
+    if camera.has_lens() {
+        source.next_2d()
+    } else {
+        (0.5, 0.5)
+    }
 }
 
 impl Integrator for LightTracer {
@@ -74,8 +85,9 @@ impl Integrator for LightTracer {
             // response to the radiance arriving along it, i.e. a point at
             // distance 1 along `w` with `le / pdf_dir` as its intensity.
             let w = -es.dir;
+            let lens = camera.lens_point(lens_numbers(camera, source));
             if !es.is_delta
-                && let Some(cs) = camera.sample_wi(camera.origin() + w)
+                && let Some(cs) = camera.connect(lens, lens + w)
                 && !geometry.occluded(&Ray::new(cs.origin, w))
             {
                 let pmf = es.pdf_pos / scene.lights.infinite_disk_pdf();
@@ -84,7 +96,7 @@ impl Integrator for LightTracer {
             }
         } else if self.max_depth >= 1
             && !es.is_delta
-            && let Some(cs) = camera.sample_wi(es.p.p)
+            && let Some(cs) = camera.sample_wi_lens(es.p.p, lens_numbers(camera, source))
         {
             let cos_l = es.p.ns.dot(cs.wi);
             if cos_l > 0.0 && geometry.segment_clear(es.p.spawn_origin(cs.origin), cs.origin) {
@@ -111,7 +123,7 @@ impl Integrator for LightTracer {
             // Connect to the camera: a path of depth + 1 segments.
             if depth.saturating_add(1) <= self.max_depth
                 && !bsdf.is_delta()
-                && let Some(cs) = camera.sample_wi(sp.p)
+                && let Some(cs) = camera.sample_wi_lens(sp.p, lens_numbers(camera, source))
             {
                 let wi = frame.to_local(cs.wi);
                 let f = bsdf.eval(wo, wi, TransportMode::Importance);

@@ -26,7 +26,8 @@
 //! primary-sample vector always feeds the same decision.
 //!
 //! **Path tracing** ([`pt`]):
-//! 1. `next_2d`: position inside the pixel (x, then y).
+//! 1. `next_2d`: position inside the pixel (x, then y); for a thin-lens
+//!    camera only, `next_2d`: the lens point.
 //! 2. For each surface vertex that is not the last one allowed by
 //!    `max_depth`, 7 numbers:
 //!    - `next_1d`: light selection (next-event estimation);
@@ -42,7 +43,8 @@
 //!    - `next_1d`: BSDF lobe choice; `next_2d`: BSDF direction;
 //!    - `next_1d`: Russian roulette.
 //!
-//!    The connection to the pinhole camera uses no numbers.
+//!    The connection to the pinhole camera uses no numbers; to a thin lens,
+//!    each attempted connection first draws `next_2d` (the lens point).
 //!
 //! **Bidirectional path tracing** ([`bdpt`]): three streams (camera, light,
 //! connection); see the module documentation there.

@@ -259,7 +259,7 @@ impl Vertex {
             return 0.0;
         };
         let pdf = match self.kind {
-            VertexKind::Camera => scene.camera.pdf_we(wn).1,
+            VertexKind::Camera => scene.camera.pdf_we(self.p(), wn).1,
             _ => {
                 let Some(wp) = prev.and_then(|prev| self.direction_to(prev)) else {
                     return 0.0;

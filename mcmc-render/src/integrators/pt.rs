@@ -157,7 +157,11 @@ impl PathTracer {
     ) {
         let u = source.next_2d();
         let raster = Vec2::new(px as f32 + u.0, py as f32 + u.1);
-        let ray = scene.camera.generate_ray(raster);
+        let ray = if scene.camera.has_lens() {
+            scene.camera.generate_ray_lens(raster, source.next_2d())
+        } else {
+            scene.camera.generate_ray(raster)
+        };
         let l = self.li(scene, ray, source);
         if l.is_finite() {
             film.add_sample(raster, l);

@@ -77,10 +77,14 @@ impl<'a> Props<'a> {
     }
 
     fn int(&mut self, name: &str, default: i64) -> Result<i64, SceneError> {
+        Ok(self.opt_int(name)?.unwrap_or(default))
+    }
+
+    fn opt_int(&mut self, name: &str) -> Result<Option<i64>, SceneError> {
         match self.get(name) {
-            None => Ok(default),
+            None => Ok(None),
             Some(p) => match &p.value {
-                Value::Integer(v) => Ok(*v),
+                Value::Integer(v) => Ok(Some(*v)),
                 _ => Err(self.type_err(p, "an <integer>")),
             },
         }
@@ -320,10 +324,13 @@ impl Loader {
     }
 
     fn sensor(&mut self, p: &Plugin) -> Result<(), SceneError> {
-        if p.kind != "perspective" {
+        if p.kind != "perspective" && p.kind != "thinlens" {
             return Err(err(
                 &p.loc,
-                format!("unsupported sensor \"{}\" (supported: perspective)", p.kind),
+                format!(
+                    "unsupported sensor \"{}\" (supported: perspective, thinlens)",
+                    p.kind
+                ),
             ));
         }
         let mut props = Props::new(p);
@@ -342,6 +349,31 @@ impl Loader {
         let near_clip = props.float("near_clip", 0.01)?;
         let far_clip = props.float("far_clip", 10000.0)?;
         let to_world = props.transform("to_world")?;
+        let (aperture_radius, focus_distance) = if p.kind == "thinlens" {
+            // Mitsuba 3 requires the aperture and focuses at far_clip by default.
+            let a = props.opt_float("aperture_radius")?.ok_or_else(|| {
+                err(
+                    &p.loc,
+                    "<sensor type=\"thinlens\"> needs an 'aperture_radius'",
+                )
+            })?;
+            let f = props.float("focus_distance", far_clip)?;
+            if !(a.is_finite() && a > 0.0) {
+                return Err(err(
+                    &p.loc,
+                    format!("aperture_radius must be positive and finite, got {a}"),
+                ));
+            }
+            if !(f.is_finite() && f > 0.0) {
+                return Err(err(
+                    &p.loc,
+                    format!("focus_distance must be positive and finite, got {f}"),
+                ));
+            }
+            (a, f)
+        } else {
+            (0.0, far_clip)
+        };
         props.finish()?;
         if !(fov > 0.0 && fov < 180.0) {
             return Err(err(
@@ -358,6 +390,8 @@ impl Loader {
             fov_axis,
             near_clip,
             far_clip,
+            aperture_radius,
+            focus_distance,
         };
         for child in &p.children {
             let c = match child {
@@ -395,6 +429,13 @@ impl Loader {
         let mut props = Props::new(p);
         let width = props.int("width", 768)?;
         let height = props.int("height", 576)?;
+        let crop_x = props.int("crop_offset_x", 0)?;
+        let crop_y = props.int("crop_offset_y", 0)?;
+        let crop_w = props.opt_int("crop_width")?;
+        let crop_h = props.opt_int("crop_height")?;
+        if props.boolean("sample_border", false)? {
+            return Err(err(&p.loc, "sample_border=true is not supported"));
+        }
         // These only choose the output container and channel layout, which
         // this renderer fixes (linear float RGB EXR); accept Mitsuba's
         // values that match it and refuse the rest.
@@ -446,19 +487,48 @@ impl Loader {
                     }
                     filter = FilterKind::Gaussian { stddev };
                 }
+                ("rfilter", "tent") => {
+                    let mut props = Props::new(c);
+                    let radius = props.float("radius", 1.0)?;
+                    props.finish()?;
+                    // The film keeps filter footprints at most 16 pixels wide.
+                    if !(radius > 0.0 && radius <= 7.5) {
+                        return Err(err(&c.loc, "radius must be in (0, 7.5] pixels"));
+                    }
+                    filter = FilterKind::Tent { radius };
+                }
                 (tag, kind) => {
                     return Err(err(
                         &c.loc,
                         format!(
-                            "unsupported <{tag} type=\"{kind}\"> (supported rfilter: box, gaussian)"
+                            "unsupported <{tag} type=\"{kind}\"> (supported rfilter: box, gaussian, tent)"
                         ),
                     ));
                 }
             }
         }
+        let crop_w = crop_w.unwrap_or(width.saturating_sub(crop_x));
+        let crop_h = crop_h.unwrap_or(height.saturating_sub(crop_y));
+        if crop_x < 0
+            || crop_y < 0
+            || crop_w <= 0
+            || crop_h <= 0
+            || crop_x.saturating_add(crop_w) > width
+            || crop_y.saturating_add(crop_h) > height
+        {
+            return Err(err(
+                &p.loc,
+                format!(
+                    "the crop window {crop_w}x{crop_h} at ({crop_x}, {crop_y}) must lie within the {width}x{height} film"
+                ),
+            ));
+        }
         self.desc.film = FilmDesc {
-            width: width as u32,
-            height: height as u32,
+            width: crop_w as u32,
+            height: crop_h as u32,
+            full_width: width as u32,
+            full_height: height as u32,
+            crop_offset: (crop_x as u32, crop_y as u32),
             filter,
         };
         Ok(())

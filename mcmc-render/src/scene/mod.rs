@@ -68,6 +68,10 @@ pub struct CameraDesc {
     pub near_clip: f32,
     /// Far clipping distance.
     pub far_clip: f32,
+    /// Lens radius (`thinlens`'s `aperture_radius`; 0 for `perspective`).
+    pub aperture_radius: f32,
+    /// Distance of the plane in focus (`thinlens`; Mitsuba's default: `far_clip`).
+    pub focus_distance: f32,
 }
 
 impl Default for CameraDesc {
@@ -78,6 +82,8 @@ impl Default for CameraDesc {
             fov_axis: FovAxis::X,
             near_clip: 0.01,
             far_clip: 10000.0,
+            aperture_radius: 0.0,
+            focus_distance: 10000.0,
         }
     }
 }
@@ -92,15 +98,26 @@ pub enum FilterKind {
         /// Standard deviation in pixels.
         stddev: f32,
     },
+    /// Mitsuba's `tent`: `max(0, 1 − |x|/radius)` per axis.
+    Tent {
+        /// Radius in pixels (Mitsuba's default 1).
+        radius: f32,
+    },
 }
 
 /// The film's parameters.
 #[derive(Clone, Debug)]
 pub struct FilmDesc {
-    /// Width in pixels.
+    /// Width of the image (the crop window) in pixels.
     pub width: u32,
-    /// Height in pixels.
+    /// Height of the image (the crop window) in pixels.
     pub height: u32,
+    /// Width of the full film (what the field of view spans).
+    pub full_width: u32,
+    /// Height of the full film.
+    pub full_height: u32,
+    /// Offset of the crop window in the full film, in pixels.
+    pub crop_offset: (u32, u32),
     /// Reconstruction filter.
     pub filter: FilterKind,
 }
@@ -110,6 +127,9 @@ impl Default for FilmDesc {
         FilmDesc {
             width: 768,
             height: 576,
+            full_width: 768,
+            full_height: 576,
+            crop_offset: (0, 0),
             filter: FilterKind::Gaussian { stddev: 0.5 },
         }
     }
@@ -359,8 +379,7 @@ impl Scene {
             &desc.point_lights,
             &desc.infinite_lights,
         );
-        let camera = Camera::new(&desc.camera, desc.film.width, desc.film.height)
-            .map_err(SceneError::Invalid)?;
+        let camera = Camera::new(&desc.camera, &desc.film).map_err(SceneError::Invalid)?;
         Ok(Scene {
             geometry,
             shapes,
