@@ -7,6 +7,7 @@ pub mod loader;
 pub mod mesh;
 pub mod named;
 pub mod serialized;
+pub mod upgrade;
 pub mod xml;
 
 use crate::bsdf::{Bsdf, BsdfDesc};
