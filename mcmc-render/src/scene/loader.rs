@@ -610,6 +610,8 @@ impl Loader {
                 })?;
                 let mut face_normals = props.boolean("face_normals", false)?;
                 let path = self.base_dir.join(&filename);
+                crate::resources::regular_file(&path)
+                    .map_err(|e| err(&loc, format!("cannot load mesh \"{filename}\": {e}")))?;
                 let mesh = match p.kind.as_str() {
                     "obj" => mesh::load_obj(&path),
                     "ply" => mesh::load_ply(&path),

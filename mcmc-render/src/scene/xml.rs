@@ -192,6 +192,7 @@ impl Parser {
         depth: usize,
         out: &mut Vec<Child>,
     ) -> Result<(), SceneError> {
+        crate::resources::regular_file(path).map_err(SceneError::Invalid)?;
         let text = std::fs::read_to_string(path).map_err(|e| SceneError::Io {
             path: path.display().to_string(),
             message: e.to_string(),
