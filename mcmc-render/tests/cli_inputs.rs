@@ -1,6 +1,7 @@
-//! Input files that are not files: a mesh, scene or image path naming a
-//! directory, a FIFO or a device is refused with one line before it is
-//! opened (a FIFO would block the open, a device never end), never a hang.
+//! Input files that are not files: a mesh, scene, image, PSS dump or
+//! convergence CSV path naming a directory, a FIFO or a device is refused
+//! with one line before it is opened (a FIFO would block the open, a
+//! device never end), never a hang.
 //! And malformed PLY files are one line naming the file, not the reader's
 //! multi-line dump.
 
@@ -89,6 +90,14 @@ fn scene_and_image_paths_that_are_not_files_are_refused() {
     assert_clean_failure(&out, &["inc.xml is a directory"]);
     let out = run_bounded(&["compare", "image.exr", "image.exr"], &dir);
     assert_clean_failure(&out, &["image.exr is a FIFO"]);
+    // The replay dump and the convergence CSV.
+    mkfifo(&dir.join("dump.pss"));
+    mkfifo(&dir.join("c.csv"));
+    write(&dir, "f.xml", &floor_scene(8, 6));
+    let out = run_bounded(&["render", "f.xml", "--replay", "dump.pss"], &dir);
+    assert_clean_failure(&out, &["dump.pss is a FIFO"]);
+    let out = run_bounded(&["convergence", "--replot", "c.csv"], &dir);
+    assert_clean_failure(&out, &["c.csv is a FIFO"]);
 }
 
 #[test]

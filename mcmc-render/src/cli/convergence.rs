@@ -388,6 +388,7 @@ pub fn write_csv(path: &Path, records: &[Record]) -> Result<(), String> {
 
 /// Reads records written by [`write_csv`] (for re-plotting a study).
 pub fn read_csv(path: &Path) -> Result<Vec<Record>, String> {
+    crate::resources::regular_file(path)?;
     let text = std::fs::read_to_string(path)
         .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
     let mut lines = text.lines().enumerate();

@@ -209,6 +209,12 @@ mod tests {
 
     #[test]
     fn to_uv_translates_then_scales() {
+        // As Mitsuba 3.9 builds it: uscale 2 with uoffset 0.5 gives the
+        // to_uv matrix row (2, 0, 1), i.e. u' = 2 (u + 0.5).
+        assert_eq!(
+            to_uv([0.5, 0.0], [2.0, 1.0]).transform_point3(Vec3::ZERO).x,
+            1.0
+        );
         let m = to_uv([0.5, 0.25], [2.0, 4.0]);
         let p = m.transform_point3(Vec3::new(1.0, 1.0, 0.0));
         assert_eq!(p, Vec3::new(3.0, 5.0, 0.0));
