@@ -140,6 +140,25 @@ fn legacy_values_read_as_06_meant_them() {
     };
     let uv = m.transform_point3(glam::Vec3::new(0.25, 0.25, 0.0));
     assert_eq!((uv.x, uv.y), (0.5, 0.75));
+    // Nested plugins' names are upgraded too (Mitsuba's rule applies to
+    // every `name` attribute).
+    let outer = first_plugin(
+        r#"<scene version="0.6.0"><bsdf type="twosided"><bsdf type="diffuse" name="innerBsdf"><float name="diffuseReflectance" value="0.5"/></bsdf></bsdf></scene>"#,
+    );
+    let Some(Child::Plugin(inner)) = outer.children.first() else {
+        panic!("no nested bsdf");
+    };
+    assert_eq!(inner.name.as_deref(), Some("inner_bsdf"));
+    assert_eq!(inner.params[0].name, "reflectance");
+    // …including diffuse's diffuseReflectance given as a nested plugin
+    // (a texture, in real files; the reader does not look at the tag).
+    let diffuse = first_plugin(
+        r#"<scene version="0.6.0"><bsdf type="diffuse"><bsdf type="x" name="diffuseReflectance"/></bsdf></scene>"#,
+    );
+    let Some(Child::Plugin(tex)) = diffuse.children.first() else {
+        panic!("no nested plugin");
+    };
+    assert_eq!(tex.name.as_deref(), Some("reflectance"));
     // Control: a Mitsuba 3 file keeps its names as written.
     let q = first_plugin(
         r#"<scene version="3.0.0"><bsdf type="diffuse"><rgb name="diffuseReflectance" value="1"/></bsdf></scene>"#,

@@ -379,12 +379,10 @@ impl Parser {
                     });
                 }
                 t if PLUGIN_TAGS.contains(&t) => {
-                    plugin.children.push(Child::Plugin(self.plugin(
-                        doc,
-                        child,
-                        file,
-                        nesting + 1,
-                    )?));
+                    let mut nested = self.plugin(doc, child, file, nesting + 1)?;
+                    // A nested plugin's name is a parameter name too.
+                    nested.name = nested.name.map(|n| self.param_name(&plugin, &n));
+                    plugin.children.push(Child::Plugin(nested));
                 }
                 "float" | "integer" | "boolean" | "string" | "rgb" | "point" | "vector"
                 | "transform" | "spectrum" => {
