@@ -77,6 +77,12 @@ const CONVERGENCE: &[&str] = &[
 #[test]
 fn every_subcommand_exits_quietly_on_a_closed_stdout() {
     let dir = fixture("stdout-closed");
+    // A primary-sample vector for `--replay` (any coordinates in [0, 1)).
+    write(
+        &dir,
+        "d.pss",
+        "# sampler pt\n# max_depth 3\n0.5\n0.25\n0.75\n0.125\n0.625\n0.375\n",
+    );
     let reports: &[&[&str]] = &[
         &["compare", "a.exr", "b.exr"],
         &["compare", "a.exr", "b.exr", "--json"],
@@ -84,6 +90,7 @@ fn every_subcommand_exits_quietly_on_a_closed_stdout() {
         &["integrators"],
         CONVERGENCE,
         &["convergence", "--replot", "c.csv"],
+        &["render", "s.xml", "--replay", "d.pss"],
     ];
     for args in reports {
         // Control: with an open pipe each of these does write to stdout,
