@@ -297,3 +297,60 @@ fn malformed_files_are_one_line_naming_the_file() {
     misplaced[n - 12..n - 4].copy_from_slice(&8u64.to_le_bytes());
     assert_refused(&dir, &misplaced, &index("1"), "format id");
 }
+
+mod mutated {
+    //! Arbitrary damage to a shape's decompressed body (any byte changed,
+    //! the body cut anywhere), recompressed so that it reaches the parser:
+    //! the reader returns a mesh whose indices are in range, or an error;
+    //! it never panics.
+    use super::*;
+    use proptest::prelude::*;
+
+    /// A valid body with normals: flags, name, counts, positions, normals
+    /// and two triangles.
+    fn valid_body() -> Vec<u8> {
+        let mut data = Vec::new();
+        for v in [
+            0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 0.0,
+        ] {
+            data.extend_from_slice(&v.to_le_bytes());
+        }
+        for _ in 0..4 {
+            for v in [0.0f32, 0.0, 1.0] {
+                data.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        for i in [0u32, 1, 2, 1, 3, 2] {
+            data.extend_from_slice(&i.to_le_bytes());
+        }
+        body(SINGLE | NORMALS, 4, 2, &data)
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+        #[test]
+        fn damaged_bodies_never_panic(
+            edits in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 0..4),
+            cut in any::<prop::sample::Index>(),
+            truncate in any::<bool>(),
+        ) {
+            let dir = std::env::temp_dir().join(format!("mcmc-render-ser-prop-{}", std::process::id()));
+            std::fs::create_dir_all(&dir).unwrap();
+            let mut b = valid_body();
+            for (at, byte) in &edits {
+                let i = at.index(b.len());
+                b[i] = *byte;
+            }
+            if truncate {
+                b.truncate(cut.index(b.len()));
+            }
+            let path = dir.join("m.serialized");
+            std::fs::write(&path, file_bytes(&[shape_bytes(4, &b)])).unwrap();
+            if let Ok(s) = load_serialized(&path, 0) {
+                let n = s.mesh.positions.len();
+                prop_assert!(s.mesh.indices.iter().flatten().all(|&i| (i as usize) < n));
+                prop_assert!(s.mesh.normals.as_ref().is_none_or(|v| v.len() == n));
+            }
+        }
+    }
+}
