@@ -19,7 +19,7 @@
 //! Every failure prints one line `error: …` on stderr
 //! and exits with status 1 (2 for unusable arguments). A standard output
 //! closed by its reader (`… | head -1`) ends any subcommand quietly with
-//! status 0 (see [`stdout`]).
+//! status 0 (see `cli/stdout.rs`).
 
 pub mod convergence;
 mod info;
