@@ -356,7 +356,8 @@ fn vertex_normals(positions: &[Vec3], indices: &[[u32; 3]]) -> Vec<Vec3> {
 /// offending text and the last cause unless it is such a dump.
 fn one_line(message: &str) -> String {
     let lines: Vec<&str> = message.lines().map(str::trim).collect();
-    let mut out = lines.first().copied().unwrap_or_default().to_string();
+    let first = lines.first().copied().unwrap_or_default();
+    let mut out = first.trim_end_matches('.').to_string();
     if let Some(text) = lines.iter().find_map(|l| l.strip_prefix("String: '")) {
         out.push_str(&format!(" (at '{}')", text.trim_end_matches('\'').trim()));
     }
