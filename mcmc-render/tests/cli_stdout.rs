@@ -1,7 +1,8 @@
 //! Every subcommand with its standard output closed by the reader (as in
 //! `mcmc-render compare A B | head -1`) exits quietly with status 0; a
 //! standard output that cannot be written for another reason (a full
-//! device) is one `error:` line and status 1. Never a panic.
+//! device) is one `error:` line and status 1. A closed standard error
+//! changes nothing. Never a panic.
 
 mod cli_support;
 
@@ -135,4 +136,38 @@ fn a_full_stdout_is_one_error_line() {
         .expect("the binary runs");
     cli_support::assert_clean_failure(&out, &["error: cannot write to standard output"]);
     assert_eq!(out.status.code(), Some(1));
+}
+
+#[test]
+fn a_closed_stderr_is_no_panic() {
+    let dir = scratch("stderr-closed");
+    write(&dir, "s.xml", &floor_scene(8, 6));
+    // The progress bar and summary of `render`, and an error line, go to
+    // a stderr whose reader has gone: the status is what it would be.
+    for (args, code) in [
+        (
+            &[
+                "render",
+                "s.xml",
+                "--spp",
+                "1",
+                "--threads",
+                "1",
+                "--out",
+                "r.exr",
+            ][..],
+            0,
+        ),
+        (&["info", "missing.xml"][..], 1),
+    ] {
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let out = Command::new(cli_support::BIN)
+            .args(args)
+            .current_dir(&dir)
+            .stderr(writer)
+            .output()
+            .expect("the binary runs");
+        assert_eq!(out.status.code(), Some(code), "{args:?}");
+    }
 }
