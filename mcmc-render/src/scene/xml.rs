@@ -385,38 +385,9 @@ impl Parser {
                     plugin.children.push(Child::Plugin(nested));
                 }
                 "float" | "integer" | "boolean" | "string" | "rgb" | "point" | "vector"
-                | "transform" | "spectrum" => {
-                    let name = self.param_name(&plugin, &self.attr(child, "name", &loc)?);
-                    if plugin.params.iter().any(|p| p.name == name) {
-                        return Err(err(&loc, format!("parameter '{name}' given twice")));
-                    }
-                    let value = self.value(child, ctag, &loc)?;
-                    let text = self
-                        .attr(child, "value", &loc)
-                        .ok()
-                        .map(|t| t.trim().to_string());
-                    plugin.params.push(Param {
-                        name,
-                        value,
-                        text,
-                        loc,
-                    });
-                }
-                "srgb" if self.legacy => {
-                    check_attrs(child, &["name", "value"], &loc)?;
-                    let name = self.param_name(&plugin, &self.attr(child, "name", &loc)?);
-                    if plugin.params.iter().any(|p| p.name == name) {
-                        return Err(err(&loc, format!("parameter '{name}' given twice")));
-                    }
-                    let rgb = upgrade::srgb(&self.attr(child, "value", &loc)?)
-                        .map_err(|e| err(&loc, e))?;
-                    plugin.params.push(Param {
-                        name,
-                        value: Value::Rgb(rgb),
-                        text: None,
-                        loc,
-                    });
-                }
+                | "transform" | "spectrum" => self.param(&mut plugin, child, ctag, loc)?,
+                // Mitsuba 0.6's gamma-encoded colour.
+                "srgb" if self.legacy => self.param(&mut plugin, child, ctag, loc)?,
                 other => {
                     return Err(err(
                         &loc,
@@ -432,6 +403,32 @@ impl Parser {
             self.upgrade_uv_params(&mut plugin)?;
         }
         Ok(plugin)
+    }
+
+    /// Parameter element `node` (tag `tag`) of `plugin`.
+    fn param(
+        &self,
+        plugin: &mut Plugin,
+        node: roxmltree::Node,
+        tag: &str,
+        loc: Loc,
+    ) -> Result<(), SceneError> {
+        let name = self.param_name(plugin, &self.attr(node, "name", &loc)?);
+        if plugin.params.iter().any(|p| p.name == name) {
+            return Err(err(&loc, format!("parameter '{name}' given twice")));
+        }
+        let value = self.value(node, tag, &loc)?;
+        let text = self
+            .attr(node, "value", &loc)
+            .ok()
+            .map(|t| t.trim().to_string());
+        plugin.params.push(Param {
+            name,
+            value,
+            text,
+            loc,
+        });
+        Ok(())
     }
 
     /// A `name` attribute as Mitsuba 3 reads it (snake_case in a 0.x file).
@@ -536,6 +533,11 @@ impl Parser {
             "string" => {
                 check_attrs(node, &["name", "value"], loc)?;
                 Ok(Value::String(self.attr(node, "value", loc)?))
+            }
+            "srgb" => {
+                check_attrs(node, &["name", "value"], loc)?;
+                let text = self.attr(node, "value", loc)?;
+                Ok(Value::Rgb(upgrade::srgb(&text).map_err(|e| err(loc, e))?))
             }
             "spectrum" => {
                 check_attrs(node, &["name", "value"], loc)?;
