@@ -56,6 +56,15 @@ fn committed_files_read_as_their_obj_copies() {
     // Version 3, float64, UVs and colours, no normals.
     assert_same_mesh(&load_serialized(&v3, 0).unwrap().mesh, &bare, "v3 shape 0");
     assert_same_mesh(&load_serialized(&v3, 1).unwrap().mesh, &tet, "v3 shape 1");
+    // Texture coordinates: the generator's grid (i/6, j/6), written as
+    // float32 (v4) and float64 (v3); none on the tetrahedron.
+    let grid: Vec<glam::Vec2> = (0..7)
+        .flat_map(|j| (0..7).map(move |i| (i, j)))
+        .map(|(i, j)| glam::Vec2::new((i as f64 / 6.0) as f32, (j as f64 / 6.0) as f32))
+        .collect();
+    assert_eq!(load_serialized(&v4, 0).unwrap().uvs, Some(grid.clone()));
+    assert_eq!(load_serialized(&v3, 0).unwrap().uvs, Some(grid));
+    assert_eq!(load_serialized(&v4, 1).unwrap().uvs, None);
     // Control: the two shapes differ, so shape_index is honoured.
     assert_ne!(
         corners(&load_serialized(&v4, 0).unwrap().mesh),

@@ -13,8 +13,8 @@ shape's byte offset (uint64 in version 4, uint32 in version 3) and the
 uint32 shape count. All little-endian.
 
 Mitsuba 3 is the independent reader: each shape of each file is loaded by
-`mi.load_dict({"type": "serialized", ...})` and its vertex positions and
-faces must equal what was written (bit for bit: every coordinate is chosen
+`mi.load_dict({"type": "serialized", ...})` and its vertex positions,
+texture coordinates and faces must equal what was written (bit for bit: every coordinate is chosen
 to be exact in float32). Run from the repository root:
 
     python3 scenes/tools/make_serialized.py
@@ -136,7 +136,7 @@ def write_obj(path, pos, nrm, idx):
                 f.write("f %d %d %d\n" % (a, b, c))
 
 
-def check_with_mitsuba(path, index, pos, idx):
+def check_with_mitsuba(path, index, pos, uv, idx):
     import mitsuba as mi
 
     mi.set_variant("scalar_rgb")
@@ -148,6 +148,10 @@ def check_with_mitsuba(path, index, pos, idx):
     want_idx = [i for t in idx for i in t]
     assert got_pos == want_pos, f"{path}@{index}: positions differ"
     assert got_idx == want_idx, f"{path}@{index}: faces differ"
+    if uv is not None:
+        got_uv = list(params["vertex_texcoords"])
+        want_uv = [f32(c) for t in uv for c in t]
+        assert got_uv == want_uv, f"{path}@{index}: texture coordinates differ"
     print(f"{path}@{index}: Mitsuba 3 reads {len(pos)} vertices, {len(idx)} triangles: equal")
 
 
@@ -168,8 +172,8 @@ def main():
             # No normals in this file: the reader must compute them.
             shapes = [("patch", (patch[0], None, patch[2], patch[3])), ("tetrahedron", tet)]
         write_file(path, version, shapes, **kw)
-        for i, (_, (pos, _, _, idx)) in enumerate(shapes):
-            check_with_mitsuba(path, i, pos, idx)
+        for i, (_, (pos, _, uv, idx)) in enumerate(shapes):
+            check_with_mitsuba(path, i, pos, uv, idx)
     write_obj(os.path.join(OUT, "patch.obj"), patch[0], patch[1], patch[3])
     write_obj(os.path.join(OUT, "patch-no-normals.obj"), patch[0], None, patch[3])
     write_obj(os.path.join(OUT, "tetrahedron.obj"), tet[0], None, tet[3])

@@ -17,7 +17,7 @@
 
 use super::mesh::RawMesh;
 use flate2::read::ZlibDecoder;
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use std::fs::File;
 use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::Path;
@@ -58,6 +58,10 @@ const CHUNK: usize = 1 << 16;
 pub struct SerializedMesh {
     /// Positions, normals (when the file has them) and triangles.
     pub mesh: RawMesh,
+    /// Per-vertex texture coordinates, when the file has them, as stored
+    /// (Mitsuba does not flip them). Kept apart until [`RawMesh`] carries
+    /// UVs.
+    pub uvs: Option<Vec<Vec2>>,
     /// The file asks for face normals (flag `0x0010`). Mitsuba 3 documents
     /// this flag as `face_normals="true"`; Mitsuba 0.6, which wrote these
     /// files, shaded such meshes flat.
@@ -312,11 +316,13 @@ fn read_shape<R: Read>(
     } else {
         None
     };
-    // Texture coordinates and colours are read past: the mesh carries
-    // neither (yet).
-    if flags & HAS_TEXCOORDS != 0 {
-        z.floats(2 * n, double, "texture coordinates")?;
-    }
+    let uvs = if flags & HAS_TEXCOORDS != 0 {
+        let flat = z.floats(2 * n, double, "texture coordinates")?;
+        Some(flat.chunks_exact(2).map(Vec2::from_slice).collect())
+    } else {
+        None
+    };
+    // Vertex colours are read past (Mitsuba 3 skips them too).
     if flags & HAS_COLORS != 0 {
         z.floats(3 * n, double, "vertex colours")?;
     }
@@ -337,6 +343,7 @@ fn read_shape<R: Read>(
             normals: normals.map(to_vec3),
             indices: flat.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
         },
+        uvs,
         face_normals: flags & FACE_NORMALS != 0,
     })
 }
