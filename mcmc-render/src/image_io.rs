@@ -19,6 +19,7 @@ pub fn write_exr(path: &Path, width: u32, height: u32, pixels: &[Rgb]) -> Result
 
 /// Reads the first RGB(A) layer of an EXR file as linear RGB.
 pub fn read_exr(path: &Path) -> Result<(u32, u32, Vec<Rgb>), String> {
+    crate::resources::regular_file(path)?;
     let image = exr::prelude::read_first_rgba_layer_from_file(
         path,
         |res, _| (res.width(), vec![Rgb::BLACK; res.width() * res.height()]),

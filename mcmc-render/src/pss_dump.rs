@@ -51,6 +51,7 @@ pub fn write_pss(path: &Path, dump: &PssDump) -> Result<(), String> {
 /// Reads a file written by [`write_pss`]. A file without a `# sampler`
 /// line is taken as a path-tracer dump at the scene's depth.
 pub fn read_pss(path: &Path) -> Result<PssDump, String> {
+    crate::resources::regular_file(path)?;
     let text = std::fs::read_to_string(path)
         .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
     let mut dump = PssDump {

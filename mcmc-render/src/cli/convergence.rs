@@ -9,6 +9,7 @@
 //! such point after each `k·T/K`. The time of a record is the wall-clock
 //! time since that integrator started, start-up (bootstrap) included.
 
+use super::stdout::{Failure, err, out};
 use super::{ParamFlags, STOP, check_writable, parse_defines, stop_on_ctrl_c};
 use crate::color::Rgb;
 use crate::compare::compare;
@@ -65,7 +66,7 @@ pub struct ConvergenceArgs {
 }
 
 /// `mcmc-render convergence …`.
-pub fn command(args: ConvergenceArgs) -> Result<(), String> {
+pub(crate) fn command(args: ConvergenceArgs) -> Result<(), Failure> {
     let stem = |p: &Path| {
         p.file_stem()
             .map_or_else(String::new, |s| s.to_string_lossy().into_owned())
@@ -76,7 +77,7 @@ pub fn command(args: ConvergenceArgs) -> Result<(), String> {
         let title = args.title.clone().unwrap_or_else(|| stem(csv));
         let png = csv.with_extension("png");
         write_plot(&png, &records, &names, &title)?;
-        println!("{}", png.display());
+        out!("{}", png.display())?;
         return Ok(());
     }
     // clap requires both unless --replot is given.
@@ -94,7 +95,8 @@ pub fn command(args: ConvergenceArgs) -> Result<(), String> {
         return Err(format!(
             "reference is {rw}x{rh}, the scene renders {}x{}",
             loaded.film.width, loaded.film.height
-        ));
+        )
+        .into());
     }
     let names: Vec<String> = args
         .integrators
@@ -117,17 +119,21 @@ pub fn command(args: ConvergenceArgs) -> Result<(), String> {
             .iter()
             .filter(|n| !records.iter().any(|r| &r.integrator == *n))
         {
-            eprintln!(
+            err!(
                 "warning: {name} has no record: its start-up (bootstrap) outlasted --time {}",
                 args.time
             );
         }
     }
     for rec in &records {
-        println!(
+        out!(
             "{:8} {:8.2} s {:>12} relMSE {:.4e} RMSE {:.4e}",
-            rec.integrator, rec.seconds, rec.samples, rec.rel_mse, rec.rmse
-        );
+            rec.integrator,
+            rec.seconds,
+            rec.samples,
+            rec.rel_mse,
+            rec.rmse
+        )?;
     }
     Ok(())
 }
@@ -382,6 +388,7 @@ pub fn write_csv(path: &Path, records: &[Record]) -> Result<(), String> {
 
 /// Reads records written by [`write_csv`] (for re-plotting a study).
 pub fn read_csv(path: &Path) -> Result<Vec<Record>, String> {
+    crate::resources::regular_file(path)?;
     let text = std::fs::read_to_string(path)
         .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
     let mut lines = text.lines().enumerate();

@@ -1,12 +1,13 @@
 //! `info` (what a scene file loads to) and `integrators` (the registry).
 
+use super::stdout::{Failure, out};
 use crate::integrators::registry::{self, REGISTRY};
 use crate::scene::Scene;
 use crate::settings::ParamKind;
 use std::path::Path;
 
 /// Prints what `s` loaded to.
-pub fn print_info(path: &Path, s: &Scene) -> Result<(), String> {
+pub fn print_info(path: &Path, s: &Scene) -> Result<(), Failure> {
     let mut kinds: Vec<(String, usize)> = Vec::new();
     for sh in &s.shapes {
         match kinds.iter_mut().find(|(k, _)| *k == sh.kind) {
@@ -21,45 +22,48 @@ pub fn print_info(path: &Path, s: &Scene) -> Result<(), String> {
         .iter()
         .filter(|l| matches!(l, crate::light::Light::Area { .. }))
         .count();
-    println!("scene               {}", path.display());
-    println!(
+    out!("scene               {}", path.display())?;
+    out!(
         "shapes              {} ({})",
         s.shapes.len(),
         shapes.join(", ")
-    );
-    println!("triangles           {}", s.geometry.triangles);
-    println!("dropped triangles   {} (zero area)", s.dropped_degenerate);
-    println!("bsdfs               {}", s.bsdf_descs.len());
+    )?;
+    out!("triangles           {}", s.geometry.triangles)?;
+    out!("dropped triangles   {} (zero area)", s.dropped_degenerate)?;
+    out!("bsdfs               {}", s.bsdf_descs.len())?;
     for (i, d) in s.bsdf_descs.iter().enumerate() {
-        println!("  [{i}] {d:?}");
+        out!("  [{i}] {d:?}")?;
     }
-    println!(
+    out!(
         "lights              {} ({} area, {} point)",
         s.lights.lights.len(),
         area,
         s.lights.lights.len() - area
-    );
-    println!(
+    )?;
+    out!(
         "film                {}x{} {:?}, {} spp",
-        s.film.width, s.film.height, s.film.filter, s.sample_count
-    );
+        s.film.width,
+        s.film.height,
+        s.film.filter,
+        s.sample_count
+    )?;
     let integ = registry::configure(s.integrator_element.as_ref(), None, &[])?;
     let settings: Vec<String> = integ
         .settings_json()
         .iter()
         .map(|(k, v)| format!("{k}={v}"))
         .collect();
-    println!(
+    out!(
         "integrator          {} ({})",
         integ.name(),
         settings.join(", ")
-    );
-    println!(
+    )?;
+    out!(
         "bvh                 {} primitives, built in {:.3} ms, {:.2} MiB",
         s.geometry.primitive_count(),
         s.geometry.build_time.as_secs_f64() * 1e3,
         s.geometry.bvh_bytes() as f64 / (1024.0 * 1024.0)
-    );
+    )?;
     Ok(())
 }
 
@@ -74,23 +78,24 @@ fn kind_text(kind: &ParamKind) -> String {
 }
 
 /// Prints every registered integrator with its parameters and defaults.
-pub fn print_integrators() {
+pub fn print_integrators() -> Result<(), Failure> {
     for r in REGISTRY {
         let aliases = if r.aliases.is_empty() {
             String::new()
         } else {
             format!(" (also: {})", r.aliases.join(", "))
         };
-        println!("{}{aliases}\n    {}", r.name, r.description);
+        out!("{}{aliases}\n    {}", r.name, r.description)?;
         for p in (r.new)().params() {
-            println!(
+            out!(
                 "    {:<24} {:<28} default {:<10} {}",
                 p.name,
                 kind_text(&p.kind),
                 p.value.to_string(),
                 p.doc
-            );
+            )?;
         }
-        println!();
+        out!()?;
     }
+    Ok(())
 }

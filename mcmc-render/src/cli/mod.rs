@@ -17,12 +17,15 @@
 //! so far (normalised by it), with `"interrupted": true` in the JSON, and
 //! exits with status 0; a second Ctrl-C exits at once with status 130.
 //! Every failure prints one line `error: …` on stderr
-//! and exits with status 1 (2 for unusable arguments).
+//! and exits with status 1 (2 for unusable arguments). A standard output
+//! closed by its reader (`… | head -1`) ends any subcommand quietly with
+//! status 0 (see `cli/stdout.rs`).
 
 pub mod convergence;
 mod info;
 mod progress;
 mod render_cmd;
+mod stdout;
 
 use crate::compare::compare;
 use crate::image_io::read_exr;
@@ -30,6 +33,7 @@ use clap::{Args, Parser, Subcommand};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
+use stdout::{Failure, err, out};
 
 /// Set by Ctrl-C: finish with what has been rendered.
 static STOP: AtomicBool = AtomicBool::new(false);
@@ -177,19 +181,22 @@ pub fn main() {
             } else {
                 para.join(" ")
             };
-            eprintln!("{line}");
+            err!("{line}");
             std::process::exit(2);
         }
     };
-    if let Err(e) = run(cli) {
-        eprintln!("error: {e}");
-        std::process::exit(1);
+    match run(cli) {
+        Ok(()) | Err(Failure::StdoutClosed) => {}
+        Err(Failure::Message(e)) => {
+            err!("error: {e}");
+            std::process::exit(1);
+        }
     }
 }
 
-fn run(cli: Cli) -> Result<(), String> {
+fn run(cli: Cli) -> Result<(), Failure> {
     match cli.command {
-        None => render_cmd::default_scene(),
+        None => Ok(render_cmd::default_scene()?),
         Some(Command::Render(args)) => render_cmd::run(args),
         Some(Command::Compare {
             reference,
@@ -202,46 +209,48 @@ fn run(cli: Cli) -> Result<(), String> {
             let s = crate::scene::Scene::load(&scene, &defines).map_err(|e| e.to_string())?;
             info::print_info(&scene, &s)
         }
-        Some(Command::Integrators) => {
-            info::print_integrators();
-            Ok(())
-        }
+        Some(Command::Integrators) => info::print_integrators(),
     }
 }
 
-fn compare_images(reference: &Path, test: &Path, json: bool) -> Result<(), String> {
+fn compare_images(reference: &Path, test: &Path, json: bool) -> Result<(), Failure> {
     let (rw, rh, r) = read_exr(reference)?;
     let (tw, th, t) = read_exr(test)?;
     if (rw, rh) != (tw, th) {
-        return Err(format!("image sizes differ: {rw}x{rh} vs {tw}x{th}"));
+        return Err(format!("image sizes differ: {rw}x{rh} vs {tw}x{th}").into());
     }
     let c = compare(&r, &t)?;
     if json {
-        println!(
+        out!(
             "{}",
             serde_json::to_string_pretty(&c).map_err(|e| e.to_string())?
-        );
+        )?;
     } else {
-        println!("relMSE              {:.6e}", c.rel_mse);
-        println!("RMSE                {:.6e}", c.rmse);
-        println!(
+        out!("relMSE              {:.6e}", c.rel_mse)?;
+        out!("RMSE                {:.6e}", c.rmse)?;
+        out!(
             "mean rel. diff      R {:+.4}%  G {:+.4}%  B {:+.4}%",
             100.0 * c.mean_rel_diff[0],
             100.0 * c.mean_rel_diff[1],
             100.0 * c.mean_rel_diff[2]
-        );
-        println!(
+        )?;
+        out!(
             "reference mean      {:.6} {:.6} {:.6}",
-            c.ref_mean[0], c.ref_mean[1], c.ref_mean[2]
-        );
-        println!(
+            c.ref_mean[0],
+            c.ref_mean[1],
+            c.ref_mean[2]
+        )?;
+        out!(
             "test mean           {:.6} {:.6} {:.6}",
-            c.test_mean[0], c.test_mean[1], c.test_mean[2]
-        );
-        println!(
+            c.test_mean[0],
+            c.test_mean[1],
+            c.test_mean[2]
+        )?;
+        out!(
             "non-finite pixels   reference {}  test {}",
-            c.ref_nonfinite, c.test_nonfinite
-        );
+            c.ref_nonfinite,
+            c.test_nonfinite
+        )?;
     }
     Ok(())
 }
@@ -254,7 +263,7 @@ fn stop_on_ctrl_c() {
     // still works, only Ctrl-C falls back to the default action.
     let _ = ctrlc::set_handler(|| {
         if STOP.swap(true, Ordering::SeqCst) {
-            eprintln!("error: interrupted twice; exiting without writing");
+            err!("error: interrupted twice; exiting without writing");
             std::process::exit(130);
         }
     });

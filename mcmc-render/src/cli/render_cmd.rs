@@ -3,6 +3,7 @@
 //! the NaN dump; `--replay` re-traces a dump.
 
 use super::progress::CliObserver;
+use super::stdout::{Failure, err, out};
 use super::{ParamFlags, STOP, check_writable, parse_defines, stop_on_ctrl_c, thread_count};
 use crate::image_io::{write_exr, write_png};
 use crate::integrators::registry::{self, Configured};
@@ -84,17 +85,17 @@ pub fn default_scene() -> Result<(), String> {
 }
 
 /// `mcmc-render render …`.
-pub fn run(args: RenderArgs) -> Result<(), String> {
+pub fn run(args: RenderArgs) -> Result<(), Failure> {
     let spp = match args.spp {
-        Some(n) if n <= 0 => return Err(format!("--spp must be a positive integer, got {n}")),
+        Some(n) if n <= 0 => {
+            return Err(format!("--spp must be a positive integer, got {n}").into());
+        }
         Some(n) => Some(u32::try_from(n).map_err(|_| format!("--spp {n} is too large"))?),
         None => None,
     };
     let time_budget = match args.time {
         Some(t) if !(t > 0.0 && t.is_finite()) => {
-            return Err(format!(
-                "--time must be a positive number of seconds, got {t}"
-            ));
+            return Err(format!("--time must be a positive number of seconds, got {t}").into());
         }
         Some(t) => {
             Some(Duration::try_from_secs_f64(t).map_err(|_| format!("--time {t:e} is too large"))?)
@@ -121,7 +122,7 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
         args.integrator.as_deref(),
         &args.params.assignments()?,
     )?;
-    render_job(&Job {
+    Ok(render_job(&Job {
         scene: &scene,
         scene_name: &args.scene.display().to_string(),
         integrator: integrator.as_ref(),
@@ -134,7 +135,7 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
         threads,
         out: &args.out,
         quiet: args.quiet,
-    })
+    })?)
 }
 
 fn render_job(job: &Job<'_>) -> Result<(), String> {
@@ -174,7 +175,7 @@ fn render_job(job: &Job<'_>) -> Result<(), String> {
         serde_json::to_string_pretty(&sidecar(job, &rendered, dump)).map_err(|e| e.to_string())?;
     crate::output::write_bytes(&json_path, (text + "\n").as_bytes())?;
     if !job.quiet {
-        eprintln!("{} -> {}", rendered.summary, job.out.display());
+        err!("{} -> {}", rendered.summary, job.out.display());
     }
     Ok(())
 }
@@ -207,24 +208,24 @@ fn sidecar(job: &Job<'_>, r: &Rendered, dump: Option<String>) -> Value {
 }
 
 /// Re-traces a dump and prints what its path contributes.
-fn print_replay(scene: &Scene, file: &Path) -> Result<(), String> {
+fn print_replay(scene: &Scene, file: &Path) -> Result<(), Failure> {
     let dump = read_pss(file)?;
     let r = replay(scene, &dump).map_err(|e| format!("{}: {e}", file.display()))?;
-    println!("sampler             {}", dump.sampler.name());
-    println!(
+    out!("sampler             {}", dump.sampler.name())?;
+    out!(
         "coordinates read    {} (file has {})",
         r.coordinates_read,
         dump.coords.len()
-    );
+    )?;
     for t in &r.traces {
         let e = &t.evaluation;
         if let Some(d) = t.target_depth {
-            println!("mmlt depth          {d}");
+            out!("mmlt depth          {d}")?;
         }
-        println!("depth               {}", e.payload.depth);
-        println!("ln I                {}", e.log_density);
+        out!("depth               {}", e.payload.depth)?;
+        out!("ln I                {}", e.log_density)?;
         // PssTarget maps a NaN or infinite contribution to ln I = NaN.
-        println!(
+        out!(
             "contribution        {}",
             if e.log_density.is_nan() {
                 "non-finite"
@@ -233,12 +234,16 @@ fn print_replay(scene: &Scene, file: &Path) -> Result<(), String> {
             } else {
                 "finite"
             }
-        );
+        )?;
         for s in &e.payload.splats {
-            println!(
+            out!(
                 "splat               raster ({}, {})  L = ({}, {}, {})",
-                s.p.x, s.p.y, s.l.r, s.l.g, s.l.b
-            );
+                s.p.x,
+                s.p.y,
+                s.l.r,
+                s.l.g,
+                s.l.b
+            )?;
         }
     }
     Ok(())

@@ -4,6 +4,7 @@
 
 use super::mesh;
 use super::named;
+use super::serialized;
 use super::xml::{Child, Loc, Param, Plugin, Value};
 use super::{
     CameraDesc, FilmDesc, FilterKind, FovAxis, InfiniteLightDesc, IntegratorDesc,
@@ -799,19 +800,35 @@ impl Loader {
         let to_world = props.transform("to_world")?;
         let flip_normals = props.boolean("flip_normals", false)?;
         let geometry = match p.kind.as_str() {
-            "obj" | "ply" => {
+            "obj" | "ply" | "serialized" => {
                 let (filename, loc) = props.opt_string("filename")?.ok_or_else(|| {
                     err(
                         &p.loc,
                         format!("<shape type=\"{}\"> needs a 'filename'", p.kind),
                     )
                 })?;
-                let face_normals = props.boolean("face_normals", false)?;
+                let mut face_normals = props.boolean("face_normals", false)?;
                 let path = self.base_dir.join(&filename);
-                let mesh = if p.kind == "obj" {
-                    mesh::load_obj(&path)
-                } else {
-                    mesh::load_ply(&path)
+                crate::resources::regular_file(&path)
+                    .map_err(|e| err(&loc, format!("cannot load mesh \"{filename}\": {e}")))?;
+                let mesh = match p.kind.as_str() {
+                    "obj" => mesh::load_obj(&path),
+                    "ply" => mesh::load_ply(&path),
+                    _ => {
+                        let index = props.int("shape_index", 0)?;
+                        let index = u32::try_from(index).map_err(|_| {
+                            err(
+                                &p.loc,
+                                format!(
+                                    "cannot load mesh \"{filename}\": shape_index must be in 0..2^32, got {index}"
+                                ),
+                            )
+                        })?;
+                        serialized::load_serialized(&path, index).map(|s| {
+                            face_normals |= s.face_normals;
+                            s.mesh
+                        })
+                    }
                 }
                 .map_err(|e| err(&loc, format!("cannot load mesh \"{filename}\": {e}")))?;
                 let mesh = mesh
@@ -854,7 +871,7 @@ impl Loader {
                 return Err(err(
                     &p.loc,
                     format!(
-                        "unsupported shape \"{other}\" (supported: obj, ply, rectangle, cube, sphere, disk)"
+                        "unsupported shape \"{other}\" (supported: obj, ply, serialized, rectangle, cube, sphere, disk)"
                     ),
                 ));
             }

@@ -163,7 +163,7 @@ pub fn load_ply(path: &Path) -> Result<RawMesh, String> {
     let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
     let mut reader = Reader::new(std::io::BufReader::new(file));
     fn perr(e: impl std::fmt::Display) -> String {
-        format!("PLY parse error: {e}")
+        format!("PLY parse error: {}", one_line(&e.to_string()))
     }
     let vparser = Parser::<PlyVertex>::new();
     let header = vparser.read_header(&mut reader).map_err(perr)?;
@@ -347,4 +347,23 @@ fn vertex_normals(positions: &[Vec3], indices: &[[u32; 3]]) -> Vec<Vec3> {
     acc.into_iter()
         .map(|n| n.try_normalize().unwrap_or(Vec3::Z))
         .collect()
+}
+
+/// A `ply-rs-bw` error on one line. Its message is a paragraph: the line
+/// and what failed, then `String: '…'` (the offending text, which spans a
+/// line break) and `Error: …` causes, the last of which can be a debug
+/// dump of the grammar's expected tokens. Kept: the first line, the
+/// offending text and the last cause unless it is such a dump.
+fn one_line(message: &str) -> String {
+    let lines: Vec<&str> = message.lines().map(str::trim).collect();
+    let first = lines.first().copied().unwrap_or_default();
+    let mut out = first.trim_end_matches('.').to_string();
+    if let Some(text) = lines.iter().find_map(|l| l.strip_prefix("String: '")) {
+        out.push_str(&format!(" (at '{}')", text.trim_end_matches('\'').trim()));
+    }
+    let cause = lines.iter().rev().find_map(|l| l.strip_prefix("Error: "));
+    if let Some(cause) = cause.filter(|c| !c.contains(" { ")) {
+        out.push_str(&format!(": {cause}"));
+    }
+    out
 }

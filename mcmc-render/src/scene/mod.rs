@@ -1,10 +1,13 @@
-//! Scenes: loading the Mitsuba 3 XML subset ([`xml`], [`loader`], [`mesh`])
+//! Scenes: loading the Mitsuba 3 XML subset ([`xml`], [`loader`], [`mesh`],
+//! [`serialized`])
 //! into a [`SceneDesc`], and building the runtime [`Scene`] (BVH, BSDFs,
 //! lights, camera) from it.
 
 pub mod loader;
 pub mod mesh;
 pub mod named;
+pub mod serialized;
+pub mod upgrade;
 pub mod xml;
 
 use crate::bsdf::{Bsdf, BsdfDesc};

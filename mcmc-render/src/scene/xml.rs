@@ -1,10 +1,13 @@
 //! Mitsuba 3 XML: reads a scene file into a tree of plugins and typed
 //! parameters, resolving `<default>`, `$name` substitution and `<include>`.
+//! A file whose root `version` is below 2.0.0 is upgraded as it is read
+//! ([`super::upgrade`]).
 //! Every element and attribute this module does not know is refused with
 //! its file and line; what a plugin does with its parameters is decided by
 //! [`super::loader`].
 
 use super::SceneError;
+use super::upgrade;
 use crate::color::Rgb;
 use glam::{Mat4, Vec3, Vec4};
 use std::collections::HashMap;
@@ -140,6 +143,8 @@ struct Parser {
     overrides: HashMap<String, String>,
     /// Files included so far.
     includes: usize,
+    /// The file being read is a Mitsuba 0.x file, upgraded as it is read.
+    legacy: bool,
 }
 
 /// Parses a scene file. `overrides` are `$name` values that win over the
@@ -152,6 +157,7 @@ pub fn parse_file(
         defaults: HashMap::new(),
         overrides: overrides.clone(),
         includes: 0,
+        legacy: false,
     };
     let mut out = Vec::new();
     parser.parse_scene_file(path, 0, &mut out)?;
@@ -165,6 +171,7 @@ pub fn parse_str(text: &str, base: &Path) -> Result<Vec<Child>, SceneError> {
         defaults: HashMap::new(),
         overrides: HashMap::new(),
         includes: 0,
+        legacy: false,
     };
     let mut out = Vec::new();
     parser.parse_scene_text(text, base, 0, &mut out)?;
@@ -185,6 +192,7 @@ impl Parser {
         depth: usize,
         out: &mut Vec<Child>,
     ) -> Result<(), SceneError> {
+        crate::resources::regular_file(path).map_err(SceneError::Invalid)?;
         let text = std::fs::read_to_string(path).map_err(|e| SceneError::Io {
             path: path.display().to_string(),
             message: e.to_string(),
@@ -216,8 +224,28 @@ impl Parser {
             ));
         }
         check_attrs(root, &["version"], &loc)?;
+        // Each file is upgraded by its own version (an included file too).
+        let outer = self.legacy;
+        self.legacy = match root.attribute("version") {
+            Some(v) => upgrade::is_legacy(v).map_err(|e| err(&loc, e))?,
+            None => false,
+        };
+        self.scene_children(&doc, root, path, depth, out)?;
+        self.legacy = outer;
+        Ok(())
+    }
+
+    fn scene_children(
+        &mut self,
+        doc: &roxmltree::Document,
+        root: roxmltree::Node,
+        path: &Path,
+        depth: usize,
+        out: &mut Vec<Child>,
+    ) -> Result<(), SceneError> {
+        let file = Arc::new(path.to_path_buf());
         for node in root.children().filter(|n| n.is_element()) {
-            let loc = loc_of(&doc, node, &file);
+            let loc = loc_of(doc, node, &file);
             match node.tag_name().name() {
                 "default" => {
                     check_attrs(node, &["name", "value"], &loc)?;
@@ -247,7 +275,7 @@ impl Parser {
                     return Err(err(&loc, "<ref> is only allowed inside a plugin"));
                 }
                 tag if PLUGIN_TAGS.contains(&tag) => {
-                    out.push(Child::Plugin(self.plugin(&doc, node, &file, 1)?));
+                    out.push(Child::Plugin(self.plugin(doc, node, &file, 1)?));
                 }
                 other => {
                     return Err(err(
@@ -332,7 +360,9 @@ impl Parser {
             tag,
             kind,
             id: self.opt_attr(node, "id", &loc)?,
-            name: self.opt_attr(node, "name", &loc)?,
+            name: self
+                .opt_attr(node, "name", &loc)?
+                .map(|n| self.upgrade_name(&n)),
             loc,
             params: Vec::new(),
             children: Vec::new(),
@@ -349,31 +379,15 @@ impl Parser {
                     });
                 }
                 t if PLUGIN_TAGS.contains(&t) => {
-                    plugin.children.push(Child::Plugin(self.plugin(
-                        doc,
-                        child,
-                        file,
-                        nesting + 1,
-                    )?));
+                    let mut nested = self.plugin(doc, child, file, nesting + 1)?;
+                    // A nested plugin's name is a parameter name too.
+                    nested.name = nested.name.map(|n| self.param_name(&plugin, &n));
+                    plugin.children.push(Child::Plugin(nested));
                 }
                 "float" | "integer" | "boolean" | "string" | "rgb" | "point" | "vector"
-                | "transform" => {
-                    let name = self.attr(child, "name", &loc)?;
-                    if plugin.params.iter().any(|p| p.name == name) {
-                        return Err(err(&loc, format!("parameter '{name}' given twice")));
-                    }
-                    let value = self.value(child, ctag, &loc)?;
-                    let text = self
-                        .attr(child, "value", &loc)
-                        .ok()
-                        .map(|t| t.trim().to_string());
-                    plugin.params.push(Param {
-                        name,
-                        value,
-                        text,
-                        loc,
-                    });
-                }
+                | "transform" | "spectrum" => self.param(&mut plugin, child, ctag, loc)?,
+                // Mitsuba 0.6's gamma-encoded colour.
+                "srgb" if self.legacy => self.param(&mut plugin, child, ctag, loc)?,
                 other => {
                     return Err(err(
                         &loc,
@@ -385,7 +399,108 @@ impl Parser {
                 }
             }
         }
+        if self.legacy {
+            self.upgrade_uv_params(&mut plugin)?;
+        }
         Ok(plugin)
+    }
+
+    /// Parameter element `node` (tag `tag`) of `plugin`.
+    fn param(
+        &self,
+        plugin: &mut Plugin,
+        node: roxmltree::Node,
+        tag: &str,
+        loc: Loc,
+    ) -> Result<(), SceneError> {
+        let name = self.param_name(plugin, &self.attr(node, "name", &loc)?);
+        if plugin.params.iter().any(|p| p.name == name) {
+            return Err(err(&loc, format!("parameter '{name}' given twice")));
+        }
+        let value = self.value(node, tag, &loc)?;
+        let text = self
+            .attr(node, "value", &loc)
+            .ok()
+            .map(|t| t.trim().to_string());
+        plugin.params.push(Param {
+            name,
+            value,
+            text,
+            loc,
+        });
+        Ok(())
+    }
+
+    /// A `name` attribute as Mitsuba 3 reads it (snake_case in a 0.x file).
+    fn upgrade_name(&self, name: &str) -> String {
+        if self.legacy {
+            upgrade::snake_case(name)
+        } else {
+            name.to_string()
+        }
+    }
+
+    /// A parameter's name as Mitsuba 3 reads it: in a 0.x file snake_case,
+    /// and a `diffuse` BSDF's `diffuse_reflectance` is its `reflectance`.
+    fn param_name(&self, plugin: &Plugin, name: &str) -> String {
+        let name = self.upgrade_name(name);
+        if self.legacy
+            && plugin.tag == "bsdf"
+            && plugin.kind == "diffuse"
+            && name == "diffuse_reflectance"
+        {
+            "reflectance".into()
+        } else {
+            name
+        }
+    }
+
+    /// Mitsuba 0.x `uoffset`, `voffset`, `uscale`, `vscale` floats become
+    /// one `to_uv` transform, written where the first of them was.
+    fn upgrade_uv_params(&self, plugin: &mut Plugin) -> Result<(), SceneError> {
+        let Some(first) = plugin
+            .params
+            .iter()
+            .position(|p| upgrade::UV_PARAMS.contains(&p.name.as_str()))
+        else {
+            return Ok(());
+        };
+        let loc = plugin.params[first].loc.clone();
+        if plugin.params.iter().any(|p| p.name == "to_uv") {
+            return Err(err(
+                &loc,
+                "uoffset/voffset/uscale/vscale given together with to_uv",
+            ));
+        }
+        let (mut offset, mut scale) = ([0.0; 2], [1.0; 2]);
+        let mut kept = Vec::with_capacity(plugin.params.len());
+        for p in plugin.params.drain(..) {
+            let slot = match p.name.as_str() {
+                "uoffset" => &mut offset[0],
+                "voffset" => &mut offset[1],
+                "uscale" => &mut scale[0],
+                "vscale" => &mut scale[1],
+                _ => {
+                    kept.push(p);
+                    continue;
+                }
+            };
+            *slot = match p.value {
+                Value::Float(v) => v,
+                _ => return Err(err(&p.loc, format!("'{}' must be a <float>", p.name))),
+            };
+        }
+        kept.insert(
+            first,
+            Param {
+                name: "to_uv".into(),
+                value: Value::Transform(upgrade::to_uv(offset, scale)),
+                text: None,
+                loc,
+            },
+        );
+        plugin.params = kept;
+        Ok(())
     }
 
     fn value(&self, node: roxmltree::Node, tag: &str, loc: &Loc) -> Result<Value, SceneError> {
@@ -418,6 +533,18 @@ impl Parser {
             "string" => {
                 check_attrs(node, &["name", "value"], loc)?;
                 Ok(Value::String(self.attr(node, "value", loc)?))
+            }
+            "srgb" => {
+                check_attrs(node, &["name", "value"], loc)?;
+                let text = self.attr(node, "value", loc)?;
+                Ok(Value::Rgb(upgrade::srgb(&text).map_err(|e| err(loc, e))?))
+            }
+            "spectrum" => {
+                check_attrs(node, &["name", "value"], loc)?;
+                let text = self.attr(node, "value", loc)?;
+                Ok(Value::Rgb(
+                    upgrade::spectrum(&text, self.legacy).map_err(|e| err(loc, e))?,
+                ))
             }
             "rgb" => {
                 check_attrs(node, &["name", "value"], loc)?;
@@ -482,7 +609,11 @@ impl Parser {
     }
 
     fn transform_op(&self, op: roxmltree::Node, loc: &Loc) -> Result<Mat4, SceneError> {
-        match op.tag_name().name() {
+        let tag = match op.tag_name().name() {
+            "lookAt" if self.legacy => "lookat",
+            t => t,
+        };
+        match tag {
             "translate" => {
                 check_attrs(op, &["x", "y", "z", "value"], loc)?;
                 Ok(Mat4::from_translation(self.xyz(op, loc, 0.0)?))
