@@ -181,7 +181,7 @@ impl Lights {
                 _ => Vec::new(),
             };
             let sphere = match surface {
-                Surface::Sphere { center, radius } => Some((*center, *radius)),
+                Surface::Sphere { center, radius, .. } => Some((*center, *radius)),
                 _ => None,
             };
             let flat_tris = (0..tri_cdf.len() as u32)
@@ -283,7 +283,7 @@ impl Lights {
             }
         } else {
             match &geometry.shapes[*shape as usize].surface {
-                Surface::Sphere { center, radius } => {
+                Surface::Sphere { center, radius, .. } => {
                     geometry.sphere_point(*shape, *center + warp::uniform_sphere(u) * *radius)
                 }
                 Surface::Disk { .. } => {
@@ -355,6 +355,7 @@ impl Lights {
                         p_err: Vec3::ZERO,
                         ng: -wi,
                         ns: -wi,
+                        uv: Vec2::ZERO,
                         shape: u32::MAX,
                     },
                     wi,
@@ -516,6 +517,7 @@ impl Lights {
                         p_err: Vec3::ZERO,
                         ng: dir,
                         ns: dir,
+                        uv: Vec2::ZERO,
                         shape: u32::MAX,
                     },
                     dir,

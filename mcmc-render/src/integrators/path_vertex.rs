@@ -77,6 +77,7 @@ impl Vertex {
             p_err: Vec3::ZERO,
             ng: Vec3::ZERO,
             ns: Vec3::ZERO,
+            uv: Vec2::ZERO,
             shape: u32::MAX,
         },
         wo: Vec3::ZERO,

@@ -608,13 +608,18 @@ impl Loader {
                     )
                 })?;
                 let face_normals = props.boolean("face_normals", false)?;
+                // Mitsuba flips v by default for OBJ files only.
+                let flip_uv = props.boolean("flip_tex_coords", p.kind == "obj")?;
                 let path = self.base_dir.join(&filename);
-                let mesh = if p.kind == "obj" {
+                let mut mesh = if p.kind == "obj" {
                     mesh::load_obj(&path)
                 } else {
                     mesh::load_ply(&path)
                 }
                 .map_err(|e| err(&loc, format!("cannot load mesh \"{filename}\": {e}")))?;
+                if flip_uv {
+                    mesh.flip_tex_coords();
+                }
                 let mesh = mesh
                     .finish(&to_world, face_normals)
                     .map_err(|e| err(&loc, format!("mesh \"{filename}\": {e}")))?;
@@ -646,9 +651,12 @@ impl Loader {
                 if (sx - sy).abs() > tol || (sx - sz).abs() > tol {
                     return Err(err(&p.loc, "sphere to_world must not scale non-uniformly"));
                 }
+                // The rotation left once the uniform scale is divided out.
+                let frame = glam::Mat3::from_mat4(to_world) * (1.0 / sx);
                 ShapeGeometry::Sphere {
                     center: to_world.transform_point3(center),
                     radius: radius * sx,
+                    frame,
                 }
             }
             other => {

@@ -166,6 +166,8 @@ pub enum ShapeGeometry {
         center: Vec3,
         /// Radius.
         radius: f32,
+        /// Object-to-world rotation (for the UV mapping).
+        frame: Mat3,
     },
     /// Unit disk in z = 0 mapped by `to_world`.
     Disk {
@@ -293,10 +295,19 @@ impl Scene {
                     Surface::Mesh(MeshData {
                         positions: m.positions,
                         normals: m.normals,
+                        uvs: m.uvs,
                         indices: m.indices,
                     })
                 }
-                ShapeGeometry::Sphere { center, radius } => Surface::Sphere { center, radius },
+                ShapeGeometry::Sphere {
+                    center,
+                    radius,
+                    frame,
+                } => Surface::Sphere {
+                    center,
+                    radius,
+                    frame,
+                },
                 ShapeGeometry::Disk { to_world } => {
                     let normal = (Mat3::from_mat4(to_world).inverse().transpose() * Vec3::Z)
                         .try_normalize()
