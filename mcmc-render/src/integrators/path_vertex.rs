@@ -143,7 +143,7 @@ impl Vertex {
     pub fn is_connectible(&self, scene: &Scene) -> bool {
         match self.kind {
             VertexKind::Camera | VertexKind::Light => true,
-            VertexKind::Surface => !scene.bsdf(self.sp.shape).is_delta(),
+            VertexKind::Surface => !scene.bsdf_at(&self.sp).is_delta(),
         }
     }
 
@@ -177,7 +177,7 @@ impl Vertex {
         let wi = d / len2.sqrt();
         let frame = Frame::from_normal(self.sp.ns);
         let f = scene
-            .bsdf(self.sp.shape)
+            .bsdf_at(&self.sp)
             .eval(frame.to_local(self.wo), frame.to_local(wi), mode);
         match mode {
             TransportMode::Radiance => f,
@@ -232,7 +232,7 @@ impl Vertex {
                 }
                 let frame = Frame::from_normal(self.sp.ns);
                 scene
-                    .bsdf(self.sp.shape)
+                    .bsdf_at(&self.sp)
                     .pdf(frame.to_local(wp), frame.to_local(wn), mode)
             }
         };

@@ -7,6 +7,7 @@ pub mod mesh;
 pub mod named;
 pub mod xml;
 
+use crate::bsdf::textured::{BsdfAt, BsdfTextures};
 use crate::bsdf::{Bsdf, BsdfDesc};
 use crate::camera::Camera;
 use crate::color::Rgb;
@@ -198,8 +199,11 @@ pub struct ShapeDesc {
 pub struct SceneDesc {
     /// Shapes.
     pub shapes: Vec<ShapeDesc>,
-    /// BSDFs (shapes refer to them by index).
+    /// BSDFs (shapes refer to them by index); a textured parameter holds
+    /// its texture's mean.
     pub bsdfs: Vec<BsdfDesc>,
+    /// The textured parameters of each BSDF, indexed like `bsdfs`.
+    pub bsdf_textures: Vec<BsdfTextures>,
     /// Point lights.
     pub point_lights: Vec<PointLightDesc>,
     /// Camera.
@@ -231,8 +235,12 @@ pub struct Scene {
     pub geometry: Geometry,
     /// Per-shape data, indexed like [`Geometry::shapes`].
     pub shapes: Vec<ShapeInfo>,
-    /// Runtime BSDFs.
+    /// Runtime BSDFs (textured parameters hold the texture's mean; shading
+    /// uses [`Scene::bsdf_at`]).
     pub bsdfs: Vec<Bsdf>,
+    /// The textured parameters of each BSDF, indexed like `bsdfs`; empty
+    /// when no BSDF of the scene is textured.
+    textures: Vec<BsdfTextures>,
     /// Parsed BSDFs, for reporting.
     pub bsdf_descs: Vec<BsdfDesc>,
     /// Emitters and the light-selection distribution.
@@ -279,9 +287,18 @@ impl Scene {
     /// Builds the runtime scene (BSDFs, BVH, lights, camera).
     pub fn build(desc: SceneDesc) -> Result<Scene, SceneError> {
         let mut bsdfs = Vec::with_capacity(desc.bsdfs.len());
-        for d in &desc.bsdfs {
-            bsdfs.push(Bsdf::from_desc(d).map_err(SceneError::Invalid)?);
+        for (i, d) in desc.bsdfs.iter().enumerate() {
+            let b = Bsdf::from_desc(d).map_err(SceneError::Invalid)?;
+            if let Some(t) = desc.bsdf_textures.get(i) {
+                t.check(&b).map_err(SceneError::Invalid)?;
+            }
+            bsdfs.push(b);
         }
+        let textures = if desc.bsdf_textures.iter().all(BsdfTextures::is_empty) {
+            Vec::new()
+        } else {
+            desc.bsdf_textures
+        };
         let no_geometry = desc.shapes.is_empty() && desc.point_lights.is_empty();
         let mut geo_shapes = Vec::with_capacity(desc.shapes.len());
         let mut shapes = Vec::with_capacity(desc.shapes.len());
@@ -351,6 +368,7 @@ impl Scene {
             geometry,
             shapes,
             bsdfs,
+            textures,
             bsdf_descs: desc.bsdfs,
             lights,
             camera,
@@ -372,9 +390,16 @@ impl Scene {
         })
     }
 
-    /// The BSDF of a shape.
-    pub fn bsdf(&self, shape: u32) -> &Bsdf {
-        &self.bsdfs[self.shapes[shape as usize].bsdf as usize]
+    /// The BSDF at a surface point, with its textured parameters (if any)
+    /// evaluated at the point's UV.
+    #[inline(always)]
+    pub fn bsdf_at(&self, sp: &SurfacePoint) -> BsdfAt<'_> {
+        let i = self.shapes[sp.shape as usize].bsdf as usize;
+        let bsdf = &self.bsdfs[i];
+        match self.textures.get(i) {
+            Some(t) if !t.is_empty() => BsdfAt::Textured(t.apply(bsdf, sp.uv)),
+            _ => BsdfAt::Shared(bsdf),
+        }
     }
 
     /// Radiance emitted from a surface point towards `w` (unit, pointing away).
