@@ -47,6 +47,7 @@ fn tessellated_sphere(n: u32) -> MeshData {
     MeshData {
         positions,
         normals: None,
+        uvs: None,
         indices,
     }
 }

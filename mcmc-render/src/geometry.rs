@@ -11,7 +11,7 @@ mod bvh4;
 mod tri_pack;
 
 use bvh4::Bvh4;
-use glam::{Mat4, Vec3, Vec3A};
+use glam::{Mat3, Mat4, Vec2, Vec3, Vec3A};
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
 use std::time::{Duration, Instant};
@@ -169,6 +169,9 @@ pub struct MeshData {
     pub positions: Vec<Vec3>,
     /// Unit vertex normals (`None`: flat shading).
     pub normals: Option<Vec<Vec3>>,
+    /// Vertex UVs (`None`: a point's UV is its barycentrics `(b1, b2)`,
+    /// as Mitsuba 3 gives meshes without texture coordinates).
+    pub uvs: Option<Vec<Vec2>>,
     /// Triangles.
     pub indices: Vec<[u32; 3]>,
 }
@@ -184,6 +187,9 @@ pub enum Surface {
         center: Vec3,
         /// Radius.
         radius: f32,
+        /// Rotation from object to world space (the orthonormal part of
+        /// `to_world`): UVs are spherical coordinates in object space.
+        frame: Mat3,
     },
     /// Mitsuba's disk: the unit disk in z = 0 mapped by `to_world`.
     Disk {
@@ -240,6 +246,10 @@ pub struct SurfacePoint {
     pub ng: Vec3,
     /// Unit shading normal, on the same side as `ng`.
     pub ns: Vec3,
+    /// Surface UV as Mitsuba 3 defines it for the shape: interpolated
+    /// vertex UVs on meshes that have them, barycentrics `(b1, b2)` on
+    /// those that do not, polar (disk) or spherical (sphere) coordinates.
+    pub uv: Vec2,
     /// Index of the shape.
     pub shape: u32,
 }
@@ -262,6 +272,11 @@ impl SurfacePoint {
 /// light samples skip the mesh look-ups of [`Geometry::triangle_point`],
 /// whose result [`FlatTriangle::point`] reproduces bit for bit.
 ///
+/// Its UV is the barycentric pair of a mesh without vertex UVs; meshes
+/// with UVs keep theirs in [`Geometry`]'s per-primitive `flat_uv` (apart,
+/// so that this stays one cache line), which [`Geometry::surface_point`]
+/// interpolates.
+///
 /// The vertices are SIMD vectors (one instruction per operation on all
 /// three axes, the same arithmetic lane by lane): 64 bytes, one cache line.
 #[derive(Clone, Copy, Debug)]
@@ -283,6 +298,7 @@ impl FlatTriangle {
             p_err: ((q0.abs() + q1.abs() + q2.abs()) * gamma(7)).into(),
             ng: self.ng,
             ns: self.ng,
+            uv: Vec2::new(b1, b2),
             shape: self.shape,
         }
     }
@@ -311,6 +327,9 @@ pub struct Geometry {
     /// Per primitive (BVH order): the cached flat triangle, or one with
     /// shape `u32::MAX` for primitives that are not flat triangles.
     flat: Vec<FlatTriangle>,
+    /// Per primitive (BVH order): the vertex UVs of flat triangles of
+    /// meshes with UVs (zeros elsewhere); empty when no such mesh exists.
+    flat_uv: Vec<[Vec2; 3]>,
     /// Triangles of the leaves made only of (at most four) triangles.
     packs: Vec<TriPack>,
     /// Index into `packs` of the leaf starting at each primitive index
@@ -347,7 +366,7 @@ impl Geometry {
                         });
                     }
                 }
-                Surface::Sphere { center, radius } => {
+                Surface::Sphere { center, radius, .. } => {
                     let r = Vec3::splat(*radius);
                     aabbs.push(Aabb::new((*center - r).into(), (*center + r).into()));
                     prims.push(Prim::Sphere {
@@ -420,12 +439,14 @@ impl Geometry {
             bvh,
             face_normals,
             flat: Vec::new(),
+            flat_uv: Vec::new(),
             packs,
             leaf_pack,
             build_time: start.elapsed(),
             triangles,
         };
         geometry.flat = geometry.flat_per_prim();
+        geometry.flat_uv = geometry.flat_uv_per_prim();
         geometry
     }
 
@@ -441,6 +462,32 @@ impl Geometry {
             .map(|p| match *p {
                 Prim::Triangle { shape, tri, .. } => self.flat_triangle(shape, tri).unwrap_or(none),
                 _ => none,
+            })
+            .collect()
+    }
+
+    /// The vertex UVs of every flat triangle of a mesh with UVs (the
+    /// `flat_uv` field; empty when no mesh has UVs).
+    fn flat_uv_per_prim(&self) -> Vec<[Vec2; 3]> {
+        let uvs_of = |shape: u32, tri: u32| match &self.shapes[shape as usize].surface {
+            Surface::Mesh(m) if m.normals.is_none() => m
+                .uvs
+                .as_ref()
+                .map(|uv| m.indices[tri as usize].map(|i| uv[i as usize])),
+            _ => None,
+        };
+        let any = self.prims.iter().any(|p| match *p {
+            Prim::Triangle { shape, tri, .. } => uvs_of(shape, tri).is_some(),
+            _ => false,
+        });
+        if !any {
+            return Vec::new();
+        }
+        self.prims
+            .iter()
+            .map(|p| match *p {
+                Prim::Triangle { shape, tri, .. } => uvs_of(shape, tri).unwrap_or([Vec2::ZERO; 3]),
+                _ => [Vec2::ZERO; 3],
             })
             .collect()
     }
@@ -474,6 +521,7 @@ impl Geometry {
             + std::mem::size_of_val(self.packs.as_slice())
             + std::mem::size_of_val(self.leaf_pack.as_slice())
             + std::mem::size_of_val(self.flat.as_slice())
+            + std::mem::size_of_val(self.flat_uv.as_slice())
     }
 
     /// Number of primitives in the BVH.
@@ -730,7 +778,12 @@ impl Geometry {
         // Flat triangles, the common case, need only their cached entry.
         let flat = &self.flat[hit.prim as usize];
         if flat.shape != u32::MAX {
-            return flat.point(1.0 - hit.u - hit.v, hit.u, hit.v);
+            let b0 = 1.0 - hit.u - hit.v;
+            let mut sp = flat.point(b0, hit.u, hit.v);
+            if let Some([t0, t1, t2]) = self.flat_uv.get(hit.prim as usize) {
+                sp.uv = *t0 * b0 + *t1 * hit.u + *t2 * hit.v;
+            }
+            return sp;
         }
         self.surface_point_other(ray, hit)
     }
@@ -773,11 +826,19 @@ impl Geometry {
             ng = -ng;
             ns = -ns;
         }
+        let uv = match &m.uvs {
+            Some(t) => {
+                let [t0, t1, t2] = idx.map(|i| t[i as usize]);
+                t0 * b0 + t1 * b1 + t2 * b2
+            }
+            None => Vec2::new(b1, b2),
+        };
         SurfacePoint {
             p,
             p_err,
             ng,
             ns,
+            uv,
             shape,
         }
     }
@@ -785,7 +846,12 @@ impl Geometry {
     /// Point on a sphere near `p_guess` (reprojected onto the surface).
     pub fn sphere_point(&self, shape: u32, p_guess: Vec3) -> SurfacePoint {
         let gs = &self.shapes[shape as usize];
-        let Surface::Sphere { center, radius } = gs.surface else {
+        let Surface::Sphere {
+            center,
+            radius,
+            frame,
+        } = gs.surface
+        else {
             unreachable!("sphere primitive on a non-sphere shape")
         };
         let local = p_guess - center;
@@ -800,6 +866,14 @@ impl Geometry {
         // (pbrt's transform bound).
         let p_err = local.abs() * gamma(5) + (center.abs() + local.abs()) * gamma(3);
         let mut n = (local / radius).normalize();
+        // Mitsuba's spherical mapping, in object space: u = φ/2π with φ
+        // the azimuth from +x towards +y in [0, 2π), v = θ/π with θ the
+        // polar angle from +z.
+        let q = frame.transpose() * n;
+        let uv = Vec2::new(
+            azimuth(q.x, q.y) * (0.5 * std::f32::consts::FRAC_1_PI),
+            q.z.clamp(-1.0, 1.0).acos() * std::f32::consts::FRAC_1_PI,
+        );
         if gs.flip_normals {
             n = -n;
         }
@@ -808,6 +882,7 @@ impl Geometry {
             p_err,
             ng: n,
             ns: n,
+            uv,
             shape,
         }
     }
@@ -827,13 +902,29 @@ impl Geometry {
             + to_world.w_axis.truncate().abs())
             * gamma(4);
         let n = if gs.flip_normals { -*normal } else { *normal };
+        // Mitsuba's polar mapping: u = r, v = φ/2π.
+        let uv = Vec2::new(
+            (x * x + y * y).sqrt(),
+            azimuth(x, y) * (0.5 * std::f32::consts::FRAC_1_PI),
+        );
         SurfacePoint {
             p,
             p_err,
             ng: n,
             ns: n,
+            uv,
             shape,
         }
+    }
+}
+
+/// The angle of (x, y) from +x towards +y, in [0, 2π).
+fn azimuth(x: f32, y: f32) -> f32 {
+    let phi = y.atan2(x);
+    if phi < 0.0 {
+        phi + 2.0 * std::f32::consts::PI
+    } else {
+        phi
     }
 }
 
@@ -931,6 +1022,7 @@ mod tests {
             surface: Surface::Mesh(MeshData {
                 positions: vec![c, c + ex, c + ex + ey, c + ey],
                 normals: None,
+                uvs: None,
                 indices: vec![[0, 1, 2], [0, 2, 3]],
             }),
             flip_normals: false,
@@ -1024,6 +1116,7 @@ mod tests {
                     Vec3::new(-0.6, 3.3, 0.7),
                 ],
                 normals,
+                uvs: None,
                 indices: vec![[0, 1, 2]],
             }),
             flip_normals: flip,
@@ -1046,6 +1139,7 @@ mod tests {
                 let want = g.triangle_point(shape, 0, 1.0 - b1 - b2, b1, b2);
                 let got = flat.point(1.0 - b1 - b2, b1, b2);
                 assert_eq!(bits(&got), bits(&want));
+                assert_eq!(got.uv, want.uv);
                 assert_eq!(got.shape, want.shape);
             }
         }
@@ -1063,7 +1157,11 @@ mod tests {
             (Vec3::new(3e4, -2e4, 1e4), 5e3),
         ] {
             let g = Geometry::build(vec![GeoShape {
-                surface: Surface::Sphere { center, radius },
+                surface: Surface::Sphere {
+                    center,
+                    radius,
+                    frame: Mat3::IDENTITY,
+                },
                 flip_normals: true,
             }]);
             let mut s = 1u64;

@@ -57,4 +57,5 @@ pub mod resources;
 pub mod sampling;
 pub mod scene;
 pub mod settings;
+pub mod texture;
 pub mod warp;

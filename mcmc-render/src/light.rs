@@ -253,7 +253,7 @@ fn bounding_sphere(geometry: &Geometry) -> (Vec3, f32) {
     for shape in &geometry.shapes {
         match &shape.surface {
             Surface::Mesh(m) => m.positions.iter().for_each(|&p| grow(p)),
-            Surface::Sphere { center, radius } => {
+            Surface::Sphere { center, radius, .. } => {
                 grow(*center - Vec3::splat(*radius));
                 grow(*center + Vec3::splat(*radius));
             }
@@ -361,7 +361,7 @@ impl Lights {
                 _ => Vec::new(),
             };
             let sphere = match surface {
-                Surface::Sphere { center, radius } => Some((*center, *radius)),
+                Surface::Sphere { center, radius, .. } => Some((*center, *radius)),
                 _ => None,
             };
             let flat_tris = (0..tri_cdf.len() as u32)
@@ -490,6 +490,7 @@ impl Lights {
             p_err: Vec3::ZERO,
             ng: -d,
             ns: -d,
+            uv: Vec2::ZERO,
             shape: u32::MAX,
         }
     }
@@ -543,7 +544,7 @@ impl Lights {
             }
         } else {
             match &geometry.shapes[*shape as usize].surface {
-                Surface::Sphere { center, radius } => {
+                Surface::Sphere { center, radius, .. } => {
                     geometry.sphere_point(*shape, *center + warp::uniform_sphere(u) * *radius)
                 }
                 Surface::Disk { .. } => {
@@ -617,6 +618,7 @@ impl Lights {
                         p_err: Vec3::ZERO,
                         ng: -wi,
                         ns: -wi,
+                        uv: Vec2::ZERO,
                         shape: u32::MAX,
                     },
                     wi,
@@ -812,6 +814,7 @@ impl Lights {
                         p_err: Vec3::ZERO,
                         ng: dir,
                         ns: dir,
+                        uv: Vec2::ZERO,
                         shape: u32::MAX,
                     },
                     dir,
@@ -878,6 +881,7 @@ impl Lights {
                 p_err: Vec3::ZERO,
                 ng: dir,
                 ns: dir,
+                uv: Vec2::ZERO,
                 shape: u32::MAX,
             },
             dir,

@@ -61,10 +61,10 @@ fn unsupported_plugin_is_refused_with_name_and_line() {
 #[test]
 fn unsupported_element_is_refused() {
     let dir = scratch("element");
-    let extra = r#"<shape type="sphere"><texture type="bitmap"/></shape>"#;
+    let extra = r#"<shape type="sphere"><medium type="homogeneous"/></shape>"#;
     write(&dir, "s.xml", &scene_text(SMALL_FILM, extra));
     let out = run(&["info", "s.xml"], &dir);
-    assert_clean_failure(&out, &["s.xml:13", "<texture>"]);
+    assert_clean_failure(&out, &["s.xml:13", "<medium>"]);
 }
 
 #[test]

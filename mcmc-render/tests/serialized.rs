@@ -62,9 +62,12 @@ fn committed_files_read_as_their_obj_copies() {
         .flat_map(|j| (0..7).map(move |i| (i, j)))
         .map(|(i, j)| glam::Vec2::new((i as f64 / 6.0) as f32, (j as f64 / 6.0) as f32))
         .collect();
-    assert_eq!(load_serialized(&v4, 0).unwrap().uvs, Some(grid.clone()));
-    assert_eq!(load_serialized(&v3, 0).unwrap().uvs, Some(grid));
-    assert_eq!(load_serialized(&v4, 1).unwrap().uvs, None);
+    assert_eq!(
+        load_serialized(&v4, 0).unwrap().mesh.uvs,
+        Some(grid.clone())
+    );
+    assert_eq!(load_serialized(&v3, 0).unwrap().mesh.uvs, Some(grid));
+    assert_eq!(load_serialized(&v4, 1).unwrap().mesh.uvs, None);
     // Control: the two shapes differ, so shape_index is honoured.
     assert_ne!(
         corners(&load_serialized(&v4, 0).unwrap().mesh),

@@ -3,7 +3,7 @@
 
 The subset (issue 5): shapes obj, ply, rectangle, cube, sphere, disk with to_world and
 flip_normals; BSDFs diffuse, conductor, roughconductor, dielectric, roughdielectric,
-twosided, ids and refs; emitters area and point; a perspective sensor with hdrfilm
+twosided, ids and refs; textures bitmap and checkerboard (issue 12); emitters area and point; a perspective sensor with hdrfilm
 (box or gaussian rfilter) and an independent sampler; the path integrator; values
 rgb, float, integer, boolean, string, point, vector, transform; <default> and <include>.
 
@@ -31,7 +31,7 @@ PLUGINS: dict[str, dict[str, set[str]]] = {
         "ply": SHAPE_COMMON | {"filename", "face_normals"},
         "rectangle": SHAPE_COMMON,
         "cube": SHAPE_COMMON,
-        "sphere": SHAPE_COMMON,
+        "sphere": SHAPE_COMMON | {"center", "radius"},
         "disk": SHAPE_COMMON,
     },
     "bsdf": {
@@ -48,12 +48,17 @@ PLUGINS: dict[str, dict[str, set[str]]] = {
     "rfilter": {"box": set(), "gaussian": set()},
     "sampler": {"independent": {"sample_count"}},
     "integrator": {"path": {"max_depth", "rr_depth"}},
+    "texture": {
+        "bitmap": {"filename", "filter_type", "wrap_mode", "raw", "to_uv"},
+        "checkerboard": {"color0", "color1", "to_uv"},
+    },
 }
 # which nested plugin kinds each kind may hold
 CHILDREN = {
     "scene": {"shape", "bsdf", "emitter", "sensor", "integrator", "default", "include"},
     "shape": {"bsdf", "emitter", "ref"},
-    "bsdf": {"bsdf", "ref"},
+    "bsdf": {"bsdf", "ref", "texture"},
+    "texture": {"texture"},
     "emitter": set(),
     "sensor": {"film", "sampler"},
     "film": {"rfilter"},

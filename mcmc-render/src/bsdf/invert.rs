@@ -117,7 +117,7 @@ impl Bsdf {
                 } else {
                     (wo, wi)
                 };
-                inner.invert(wo, wi)
+                inner.bsdf().invert(wo, wi)
             }
         }
     }

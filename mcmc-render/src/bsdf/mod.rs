@@ -50,8 +50,9 @@ pub mod microfacet;
 pub mod model;
 pub mod regularize;
 pub mod special;
+pub mod textured;
 pub use desc::{BsdfDesc, MicrofacetKind};
-pub use model::Bsdf;
+pub use model::{Bsdf, OneSided};
 
 use crate::color::Rgb;
 use glam::Vec3;

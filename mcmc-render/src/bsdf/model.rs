@@ -14,8 +14,10 @@ use glam::Vec3;
 ///
 /// See the module documentation of [`crate::bsdf`] for the direction and
 /// weight conventions. Every method is allocation-free and returns finite
-/// values (zero / `None` for degenerate configurations).
-#[derive(Clone, Debug, PartialEq)]
+/// values (zero / `None` for degenerate configurations). A plain value
+/// (`Copy`, nothing boxed), so that a textured BSDF can be made per hit
+/// point on the stack (`bsdf::textured`).
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Bsdf {
     /// One-sided Lambertian reflection.
     Diffuse(Diffuse),
@@ -29,7 +31,42 @@ pub enum Bsdf {
     RoughDielectric(RoughDielectric),
     /// A reflective BSDF applied on both sides: queries from below the surface
     /// are mirrored to the upper hemisphere (z of both directions negated).
-    TwoSided(Box<Bsdf>),
+    TwoSided(OneSided),
+}
+
+/// The models `twosided` can wrap: those without transmission (Mitsuba 3
+/// refuses the others too), held inline rather than boxed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum OneSided {
+    /// Lambertian reflection.
+    Diffuse(Diffuse),
+    /// Smooth conductor or perfect mirror.
+    Conductor(SmoothConductor),
+    /// Microfacet conductor.
+    RoughConductor(RoughConductor),
+}
+
+impl OneSided {
+    /// The wrapped model as a (one-sided) [`Bsdf`].
+    #[inline]
+    pub fn bsdf(&self) -> Bsdf {
+        match *self {
+            OneSided::Diffuse(b) => Bsdf::Diffuse(b),
+            OneSided::Conductor(b) => Bsdf::Conductor(b),
+            OneSided::RoughConductor(b) => Bsdf::RoughConductor(b),
+        }
+    }
+
+    /// A one-sided model as `twosided` holds it; `None` for the models
+    /// with transmission and for `twosided` itself.
+    pub fn from_bsdf(b: Bsdf) -> Option<OneSided> {
+        match b {
+            Bsdf::Diffuse(b) => Some(OneSided::Diffuse(b)),
+            Bsdf::Conductor(b) => Some(OneSided::Conductor(b)),
+            Bsdf::RoughConductor(b) => Some(OneSided::RoughConductor(b)),
+            Bsdf::Dielectric(_) | Bsdf::RoughDielectric(_) | Bsdf::TwoSided(_) => None,
+        }
+    }
 }
 
 /// Checks that a colour parameter is finite.
@@ -153,15 +190,12 @@ impl Bsdf {
                 }
             }
             BsdfDesc::TwoSided { inner } => match Bsdf::from_desc(inner)? {
-                Bsdf::Dielectric(_) | Bsdf::RoughDielectric(_) => {
-                    return Err(
-                        "`twosided` can only wrap BSDFs without transmission (not dielectric/roughdielectric)"
-                            .to_string(),
-                    );
-                }
                 // Two-sided twice is two-sided once.
                 b @ Bsdf::TwoSided(_) => b,
-                b => Bsdf::TwoSided(Box::new(b)),
+                b => Bsdf::TwoSided(OneSided::from_bsdf(b).ok_or_else(|| {
+                    "`twosided` can only wrap BSDFs without transmission (not dielectric/roughdielectric)"
+                        .to_string()
+                })?),
             },
         })
     }
@@ -180,7 +214,7 @@ impl Bsdf {
             Bsdf::RoughDielectric(b) => b.eval(wo, wi, mode),
             Bsdf::TwoSided(inner) => {
                 let (wo, wi) = to_front(wo, wi);
-                inner.eval(wo, wi, mode)
+                inner.bsdf().eval(wo, wi, mode)
             }
         }
     }
@@ -192,7 +226,7 @@ impl Bsdf {
         match self {
             Bsdf::TwoSided(inner) => {
                 let (wo, wi) = to_front(wo, wi);
-                inner.one_sided().eval_pdf_one_sided(wo, wi, mode)
+                inner.bsdf().eval_pdf_one_sided(wo, wi, mode)
             }
             b => b.eval_pdf_one_sided(wo, wi, mode),
         }
@@ -207,21 +241,9 @@ impl Bsdf {
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) => (Rgb::BLACK, 0.0),
             Bsdf::RoughConductor(b) => b.eval_pdf(wo, wi),
             Bsdf::RoughDielectric(b) => b.eval_pdf(wo, wi, mode),
-            // Excluded by `one_sided`.
+            // Never called on it (`eval_pdf` unwraps it).
             Bsdf::TwoSided(_) => (Rgb::BLACK, 0.0),
         }
-    }
-
-    /// The model under any number of [`Bsdf::TwoSided`] wrappers. Nesting
-    /// adds nothing: once the outer wrapper has mirrored `wo` to the front,
-    /// an inner one never flips again (`from_desc` also collapses it).
-    #[inline]
-    fn one_sided(&self) -> &Bsdf {
-        let mut b = self;
-        while let Bsdf::TwoSided(inner) = b {
-            b = inner;
-        }
-        b
     }
 
     /// Importance-samples `wi` given `wo`. `u_lobe` chooses between lobes
@@ -242,7 +264,7 @@ impl Bsdf {
         // code does not crowd the loop.
         match self {
             Bsdf::Diffuse(b) => b.sample(wo, u, mode),
-            Bsdf::TwoSided(inner) if let Bsdf::Diffuse(b) = &**inner => {
+            Bsdf::TwoSided(OneSided::Diffuse(b)) => {
                 two_sided_sample(wo, |wo| b.sample(wo, u, mode))
             }
             _ => self.sample_general(wo, u_lobe, u, mode),
@@ -259,9 +281,9 @@ impl Bsdf {
         mode: TransportMode,
     ) -> Option<BsdfSample> {
         match self {
-            Bsdf::TwoSided(inner) => two_sided_sample(wo, |wo| {
-                inner.one_sided().sample_one_sided(wo, u_lobe, u, mode)
-            }),
+            Bsdf::TwoSided(inner) => {
+                two_sided_sample(wo, |wo| inner.bsdf().sample_one_sided(wo, u_lobe, u, mode))
+            }
             b => b.sample_one_sided(wo, u_lobe, u, mode),
         }
     }
@@ -282,7 +304,7 @@ impl Bsdf {
             Bsdf::RoughConductor(b) => b.sample(wo, u, mode),
             Bsdf::Dielectric(b) => b.sample(wo, u_lobe, mode),
             Bsdf::RoughDielectric(b) => b.sample(wo, u_lobe, u, mode),
-            // Excluded by `one_sided`.
+            // Never called on it (`sample_general` unwraps it).
             Bsdf::TwoSided(_) => None,
         }
     }
@@ -298,7 +320,7 @@ impl Bsdf {
             Bsdf::RoughDielectric(b) => b.pdf(wo, wi, mode),
             Bsdf::TwoSided(inner) => {
                 let (wo, wi) = to_front(wo, wi);
-                inner.pdf(wo, wi, mode)
+                inner.bsdf().pdf(wo, wi, mode)
             }
         }
     }
@@ -308,11 +330,10 @@ impl Bsdf {
     /// only `sample` transports light.
     #[inline]
     pub fn is_delta(&self) -> bool {
-        match self.one_sided() {
+        match self {
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) => true,
             Bsdf::Diffuse(_) | Bsdf::RoughConductor(_) | Bsdf::RoughDielectric(_) => false,
-            // Excluded by `one_sided`.
-            Bsdf::TwoSided(_) => false,
+            Bsdf::TwoSided(inner) => inner.bsdf().is_delta(),
         }
     }
 
@@ -320,7 +341,7 @@ impl Bsdf {
     /// models this equals [`Bsdf::is_delta`]; kept separate for mixed models).
     pub fn has_delta_lobe(&self) -> bool {
         match self {
-            Bsdf::TwoSided(inner) => inner.has_delta_lobe(),
+            Bsdf::TwoSided(inner) => inner.bsdf().has_delta_lobe(),
             b => b.is_delta(),
         }
     }

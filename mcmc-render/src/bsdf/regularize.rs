@@ -5,6 +5,7 @@
 use super::conductor::RoughConductor;
 use super::dielectric::RoughDielectric;
 use super::microfacet::Microfacet;
+use super::model::OneSided;
 use super::{Bsdf, MicrofacetKind};
 
 impl Bsdf {
@@ -16,7 +17,7 @@ impl Bsdf {
     /// surfaces are unchanged. `min_alpha <= 0` (or NaN) returns a plain copy.
     pub fn regularized(&self, min_alpha: f32) -> Bsdf {
         if min_alpha.is_nan() || min_alpha <= 0.0 {
-            return self.clone();
+            return *self;
         }
         let raise = |m: &Microfacet| {
             let (au, av) = m.alpha();
@@ -24,7 +25,7 @@ impl Bsdf {
         };
         let smooth = Microfacet::new(MicrofacetKind::Beckmann, min_alpha, min_alpha);
         match self {
-            Bsdf::Diffuse(_) => self.clone(),
+            Bsdf::Diffuse(_) => *self,
             Bsdf::Conductor(c) => Bsdf::RoughConductor(RoughConductor {
                 distribution: smooth,
                 fresnel: c.fresnel,
@@ -34,7 +35,7 @@ impl Bsdf {
                 distribution: raise(&c.distribution),
                 ..*c
             }),
-            Bsdf::Dielectric(d) if d.eta == 1.0 => self.clone(),
+            Bsdf::Dielectric(d) if d.eta == 1.0 => *self,
             Bsdf::Dielectric(d) => Bsdf::RoughDielectric(RoughDielectric {
                 distribution: smooth,
                 eta: d.eta,
@@ -45,7 +46,12 @@ impl Bsdf {
                 distribution: raise(&d.distribution),
                 ..*d
             }),
-            Bsdf::TwoSided(inner) => Bsdf::TwoSided(Box::new(inner.regularized(min_alpha))),
+            // Roughening keeps a model reflective-only (diffuse stays
+            // diffuse, conductors stay conductors).
+            Bsdf::TwoSided(inner) => Bsdf::TwoSided(
+                OneSided::from_bsdf(inner.bsdf().regularized(min_alpha))
+                    .expect("a roughened reflective model is reflective"),
+            ),
         }
     }
 }
@@ -112,9 +118,10 @@ mod tests {
             inner: Box::new(BsdfDesc::PerfectMirror),
         })
         .unwrap();
-        assert!(
-            matches!(two.regularized(0.1), Bsdf::TwoSided(ref i) if matches!(**i, Bsdf::RoughConductor(_)))
-        );
+        assert!(matches!(
+            two.regularized(0.1),
+            Bsdf::TwoSided(OneSided::RoughConductor(_))
+        ));
     }
 
     #[test]

@@ -167,7 +167,7 @@ fn random_walk(
         let u_lobe = source.next_1d();
         let u_dir = source.next_2d();
         let u_rr = source.next_1d();
-        let bsdf = scene.bsdf(sp.shape);
+        let bsdf = scene.bsdf_at(&sp);
         let frame = Frame::from_normal(sp.ns);
         let wo = frame.to_local(-ray.d);
         let Some(bs) = bsdf.sample(wo, u_lobe, u_dir, mode) else {

@@ -116,7 +116,7 @@ impl Integrator for LightTracer {
         while let Some(its) = scene.intersect(&ray) {
             let sp = its.sp;
             let wo_world = -ray.d;
-            let bsdf = scene.bsdf(sp.shape);
+            let bsdf = scene.bsdf_at(&sp);
             let frame = Frame::from_normal(sp.ns);
             let wo = frame.to_local(wo_world);
 

@@ -85,6 +85,7 @@ impl Vertex {
             p_err: Vec3::ZERO,
             ng: Vec3::ZERO,
             ns: Vec3::ZERO,
+            uv: Vec2::ZERO,
             shape: u32::MAX,
         },
         wo: Vec3::ZERO,
@@ -176,7 +177,7 @@ impl Vertex {
     pub fn is_connectible(&self, scene: &Scene) -> bool {
         match self.kind {
             VertexKind::Camera | VertexKind::Light | VertexKind::Infinite => true,
-            VertexKind::Surface => !scene.bsdf(self.sp.shape).is_delta(),
+            VertexKind::Surface => !scene.bsdf_at(&self.sp).is_delta(),
         }
     }
 
@@ -205,7 +206,7 @@ impl Vertex {
         };
         let frame = Frame::from_normal(self.sp.ns);
         let f = scene
-            .bsdf(self.sp.shape)
+            .bsdf_at(&self.sp)
             .eval(frame.to_local(self.wo), frame.to_local(wi), mode);
         match mode {
             TransportMode::Radiance => f,
@@ -266,7 +267,7 @@ impl Vertex {
                 };
                 let frame = Frame::from_normal(self.sp.ns);
                 scene
-                    .bsdf(self.sp.shape)
+                    .bsdf_at(&self.sp)
                     .pdf(frame.to_local(wp), frame.to_local(wn), mode)
             }
         };

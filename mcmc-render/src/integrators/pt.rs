@@ -85,7 +85,7 @@ impl PathTracer {
                 break;
             }
 
-            let bsdf = scene.bsdf(sp.shape);
+            let bsdf = scene.bsdf_at(&sp);
             let frame = Frame::from_normal(sp.ns);
             let wo = frame.to_local(wo_world);
 

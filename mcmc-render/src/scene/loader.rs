@@ -10,10 +10,12 @@ use super::{
     CameraDesc, FilmDesc, FilterKind, FovAxis, InfiniteLightDesc, IntegratorDesc,
     IntegratorElement, PointLightDesc, SceneDesc, SceneError, ShapeDesc, ShapeGeometry,
 };
+use crate::bsdf::textured::{BsdfTextures, TexturedParam};
 use crate::bsdf::{BsdfDesc, MicrofacetKind};
 use crate::color::Rgb;
 use crate::environment::{EnvRadiance, Environment, LatLong};
 use crate::light::SpotProfile;
+use crate::texture::{self, Bitmap, Checkerboard, FilterType, Texture, WrapMode};
 use glam::{Mat3, Mat4, Vec3};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -267,8 +269,9 @@ impl Loader {
         }
     }
 
-    fn push_bsdf(&mut self, desc: BsdfDesc) -> usize {
+    fn push_bsdf(&mut self, (desc, textures): (BsdfDesc, BsdfTextures)) -> usize {
         self.desc.bsdfs.push(desc);
+        self.desc.bsdf_textures.push(textures);
         self.desc.bsdfs.len() - 1
     }
 
@@ -612,7 +615,7 @@ impl Loader {
         Ok(())
     }
 
-    /// Mitsuba 3's `envmap` (`filename` of a lat-long EXR, `scale` 1,
+    /// Mitsuba 3's `envmap` (`filename` of a lat-long image, `scale` 1,
     /// `to_world`) and `constant` (`radiance` 1). One per scene.
     fn environment(&mut self, p: &Plugin) -> Result<(), SceneError> {
         no_children(p)?;
@@ -649,18 +652,20 @@ impl Loader {
                 ));
             }
             let path = self.base_dir.join(&filename);
-            let is_exr = path
-                .extension()
-                .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
-            if !is_exr {
-                return Err(err(
+            crate::resources::regular_file(&path).map_err(|e| {
+                err(
                     &loc,
-                    format!(
-                        "environment map \"{filename}\": only OpenEXR (.exr) files are supported"
-                    ),
-                ));
-            }
-            let (w, h, texels) = crate::image_io::read_exr(&path).map_err(|e| err(&loc, e))?;
+                    format!("cannot load environment map \"{filename}\": {e}"),
+                )
+            })?;
+            // Any format the bitmap texture reads; 8-bit images are
+            // sRGB-decoded, as Mitsuba's envmap does.
+            let (w, h, texels) = texture::read_linear(&path, false).map_err(|e| {
+                err(
+                    &loc,
+                    format!("cannot load environment map \"{filename}\": {e}"),
+                )
+            })?;
             let texels = texels.into_iter().map(|t| t * scale).collect();
             let map = LatLong::new(w as usize, h as usize, texels)
                 .map_err(|e| err(&loc, format!("environment map \"{filename}\": {e}")))?;
@@ -676,15 +681,28 @@ impl Loader {
         Ok(())
     }
 
-    fn bsdf(&mut self, p: &Plugin) -> Result<BsdfDesc, SceneError> {
+    /// A BSDF and its textured parameters (their constants in the
+    /// description are the textures' means).
+    fn bsdf(&mut self, p: &Plugin) -> Result<(BsdfDesc, BsdfTextures), SceneError> {
         let mut props = Props::new(p);
+        let mut tex = TextureChildren::new(p);
+        let mut textures = BsdfTextures::default();
+        let mut color = |loader: &mut Self,
+                         props: &mut Props,
+                         param: TexturedParam,
+                         default: Rgb|
+         -> Result<Rgb, SceneError> {
+            loader.color_param(props, &mut tex, param, default, &mut textures)
+        };
+        use TexturedParam::*;
         let desc = match p.kind.as_str() {
             "diffuse" => BsdfDesc::Diffuse {
-                reflectance: props.rgb("reflectance", Rgb::splat(0.5))?,
+                reflectance: color(self, &mut props, Reflectance, Rgb::splat(0.5))?,
             },
             "conductor" | "roughconductor" => {
                 let (eta, k) = conductor_ior(&mut props)?;
-                let specular_reflectance = props.rgb("specular_reflectance", Rgb::WHITE)?;
+                let specular_reflectance =
+                    color(self, &mut props, SpecularReflectance, Rgb::WHITE)?;
                 if p.kind == "conductor" {
                     if eta == Rgb::splat(0.0)
                         && k == Rgb::WHITE
@@ -719,8 +737,10 @@ impl Loader {
                         "int_ior and ext_ior must be positive and differ",
                     ));
                 }
-                let specular_reflectance = props.rgb("specular_reflectance", Rgb::WHITE)?;
-                let specular_transmittance = props.rgb("specular_transmittance", Rgb::WHITE)?;
+                let specular_reflectance =
+                    color(self, &mut props, SpecularReflectance, Rgb::WHITE)?;
+                let specular_transmittance =
+                    color(self, &mut props, SpecularTransmittance, Rgb::WHITE)?;
                 if p.kind == "dielectric" {
                     BsdfDesc::Dielectric {
                         int_ior,
@@ -762,14 +782,18 @@ impl Loader {
                     }
                     inner = Some(d);
                 }
-                let inner = inner.ok_or_else(|| err(&p.loc, "twosided needs a nested <bsdf>"))?;
+                let (inner, inner_textures) =
+                    inner.ok_or_else(|| err(&p.loc, "twosided needs a nested <bsdf>"))?;
                 if matches!(inner, BsdfDesc::TwoSided { .. }) {
                     return Err(err(&p.loc, "twosided cannot wrap another twosided"));
                 }
                 props.finish()?;
-                return Ok(BsdfDesc::TwoSided {
-                    inner: Box::new(inner),
-                });
+                return Ok((
+                    BsdfDesc::TwoSided {
+                        inner: Box::new(inner),
+                    },
+                    inner_textures,
+                ));
             }
             other => {
                 return Err(err(
@@ -780,19 +804,147 @@ impl Loader {
                 ));
             }
         };
-        no_children(p)?;
+        tex.finish()?;
         props.finish()?;
-        Ok(desc)
+        Ok((desc, textures))
     }
 
-    fn bsdf_by_id(&self, id: &str, loc: &Loc) -> Result<BsdfDesc, SceneError> {
+    fn bsdf_by_id(&self, id: &str, loc: &Loc) -> Result<(BsdfDesc, BsdfTextures), SceneError> {
         let index = self.named_bsdfs.get(id).ok_or_else(|| {
             err(
                 loc,
                 format!("no <bsdf id=\"{id}\"> defined before this reference"),
             )
         })?;
-        Ok(self.desc.bsdfs[*index].clone())
+        Ok((
+            self.desc.bsdfs[*index].clone(),
+            self.desc.bsdf_textures[*index].clone(),
+        ))
+    }
+
+    /// A colour parameter that may be a texture: the constant (`<rgb>`,
+    /// `<float>`) or a nested `<texture name=…>`, whose mean it returns
+    /// after recording the texture in `textures`.
+    fn color_param(
+        &mut self,
+        props: &mut Props,
+        tex: &mut TextureChildren,
+        param: TexturedParam,
+        default: Rgb,
+        textures: &mut BsdfTextures,
+    ) -> Result<Rgb, SceneError> {
+        let name = param.name();
+        let constant = props.opt_rgb(name)?;
+        let Some(child) = tex.take(name) else {
+            return Ok(constant.unwrap_or(default));
+        };
+        if constant.is_some() {
+            return Err(err(&child.loc, format!("'{name}' is given twice")));
+        }
+        let t = self.texture(child)?;
+        let mean = t.mean();
+        if !matches!(t, Texture::Constant(_)) {
+            textures.0.push((param, t));
+        }
+        Ok(mean)
+    }
+
+    /// A colour that may be a texture inside a texture (`checkerboard`'s
+    /// colours).
+    fn texture_or_color(
+        &mut self,
+        props: &mut Props,
+        tex: &mut TextureChildren,
+        name: &str,
+        default: f32,
+    ) -> Result<Texture, SceneError> {
+        let constant = props.opt_rgb(name)?;
+        match tex.take(name) {
+            None => Ok(Texture::Constant(constant.unwrap_or(Rgb::splat(default)))),
+            Some(child) if constant.is_none() => self.texture(child),
+            Some(child) => Err(err(&child.loc, format!("'{name}' is given twice"))),
+        }
+    }
+
+    /// A `<texture>` element: `bitmap` or `checkerboard`.
+    fn texture(&mut self, p: &Plugin) -> Result<Texture, SceneError> {
+        let mut props = Props::new(p);
+        let to_uv = props.transform("to_uv")?;
+        let to_uv = texture::uv_transform(&to_uv).map_err(|e| err(&p.loc, e))?;
+        let t = match p.kind.as_str() {
+            "bitmap" => {
+                let (filename, loc) = props
+                    .opt_string("filename")?
+                    .ok_or_else(|| err(&p.loc, "<texture type=\"bitmap\"> needs a 'filename'"))?;
+                let filter = match props.opt_string("filter_type")? {
+                    None => FilterType::Bilinear,
+                    Some((s, l)) => match s.as_str() {
+                        "bilinear" => FilterType::Bilinear,
+                        "nearest" => FilterType::Nearest,
+                        _ => {
+                            return Err(err(
+                                &l,
+                                format!("unknown filter_type \"{s}\" (bilinear|nearest)"),
+                            ));
+                        }
+                    },
+                };
+                let wrap = match props.opt_string("wrap_mode")? {
+                    None => WrapMode::Repeat,
+                    Some((s, l)) => match s.as_str() {
+                        "repeat" => WrapMode::Repeat,
+                        "mirror" => WrapMode::Mirror,
+                        "clamp" => WrapMode::Clamp,
+                        _ => {
+                            return Err(err(
+                                &l,
+                                format!("unknown wrap_mode \"{s}\" (repeat|mirror|clamp)"),
+                            ));
+                        }
+                    },
+                };
+                let raw = props.boolean("raw", false)?;
+                // Storage and GPU options of Mitsuba that change no value
+                // here (texels are stored in single precision).
+                props.boolean("accel", true)?;
+                if let Some((s, l)) = props.opt_string("format")?
+                    && !["auto", "variant", "fp16"].contains(&s.as_str())
+                {
+                    return Err(err(
+                        &l,
+                        format!("unknown format \"{s}\" (auto|variant|fp16)"),
+                    ));
+                }
+                no_children(p)?;
+                let path = self.base_dir.join(&filename);
+                let bitmap = Bitmap::load(&path, raw, filter, wrap, to_uv).map_err(|e| {
+                    err(
+                        &loc,
+                        format!("cannot load texture \"{}\": {e}", path.display()),
+                    )
+                })?;
+                Texture::Bitmap(std::sync::Arc::new(bitmap))
+            }
+            "checkerboard" => {
+                let mut tex = TextureChildren::new(p);
+                let color0 = self.texture_or_color(&mut props, &mut tex, "color0", 0.4)?;
+                let color1 = self.texture_or_color(&mut props, &mut tex, "color1", 0.2)?;
+                tex.finish()?;
+                Texture::Checkerboard(Box::new(Checkerboard {
+                    color0,
+                    color1,
+                    to_uv,
+                }))
+            }
+            other => {
+                return Err(err(
+                    &p.loc,
+                    format!("unsupported texture \"{other}\" (supported: bitmap, checkerboard)"),
+                ));
+            }
+        };
+        props.finish()?;
+        Ok(t)
     }
 
     fn shape(&mut self, p: &Plugin) -> Result<(), SceneError> {
@@ -808,10 +960,17 @@ impl Loader {
                     )
                 })?;
                 let mut face_normals = props.boolean("face_normals", false)?;
+                // Mitsuba flips v by default for OBJ files only; its
+                // `serialized` plugin has no such flag.
+                let flip_uv = if p.kind == "serialized" {
+                    false
+                } else {
+                    props.boolean("flip_tex_coords", p.kind == "obj")?
+                };
                 let path = self.base_dir.join(&filename);
                 crate::resources::regular_file(&path)
                     .map_err(|e| err(&loc, format!("cannot load mesh \"{filename}\": {e}")))?;
-                let mesh = match p.kind.as_str() {
+                let mut mesh = match p.kind.as_str() {
                     "obj" => mesh::load_obj(&path),
                     "ply" => mesh::load_ply(&path),
                     _ => {
@@ -831,6 +990,9 @@ impl Loader {
                     }
                 }
                 .map_err(|e| err(&loc, format!("cannot load mesh \"{filename}\": {e}")))?;
+                if flip_uv {
+                    mesh.flip_tex_coords();
+                }
                 let mesh = mesh
                     .finish(&to_world, face_normals)
                     .map_err(|e| err(&loc, format!("mesh \"{filename}\": {e}")))?;
@@ -862,9 +1024,12 @@ impl Loader {
                 if (sx - sy).abs() > tol || (sx - sz).abs() > tol {
                     return Err(err(&p.loc, "sphere to_world must not scale non-uniformly"));
                 }
+                // The rotation left once the uniform scale is divided out.
+                let frame = glam::Mat3::from_mat4(to_world) * (1.0 / sx);
                 ShapeGeometry::Sphere {
                     center: to_world.transform_point3(center),
                     radius: radius * sx,
+                    frame,
                 }
             }
             other => {
@@ -943,9 +1108,12 @@ impl Loader {
         let bsdf = match bsdf {
             Some(b) => b,
             // Mitsuba gives a shape without a BSDF a diffuse one of albedo 0.5.
-            None => self.push_bsdf(BsdfDesc::Diffuse {
-                reflectance: Rgb::splat(0.5),
-            }),
+            None => self.push_bsdf((
+                BsdfDesc::Diffuse {
+                    reflectance: Rgb::splat(0.5),
+                },
+                BsdfTextures::default(),
+            )),
         };
         self.desc.shapes.push(ShapeDesc {
             kind: p.kind.clone(),
@@ -1017,6 +1185,70 @@ fn microfacet(props: &mut Props, loc: &Loc) -> Result<(MicrofacetKind, f32, f32)
         ));
     }
     Ok((distribution, alpha_u, alpha_v))
+}
+
+/// The nested `<texture name=…>` elements of a plugin, each to be taken
+/// once by the parameter it names; [`TextureChildren::finish`] refuses
+/// any other child and any texture nobody took.
+struct TextureChildren<'a> {
+    plugin: &'a Plugin,
+    taken: Vec<bool>,
+}
+
+impl<'a> TextureChildren<'a> {
+    fn new(plugin: &'a Plugin) -> Self {
+        TextureChildren {
+            plugin,
+            taken: vec![false; plugin.children.len()],
+        }
+    }
+
+    /// The texture child named `name`, if any.
+    fn take(&mut self, name: &str) -> Option<&'a Plugin> {
+        let plugin = self.plugin;
+        plugin
+            .children
+            .iter()
+            .enumerate()
+            .find_map(|(i, c)| match c {
+                Child::Plugin(t) if t.tag == "texture" && t.name.as_deref() == Some(name) => {
+                    self.taken[i] = true;
+                    Some(t)
+                }
+                _ => None,
+            })
+    }
+
+    fn finish(self) -> Result<(), SceneError> {
+        let what = format!("<{} type=\"{}\">", self.plugin.tag, self.plugin.kind);
+        for (c, taken) in self.plugin.children.iter().zip(self.taken) {
+            match c {
+                _ if taken => {}
+                Child::Plugin(t) if t.tag == "texture" => {
+                    return Err(err(
+                        &t.loc,
+                        match &t.name {
+                            Some(n) => format!("parameter '{n}' of {what} cannot be a texture"),
+                            None => format!("a <texture> in {what} needs a 'name'"),
+                        },
+                    ));
+                }
+                Child::Plugin(t) => {
+                    return Err(err(
+                        &t.loc,
+                        format!("<{}> is not allowed inside {what}", t.tag),
+                    ));
+                }
+                Child::Ref { loc, .. } => {
+                    return Err(err(
+                        loc,
+                        format!("<ref> is not allowed inside {what} (write textures inline)"),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
 }
 
 fn no_children(p: &Plugin) -> Result<(), SceneError> {

@@ -1,9 +1,9 @@
 //! Triangle meshes: OBJ (tobj) and PLY (ply-rs-bw) loading, Mitsuba's
 //! built-in rectangle and cube, transformation to world space, validation
-//! (NaN vertices refused, zero-area triangles dropped and counted) and
-//! Mitsuba's vertex-normal rules.
+//! (NaN vertices refused, zero-area triangles dropped and counted),
+//! Mitsuba's vertex-normal rules and its texture coordinates (UVs).
 
-use glam::{Mat3, Mat4, Vec3};
+use glam::{Mat3, Mat4, Vec2, Vec3};
 use std::path::Path;
 
 /// A mesh as read from a file, in object space.
@@ -13,6 +13,9 @@ pub struct RawMesh {
     pub positions: Vec<Vec3>,
     /// Per-vertex normals, when the file has them.
     pub normals: Option<Vec<Vec3>>,
+    /// Per-vertex texture coordinates, when the file has them (as stored:
+    /// [`RawMesh::flip_tex_coords`] applies Mitsuba's OBJ convention).
+    pub uvs: Option<Vec<Vec2>>,
     /// Triangles as vertex indices.
     pub indices: Vec<[u32; 3]>,
 }
@@ -24,6 +27,8 @@ pub struct TriMesh {
     pub positions: Vec<Vec3>,
     /// World-space unit vertex normals; `None` means flat (face) shading.
     pub normals: Option<Vec<Vec3>>,
+    /// Per-vertex UVs (`None`: the mesh has none).
+    pub uvs: Option<Vec<Vec2>>,
     /// Triangles (degenerate ones already removed).
     pub indices: Vec<[u32; 3]>,
     /// How many zero-area triangles were dropped.
@@ -42,6 +47,8 @@ pub fn load_obj(path: &Path) -> Result<RawMesh, String> {
     let mut out = RawMesh::default();
     let mut all_have_normals = true;
     let mut normals = Vec::new();
+    let mut all_have_uvs = true;
+    let mut uvs = Vec::new();
     for m in &models {
         let mesh = &m.mesh;
         let base = out.positions.len() as u32;
@@ -59,6 +66,15 @@ pub fn load_obj(path: &Path) -> Result<RawMesh, String> {
         } else {
             all_have_normals = false;
         }
+        if mesh.texcoords.len() / 2 == mesh.positions.len() / 3 && !mesh.texcoords.is_empty() {
+            uvs.extend(
+                mesh.texcoords
+                    .chunks_exact(2)
+                    .map(|t| Vec2::new(t[0], t[1])),
+            );
+        } else {
+            all_have_uvs = false;
+        }
         out.indices.extend(
             mesh.indices
                 .chunks_exact(3)
@@ -67,6 +83,9 @@ pub fn load_obj(path: &Path) -> Result<RawMesh, String> {
     }
     if all_have_normals && !normals.is_empty() {
         out.normals = Some(normals);
+    }
+    if all_have_uvs && !uvs.is_empty() {
+        out.uvs = Some(uvs);
     }
     if out.indices.is_empty() {
         return Err("the file holds no triangles".into());
@@ -78,7 +97,9 @@ pub fn load_obj(path: &Path) -> Result<RawMesh, String> {
 struct PlyVertex {
     p: [f32; 3],
     n: [f32; 3],
-    /// Bit i set: coordinate i of `p` present; bit 3 + i: of `n`.
+    uv: [f32; 2],
+    /// Bit i set: coordinate i of `p` present; bit 3 + i: of `n`; bit
+    /// 6 + i: of `uv`.
     seen: u8,
 }
 
@@ -87,6 +108,7 @@ impl ply_rs_bw::ply::PropertyAccess for PlyVertex {
         PlyVertex {
             p: [0.0; 3],
             n: [0.0; 3],
+            uv: [0.0; 2],
             seen: 0,
         }
     }
@@ -103,15 +125,18 @@ impl ply_rs_bw::ply::PropertyAccess for PlyVertex {
             "nx" => 3,
             "ny" => 4,
             "nz" => 5,
+            // The texture-coordinate names Mitsuba's PLY reader accepts.
+            "u" | "s" | "texture_u" => 6,
+            "v" | "t" | "texture_v" => 7,
             _ => return PropertyAccessResult::Ignored,
         };
         let Some(v) = property.to_f32_lossy() else {
             return PropertyAccessResult::UnsupportedType;
         };
-        if slot < 3 {
-            self.p[slot] = v;
-        } else {
-            self.n[slot - 3] = v;
+        match slot {
+            0..3 => self.p[slot] = v,
+            3..6 => self.n[slot - 3] = v,
+            _ => self.uv[slot - 6] = v,
         }
         self.seen |= 1 << slot;
         PropertyAccessResult::Set
@@ -155,8 +180,8 @@ impl ply_rs_bw::ply::PropertyAccess for PlySkip {
     }
 }
 
-/// Reads a PLY file (ASCII or binary): `vertex` with x, y, z and optional
-/// nx, ny, nz; `face` with `vertex_indices` (or `vertex_index`), polygons
+/// Reads a PLY file (ASCII or binary): `vertex` with x, y, z, optional
+/// nx, ny, nz and optional UVs (u, v or s, t or texture_u, texture_v); `face` with `vertex_indices` (or `vertex_index`), polygons
 /// fan-triangulated.
 pub fn load_ply(path: &Path) -> Result<RawMesh, String> {
     use ply_rs_bw::parser::{Parser, Reader};
@@ -197,6 +222,7 @@ pub fn load_ply(path: &Path) -> Result<RawMesh, String> {
     let mut out = RawMesh {
         positions: Vec::with_capacity(vertices.len()),
         normals: None,
+        uvs: None,
         indices: Vec::with_capacity(faces.len()),
     };
     let has_normals =
@@ -209,6 +235,9 @@ pub fn load_ply(path: &Path) -> Result<RawMesh, String> {
     }
     if has_normals {
         out.normals = Some(vertices.iter().map(|v| Vec3::from(v.n)).collect());
+    }
+    if !vertices.is_empty() && vertices.iter().all(|v| v.seen & 0b1100_0000 == 0b1100_0000) {
+        out.uvs = Some(vertices.iter().map(|v| Vec2::from(v.uv)).collect());
     }
     drop(vertices);
     let n = out.positions.len() as u32;
@@ -235,43 +264,78 @@ pub fn load_ply(path: &Path) -> Result<RawMesh, String> {
     Ok(out)
 }
 
-/// Mitsuba's `rectangle`: [-1,1]² in the z = 0 plane, normal +z.
+/// Mitsuba's `rectangle`: [-1,1]² in the z = 0 plane, normal +z, with
+/// Mitsuba's UVs u = (x + 1)/2, v = (y + 1)/2.
 pub fn rectangle() -> RawMesh {
+    let corners = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
     RawMesh {
-        positions: vec![
-            Vec3::new(-1.0, -1.0, 0.0),
-            Vec3::new(1.0, -1.0, 0.0),
-            Vec3::new(1.0, 1.0, 0.0),
-            Vec3::new(-1.0, 1.0, 0.0),
-        ],
+        positions: corners.map(|(x, y)| Vec3::new(x, y, 0.0)).to_vec(),
         normals: None,
+        uvs: Some(
+            corners
+                .map(|(x, y)| Vec2::new((x + 1.0) / 2.0, (y + 1.0) / 2.0))
+                .to_vec(),
+        ),
         indices: vec![[0, 1, 2], [0, 2, 3]],
     }
 }
 
-/// Mitsuba's `cube`: [-1,1]³ with outward face normals.
+/// Mitsuba's `cube`: [-1,1]³ with outward face normals; every face maps
+/// onto [0,1]² in UV as Mitsuba 3's cube does: its four corners, in the
+/// order listed, get UVs (0,1), (1,1), (1,0), (0,0).
 pub fn cube() -> RawMesh {
-    let mut m = RawMesh::default();
-    for axis in 0..3 {
-        for sign in [-1.0f32, 1.0] {
-            let mut n = Vec3::ZERO;
-            n[axis] = sign;
-            // Two tangents with t1 × t2 = n, so the winding faces outwards.
-            let mut t1 = Vec3::ZERO;
-            t1[(axis + 1) % 3] = 1.0;
-            let t2 = n.cross(t1);
-            let base = m.positions.len() as u32;
-            for (a, b) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
-                m.positions.push(n + t1 * a + t2 * b);
-            }
-            m.indices.push([base, base + 1, base + 2]);
-            m.indices.push([base, base + 2, base + 3]);
-        }
+    // Per face: the corners (x, y, z), counter-clockwise seen from outside.
+    const FACES: [[[f32; 3]; 4]; 6] = [
+        [
+            [1., -1., -1.],
+            [1., -1., 1.],
+            [-1., -1., 1.],
+            [-1., -1., -1.],
+        ], // −y
+        [[1., 1., -1.], [-1., 1., -1.], [-1., 1., 1.], [1., 1., 1.]], // +y
+        [[1., -1., -1.], [1., 1., -1.], [1., 1., 1.], [1., -1., 1.]], // +x
+        [[1., -1., 1.], [1., 1., 1.], [-1., 1., 1.], [-1., -1., 1.]], // +z
+        [
+            [-1., -1., 1.],
+            [-1., 1., 1.],
+            [-1., 1., -1.],
+            [-1., -1., -1.],
+        ], // −x
+        [
+            [1., 1., -1.],
+            [1., -1., -1.],
+            [-1., -1., -1.],
+            [-1., 1., -1.],
+        ], // −z
+    ];
+    const UVS: [[f32; 2]; 4] = [[0., 1.], [1., 1.], [1., 0.], [0., 0.]];
+    let mut m = RawMesh {
+        uvs: Some(Vec::new()),
+        ..RawMesh::default()
+    };
+    for face in FACES {
+        let base = m.positions.len() as u32;
+        m.positions.extend(face.map(Vec3::from));
+        m.uvs
+            .as_mut()
+            .expect("set above")
+            .extend(UVS.map(Vec2::from));
+        m.indices.push([base, base + 1, base + 2]);
+        m.indices.push([base + 3, base, base + 2]);
     }
     m
 }
 
 impl RawMesh {
+    /// Mirrors the v coordinate (v → 1 − v), Mitsuba's `flip_tex_coords`
+    /// (on by default for OBJ files, whose images have their origin at the
+    /// bottom, off for PLY).
+    pub fn flip_tex_coords(&mut self) {
+        for uv in self.uvs.iter_mut().flatten() {
+            uv.y = 1.0 - uv.y;
+        }
+    }
+
     /// Transforms to world space, validates, and applies Mitsuba's normal
     /// rules: `face_normals` discards vertex normals; without it, a file
     /// without normals gets angle-weighted vertex normals (as Mitsuba 3
@@ -280,6 +344,9 @@ impl RawMesh {
         let n = self.positions.len();
         if let Some(i) = self.positions.iter().position(|p| !p.is_finite()) {
             return Err(format!("vertex {i} has a NaN or infinite coordinate"));
+        }
+        if let Some(i) = self.uvs.iter().flatten().position(|t| !t.is_finite()) {
+            return Err(format!("texture coordinate {i} is NaN or infinite"));
         }
         if self.indices.iter().flatten().any(|&i| i as usize >= n) {
             return Err("a triangle refers to a vertex that does not exist".into());
@@ -324,6 +391,7 @@ impl RawMesh {
         Ok(TriMesh {
             positions,
             normals,
+            uvs: self.uvs,
             indices,
             dropped_degenerate: dropped,
         })

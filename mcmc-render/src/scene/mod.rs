@@ -10,6 +10,7 @@ pub mod serialized;
 pub mod upgrade;
 pub mod xml;
 
+use crate::bsdf::textured::{BsdfAt, BsdfTextures};
 use crate::bsdf::{Bsdf, BsdfDesc};
 use crate::camera::Camera;
 use crate::color::Rgb;
@@ -205,6 +206,8 @@ pub enum ShapeGeometry {
         center: Vec3,
         /// Radius.
         radius: f32,
+        /// Object-to-world rotation (for the UV mapping).
+        frame: Mat3,
     },
     /// Unit disk in z = 0 mapped by `to_world`.
     Disk {
@@ -235,8 +238,11 @@ pub struct ShapeDesc {
 pub struct SceneDesc {
     /// Shapes.
     pub shapes: Vec<ShapeDesc>,
-    /// BSDFs (shapes refer to them by index).
+    /// BSDFs (shapes refer to them by index); a textured parameter holds
+    /// its texture's mean.
     pub bsdfs: Vec<BsdfDesc>,
+    /// The textured parameters of each BSDF, indexed like `bsdfs`.
+    pub bsdf_textures: Vec<BsdfTextures>,
     /// Point lights.
     pub point_lights: Vec<PointLightDesc>,
     /// Emitters at infinity (at most one environment).
@@ -270,8 +276,12 @@ pub struct Scene {
     pub geometry: Geometry,
     /// Per-shape data, indexed like [`Geometry::shapes`].
     pub shapes: Vec<ShapeInfo>,
-    /// Runtime BSDFs.
+    /// Runtime BSDFs (textured parameters hold the texture's mean; shading
+    /// uses [`Scene::bsdf_at`]).
     pub bsdfs: Vec<Bsdf>,
+    /// The textured parameters of each BSDF, indexed like `bsdfs`; empty
+    /// when no BSDF of the scene is textured.
+    textures: Vec<BsdfTextures>,
     /// Parsed BSDFs, for reporting.
     pub bsdf_descs: Vec<BsdfDesc>,
     /// Emitters and the light-selection distribution.
@@ -318,9 +328,18 @@ impl Scene {
     /// Builds the runtime scene (BSDFs, BVH, lights, camera).
     pub fn build(desc: SceneDesc) -> Result<Scene, SceneError> {
         let mut bsdfs = Vec::with_capacity(desc.bsdfs.len());
-        for d in &desc.bsdfs {
-            bsdfs.push(Bsdf::from_desc(d).map_err(SceneError::Invalid)?);
+        for (i, d) in desc.bsdfs.iter().enumerate() {
+            let b = Bsdf::from_desc(d).map_err(SceneError::Invalid)?;
+            if let Some(t) = desc.bsdf_textures.get(i) {
+                t.check(&b).map_err(SceneError::Invalid)?;
+            }
+            bsdfs.push(b);
         }
+        let textures = if desc.bsdf_textures.iter().all(BsdfTextures::is_empty) {
+            Vec::new()
+        } else {
+            desc.bsdf_textures
+        };
         let no_geometry = desc.shapes.is_empty()
             && desc.point_lights.is_empty()
             && desc.infinite_lights.is_empty();
@@ -336,10 +355,19 @@ impl Scene {
                     Surface::Mesh(MeshData {
                         positions: m.positions,
                         normals: m.normals,
+                        uvs: m.uvs,
                         indices: m.indices,
                     })
                 }
-                ShapeGeometry::Sphere { center, radius } => Surface::Sphere { center, radius },
+                ShapeGeometry::Sphere {
+                    center,
+                    radius,
+                    frame,
+                } => Surface::Sphere {
+                    center,
+                    radius,
+                    frame,
+                },
                 ShapeGeometry::Disk { to_world } => {
                     let normal = (Mat3::from_mat4(to_world).inverse().transpose() * Vec3::Z)
                         .try_normalize()
@@ -387,6 +415,7 @@ impl Scene {
             geometry,
             shapes,
             bsdfs,
+            textures,
             bsdf_descs: desc.bsdfs,
             lights,
             camera,
@@ -408,9 +437,16 @@ impl Scene {
         })
     }
 
-    /// The BSDF of a shape.
-    pub fn bsdf(&self, shape: u32) -> &Bsdf {
-        &self.bsdfs[self.shapes[shape as usize].bsdf as usize]
+    /// The BSDF at a surface point, with its textured parameters (if any)
+    /// evaluated at the point's UV.
+    #[inline(always)]
+    pub fn bsdf_at(&self, sp: &SurfacePoint) -> BsdfAt<'_> {
+        let i = self.shapes[sp.shape as usize].bsdf as usize;
+        let bsdf = &self.bsdfs[i];
+        match self.textures.get(i) {
+            Some(t) if !t.is_empty() => BsdfAt::Textured(t.apply(bsdf, sp.uv)),
+            _ => BsdfAt::Shared(bsdf),
+        }
     }
 
     /// True when nothing blocks the light sample `ds` from `sp` (for an

@@ -56,12 +56,9 @@ const CHUNK: usize = 1 << 16;
 
 /// A mesh of a `.serialized` file.
 pub struct SerializedMesh {
-    /// Positions, normals (when the file has them) and triangles.
+    /// Positions, normals and texture coordinates (when the file has
+    /// them; UVs as stored, Mitsuba does not flip them) and triangles.
     pub mesh: RawMesh,
-    /// Per-vertex texture coordinates, when the file has them, as stored
-    /// (Mitsuba does not flip them). Kept apart until [`RawMesh`] carries
-    /// UVs.
-    pub uvs: Option<Vec<Vec2>>,
     /// The file asks for face normals (flag `0x0010`). Mitsuba 3 documents
     /// this flag as `face_normals="true"`; Mitsuba 0.6, which wrote these
     /// files, shaded such meshes flat.
@@ -341,9 +338,9 @@ fn read_shape<R: Read>(
         mesh: RawMesh {
             positions: to_vec3(positions),
             normals: normals.map(to_vec3),
+            uvs,
             indices: flat.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
         },
-        uvs,
         face_normals: flags & FACE_NORMALS != 0,
     })
 }

@@ -125,6 +125,7 @@ const PLUGIN_TAGS: &[&str] = &[
     "sampler",
     "rfilter",
     "integrator",
+    "texture",
 ];
 
 /// Maximum `<include>` nesting (guards against include cycles).

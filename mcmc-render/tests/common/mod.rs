@@ -262,7 +262,7 @@ pub fn direct_view(scene: &Scene, n: u32) -> DirectView {
                 continue;
             };
             let shape = its.sp.shape;
-            let is_delta = scene.bsdf(shape).is_delta();
+            let is_delta = scene.bsdf_at(&its.sp).is_delta();
             let is_emitter = scene.shapes[shape as usize].light.is_some();
             if !is_delta && !is_emitter {
                 continue;

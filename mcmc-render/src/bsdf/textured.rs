@@ -1,0 +1,169 @@
+//! Textured BSDF parameters: which colour parameters of a BSDF come from
+//! a texture, and the BSDF at a surface point ([`BsdfAt`]).
+//!
+//! The scene keeps every BSDF as built from its file ([`Bsdf`], the
+//! textured parameters holding the texture's mean) and, beside it, its
+//! [`BsdfTextures`]. At a hit, [`BsdfTextures::apply`] copies the BSDF
+//! (a small `Copy` value) and writes the texture values at the point's UV
+//! into it: no allocation, and untextured BSDFs are lent as they are.
+
+use super::{Bsdf, OneSided};
+use crate::color::Rgb;
+use crate::texture::Texture;
+use glam::Vec2;
+
+/// A colour parameter of a BSDF that may be textured.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TexturedParam {
+    /// `reflectance` of `diffuse` (also inside `twosided`).
+    Reflectance,
+    /// `specular_reflectance` of `conductor`, `roughconductor`,
+    /// `dielectric`, `roughdielectric` (and the conductors in `twosided`).
+    SpecularReflectance,
+    /// `specular_transmittance` of `dielectric` and `roughdielectric`.
+    SpecularTransmittance,
+}
+
+impl TexturedParam {
+    /// Its name in a Mitsuba scene file.
+    pub fn name(self) -> &'static str {
+        match self {
+            TexturedParam::Reflectance => "reflectance",
+            TexturedParam::SpecularReflectance => "specular_reflectance",
+            TexturedParam::SpecularTransmittance => "specular_transmittance",
+        }
+    }
+
+    /// The field of `bsdf` this parameter sets, if the model has it.
+    fn field(self, bsdf: &mut Bsdf) -> Option<&mut Rgb> {
+        use TexturedParam::*;
+        Some(match (self, bsdf) {
+            (Reflectance, Bsdf::Diffuse(b) | Bsdf::TwoSided(OneSided::Diffuse(b))) => {
+                &mut b.reflectance
+            }
+            (SpecularReflectance, Bsdf::Conductor(b) | Bsdf::TwoSided(OneSided::Conductor(b))) => {
+                &mut b.specular_reflectance
+            }
+            (
+                SpecularReflectance,
+                Bsdf::RoughConductor(b) | Bsdf::TwoSided(OneSided::RoughConductor(b)),
+            ) => &mut b.specular_reflectance,
+            (SpecularReflectance, Bsdf::Dielectric(b)) => &mut b.specular_reflectance,
+            (SpecularReflectance, Bsdf::RoughDielectric(b)) => &mut b.specular_reflectance,
+            (SpecularTransmittance, Bsdf::Dielectric(b)) => &mut b.specular_transmittance,
+            (SpecularTransmittance, Bsdf::RoughDielectric(b)) => &mut b.specular_transmittance,
+            _ => return None,
+        })
+    }
+}
+
+/// The textured parameters of one BSDF (empty for most).
+#[derive(Clone, Debug, Default)]
+pub struct BsdfTextures(pub Vec<(TexturedParam, Texture)>);
+
+impl BsdfTextures {
+    /// True when no parameter is textured.
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+
+    /// Checks that `bsdf` has every textured parameter (one line naming
+    /// the first it lacks).
+    pub fn check(&self, bsdf: &Bsdf) -> Result<(), String> {
+        let mut b = *bsdf;
+        for (param, _) in &self.0 {
+            if param.field(&mut b).is_none() {
+                return Err(format!(
+                    "a texture for '{}' does not apply to this BSDF",
+                    param.name()
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// `bsdf` with its textured parameters set to the textures' values at `uv`.
+    #[inline]
+    pub fn apply(&self, bsdf: &Bsdf, uv: Vec2) -> Bsdf {
+        let mut b = *bsdf;
+        for (param, texture) in &self.0 {
+            if let Some(field) = param.field(&mut b) {
+                *field = texture.eval(uv);
+            }
+        }
+        b
+    }
+}
+
+/// The BSDF at a surface point: lent from the scene when untextured, made
+/// for the point when textured. Dereferences to [`Bsdf`].
+#[derive(Clone, Copy, Debug)]
+pub enum BsdfAt<'a> {
+    /// The scene's BSDF, unchanged.
+    Shared(&'a Bsdf),
+    /// A copy with the texture values at the point.
+    Textured(Bsdf),
+}
+
+impl std::ops::Deref for BsdfAt<'_> {
+    type Target = Bsdf;
+
+    #[inline(always)]
+    fn deref(&self) -> &Bsdf {
+        match self {
+            BsdfAt::Shared(b) => b,
+            BsdfAt::Textured(b) => b,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bsdf::BsdfDesc;
+    use crate::texture::Checkerboard;
+    use glam::Affine2;
+
+    fn board() -> Texture {
+        Texture::Checkerboard(Box::new(Checkerboard {
+            color0: Texture::Constant(Rgb::new(0.9, 0.1, 0.1)),
+            color1: Texture::Constant(Rgb::new(0.1, 0.1, 0.9)),
+            to_uv: Affine2::IDENTITY,
+        }))
+    }
+
+    /// A textured two-sided diffuse BSDF evaluates to the texture's value
+    /// at the UV, from both sides, and leaves the template untouched.
+    #[test]
+    fn textured_two_sided_diffuse() {
+        let desc = BsdfDesc::TwoSided {
+            inner: Box::new(BsdfDesc::Diffuse {
+                reflectance: Rgb::splat(0.5),
+            }),
+        };
+        let template = Bsdf::from_desc(&desc).unwrap();
+        let t = BsdfTextures(vec![(TexturedParam::Reflectance, board())]);
+        t.check(&template).unwrap();
+        let up = glam::Vec3::new(0.0, 0.6, 0.8);
+        let down = glam::Vec3::new(0.0, 0.6, -0.8);
+        let mode = crate::bsdf::TransportMode::Radiance;
+        for (uv, want) in [
+            (Vec2::new(0.25, 0.25), Rgb::new(0.9, 0.1, 0.1)),
+            (Vec2::new(0.75, 0.25), Rgb::new(0.1, 0.1, 0.9)),
+        ] {
+            let b = t.apply(&template, uv);
+            let f = want * std::f32::consts::FRAC_1_PI;
+            assert_eq!(b.eval(up, up, mode), f);
+            assert_eq!(b.eval(down, down, mode), f);
+        }
+        assert_eq!(template, Bsdf::from_desc(&desc).unwrap());
+    }
+
+    /// A texture bound to a parameter the model lacks is refused.
+    #[test]
+    fn mismatched_parameter_is_refused() {
+        let diffuse = Bsdf::diffuse(Rgb::splat(0.5));
+        let t = BsdfTextures(vec![(TexturedParam::SpecularTransmittance, board())]);
+        assert!(t.check(&diffuse).is_err());
+    }
+}
