@@ -79,7 +79,7 @@ fn sampling_the_inverse_reproduces_the_direction() {
             let Some(s) = b.sample(wo, ul, u, mode) else {
                 continue;
             };
-            let inv = b.invert(wo, s.wi).unwrap_or_else(|| {
+            let inv = b.invert(wo, s.wi, 0.5).unwrap_or_else(|| {
                 panic!(
                     "{name}: no inverse for a sampled direction wo={wo:?} wi={:?}",
                     s.wi

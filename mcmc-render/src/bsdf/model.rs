@@ -6,6 +6,9 @@ use super::dielectric::{RoughDielectric, SmoothDielectric};
 use super::diffuse::Diffuse;
 use super::fresnel::ConductorFresnel;
 use super::microfacet::Microfacet;
+use super::plastic::SmoothPlastic;
+use super::rough_plastic::RoughPlastic;
+use super::thin_dielectric::ThinDielectric;
 use super::{BsdfDesc, BsdfSample, TransportMode};
 use crate::color::Rgb;
 use glam::Vec3;
@@ -27,6 +30,13 @@ pub enum Bsdf {
     Dielectric(SmoothDielectric),
     /// Microfacet dielectric.
     RoughDielectric(RoughDielectric),
+    /// Smooth plastic: Dirac coating reflection over a diffuse base.
+    Plastic(SmoothPlastic),
+    /// Rough plastic: glossy coating reflection over a diffuse base (boxed:
+    /// it carries a 64-entry transmittance table).
+    RoughPlastic(Box<RoughPlastic>),
+    /// Thin dielectric sheet (Dirac reflection and straight transmission).
+    ThinDielectric(ThinDielectric),
     /// A reflective BSDF applied on both sides: queries from below the surface
     /// are mirrored to the upper hemisphere (z of both directions negated).
     TwoSided(Box<Bsdf>),
@@ -60,6 +70,33 @@ fn relative_ior(int_ior: f32, ext_ior: f32) -> Result<f32, String> {
         ));
     }
     Ok(int_ior / ext_ior)
+}
+
+/// Relative index of a plastic coating: as [`relative_ior`], and not 1
+/// (an index-matched coating has no Fresnel reflection to build on; Mitsuba
+/// 3 refuses it for `roughplastic`, and its `plastic` would divide by zero
+/// in the diffuse Fresnel fit's use).
+fn plastic_ior(int_ior: f32, ext_ior: f32) -> Result<f32, String> {
+    let eta = relative_ior(int_ior, ext_ior)?;
+    if eta == 1.0 {
+        return Err(format!(
+            "a plastic coating needs int_ior != ext_ior, got {int_ior} for both"
+        ));
+    }
+    Ok(eta)
+}
+
+/// Checks a diffuse albedo: finite, each channel in [0, 1] (the
+/// internal-scattering sum R/(1 − R·F_dr) diverges for larger R).
+fn reflectance(name: &str, c: Rgb) -> Result<Rgb, String> {
+    let c = finite_rgb(name, c)?;
+    if c.to_array().iter().all(|v| (0.0..=1.0).contains(v)) {
+        Ok(c)
+    } else {
+        Err(format!(
+            "BSDF parameter `{name}` must lie in [0, 1] per channel, got {c:?}"
+        ))
+    }
 }
 
 impl Bsdf {
@@ -152,10 +189,58 @@ impl Bsdf {
                     })
                 }
             }
+            BsdfDesc::Plastic {
+                diffuse_reflectance,
+                specular_reflectance,
+                int_ior,
+                ext_ior,
+                nonlinear,
+            } => {
+                let eta = plastic_ior(*int_ior, *ext_ior)?;
+                let diffuse = reflectance("diffuse_reflectance", *diffuse_reflectance)?;
+                let specular = finite_rgb("specular_reflectance", *specular_reflectance)?;
+                Bsdf::Plastic(SmoothPlastic::new(eta, diffuse, specular, *nonlinear))
+            }
+            BsdfDesc::RoughPlastic {
+                distribution,
+                alpha,
+                sample_visible,
+                diffuse_reflectance,
+                specular_reflectance,
+                int_ior,
+                ext_ior,
+                nonlinear,
+            } => {
+                let eta = plastic_ior(*int_ior, *ext_ior)?;
+                let diffuse = reflectance("diffuse_reflectance", *diffuse_reflectance)?;
+                let specular = finite_rgb("specular_reflectance", *specular_reflectance)?;
+                Bsdf::RoughPlastic(Box::new(RoughPlastic::new(
+                    *distribution,
+                    roughness("alpha", *alpha)?,
+                    *sample_visible,
+                    eta,
+                    diffuse,
+                    specular,
+                    *nonlinear,
+                )))
+            }
+            BsdfDesc::ThinDielectric {
+                int_ior,
+                ext_ior,
+                specular_reflectance,
+                specular_transmittance,
+            } => Bsdf::ThinDielectric(ThinDielectric {
+                eta: relative_ior(*int_ior, *ext_ior)?,
+                specular_reflectance: finite_rgb("specular_reflectance", *specular_reflectance)?,
+                specular_transmittance: finite_rgb(
+                    "specular_transmittance",
+                    *specular_transmittance,
+                )?,
+            }),
             BsdfDesc::TwoSided { inner } => match Bsdf::from_desc(inner)? {
-                Bsdf::Dielectric(_) | Bsdf::RoughDielectric(_) => {
+                Bsdf::Dielectric(_) | Bsdf::RoughDielectric(_) | Bsdf::ThinDielectric(_) => {
                     return Err(
-                        "`twosided` can only wrap BSDFs without transmission (not dielectric/roughdielectric)"
+                        "`twosided` can only wrap BSDFs without transmission (not dielectric/roughdielectric/thindielectric)"
                             .to_string(),
                     );
                 }
@@ -175,9 +260,11 @@ impl Bsdf {
     pub fn eval(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
         match self {
             Bsdf::Diffuse(b) => b.eval(wo, wi),
-            Bsdf::Conductor(_) | Bsdf::Dielectric(_) => Rgb::BLACK,
+            Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => Rgb::BLACK,
             Bsdf::RoughConductor(b) => b.eval(wo, wi),
             Bsdf::RoughDielectric(b) => b.eval(wo, wi, mode),
+            Bsdf::Plastic(b) => b.eval(wo, wi),
+            Bsdf::RoughPlastic(b) => b.eval(wo, wi),
             Bsdf::TwoSided(inner) => {
                 let (wo, wi) = to_front(wo, wi);
                 inner.eval(wo, wi, mode)
@@ -204,9 +291,11 @@ impl Bsdf {
     fn eval_pdf_one_sided(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> (Rgb, f32) {
         match self {
             Bsdf::Diffuse(b) => (b.eval(wo, wi), b.pdf(wo, wi)),
-            Bsdf::Conductor(_) | Bsdf::Dielectric(_) => (Rgb::BLACK, 0.0),
+            Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => (Rgb::BLACK, 0.0),
             Bsdf::RoughConductor(b) => b.eval_pdf(wo, wi),
             Bsdf::RoughDielectric(b) => b.eval_pdf(wo, wi, mode),
+            Bsdf::Plastic(b) => b.eval_pdf(wo, wi),
+            Bsdf::RoughPlastic(b) => b.eval_pdf(wo, wi),
             // Excluded by `one_sided`.
             Bsdf::TwoSided(_) => (Rgb::BLACK, 0.0),
         }
@@ -282,6 +371,9 @@ impl Bsdf {
             Bsdf::RoughConductor(b) => b.sample(wo, u, mode),
             Bsdf::Dielectric(b) => b.sample(wo, u_lobe, mode),
             Bsdf::RoughDielectric(b) => b.sample(wo, u_lobe, u, mode),
+            Bsdf::Plastic(b) => b.sample(wo, u_lobe, u, mode),
+            Bsdf::RoughPlastic(b) => b.sample(wo, u_lobe, u, mode),
+            Bsdf::ThinDielectric(b) => b.sample(wo, u_lobe, mode),
             // Excluded by `one_sided`.
             Bsdf::TwoSided(_) => None,
         }
@@ -293,9 +385,11 @@ impl Bsdf {
     pub fn pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
         match self {
             Bsdf::Diffuse(b) => b.pdf(wo, wi),
-            Bsdf::Conductor(_) | Bsdf::Dielectric(_) => 0.0,
+            Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => 0.0,
             Bsdf::RoughConductor(b) => b.pdf(wo, wi),
             Bsdf::RoughDielectric(b) => b.pdf(wo, wi, mode),
+            Bsdf::Plastic(b) => b.pdf(wo, wi),
+            Bsdf::RoughPlastic(b) => b.pdf(wo, wi),
             Bsdf::TwoSided(inner) => {
                 let (wo, wi) = to_front(wo, wi);
                 inner.pdf(wo, wi, mode)
@@ -304,23 +398,28 @@ impl Bsdf {
     }
 
     /// True when every lobe is a Dirac delta (smooth conductor, mirror,
-    /// smooth dielectric): `eval` and `pdf` are then identically zero and
-    /// only `sample` transports light.
+    /// smooth and thin dielectric): `eval` and `pdf` are then identically
+    /// zero and only `sample` transports light.
     #[inline]
     pub fn is_delta(&self) -> bool {
         match self.one_sided() {
-            Bsdf::Conductor(_) | Bsdf::Dielectric(_) => true,
-            Bsdf::Diffuse(_) | Bsdf::RoughConductor(_) | Bsdf::RoughDielectric(_) => false,
+            Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => true,
+            Bsdf::Diffuse(_)
+            | Bsdf::RoughConductor(_)
+            | Bsdf::RoughDielectric(_)
+            | Bsdf::Plastic(_)
+            | Bsdf::RoughPlastic(_) => false,
             // Excluded by `one_sided`.
             Bsdf::TwoSided(_) => false,
         }
     }
 
-    /// True when at least one lobe is a Dirac delta (for the current set of
-    /// models this equals [`Bsdf::is_delta`]; kept separate for mixed models).
+    /// True when at least one lobe is a Dirac delta: the delta models, and
+    /// the smooth `plastic`, whose coating reflection is a Dirac lobe over a
+    /// diffuse one (its samples say per sample with `is_delta`).
     pub fn has_delta_lobe(&self) -> bool {
-        match self {
-            Bsdf::TwoSided(inner) => inner.has_delta_lobe(),
+        match self.one_sided() {
+            Bsdf::Plastic(_) => true,
             b => b.is_delta(),
         }
     }

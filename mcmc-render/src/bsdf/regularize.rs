@@ -5,15 +5,23 @@
 use super::conductor::RoughConductor;
 use super::dielectric::RoughDielectric;
 use super::microfacet::Microfacet;
+use super::rough_plastic::RoughPlastic;
 use super::{Bsdf, MicrofacetKind};
 
 impl Bsdf {
     /// A copy whose microfacet roughnesses are raised to at least `min_alpha`
     /// (each axis separately). Smooth conductors and dielectrics become rough
     /// ones with a Beckmann distribution of roughness `min_alpha`, keeping
-    /// their Fresnel parameters and colour scales; index-matched dielectrics
-    /// (which refract straight through whatever the roughness) and diffuse
-    /// surfaces are unchanged. `min_alpha <= 0` (or NaN) returns a plain copy.
+    /// their Fresnel parameters and colour scales; smooth `plastic` becomes
+    /// `roughplastic` likewise (Beckmann, visible-normal sampling; its
+    /// diffuse lobe then uses the rough coating's transmittance, which tends
+    /// to the smooth one as α → 0). Index-matched dielectrics (which refract
+    /// straight through whatever the roughness), thin dielectrics (no rough
+    /// counterpart in Mitsuba; their transmission is undeflected anyway, only
+    /// their reflection stays a Dirac lobe) and diffuse surfaces are
+    /// unchanged. `min_alpha <= 0` (or NaN) returns a plain copy.
+    /// Rough plastics recompute their tables (~0.1 s), so call this once per
+    /// level, not per query.
     pub fn regularized(&self, min_alpha: f32) -> Bsdf {
         if min_alpha.is_nan() || min_alpha <= 0.0 {
             return self.clone();
@@ -45,6 +53,24 @@ impl Bsdf {
                 distribution: raise(&d.distribution),
                 ..*d
             }),
+            Bsdf::Plastic(p) => Bsdf::RoughPlastic(Box::new(RoughPlastic::new(
+                MicrofacetKind::Beckmann,
+                min_alpha,
+                true,
+                p.eta(),
+                p.diffuse_reflectance(),
+                p.specular_reflectance(),
+                p.nonlinear(),
+            ))),
+            Bsdf::RoughPlastic(p) => {
+                let (a, _) = p.distribution().alpha();
+                if a >= min_alpha {
+                    self.clone()
+                } else {
+                    Bsdf::RoughPlastic(Box::new(p.with_alpha(min_alpha)))
+                }
+            }
+            Bsdf::ThinDielectric(_) => self.clone(),
             Bsdf::TwoSided(inner) => Bsdf::TwoSided(Box::new(inner.regularized(min_alpha))),
         }
     }
