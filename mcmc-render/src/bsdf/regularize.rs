@@ -134,6 +134,32 @@ mod tests {
         }
         let diffuse = Bsdf::diffuse(Rgb::splat(0.5));
         assert_eq!(diffuse.regularized(0.3), diffuse);
+        let plastic = Bsdf::from_desc(&BsdfDesc::Plastic {
+            diffuse_reflectance: Rgb::splat(0.3),
+            specular_reflectance: Rgb::WHITE,
+            int_ior: 1.49,
+            ext_ior: 1.0,
+            nonlinear: true,
+        })
+        .unwrap();
+        let rough = plastic.regularized(0.1);
+        match &rough {
+            Bsdf::RoughPlastic(p) => assert_eq!(p.distribution().alpha(), (0.1, 0.1)),
+            other => panic!("{other:?}"),
+        }
+        // Already rough enough: unchanged; rougher levels raise it.
+        assert_eq!(rough.regularized(0.05), rough);
+        assert!(
+            matches!(rough.regularized(0.2), Bsdf::RoughPlastic(ref p) if p.distribution().alpha() == (0.2, 0.2))
+        );
+        let thin = Bsdf::from_desc(&BsdfDesc::ThinDielectric {
+            int_ior: 1.5,
+            ext_ior: 1.0,
+            specular_reflectance: Rgb::WHITE,
+            specular_transmittance: Rgb::WHITE,
+        })
+        .unwrap();
+        assert_eq!(thin.regularized(0.3), thin);
         let two = Bsdf::from_desc(&BsdfDesc::TwoSided {
             inner: Box::new(BsdfDesc::PerfectMirror),
         })
