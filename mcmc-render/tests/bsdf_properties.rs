@@ -638,6 +638,17 @@ fn every_model() -> Vec<(String, Bsdf)> {
     }
     v.push(("plastic".into(), plastic(false, Rgb::splat(0.5))));
     v.push(("plastic nonlinear white".into(), plastic(true, Rgb::WHITE)));
+    // All black: the lobe-selection weight s/(d + s) must not become 0/0.
+    v.push((
+        "plastic black".into(),
+        build(&BsdfDesc::Plastic {
+            diffuse_reflectance: Rgb::BLACK,
+            specular_reflectance: Rgb::BLACK,
+            int_ior: 1.49,
+            ext_ior: 1.0,
+            nonlinear: false,
+        }),
+    ));
     for kind in KINDS {
         for alpha in [1e-5f32, 0.3, 1.0] {
             for visible in [true, false] {

@@ -70,7 +70,8 @@ impl SmoothPlastic {
             specular_reflectance,
             nonlinear,
             fdr_int: fresnel_diffuse_reflectance(1.0 / eta),
-            specular_sampling_weight: s / (d + s),
+            // An all-black material (d = s = 0) would give 0/0.
+            specular_sampling_weight: if d + s > 0.0 { s / (d + s) } else { 0.5 },
         }
     }
 

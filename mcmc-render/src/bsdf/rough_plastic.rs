@@ -96,7 +96,8 @@ impl RoughPlastic {
             diffuse_reflectance,
             specular_reflectance,
             nonlinear,
-            specular_sampling_weight: s / (d + s),
+            // An all-black material (d = s = 0) would give 0/0.
+            specular_sampling_weight: if d + s > 0.0 { s / (d + s) } else { 0.5 },
             internal_reflectance: internal_reflectance as f32,
             external_transmittance,
         }
