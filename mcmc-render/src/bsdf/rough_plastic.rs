@@ -19,8 +19,10 @@
 //! (μ_0 = 1e-6) and interpolated linearly, and R_int is twice the mean of
 //! R_in(μ_i) μ_i over the same 64 cosines. The expectations are integrated
 //! here by tensor Gauss–Legendre quadrature over the random numbers of our
-//! own visible-normal sampler (32² nodes for T, 128² for R_in, whose
-//! integrand jumps at total internal reflection) — Mitsuba's recipe, with
+//! own visible-normal sampler (32² nodes where the light enters the denser
+//! side, 128² where it can be totally internally reflected, which makes the
+//! integrand jump: for the usual int_ior > ext_ior, T and R_in
+//! respectively) — Mitsuba's recipe, with
 //! our sampler and quadrature code, so the tables agree with Mitsuba's to
 //! the quadrature error (see `tests/bsdf_mitsuba.rs`).
 //!
