@@ -38,6 +38,42 @@ fn models() -> Vec<(String, Bsdf)> {
             }),
         ),
     ];
+    v.push((
+        "plastic".into(),
+        build(&BsdfDesc::Plastic {
+            diffuse_reflectance: Rgb::splat(0.5),
+            specular_reflectance: Rgb::WHITE,
+            int_ior: 1.49,
+            ext_ior: 1.0,
+            nonlinear: false,
+        }),
+    ));
+    v.push((
+        "thindielectric".into(),
+        build(&BsdfDesc::ThinDielectric {
+            int_ior: 1.5,
+            ext_ior: 1.0,
+            specular_reflectance: Rgb::WHITE,
+            specular_transmittance: Rgb::WHITE,
+        }),
+    ));
+    for kind in KINDS {
+        for (alpha, sample_visible) in [(0.05f32, true), (0.5, true), (0.3, false)] {
+            v.push((
+                format!("roughplastic {kind:?} {alpha} visible={sample_visible}"),
+                build(&BsdfDesc::RoughPlastic {
+                    distribution: kind,
+                    alpha,
+                    sample_visible,
+                    diffuse_reflectance: Rgb::splat(0.5),
+                    specular_reflectance: Rgb::WHITE,
+                    int_ior: 1.49,
+                    ext_ior: 1.0,
+                    nonlinear: false,
+                }),
+            ));
+        }
+    }
     for kind in KINDS {
         for alpha in ALPHAS.into_iter().chain([(1.0, 1.0)]) {
             v.push((
@@ -56,10 +92,15 @@ fn models() -> Vec<(String, Bsdf)> {
 #[test]
 fn sampling_the_inverse_reproduces_the_direction() {
     let mut r = rng(77);
+    let mut r_choice = rng(78);
     let mode = TransportMode::Radiance;
     for (name, b) in models() {
         let mut angle_errs = Vec::new();
         let mut u_errs = Vec::new();
+        let mut other_lobe = 0usize;
+        // Measure preservation of the stochastic inverse: the lobe it picks
+        // must be distributed like the lobe sampling drew.
+        let (mut glossy_drawn, mut glossy_inverted, mut bernoulli_var) = (0u32, 0u32, 0f64);
         for i in 0..20_000 {
             // Outgoing directions over the whole sphere (both sides for dielectrics).
             let (a, c) = r.next_2d();
@@ -70,7 +111,10 @@ fn sampling_the_inverse_reproduces_the_direction() {
             if i % 2 == 1
                 && matches!(
                     b,
-                    Bsdf::Dielectric(_) | Bsdf::RoughDielectric(_) | Bsdf::TwoSided(_)
+                    Bsdf::Dielectric(_)
+                        | Bsdf::RoughDielectric(_)
+                        | Bsdf::ThinDielectric(_)
+                        | Bsdf::TwoSided(_)
                 )
             {
                 wo.z = -wo.z;
@@ -79,7 +123,10 @@ fn sampling_the_inverse_reproduces_the_direction() {
             let Some(s) = b.sample(wo, ul, u, mode) else {
                 continue;
             };
-            let inv = b.invert(wo, s.wi).unwrap_or_else(|| {
+            // Rough plastic's inverse picks one of its two lobes at random.
+            // (From its own stream, so the other models' samples stay as they were.)
+            let u_choice = r_choice.next_1d();
+            let inv = b.invert(wo, s.wi, u_choice).unwrap_or_else(|| {
                 panic!(
                     "{name}: no inverse for a sampled direction wo={wo:?} wi={:?}",
                     s.wi
@@ -88,10 +135,29 @@ fn sampling_the_inverse_reproduces_the_direction() {
             let (lo, hi) = inv.u_lobe;
             // The lobe probability is recomputed from the half vector of (wo, wi),
             // which rounds slightly differently from the sampled normal.
-            assert!(
-                ul >= lo - 1e-4 && ul < hi + 1e-4,
-                "{name}: u_lobe {ul} outside [{lo}, {hi})"
-            );
+            let mut same_lobe = ul >= lo - 1e-4 && ul < hi + 1e-4;
+            if let Bsdf::RoughPlastic(_) = b {
+                // Its lobe probability depends on wo alone, so it is exact:
+                // no slack (with it, a draw just below the split would count
+                // as the other lobe's and compare the wrong numbers).
+                same_lobe = ul >= lo && ul < hi;
+                // The glossy lobe is [0, p), the diffuse one [p, 1).
+                let p = if lo == 0.0 { hi } else { lo };
+                glossy_drawn += u32::from(ul < p);
+                glossy_inverted += u32::from(lo == 0.0);
+                bernoulli_var += (p * (1.0 - p)) as f64;
+                // Both lobes reach every direction: the inverse may pick the
+                // other one (then only the direction must come back).
+                other_lobe += usize::from(!same_lobe);
+                if !same_lobe {
+                    let again = b
+                        .sample(wo, 0.5 * (lo + hi), inv.u, mode)
+                        .expect("resample");
+                    angle_errs.push((again.wi - s.wi).length());
+                    continue;
+                }
+            }
+            assert!(same_lobe, "{name}: u_lobe {ul} outside [{lo}, {hi})");
             let ul2 = ul.clamp(lo, hi - 1e-7);
             let again = b
                 .sample(wo, ul2, if inv.u_used { inv.u } else { u }, mode)
@@ -133,6 +199,21 @@ fn sampling_the_inverse_reproduces_the_direction() {
             "{name}: only {} samples",
             angle_errs.len()
         );
+        if let Bsdf::RoughPlastic(_) = b {
+            // Where the lobes overlap the choice must go both ways sometimes.
+            assert!(other_lobe > 0, "{name}: the inverse never switched lobes");
+            // Both counts have mean Σ p_spec(wo); each has variance at most
+            // Σ p(1 − p) (the inverse's choice given wi is Bernoulli too), so
+            // their difference is within 5 SE of zero (false alarm < 1e-6).
+            // Control: u_choice^0.8 instead of u_choice (a biased choice)
+            // fails this by 11 SE at Beckmann α = 0.5.
+            let d = glossy_drawn as f64 - glossy_inverted as f64;
+            let se = (2.0 * bernoulli_var).sqrt();
+            assert!(
+                d.abs() < 5.0 * se,
+                "{name}: glossy lobe drawn {glossy_drawn}, chosen by the inverse {glossy_inverted} (SE {se:.1})"
+            );
+        }
         u_errs.sort_by(f32::total_cmp);
         let q = |v: &Vec<f32>, p: f64| {
             if v.is_empty() {

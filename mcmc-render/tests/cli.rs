@@ -52,10 +52,10 @@ fn missing_mesh_file_is_refused() {
 #[test]
 fn unsupported_plugin_is_refused_with_name_and_line() {
     let dir = scratch("plugin");
-    let extra = r#"<shape type="sphere"><bsdf type="plastic"/></shape>"#;
+    let extra = r#"<shape type="sphere"><bsdf type="principled"/></shape>"#;
     write(&dir, "s.xml", &scene_text(SMALL_FILM, extra));
     let out = run(&["info", "s.xml"], &dir);
-    assert_clean_failure(&out, &["s.xml:13", "plastic"]);
+    assert_clean_failure(&out, &["s.xml:13", "principled"]);
 }
 
 #[test]

@@ -177,6 +177,82 @@ fn bsdf_parsing_fills_mitsuba_defaults() {
 }
 
 #[test]
+fn plastic_and_thin_dielectric_parse_with_mitsuba_defaults() {
+    let d = desc(
+        r#"<bsdf type="plastic" id="p"/>
+<bsdf type="roughplastic" id="rp">
+    <string name="distribution" value="ggx"/><float name="alpha" value="0.2"/>
+    <boolean name="sample_visible" value="false"/><boolean name="nonlinear" value="true"/>
+    <rgb name="diffuse_reflectance" value="0.1, 0.2, 0.3"/><string name="int_ior" value="water"/>
+</bsdf>
+<bsdf type="thindielectric" id="t"/>"#,
+    );
+    assert_eq!(
+        d.bsdfs[0],
+        BsdfDesc::Plastic {
+            diffuse_reflectance: Rgb::splat(0.5),
+            specular_reflectance: Rgb::WHITE,
+            int_ior: 1.49,
+            ext_ior: 1.000_277,
+            nonlinear: false,
+        }
+    );
+    assert_eq!(
+        d.bsdfs[1],
+        BsdfDesc::RoughPlastic {
+            distribution: MicrofacetKind::Ggx,
+            alpha: 0.2,
+            sample_visible: false,
+            diffuse_reflectance: Rgb::new(0.1, 0.2, 0.3),
+            specular_reflectance: Rgb::WHITE,
+            int_ior: 1.333,
+            ext_ior: 1.000_277,
+            nonlinear: true,
+        }
+    );
+    assert_eq!(
+        d.bsdfs[2],
+        BsdfDesc::ThinDielectric {
+            int_ior: 1.5046,
+            ext_ior: 1.000_277,
+            specular_reflectance: Rgb::WHITE,
+            specular_transmittance: Rgb::WHITE,
+        }
+    );
+    let dir = scratch("refuse-plastic");
+    for (body, needle) in [
+        (
+            r#"<bsdf type="roughplastic"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.2"/></bsdf>"#,
+            "anisotropic",
+        ),
+        (
+            r#"<bsdf type="plastic"><float name="alpha" value="0.1"/></bsdf>"#,
+            "'alpha'",
+        ),
+        (
+            r#"<bsdf type="plastic"><float name="int_ior" value="1.2"/><float name="ext_ior" value="1.2"/></bsdf>"#,
+            "differ",
+        ),
+        (
+            r#"<bsdf type="roughplastic"><rgb name="diffuse_reflectance" value="1.5"/></bsdf>"#,
+            "[0, 1]",
+        ),
+        (
+            r#"<bsdf type="thindielectric"><string name="int_ior" value="unobtainium"/></bsdf>"#,
+            "unobtainium",
+        ),
+        (
+            r#"<bsdf type="twosided"><bsdf type="thindielectric"/></bsdf>"#,
+            "transmission",
+        ),
+    ] {
+        let e = desc_in(&dir, body, &[]).expect_err(body);
+        assert!(e.contains("scene.xml:3"), "{e}");
+        assert!(e.contains(needle), "{e}");
+    }
+}
+
+#[test]
 fn refusals_name_the_line() {
     let dir = scratch("refuse");
     let cases = [

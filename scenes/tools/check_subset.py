@@ -3,7 +3,7 @@
 
 The subset (issue 5): shapes obj, ply, rectangle, cube, sphere, disk with to_world and
 flip_normals; BSDFs diffuse, conductor, roughconductor, dielectric, roughdielectric,
-twosided, ids and refs; textures bitmap and checkerboard (issue 12); emitters area and point; a perspective sensor with hdrfilm
+thindielectric, plastic, roughplastic, twosided, ids and refs; textures bitmap and checkerboard (issue 12); emitters area and point; a perspective sensor with hdrfilm
 (box or gaussian rfilter) and an independent sampler; the path integrator; values
 rgb, float, integer, boolean, string, point, vector, transform; <default> and <include>.
 
@@ -40,6 +40,9 @@ PLUGINS: dict[str, dict[str, set[str]]] = {
         "roughconductor": {"eta", "k", "material", "distribution", "alpha"},
         "dielectric": {"int_ior", "ext_ior"},
         "roughdielectric": {"int_ior", "ext_ior", "distribution", "alpha"},
+        "thindielectric": {"int_ior", "specular_transmittance"},
+        "plastic": {"diffuse_reflectance", "specular_reflectance", "int_ior", "nonlinear"},
+        "roughplastic": {"diffuse_reflectance", "distribution", "alpha", "nonlinear"},
         "twosided": set(),
     },
     "emitter": {"area": {"radiance"}, "point": {"intensity", "position", "to_world"}},

@@ -70,12 +70,14 @@ impl RoughConductor {
         if d == 0.0 || woh <= 0.0 {
             return (Rgb::BLACK, 0.0);
         }
-        let g1o = self.distribution.g1(wo, h);
+        // Mitsuba's G1 in the value, the exact one in the density (see the
+        // `microfacet` module documentation).
+        let (g1o, g1o_exact) = self.distribution.g1_both(wo, h);
         let g1i = self.distribution.g1(wi, h);
         let f = self.fresnel.eval(woh);
         let value = self.specular_reflectance * f * (d * g1o * g1i / (4.0 * wo.z * wi.z));
         // Visible-normal density G1(wo) (wo·h) D / cos θ_o, times 1/(4 wo·h).
-        let pdf = g1o * d / (4.0 * wo.z);
+        let pdf = g1o_exact * d / (4.0 * wo.z);
         if pdf.is_finite() && value.is_finite() {
             (value, pdf)
         } else {
@@ -84,7 +86,8 @@ impl RoughConductor {
     }
 
     /// Samples a visible normal and reflects `wo` about it. The weight is
-    /// F · G1(wi) (D and G1(wo) cancel against the pdf); weight and pdf are
+    /// F · G1(wi) (D and G1(wo) cancel against the pdf; for Beckmann times
+    /// G1_fit(wo)/G1_exact(wo), see [`Microfacet::g1`]); weight and pdf are
     /// evaluated from the final (wo, wi) pair so they match `eval`/`pdf`.
     pub fn sample(&self, wo: Vec3, u: (f32, f32), _mode: TransportMode) -> Option<BsdfSample> {
         if wo.z <= 0.0 {

@@ -73,6 +73,49 @@ pub enum BsdfDesc {
         /// Scale on transmission.
         specular_transmittance: Rgb,
     },
+    /// Smooth plastic (`plastic`): diffuse base under a smooth coating.
+    Plastic {
+        /// Albedo of the base (Mitsuba default 0.5).
+        diffuse_reflectance: Rgb,
+        /// Scale on the specular reflection (default 1).
+        specular_reflectance: Rgb,
+        /// Interior index of refraction (default: polypropylene, 1.49).
+        int_ior: f32,
+        /// Exterior index of refraction (default: air, 1.000277).
+        ext_ior: f32,
+        /// Colour shift from internal scattering (default false).
+        nonlinear: bool,
+    },
+    /// Rough plastic (`roughplastic`): diffuse base under a rough coating.
+    RoughPlastic {
+        /// Normal distribution (default Beckmann).
+        distribution: MicrofacetKind,
+        /// Roughness (isotropic; default 0.1).
+        alpha: f32,
+        /// Visible-normal sampling (default true); else D(m) cos θ_m sampling.
+        sample_visible: bool,
+        /// Albedo of the base (default 0.5).
+        diffuse_reflectance: Rgb,
+        /// Scale on the specular reflection (default 1).
+        specular_reflectance: Rgb,
+        /// Interior index of refraction (default: polypropylene, 1.49).
+        int_ior: f32,
+        /// Exterior index of refraction (default: air, 1.000277).
+        ext_ior: f32,
+        /// Colour shift from internal scattering (default false).
+        nonlinear: bool,
+    },
+    /// Thin dielectric sheet (`thindielectric`).
+    ThinDielectric {
+        /// Interior index of refraction (default: bk7, 1.5046).
+        int_ior: f32,
+        /// Exterior index of refraction (default: air, 1.000277).
+        ext_ior: f32,
+        /// Scale on reflection.
+        specular_reflectance: Rgb,
+        /// Scale on transmission.
+        specular_transmittance: Rgb,
+    },
     /// `twosided` wrapper: the same BSDF on both sides of the surface.
     TwoSided {
         /// The wrapped BSDF.

@@ -142,10 +142,10 @@ impl RoughDielectric {
             return (Rgb::BLACK, 0.0);
         }
         // g1 repeats half_vector's orientation test; it passes here.
-        let (g1o, g1i) = (
-            self.distribution.g1(wo, hv.h),
-            self.distribution.g1(wi, hv.h),
-        );
+        // Mitsuba's G1 in the value, the exact one in the visible-normal
+        // density (see the `microfacet` module documentation).
+        let (g1o, g1o_exact) = self.distribution.g1_both(wo, hv.h);
+        let g1i = self.distribution.g1(wi, hv.h);
         // Fresnel is symmetric across a refraction pair, but evaluated from
         // the denser side it loses all precision near the critical angle
         // (cos²θ_t cancels). For transmission, evaluate it from the outside,
@@ -159,7 +159,7 @@ impl RoughDielectric {
         let f = fresnel_dielectric(cos_fresnel, self.eta).r;
         let (co, ci) = (wo.z.abs(), wi.z.abs());
         // Visible-normal density from the side of wo: G1(wo) |wo·h| D / |cos θ_o|.
-        let pdf_m = g1o * hv.wo_h.abs() * d / co;
+        let pdf_m = g1o_exact * hv.wo_h.abs() * d / co;
         let (value, pdf) = if hv.reflect {
             let v = self.specular_reflectance * (f * d * g1o * g1i / (4.0 * co * ci));
             (v, pdf_m * f / (4.0 * hv.wi_h.abs()))

@@ -26,12 +26,20 @@ impl Bsdf {
     /// (in either mode: directions do not depend on it)
     /// returns `wi`, or `None` when `sample` cannot produce `wi` from `wo`.
     ///
+    /// `u_choice` (uniform in [0, 1)) is used only where the sampling map is
+    /// many-to-one: `roughplastic`, whose glossy and diffuse lobes both reach
+    /// every `wi`, picks the lobe with probability proportional to its share
+    /// of `pdf(wo, wi)`, which keeps the inverse measure-preserving.
+    ///
     /// For delta models `wi` is trusted to be the reflected or refracted
-    /// direction (its hemisphere picks the lobe). Exact up to f32 rounding:
+    /// direction (its hemisphere picks the lobe). Smooth `plastic` takes `wi`
+    /// for its Dirac lobe when it is the mirror direction of `wo` to within
+    /// 1e-5 (a diffuse sample lands there with probability ~1e-10).
+    /// Exact up to f32 rounding:
     /// sampling the returned numbers gives `wi` back to roughly 1e-5 rad in
     /// well-conditioned regions (less precisely in the far tails of very
     /// peaked lobes, where the sampling map compresses a wide range of `u`).
-    pub fn invert(&self, wo: Vec3, wi: Vec3) -> Option<SampleInverse> {
+    pub fn invert(&self, wo: Vec3, wi: Vec3, u_choice: f32) -> Option<SampleInverse> {
         const ANY: (f32, f32) = (0.0, 1.0);
         match self {
             Bsdf::Diffuse(_) => {
@@ -117,7 +125,51 @@ impl Bsdf {
                 } else {
                     (wo, wi)
                 };
-                inner.bsdf().invert(wo, wi)
+                inner.bsdf().invert(wo, wi, u_choice)
+            }
+            Bsdf::Plastic(p) => {
+                if wo.z <= 0.0 || wi.z <= 0.0 {
+                    return None;
+                }
+                let p_spec = p.specular_probability(p.fresnel(wo.z));
+                let mirror = Vec3::new(-wo.x, -wo.y, wo.z);
+                if (wi - mirror).length_squared() < 1e-10 {
+                    (p_spec > 0.0).then_some(SampleInverse {
+                        u_lobe: (0.0, p_spec),
+                        u: (0.5, 0.5),
+                        u_used: false,
+                    })
+                } else {
+                    (p_spec < 1.0).then_some(SampleInverse {
+                        u_lobe: (p_spec, 1.0),
+                        u: cosine_hemisphere_to_square(wi),
+                        u_used: true,
+                    })
+                }
+            }
+            Bsdf::RoughPlastic(p) => {
+                let (u_lobe, u) = p.invert(wo, wi, u_choice)?;
+                (u_lobe.1 > u_lobe.0).then_some(SampleInverse {
+                    u_lobe,
+                    u,
+                    u_used: true,
+                })
+            }
+            Bsdf::ThinDielectric(d) => {
+                if wo.z == 0.0 || wi.z == 0.0 {
+                    return None;
+                }
+                let r = d.reflectance(wo);
+                let u_lobe = if wo.z * wi.z > 0.0 {
+                    (0.0, r)
+                } else {
+                    (r, 1.0)
+                };
+                (u_lobe.1 > u_lobe.0).then_some(SampleInverse {
+                    u_lobe,
+                    u: (0.5, 0.5),
+                    u_used: false,
+                })
             }
         }
     }

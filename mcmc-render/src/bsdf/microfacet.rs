@@ -4,12 +4,32 @@
 //! All directions are in the local shading frame (z = macro normal);
 //! `alpha_u` is the roughness along x (tangent), `alpha_v` along y.
 //!
-//! Shadowing uses the exact Smith Λ of each distribution. For Beckmann,
-//! Mitsuba 3 uses Walter's rational approximation of G1 (< 0.35 % relative
-//! error); the exact form is used here because visible-normal sampling is
-//! only normalised — its pdf only matches its samples — with the exact G1.
-//! (With the fit in the pdf, the chi-square test in `tests/bsdf_chi2.rs`
-//! rejects every grazing Beckmann case, at p-values down to 1e-138.)
+//! # Two shadowing terms for Beckmann, and why
+//!
+//! Mitsuba 3 evaluates Beckmann's Smith G1 with Walter et al.'s (2007)
+//! rational fit (`smith_g1` in `include/mitsuba/render/microfacet.h`: for
+//! a = 1/(α tan θ), G1 = (3.535 a + 2.181 a²)/(1 + 2.276 a + 2.577 a²) below
+//! a = 1.6, else 1; < 0.35 % from the exact value). The BSDF *value* here uses
+//! the same fit ([`Microfacet::g1`]), so `eval` is what Mitsuba evaluates.
+//!
+//! The *density* of the visible normals is another matter: visible-normal
+//! sampling draws m with density D_w(m) = G1(w, m) max(0, w·m) D(m) / w.z,
+//! which is a normalised density only with the exact Smith G1 (it is the
+//! normaliser ∫ max(0, w·m) D(m) dm / w.z = 1/G1). Mitsuba's sampler inverts
+//! the exact CDF too (three Newton steps), but its `pdf` puts the fit in
+//! D_w, so Mitsuba's pdf is off the true density by G1_fit/G1_exact, and its
+//! sampled weight F·G1_fit(wi) integrates F D G1_exact(wo) G1_fit(wi)/(4 cos θ_o),
+//! not its own `eval` (one factor of up to 0.35 % apart). Here the pdf is the
+//! exact density ([`Microfacet::g1_exact`], [`Microfacet::pdf_visible`]), and
+//! the sampled weight is `eval · cos / pdf`, so BSDF sampling and light
+//! sampling both converge to the integral of Mitsuba's `eval`. Consequences:
+//! `eval` matches Mitsuba to f32 rounding; `pdf` differs from Mitsuba's by
+//! exactly the factor G1_exact(wo)/G1_fit(wo) (`tests/bsdf_mitsuba.rs`
+//! checks both); a Mitsuba render can still differ from ours by up to that
+//! factor on the BSDF-sampled part of its estimate. (With the fit in the
+//! pdf, the chi-square test in `tests/bsdf_chi2.rs` rejects every grazing
+//! Beckmann case, at p-values down to 1e-138.) For GGX both terms are the
+//! same closed form.
 
 use super::desc::MicrofacetKind;
 use super::special::{erfc, erfc_f32, erfc_scaled, erfinv};
@@ -104,22 +124,63 @@ impl Microfacet {
         }
     }
 
-    /// Smith's monodirectional shadowing G1(w, m): zero when `w` sees the back
-    /// of the microfacet (w·m and w·n of different signs).
+    /// Smith's monodirectional shadowing G1(w, m) as Mitsuba 3 evaluates it
+    /// (the BSDF value uses this): exact for GGX, Walter's rational fit for
+    /// Beckmann (see the module documentation). Zero when `w` sees the back of
+    /// the microfacet (w·m and w·n of different signs).
     pub fn g1(&self, w: Vec3, m: Vec3) -> f32 {
+        if w.dot(m) * w.z <= 0.0 {
+            return 0.0;
+        }
+        match self.kind {
+            MicrofacetKind::Ggx => 1.0 / (1.0 + self.lambda(w)),
+            MicrofacetKind::Beckmann => {
+                let xy_alpha2 = (self.alpha_u * w.x) * (self.alpha_u * w.x)
+                    + (self.alpha_v * w.y) * (self.alpha_v * w.y);
+                if xy_alpha2 == 0.0 {
+                    return 1.0;
+                }
+                // a = 1/(α tan θ) = |cos θ| / √(α_x² x² + α_y² y²).
+                let a = w.z.abs() / xy_alpha2.sqrt();
+                if a >= 1.6 {
+                    return 1.0;
+                }
+                let a2 = a * a;
+                (3.535 * a + 2.181 * a2) / (1.0 + 2.276 * a + 2.577 * a2)
+            }
+        }
+    }
+
+    /// The exact Smith G1(w, m) (from Λ), the normaliser of the visible-normal
+    /// density that [`Microfacet::sample_visible`] draws from; same support
+    /// as [`Microfacet::g1`]. Equal to it for GGX.
+    pub fn g1_exact(&self, w: Vec3, m: Vec3) -> f32 {
         if w.dot(m) * w.z <= 0.0 {
             return 0.0;
         }
         1.0 / (1.0 + self.lambda(w))
     }
 
-    /// Separable Smith shadowing–masking G1(wo, m)·G1(wi, m), as Mitsuba 3.
+    /// `(g1(w, m), g1_exact(w, m))`, computing the shared value once for GGX.
+    pub fn g1_both(&self, w: Vec3, m: Vec3) -> (f32, f32) {
+        match self.kind {
+            MicrofacetKind::Ggx => {
+                let g = self.g1_exact(w, m);
+                (g, g)
+            }
+            MicrofacetKind::Beckmann => (self.g1(w, m), self.g1_exact(w, m)),
+        }
+    }
+
+    /// Separable Smith shadowing–masking G1(wo, m)·G1(wi, m) with Mitsuba's
+    /// G1 ([`Microfacet::g1`]).
     pub fn g(&self, wo: Vec3, wi: Vec3, m: Vec3) -> f32 {
         self.g1(wo, m) * self.g1(wi, m)
     }
 
     /// Density of visible normals seen from `w` (w.z > 0), per solid angle of m:
-    /// D_w(m) = G1(w, m) · max(0, w·m) · D(m) / w.z.
+    /// D_w(m) = G1(w, m) · max(0, w·m) · D(m) / w.z with the exact G1, which
+    /// makes it a normalised density (the one `sample_visible` draws from).
     pub fn pdf_visible(&self, w: Vec3, m: Vec3) -> f32 {
         if w.z <= 0.0 {
             return 0.0;
@@ -132,7 +193,7 @@ impl Microfacet {
         if d == 0.0 {
             return 0.0;
         }
-        self.g1(w, m) * wm * d / w.z
+        self.g1_exact(w, m) * wm * d / w.z
     }
 
     /// Samples a microfacet normal from the visible-normal distribution seen

@@ -7,8 +7,9 @@
 //!   camera for camera paths), `wi` the sampled direction.
 //! - [`Bsdf::eval`] returns `f(wo, wi)` **without** the cosine factor.
 //! - [`BsdfSample::weight`] is `f · |cos θ_i| / pdf` (the throughput factor).
-//! - Delta lobes (smooth conductor, smooth dielectric) return `is_delta`
-//!   samples; for them `eval` and `pdf` return zero for any given pair.
+//! - Delta lobes (smooth conductor, smooth and thin dielectric, the coating
+//!   of `plastic`) return `is_delta` samples; `eval` and `pdf` leave them
+//!   out (zero for purely delta models; the diffuse lobe alone for `plastic`).
 //! - The reverse pdf bidirectional methods need is `pdf(wi, wo, mode.flip())`.
 //!
 //! Models ([`Bsdf`], built from a scene's [`BsdfDesc`] by [`Bsdf::from_desc`]),
@@ -22,11 +23,25 @@
 //!   radiance scaling on refraction in radiance mode ([`dielectric`]);
 //! - `roughdielectric`: Walter et al. 2007 with visible-normal sampling and
 //!   the same mode-dependent factor ([`dielectric`]);
+//! - `plastic`: Dirac coating reflection (Fresnel) over a diffuse base, with
+//!   the internal-scattering term and Mitsuba's lobe-selection weight
+//!   ([`plastic`]);
+//! - `roughplastic`: Beckmann or GGX (isotropic) coating over a diffuse base,
+//!   with the coating's transmittance tables computed here ([`rough_plastic`]);
+//! - `thindielectric`: a thin sheet, Dirac reflection with the internal
+//!   multiple-reflection sum 2r/(1 + r) and undeflected transmission
+//!   ([`thin_dielectric`]);
 //! - `twosided`: wraps a reflective model, mirroring queries from below.
 //!
+//! Beckmann shadowing: `eval` uses Mitsuba's rational fit of Smith's G1, so
+//! it equals Mitsuba's value; `pdf` is the exact density of the visible
+//! normals that `sample` draws (normalised only with the exact G1), not
+//! Mitsuba's `pdf`, which carries the fit and so is off the true density by
+//! G1_fit(wo)/G1_exact(wo) (< 0.35 %). Sample weights are `eval · cos / pdf`,
+//! so every estimator converges to the integral of Mitsuba's `eval`
+//! (details in [`microfacet`]).
+//!
 //! Where this differs from Mitsuba 3, on purpose:
-//! - Beckmann uses the exact Smith G1 (Mitsuba: a rational fit with < 0.35 %
-//!   error), so visible-normal sampling and its pdf agree exactly;
 //! - an index-matched `roughdielectric` is built as the smooth `dielectric`
 //!   (which it equals; Mitsuba returns an infinite pdf there).
 //!
@@ -48,9 +63,12 @@ pub mod fresnel;
 pub mod invert;
 pub mod microfacet;
 pub mod model;
+pub mod plastic;
 pub mod regularize;
+pub mod rough_plastic;
 pub mod special;
 pub mod textured;
+pub mod thin_dielectric;
 pub use desc::{BsdfDesc, MicrofacetKind};
 pub use model::{Bsdf, OneSided};
 

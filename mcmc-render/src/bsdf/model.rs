@@ -6,6 +6,9 @@ use super::dielectric::{RoughDielectric, SmoothDielectric};
 use super::diffuse::Diffuse;
 use super::fresnel::ConductorFresnel;
 use super::microfacet::Microfacet;
+use super::plastic::SmoothPlastic;
+use super::rough_plastic::RoughPlastic;
+use super::thin_dielectric::ThinDielectric;
 use super::{BsdfDesc, BsdfSample, TransportMode};
 use crate::color::Rgb;
 use glam::Vec3;
@@ -29,6 +32,13 @@ pub enum Bsdf {
     Dielectric(SmoothDielectric),
     /// Microfacet dielectric.
     RoughDielectric(RoughDielectric),
+    /// Smooth plastic: Dirac coating reflection over a diffuse base.
+    Plastic(SmoothPlastic),
+    /// Rough plastic: glossy coating reflection over a diffuse base (its
+    /// transmittance table shared, by reference).
+    RoughPlastic(RoughPlastic),
+    /// Thin dielectric sheet (Dirac reflection and straight transmission).
+    ThinDielectric(ThinDielectric),
     /// A reflective BSDF applied on both sides: queries from below the surface
     /// are mirrored to the upper hemisphere (z of both directions negated).
     TwoSided(OneSided),
@@ -44,6 +54,10 @@ pub enum OneSided {
     Conductor(SmoothConductor),
     /// Microfacet conductor.
     RoughConductor(RoughConductor),
+    /// Smooth plastic.
+    Plastic(SmoothPlastic),
+    /// Rough plastic.
+    RoughPlastic(RoughPlastic),
 }
 
 impl OneSided {
@@ -54,6 +68,8 @@ impl OneSided {
             OneSided::Diffuse(b) => Bsdf::Diffuse(b),
             OneSided::Conductor(b) => Bsdf::Conductor(b),
             OneSided::RoughConductor(b) => Bsdf::RoughConductor(b),
+            OneSided::Plastic(b) => Bsdf::Plastic(b),
+            OneSided::RoughPlastic(b) => Bsdf::RoughPlastic(b),
         }
     }
 
@@ -64,7 +80,12 @@ impl OneSided {
             Bsdf::Diffuse(b) => Some(OneSided::Diffuse(b)),
             Bsdf::Conductor(b) => Some(OneSided::Conductor(b)),
             Bsdf::RoughConductor(b) => Some(OneSided::RoughConductor(b)),
-            Bsdf::Dielectric(_) | Bsdf::RoughDielectric(_) | Bsdf::TwoSided(_) => None,
+            Bsdf::Plastic(b) => Some(OneSided::Plastic(b)),
+            Bsdf::RoughPlastic(b) => Some(OneSided::RoughPlastic(b)),
+            Bsdf::Dielectric(_)
+            | Bsdf::RoughDielectric(_)
+            | Bsdf::ThinDielectric(_)
+            | Bsdf::TwoSided(_) => None,
         }
     }
 }
@@ -97,6 +118,33 @@ fn relative_ior(int_ior: f32, ext_ior: f32) -> Result<f32, String> {
         ));
     }
     Ok(int_ior / ext_ior)
+}
+
+/// Relative index of a plastic coating: as [`relative_ior`], and not 1
+/// (an index-matched coating has no Fresnel reflection to build on; Mitsuba
+/// 3 refuses it for `roughplastic`, and its `plastic` would divide by zero
+/// in the diffuse Fresnel fit's use).
+fn plastic_ior(int_ior: f32, ext_ior: f32) -> Result<f32, String> {
+    let eta = relative_ior(int_ior, ext_ior)?;
+    if eta == 1.0 {
+        return Err(format!(
+            "a plastic coating needs int_ior != ext_ior, got {int_ior} for both"
+        ));
+    }
+    Ok(eta)
+}
+
+/// Checks a diffuse albedo: finite, each channel in [0, 1] (the
+/// internal-scattering sum R/(1 − R·F_dr) diverges for larger R).
+fn reflectance(name: &str, c: Rgb) -> Result<Rgb, String> {
+    let c = finite_rgb(name, c)?;
+    if c.to_array().iter().all(|v| (0.0..=1.0).contains(v)) {
+        Ok(c)
+    } else {
+        Err(format!(
+            "BSDF parameter `{name}` must lie in [0, 1] per channel, got {c:?}"
+        ))
+    }
 }
 
 impl Bsdf {
@@ -189,11 +237,59 @@ impl Bsdf {
                     })
                 }
             }
+            BsdfDesc::Plastic {
+                diffuse_reflectance,
+                specular_reflectance,
+                int_ior,
+                ext_ior,
+                nonlinear,
+            } => {
+                let eta = plastic_ior(*int_ior, *ext_ior)?;
+                let diffuse = reflectance("diffuse_reflectance", *diffuse_reflectance)?;
+                let specular = finite_rgb("specular_reflectance", *specular_reflectance)?;
+                Bsdf::Plastic(SmoothPlastic::new(eta, diffuse, specular, *nonlinear))
+            }
+            BsdfDesc::RoughPlastic {
+                distribution,
+                alpha,
+                sample_visible,
+                diffuse_reflectance,
+                specular_reflectance,
+                int_ior,
+                ext_ior,
+                nonlinear,
+            } => {
+                let eta = plastic_ior(*int_ior, *ext_ior)?;
+                let diffuse = reflectance("diffuse_reflectance", *diffuse_reflectance)?;
+                let specular = finite_rgb("specular_reflectance", *specular_reflectance)?;
+                Bsdf::RoughPlastic(RoughPlastic::new(
+                    *distribution,
+                    roughness("alpha", *alpha)?,
+                    *sample_visible,
+                    eta,
+                    diffuse,
+                    specular,
+                    *nonlinear,
+                ))
+            }
+            BsdfDesc::ThinDielectric {
+                int_ior,
+                ext_ior,
+                specular_reflectance,
+                specular_transmittance,
+            } => Bsdf::ThinDielectric(ThinDielectric {
+                eta: relative_ior(*int_ior, *ext_ior)?,
+                specular_reflectance: finite_rgb("specular_reflectance", *specular_reflectance)?,
+                specular_transmittance: finite_rgb(
+                    "specular_transmittance",
+                    *specular_transmittance,
+                )?,
+            }),
             BsdfDesc::TwoSided { inner } => match Bsdf::from_desc(inner)? {
                 // Two-sided twice is two-sided once.
                 b @ Bsdf::TwoSided(_) => b,
                 b => Bsdf::TwoSided(OneSided::from_bsdf(b).ok_or_else(|| {
-                    "`twosided` can only wrap BSDFs without transmission (not dielectric/roughdielectric)"
+                    "`twosided` can only wrap BSDFs without transmission (not dielectric/roughdielectric/thindielectric)"
                         .to_string()
                 })?),
             },
@@ -209,9 +305,11 @@ impl Bsdf {
     pub fn eval(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
         match self {
             Bsdf::Diffuse(b) => b.eval(wo, wi),
-            Bsdf::Conductor(_) | Bsdf::Dielectric(_) => Rgb::BLACK,
+            Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => Rgb::BLACK,
             Bsdf::RoughConductor(b) => b.eval(wo, wi),
             Bsdf::RoughDielectric(b) => b.eval(wo, wi, mode),
+            Bsdf::Plastic(b) => b.eval(wo, wi),
+            Bsdf::RoughPlastic(b) => b.eval(wo, wi),
             Bsdf::TwoSided(inner) => {
                 let (wo, wi) = to_front(wo, wi);
                 inner.bsdf().eval(wo, wi, mode)
@@ -238,9 +336,11 @@ impl Bsdf {
     fn eval_pdf_one_sided(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> (Rgb, f32) {
         match self {
             Bsdf::Diffuse(b) => (b.eval(wo, wi), b.pdf(wo, wi)),
-            Bsdf::Conductor(_) | Bsdf::Dielectric(_) => (Rgb::BLACK, 0.0),
+            Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => (Rgb::BLACK, 0.0),
             Bsdf::RoughConductor(b) => b.eval_pdf(wo, wi),
             Bsdf::RoughDielectric(b) => b.eval_pdf(wo, wi, mode),
+            Bsdf::Plastic(b) => b.eval_pdf(wo, wi),
+            Bsdf::RoughPlastic(b) => b.eval_pdf(wo, wi),
             // Never called on it (`eval_pdf` unwraps it).
             Bsdf::TwoSided(_) => (Rgb::BLACK, 0.0),
         }
@@ -304,6 +404,9 @@ impl Bsdf {
             Bsdf::RoughConductor(b) => b.sample(wo, u, mode),
             Bsdf::Dielectric(b) => b.sample(wo, u_lobe, mode),
             Bsdf::RoughDielectric(b) => b.sample(wo, u_lobe, u, mode),
+            Bsdf::Plastic(b) => b.sample(wo, u_lobe, u, mode),
+            Bsdf::RoughPlastic(b) => b.sample(wo, u_lobe, u, mode),
+            Bsdf::ThinDielectric(b) => b.sample(wo, u_lobe, mode),
             // Never called on it (`sample_general` unwraps it).
             Bsdf::TwoSided(_) => None,
         }
@@ -315,9 +418,11 @@ impl Bsdf {
     pub fn pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
         match self {
             Bsdf::Diffuse(b) => b.pdf(wo, wi),
-            Bsdf::Conductor(_) | Bsdf::Dielectric(_) => 0.0,
+            Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => 0.0,
             Bsdf::RoughConductor(b) => b.pdf(wo, wi),
             Bsdf::RoughDielectric(b) => b.pdf(wo, wi, mode),
+            Bsdf::Plastic(b) => b.pdf(wo, wi),
+            Bsdf::RoughPlastic(b) => b.pdf(wo, wi),
             Bsdf::TwoSided(inner) => {
                 let (wo, wi) = to_front(wo, wi);
                 inner.bsdf().pdf(wo, wi, mode)
@@ -326,21 +431,27 @@ impl Bsdf {
     }
 
     /// True when every lobe is a Dirac delta (smooth conductor, mirror,
-    /// smooth dielectric): `eval` and `pdf` are then identically zero and
-    /// only `sample` transports light.
+    /// smooth and thin dielectric): `eval` and `pdf` are then identically
+    /// zero and only `sample` transports light.
     #[inline]
     pub fn is_delta(&self) -> bool {
         match self {
-            Bsdf::Conductor(_) | Bsdf::Dielectric(_) => true,
-            Bsdf::Diffuse(_) | Bsdf::RoughConductor(_) | Bsdf::RoughDielectric(_) => false,
+            Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => true,
+            Bsdf::Diffuse(_)
+            | Bsdf::RoughConductor(_)
+            | Bsdf::RoughDielectric(_)
+            | Bsdf::Plastic(_)
+            | Bsdf::RoughPlastic(_) => false,
             Bsdf::TwoSided(inner) => inner.bsdf().is_delta(),
         }
     }
 
-    /// True when at least one lobe is a Dirac delta (for the current set of
-    /// models this equals [`Bsdf::is_delta`]; kept separate for mixed models).
+    /// True when at least one lobe is a Dirac delta: the delta models, and
+    /// the smooth `plastic`, whose coating reflection is a Dirac lobe over a
+    /// diffuse one (its samples say per sample with `is_delta`).
     pub fn has_delta_lobe(&self) -> bool {
         match self {
+            Bsdf::Plastic(_) => true,
             Bsdf::TwoSided(inner) => inner.bsdf().has_delta_lobe(),
             b => b.is_delta(),
         }
@@ -386,9 +497,13 @@ mod tests {
     fn bsdf_is_shareable_across_threads() {
         fn assert_traits<T: Clone + Send + Sync + std::fmt::Debug + 'static>() {}
         assert_traits::<Bsdf>();
-        // Small enough to store per shape or per triangle group without boxing.
+        // Small enough to store per shape and to copy per hit for textured
+        // materials (`bsdf::textured`): 72 bytes since the rough plastic,
+        // whose cached constants (distribution, two colours, coating
+        // reflectance, sampling weight, table reference) fill 64 bytes and
+        // leave no niche for the enum tags.
         assert!(
-            std::mem::size_of::<Bsdf>() <= 64,
+            std::mem::size_of::<Bsdf>() <= 72,
             "{}",
             std::mem::size_of::<Bsdf>()
         );

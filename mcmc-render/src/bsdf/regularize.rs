@@ -6,15 +6,23 @@ use super::conductor::RoughConductor;
 use super::dielectric::RoughDielectric;
 use super::microfacet::Microfacet;
 use super::model::OneSided;
+use super::rough_plastic::RoughPlastic;
 use super::{Bsdf, MicrofacetKind};
 
 impl Bsdf {
     /// A copy whose microfacet roughnesses are raised to at least `min_alpha`
     /// (each axis separately). Smooth conductors and dielectrics become rough
     /// ones with a Beckmann distribution of roughness `min_alpha`, keeping
-    /// their Fresnel parameters and colour scales; index-matched dielectrics
-    /// (which refract straight through whatever the roughness) and diffuse
-    /// surfaces are unchanged. `min_alpha <= 0` (or NaN) returns a plain copy.
+    /// their Fresnel parameters and colour scales; smooth `plastic` becomes
+    /// `roughplastic` likewise (Beckmann, visible-normal sampling; its
+    /// diffuse lobe then uses the rough coating's transmittance, which tends
+    /// to the smooth one as α → 0). Index-matched dielectrics (which refract
+    /// straight through whatever the roughness), thin dielectrics (no rough
+    /// counterpart in Mitsuba; their transmission is undeflected anyway, only
+    /// their reflection stays a Dirac lobe) and diffuse surfaces are
+    /// unchanged. `min_alpha <= 0` (or NaN) returns a plain copy.
+    /// Rough plastics recompute their tables (~0.1 s), so call this once per
+    /// level, not per query.
     pub fn regularized(&self, min_alpha: f32) -> Bsdf {
         if min_alpha.is_nan() || min_alpha <= 0.0 {
             return *self;
@@ -46,8 +54,26 @@ impl Bsdf {
                 distribution: raise(&d.distribution),
                 ..*d
             }),
+            Bsdf::Plastic(p) => Bsdf::RoughPlastic(RoughPlastic::new(
+                MicrofacetKind::Beckmann,
+                min_alpha,
+                true,
+                p.eta(),
+                p.diffuse_reflectance(),
+                p.specular_reflectance(),
+                p.nonlinear(),
+            )),
+            Bsdf::RoughPlastic(p) => {
+                let (a, _) = p.distribution().alpha();
+                if a >= min_alpha {
+                    *self
+                } else {
+                    Bsdf::RoughPlastic(p.with_alpha(min_alpha))
+                }
+            }
+            Bsdf::ThinDielectric(_) => *self,
             // Roughening keeps a model reflective-only (diffuse stays
-            // diffuse, conductors stay conductors).
+            // diffuse, conductors stay conductors, plastics stay plastics).
             Bsdf::TwoSided(inner) => Bsdf::TwoSided(
                 OneSided::from_bsdf(inner.bsdf().regularized(min_alpha))
                     .expect("a roughened reflective model is reflective"),
@@ -114,6 +140,32 @@ mod tests {
         }
         let diffuse = Bsdf::diffuse(Rgb::splat(0.5));
         assert_eq!(diffuse.regularized(0.3), diffuse);
+        let plastic = Bsdf::from_desc(&BsdfDesc::Plastic {
+            diffuse_reflectance: Rgb::splat(0.3),
+            specular_reflectance: Rgb::WHITE,
+            int_ior: 1.49,
+            ext_ior: 1.0,
+            nonlinear: true,
+        })
+        .unwrap();
+        let rough = plastic.regularized(0.1);
+        match &rough {
+            Bsdf::RoughPlastic(p) => assert_eq!(p.distribution().alpha(), (0.1, 0.1)),
+            other => panic!("{other:?}"),
+        }
+        // Already rough enough: unchanged; rougher levels raise it.
+        assert_eq!(rough.regularized(0.05), rough);
+        assert!(
+            matches!(rough.regularized(0.2), Bsdf::RoughPlastic(ref p) if p.distribution().alpha() == (0.2, 0.2))
+        );
+        let thin = Bsdf::from_desc(&BsdfDesc::ThinDielectric {
+            int_ior: 1.5,
+            ext_ior: 1.0,
+            specular_reflectance: Rgb::WHITE,
+            specular_transmittance: Rgb::WHITE,
+        })
+        .unwrap();
+        assert_eq!(thin.regularized(0.3), thin);
         let two = Bsdf::from_desc(&BsdfDesc::TwoSided {
             inner: Box::new(BsdfDesc::PerfectMirror),
         })

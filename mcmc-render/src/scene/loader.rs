@@ -761,6 +761,67 @@ impl Loader {
                     }
                 }
             }
+            "plastic" | "roughplastic" => {
+                let int_ior = props.ior("int_ior", 1.49)?;
+                let ext_ior = props.ior("ext_ior", 1.000_277)?;
+                if !(int_ior > 0.0 && ext_ior > 0.0) || int_ior == ext_ior {
+                    return Err(err(
+                        &p.loc,
+                        "int_ior and ext_ior must be positive and differ",
+                    ));
+                }
+                let diffuse_reflectance = props.rgb("diffuse_reflectance", Rgb::splat(0.5))?;
+                if !diffuse_reflectance
+                    .to_array()
+                    .iter()
+                    .all(|c| (0.0..=1.0).contains(c))
+                {
+                    return Err(err(&p.loc, "diffuse_reflectance must lie in [0, 1]"));
+                }
+                let specular_reflectance = props.rgb("specular_reflectance", Rgb::WHITE)?;
+                let nonlinear = props.boolean("nonlinear", false)?;
+                if p.kind == "plastic" {
+                    BsdfDesc::Plastic {
+                        diffuse_reflectance,
+                        specular_reflectance,
+                        int_ior,
+                        ext_ior,
+                        nonlinear,
+                    }
+                } else {
+                    let (distribution, alpha_u, alpha_v, sample_visible) =
+                        microfacet_params(&mut props, &p.loc)?;
+                    if alpha_u != alpha_v {
+                        return Err(err(
+                            &p.loc,
+                            "roughplastic does not support anisotropic roughness (as Mitsuba 3)",
+                        ));
+                    }
+                    BsdfDesc::RoughPlastic {
+                        distribution,
+                        alpha: alpha_u,
+                        sample_visible,
+                        diffuse_reflectance,
+                        specular_reflectance,
+                        int_ior,
+                        ext_ior,
+                        nonlinear,
+                    }
+                }
+            }
+            "thindielectric" => {
+                let int_ior = props.ior("int_ior", 1.5046)?;
+                let ext_ior = props.ior("ext_ior", 1.000_277)?;
+                if !(int_ior > 0.0 && ext_ior > 0.0) {
+                    return Err(err(&p.loc, "int_ior and ext_ior must be positive"));
+                }
+                BsdfDesc::ThinDielectric {
+                    int_ior,
+                    ext_ior,
+                    specular_reflectance: props.rgb("specular_reflectance", Rgb::WHITE)?,
+                    specular_transmittance: props.rgb("specular_transmittance", Rgb::WHITE)?,
+                }
+            }
             "twosided" => {
                 let mut inner = None;
                 for child in &p.children {
@@ -787,6 +848,17 @@ impl Loader {
                 if matches!(inner, BsdfDesc::TwoSided { .. }) {
                     return Err(err(&p.loc, "twosided cannot wrap another twosided"));
                 }
+                if matches!(
+                    inner,
+                    BsdfDesc::Dielectric { .. }
+                        | BsdfDesc::RoughDielectric { .. }
+                        | BsdfDesc::ThinDielectric { .. }
+                ) {
+                    return Err(err(
+                        &p.loc,
+                        "twosided can only wrap BSDFs without transmission (as Mitsuba 3)",
+                    ));
+                }
                 props.finish()?;
                 return Ok((
                     BsdfDesc::TwoSided {
@@ -799,7 +871,7 @@ impl Loader {
                 return Err(err(
                     &p.loc,
                     format!(
-                        "unsupported bsdf \"{other}\" (supported: diffuse, conductor, roughconductor, dielectric, roughdielectric, twosided)"
+                        "unsupported bsdf \"{other}\" (supported: diffuse, conductor, roughconductor, dielectric, roughdielectric, thindielectric, plastic, roughplastic, twosided)"
                     ),
                 ));
             }
@@ -1147,7 +1219,25 @@ fn conductor_ior(props: &mut Props) -> Result<(Rgb, Rgb), SceneError> {
 }
 
 /// `distribution`, `alpha` / `alpha_u` / `alpha_v` and `sample_visible`.
+/// `distribution`, roughness and `sample_visible` of a microfacet model
+/// whose sampling is visible-normal only (refuses `sample_visible=false`).
 fn microfacet(props: &mut Props, loc: &Loc) -> Result<(MicrofacetKind, f32, f32), SceneError> {
+    let (distribution, alpha_u, alpha_v, sample_visible) = microfacet_params(props, loc)?;
+    if !sample_visible {
+        return Err(err(
+            loc,
+            "sample_visible=false is not supported (visible-normal sampling only)",
+        ));
+    }
+    Ok((distribution, alpha_u, alpha_v))
+}
+
+/// `distribution` (beckmann), `alpha` (0.1) or `alpha_u`+`alpha_v`, and
+/// `sample_visible` (true), as Mitsuba 3's microfacet distributions read them.
+fn microfacet_params(
+    props: &mut Props,
+    loc: &Loc,
+) -> Result<(MicrofacetKind, f32, f32, bool), SceneError> {
     let distribution = match props.opt_string("distribution")? {
         None => MicrofacetKind::Beckmann,
         Some((s, l)) => match s.as_str() {
@@ -1178,13 +1268,8 @@ fn microfacet(props: &mut Props, loc: &Loc) -> Result<(MicrofacetKind, f32, f32)
     if !(alpha_u > 0.0 && alpha_v > 0.0) {
         return Err(err(loc, "alpha must be positive"));
     }
-    if !props.boolean("sample_visible", true)? {
-        return Err(err(
-            loc,
-            "sample_visible=false is not supported (visible-normal sampling only)",
-        ));
-    }
-    Ok((distribution, alpha_u, alpha_v))
+    let sample_visible = props.boolean("sample_visible", true)?;
+    Ok((distribution, alpha_u, alpha_v, sample_visible))
 }
 
 /// The nested `<texture name=…>` elements of a plugin, each to be taken

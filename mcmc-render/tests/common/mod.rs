@@ -262,7 +262,8 @@ pub fn direct_view(scene: &Scene, n: u32) -> DirectView {
                 continue;
             };
             let shape = its.sp.shape;
-            let is_delta = scene.bsdf_at(&its.sp).is_delta();
+            // Any Dirac lobe (also smooth plastic's coating) is one LT misses.
+            let is_delta = scene.bsdf_at(&its.sp).has_delta_lobe();
             let is_emitter = scene.shapes[shape as usize].light.is_some();
             if !is_delta && !is_emitter {
                 continue;

@@ -49,6 +49,33 @@ for dist in ["beckmann", "ggx"]:
             "int_ior": 1.5, "ext_ior": 1.0,
         }
 
+# Coated and thin models (appended after the others, so that the random
+# directions of the earlier configurations stay as they were).
+CONFIGS["plastic"] = {"type": "plastic", "diffuse_reflectance": rgb([0.2, 0.5, 0.8])}
+CONFIGS["plasticnl"] = {
+    "type": "plastic", "diffuse_reflectance": rgb([0.2, 0.5, 0.8]), "nonlinear": True,
+    "specular_reflectance": rgb([0.9, 0.7, 0.5]), "int_ior": 1.9,
+}
+for dist, a in [("beckmann", 0.1), ("ggx", 0.3), ("beckmann", 0.5)]:
+    CONFIGS[f"roughplastic_{dist}_{a}_{a}"] = {
+        "type": "roughplastic", "distribution": dist, "alpha": a,
+        "diffuse_reflectance": rgb([0.2, 0.5, 0.8]),
+    }
+CONFIGS["roughplasticnl_ggx_0.2_0.2"] = {
+    "type": "roughplastic", "distribution": "ggx", "alpha": 0.2, "nonlinear": True,
+    "diffuse_reflectance": rgb([0.2, 0.5, 0.8]), "specular_reflectance": rgb([0.9, 0.7, 0.5]),
+    "int_ior": 1.9,
+}
+CONFIGS["roughplastichidden_beckmann_0.2_0.2"] = {
+    "type": "roughplastic", "distribution": "beckmann", "alpha": 0.2, "sample_visible": False,
+    "diffuse_reflectance": rgb([0.2, 0.5, 0.8]),
+}
+CONFIGS["thindielectric"] = {"type": "thindielectric", "int_ior": 1.5, "ext_ior": 1.0}
+CONFIGS["thindielectric_tinted"] = {
+    "type": "thindielectric", "int_ior": 1.9, "ext_ior": 1.0,
+    "specular_reflectance": rgb([0.9, 0.7, 0.5]), "specular_transmittance": rgb([0.3, 0.6, 0.9]),
+}
+
 
 def unit(rng):
     z = rng.uniform(-1, 1)
