@@ -18,6 +18,11 @@
 //! `ess_bulk_min` is the smallest bulk ESS over coordinates and `rhat_max`
 //! the largest rank-normalised split R-hat (mcmc_core::diagnostics).
 //! H²MC also evaluates one Hessian per proposal (`hessian_evaluations`).
+//!
+//! MALA moves diffusively (in 100 dimensions ≈ 100 steps per independent
+//! draw), so it runs `--mala-steps k` (default 20) steps per kept draw and
+//! `k × warmup` warm-up steps: with one gradient per step that is 40 000
+//! gradients per chain, about the budget of NUTS on the Gaussian.
 
 // Shared with the `hmc` example, which also reads the true coefficients.
 #[allow(dead_code)]
@@ -68,6 +73,7 @@ struct Options {
     seed: u64,
     hmc_time: Option<f64>,
     h2mc_tau: f64,
+    mala_steps: usize,
     samplers: Vec<String>,
 }
 
@@ -83,6 +89,7 @@ fn parse() -> Result<Options, String> {
         seed: 2026,
         hmc_time: None,
         h2mc_tau: 1.0,
+        mala_steps: 20,
         samplers: SAMPLERS.map(String::from).to_vec(),
     };
     let mut args = std::env::args().skip(1);
@@ -126,6 +133,11 @@ fn parse() -> Result<Options, String> {
                     ));
                 }
             }
+            "--mala-steps" => {
+                o.mala_steps = value("--mala-steps")?
+                    .parse()
+                    .map_err(|e| format!("--mala-steps: {e}"))?
+            }
             "--h2mc-tau" => {
                 o.h2mc_tau = value("--h2mc-tau")?
                     .parse()
@@ -133,13 +145,16 @@ fn parse() -> Result<Options, String> {
             }
             other => {
                 return Err(format!(
-                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --hmc-time T, --h2mc-tau τ, --samplers a,b)"
+                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --hmc-time T, --h2mc-tau τ, --mala-steps k, --samplers a,b)"
                 ));
             }
         }
     }
     if !(o.h2mc_tau > 0.0 && o.h2mc_tau <= 1.0) {
         return Err("--h2mc-tau must lie in (0, 1]".into());
+    }
+    if o.mala_steps == 0 {
+        return Err("--mala-steps must be at least 1".into());
     }
     if o.chains == 0 || o.draws < 4 {
         return Err("need at least 1 chain and 4 draws".into());
@@ -216,7 +231,16 @@ fn finish(target: &str, sampler: &str, seconds: f64, c: Counts, draws: &[Vec<Vec
     }
 }
 
-fn run_ours<G, K>(target_name: &str, sampler: &str, g: &G, make: impl Fn() -> K, o: &Options) -> Run
+/// Runs `o.chains` chains of the kernel `make()` builds: `o.warmup × thin`
+/// warm-up steps, then `o.draws` draws each `thin` steps apart.
+fn run_ours<G, K>(
+    target_name: &str,
+    sampler: &str,
+    g: &G,
+    make: impl Fn() -> K,
+    thin: usize,
+    o: &Options,
+) -> Run
 where
     G: GradientTarget + Clone,
     K: Kernel<Vec<f64>, GradientPayload> + Counted,
@@ -234,14 +258,16 @@ where
             stream_rng(o.seed, c as u64),
         )
         .expect("the initial point has a finite density");
-        for _ in 0..o.warmup {
+        for _ in 0..o.warmup * thin {
             chain.step(&t);
         }
         chain.freeze();
         let warm_divergences = chain.algorithm().kernel().counts().divergences;
         let mut draws = Vec::with_capacity(o.draws);
         for _ in 0..o.draws {
-            chain.step(&t);
+            for _ in 0..thin {
+                chain.step(&t);
+            }
             draws.push(chain.state().clone());
         }
         let k = chain.algorithm().kernel();
@@ -453,13 +479,14 @@ fn compare<G: GradientTarget + Clone>(name: &str, g: &G, time: f64, o: &Options)
     let on = |s: &str| o.samplers.iter().any(|x| x == s);
     let mut runs = Vec::new();
     if on("nuts") {
-        runs.push(run_ours(name, "nuts", g, || nuts(g.clone(), w), o));
+        runs.push(run_ours(name, "nuts", g, || nuts(g.clone(), w), 1, o));
     }
     if on("hmc") {
-        runs.push(run_ours(name, "hmc", g, || hmc(g.clone(), time, w), o));
+        runs.push(run_ours(name, "hmc", g, || hmc(g.clone(), time, w), 1, o));
     }
     if on("mala") {
-        runs.push(run_ours(name, "mala", g, || mala(g.clone(), w), o));
+        let k = o.mala_steps;
+        runs.push(run_ours(name, "mala", g, || mala(g.clone(), w * k), k, o));
     }
     if on("h2mc") {
         runs.push(run_ours(
@@ -467,6 +494,7 @@ fn compare<G: GradientTarget + Clone>(name: &str, g: &G, time: f64, o: &Options)
             "h2mc",
             g,
             || h2mc(g.clone(), o.h2mc_tau, w),
+            1,
             o,
         ));
     }
@@ -506,7 +534,8 @@ fn h2mc<G: GradientTarget>(g: G, tau: f64, warmup: usize) -> H2mc<G> {
         .expect("valid settings")
 }
 
-/// Our adaptive MALA: dual averaging to 0.574, diagonal metric windows.
+/// Our adaptive MALA: dual averaging to 0.574, diagonal metric windows
+/// growing with the warm-up (`Mala::with_warmup`).
 fn mala<G: GradientTarget>(g: G, warmup: usize) -> Mala<G> {
     Mala::new(g, 0.1)
         .and_then(|m| m.with_warmup(warmup, 0.574, MetricAdaptation::Diagonal))
