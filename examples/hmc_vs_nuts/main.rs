@@ -1,12 +1,19 @@
 //! Our NUTS, adaptive HMC, MALA and H²MC side by side with nuts-rs, in one
 //! process, on the same targets: a 100-d correlated Gaussian and a Bayesian
-//! logistic regression (d = 25, n = 1000, synthetic data).
+//! logistic regression (d = 25, n = 1000, synthetic data); then our NUTS
+//! and nuts-rs only on two posteriordb posteriors of
+//! `mcmc_examples::posteriordb` (`arK-arK`, an AR(5) time series, and
+//! `eight_schools-eight_schools_noncentered`).
 //!
 //! ```text
 //! cargo run --release --example hmc_vs_nuts -- --json
 //! cargo run --release --example hmc_vs_nuts -- --chains 4 --warmup 1000 --draws 1000
 //! cargo run --release --example hmc_vs_nuts -- --draws 10000 --samplers nuts,hmc,nuts-rs
+//! cargo run --release --example hmc_vs_nuts -- --samplers nuts,nuts-rs --nuts-term-buffer 150
 //! ```
+//!
+//! `--nuts-term-buffer N` sets our NUTS's final step-size-only warm-up
+//! buffer (CmdStan's `term_buffer`, default 50).
 //!
 //! Every sampler runs `chains` chains one after the other on one thread,
 //! each with `warmup` adaptation steps and `draws` kept draws, from a
@@ -29,11 +36,12 @@
 #[path = "targets.rs"]
 mod targets;
 
-use mcmc_core::adaptation::MetricAdaptation;
+use mcmc_core::adaptation::{MetricAdaptation, WarmupSchedule};
 use mcmc_core::diagnostics::summarize;
 use mcmc_core::gradient::{Differentiable, GradientPayload, GradientTarget};
 use mcmc_core::kernel::{GradientKernelStatistics, H2mc, Hmc, Kernel, Mala, Nuts, Trajectory};
 use mcmc_core::prelude::{Chain, MetropolisHastings, stream_rng};
+use mcmc_examples::posteriordb;
 use nuts_rs::{
     Chain as NutsChain, CpuLogpFunc, CpuMath, DiagNutsSettings, HasDims, LogpError, Settings,
 };
@@ -65,6 +73,7 @@ struct Report {
     runs: Vec<Run>,
 }
 
+#[derive(Clone)]
 struct Options {
     json: bool,
     chains: usize,
@@ -74,6 +83,7 @@ struct Options {
     hmc_time: Option<f64>,
     h2mc_tau: f64,
     mala_steps: usize,
+    nuts_term_buffer: usize,
     samplers: Vec<String>,
 }
 
@@ -90,6 +100,7 @@ fn parse() -> Result<Options, String> {
         hmc_time: None,
         h2mc_tau: 1.0,
         mala_steps: 20,
+        nuts_term_buffer: 50,
         samplers: SAMPLERS.map(String::from).to_vec(),
     };
     let mut args = std::env::args().skip(1);
@@ -133,6 +144,11 @@ fn parse() -> Result<Options, String> {
                     ));
                 }
             }
+            "--nuts-term-buffer" => {
+                o.nuts_term_buffer = value("--nuts-term-buffer")?
+                    .parse()
+                    .map_err(|e| format!("--nuts-term-buffer: {e}"))?
+            }
             "--mala-steps" => {
                 o.mala_steps = value("--mala-steps")?
                     .parse()
@@ -145,7 +161,7 @@ fn parse() -> Result<Options, String> {
             }
             other => {
                 return Err(format!(
-                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --hmc-time T, --h2mc-tau τ, --mala-steps k, --samplers a,b)"
+                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --hmc-time T, --h2mc-tau τ, --mala-steps k, --nuts-term-buffer N, --samplers a,b)"
                 ));
             }
         }
@@ -422,6 +438,21 @@ fn main() {
         o.hmc_time.unwrap_or(2.0),
         &o,
     ));
+    // Posteriordb posteriors: the NUTS comparison only (HMC's integration
+    // time is hand-chosen per target; MALA and H²MC are compared above).
+    let nuts_only = Options {
+        samplers: o
+            .samplers
+            .iter()
+            .filter(|s| *s == "nuts" || *s == "nuts-rs")
+            .cloned()
+            .collect(),
+        ..o.clone()
+    };
+    for name in ["arK-arK", "eight_schools-eight_schools_noncentered"] {
+        let p = posteriordb::load(name).unwrap_or_else(|e| fail(&e));
+        runs.extend(compare(name, &p.model, 1.0, &nuts_only));
+    }
     let report = Report {
         chains: o.chains,
         warmup: o.warmup,
@@ -436,7 +467,7 @@ fn main() {
         return;
     }
     println!(
-        "{:<13} {:<8} {:>8} {:>11} {:>9} {:>7} {:>9} {:>10} {:>5} {:>8}",
+        "{:<40} {:<8} {:>8} {:>11} {:>9} {:>7} {:>9} {:>10} {:>5} {:>8}",
         "target",
         "sampler",
         "seconds",
@@ -450,7 +481,7 @@ fn main() {
     );
     for r in &report.runs {
         println!(
-            "{:<13} {:<8} {:>8.3} {:>11} {:>9.0} {:>7.3} {:>9.0} {:>10.5} {:>5} {:>8.4}",
+            "{:<40} {:<8} {:>8.3} {:>11} {:>9.0} {:>7.3} {:>9.0} {:>10.5} {:>5} {:>8.4}",
             r.target,
             r.sampler,
             r.seconds,
@@ -479,7 +510,8 @@ fn compare<G: GradientTarget + Clone>(name: &str, g: &G, time: f64, o: &Options)
     let on = |s: &str| o.samplers.iter().any(|x| x == s);
     let mut runs = Vec::new();
     if on("nuts") {
-        runs.push(run_ours(name, "nuts", g, || nuts(g.clone(), w), 1, o));
+        let tb = o.nuts_term_buffer;
+        runs.push(run_ours(name, "nuts", g, || nuts(g.clone(), w, tb), 1, o));
     }
     if on("hmc") {
         runs.push(run_ours(name, "hmc", g, || hmc(g.clone(), time, w), 1, o));
@@ -510,10 +542,12 @@ fn fail(e: &str) -> ! {
 }
 
 /// Our NUTS with Stan's defaults: warm-up with the step-size heuristic,
-/// dual averaging to 0.8 and diagonal metric windows; maximum depth 10.
-fn nuts<G: GradientTarget>(g: G, warmup: usize) -> Nuts<G> {
+/// dual averaging to 0.8 and diagonal metric windows (75 / 25 /
+/// `term_buffer`); maximum depth 10.
+fn nuts<G: GradientTarget>(g: G, warmup: usize, term_buffer: usize) -> Nuts<G> {
     Nuts::new(g, 1.0)
         .and_then(|n| n.with_warmup(warmup, 0.8, MetricAdaptation::Diagonal))
+        .and_then(|n| n.with_warmup_schedule(WarmupSchedule::new(warmup, 75, 25, term_buffer)))
         .expect("valid settings")
 }
 
