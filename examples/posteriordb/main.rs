@@ -9,15 +9,18 @@
 //!
 //! Flags: `--chains N` (4), `--warmup N` (1000), `--draws N` (1000),
 //! `--seed N` (1), `--adapt-delta δ` (0.8), `--posteriors a,b` (all),
-//! `--json`. Every posterior runs with the same settings (Stan's defaults).
+//! `--json`, `--out DIR` (also write each posterior's constrained draws and
+//! sampler statistics as CmdStan CSV files and one `.npz`). Every posterior
+//! runs with the same settings (Stan's defaults).
 
 use mcmc_core::fit::NutsSettings;
-use mcmc_examples::posteriordb::{PosteriorReport, load, names, run};
+use mcmc_examples::posteriordb::{PosteriorReport, load, names, run, write_outputs};
 
 struct Options {
     json: bool,
     settings: NutsSettings,
     posteriors: Vec<String>,
+    out: Option<std::path::PathBuf>,
 }
 
 fn parse() -> Result<Options, String> {
@@ -25,6 +28,7 @@ fn parse() -> Result<Options, String> {
         json: false,
         settings: NutsSettings::default(),
         posteriors: names().into_iter().map(String::from).collect(),
+        out: None,
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -32,6 +36,7 @@ fn parse() -> Result<Options, String> {
         let s = &mut o.settings;
         match a.as_str() {
             "--json" => o.json = true,
+            "--out" => o.out = Some(value(&a)?.into()),
             "--chains" => s.chains = number(&a, &value(&a)?)?,
             "--warmup" => s.warmup = number(&a, &value(&a)?)?,
             "--draws" => s.draws = number(&a, &value(&a)?)?,
@@ -54,7 +59,7 @@ fn parse() -> Result<Options, String> {
             }
             other => {
                 return Err(format!(
-                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --adapt-delta δ, --posteriors a,b)"
+                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --adapt-delta δ, --posteriors a,b, --out DIR)"
                 ));
             }
         }
@@ -77,7 +82,11 @@ fn main() {
     let mut reports = Vec::new();
     for name in &o.posteriors {
         let p = load(name).unwrap_or_else(|e| fail(&e));
-        reports.push(run(&p, &o.settings).unwrap_or_else(|e| fail(&e)));
+        let (report, fit) = run(&p, &o.settings).unwrap_or_else(|e| fail(&e));
+        if let Some(dir) = &o.out {
+            write_outputs(dir, &p, &fit).unwrap_or_else(|e| fail(&e));
+        }
+        reports.push(report);
     }
     if o.json {
         println!(

@@ -17,12 +17,15 @@
 pub mod models;
 pub mod transforms;
 
+use mcmc_core::cmdstan::write_fit;
 use mcmc_core::diagnostics::summarize;
-use mcmc_core::fit::{NutsSettings, sample_nuts};
+use mcmc_core::fit::{Fit, NutsSettings, sample_nuts};
 use mcmc_core::gradient::GradientTarget;
+use mcmc_core::npz::write_npz_file;
 use models::{Ark, Arma11, EightSchools, Garch11, GaussMix, GpRegression, LinearRegression, Model};
 use serde::Serialize;
 use serde_json::Value;
+use std::path::Path;
 use std::sync::Arc;
 
 /// One reported quantity's reference values.
@@ -215,10 +218,15 @@ pub struct PosteriorReport {
     pub quantities: Vec<Comparison>,
 }
 
-/// Runs NUTS on `posterior` with `settings` and compares with the reference.
-pub fn run(posterior: &Posterior, settings: &NutsSettings) -> Result<PosteriorReport, String> {
+/// Runs NUTS on `posterior` with `settings` and compares with the
+/// reference; returns the report and the fit with its draws mapped to the
+/// reported (constrained) quantities, for [`write_outputs`].
+pub fn run(
+    posterior: &Posterior,
+    settings: &NutsSettings,
+) -> Result<(PosteriorReport, Fit), String> {
     let clock = std::time::Instant::now();
-    let fit = sample_nuts(&posterior.model, settings, None::<fn(usize) -> Vec<f64>>)
+    let mut fit = sample_nuts(&posterior.model, settings, None::<fn(usize) -> Vec<f64>>)
         .map_err(|e| format!("{}: {e}", posterior.name))?;
     let seconds = clock.elapsed().as_secs_f64();
     let constrained: Vec<Vec<Vec<f64>>> = fit
@@ -257,7 +265,10 @@ pub fn run(posterior: &Posterior, settings: &NutsSettings) -> Result<PosteriorRe
         .map(|q| q.ess_bulk)
         .fold(f64::INFINITY, f64::min);
     let gradient_evaluations = fit.gradient_evaluations();
-    Ok(PosteriorReport {
+    for (c, draws) in fit.chains.iter_mut().zip(constrained) {
+        c.draws = draws;
+    }
+    let report = PosteriorReport {
         posterior: posterior.name.to_string(),
         dim: posterior.model.dim(),
         gradient_evaluations,
@@ -275,5 +286,20 @@ pub fn run(posterior: &Posterior, settings: &NutsSettings) -> Result<PosteriorRe
             .fold(f64::NEG_INFINITY, f64::max),
         seconds,
         quantities,
-    })
+    };
+    Ok((report, fit))
+}
+
+/// Writes `fit` (constrained draws) of `posterior` to `dir` as CmdStan CSV
+/// files `<posterior>-<chain>.csv` and one `<posterior>.npz`.
+pub fn write_outputs(dir: &Path, posterior: &Posterior, fit: &Fit) -> Result<(), String> {
+    let names: Vec<String> = posterior.model.names();
+    let fail = |e: std::io::Error| format!("{}: {e}", dir.display());
+    // CmdStan spells `theta[1]` as `theta.1` (ArviZ rebuilds vectors from it).
+    let cmdstan: Vec<String> = names
+        .iter()
+        .map(|n| n.replace('[', ".").replace(']', ""))
+        .collect();
+    write_fit(dir, fit, posterior.name, &cmdstan).map_err(fail)?;
+    write_npz_file(&dir.join(format!("{}.npz", posterior.name)), fit, &names).map_err(fail)
 }

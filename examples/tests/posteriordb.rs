@@ -63,7 +63,7 @@ fn nuts_agrees_with_posteriordb_references() {
     let mut failures = Vec::new();
     for name in names() {
         let p = load(name).unwrap();
-        let r = run(&p, &settings).unwrap();
+        let (r, _) = run(&p, &settings).unwrap();
         if p.expect_divergences {
             assert!(
                 r.divergences > 0,
@@ -120,6 +120,6 @@ fn dropped_jacobian_fails_the_reference_check() {
         seed: 2026,
         ..Default::default()
     };
-    let r = run(&wrong, &settings).unwrap();
+    let (r, _) = run(&wrong, &settings).unwrap();
     assert!(r.max_abs_z > 4.0, "max |z| = {}", r.max_abs_z);
 }
