@@ -1,12 +1,19 @@
 //! Our NUTS, adaptive HMC, MALA and H²MC side by side with nuts-rs, in one
 //! process, on the same targets: a 100-d correlated Gaussian and a Bayesian
-//! logistic regression (d = 25, n = 1000, synthetic data).
+//! logistic regression (d = 25, n = 1000, synthetic data); then our NUTS
+//! and nuts-rs only on two posteriordb posteriors of
+//! `mcmc_examples::posteriordb` (`arK-arK`, an AR(5) time series, and
+//! `eight_schools-eight_schools_noncentered`).
 //!
 //! ```text
 //! cargo run --release --example hmc_vs_nuts -- --json
 //! cargo run --release --example hmc_vs_nuts -- --chains 4 --warmup 1000 --draws 1000
 //! cargo run --release --example hmc_vs_nuts -- --draws 10000 --samplers nuts,hmc,nuts-rs
+//! cargo run --release --example hmc_vs_nuts -- --samplers nuts,nuts-rs --nuts-term-buffer 150
 //! ```
+//!
+//! `--nuts-term-buffer N` sets our NUTS's final step-size-only warm-up
+//! buffer (CmdStan's `term_buffer`, default 50).
 //!
 //! Every sampler runs `chains` chains one after the other on one thread,
 //! each with `warmup` adaptation steps and `draws` kept draws, from a
@@ -18,17 +25,23 @@
 //! `ess_bulk_min` is the smallest bulk ESS over coordinates and `rhat_max`
 //! the largest rank-normalised split R-hat (mcmc_core::diagnostics).
 //! H²MC also evaluates one Hessian per proposal (`hessian_evaluations`).
+//!
+//! MALA moves diffusively (in 100 dimensions ≈ 100 steps per independent
+//! draw), so it runs `--mala-steps k` (default 20) steps per kept draw and
+//! `k × warmup` warm-up steps: with one gradient per step that is 40 000
+//! gradients per chain, about the budget of NUTS on the Gaussian.
 
 // Shared with the `hmc` example, which also reads the true coefficients.
 #[allow(dead_code)]
 #[path = "targets.rs"]
 mod targets;
 
-use mcmc_core::adaptation::MetricAdaptation;
+use mcmc_core::adaptation::{MetricAdaptation, WarmupSchedule};
 use mcmc_core::diagnostics::summarize;
 use mcmc_core::gradient::{Differentiable, GradientPayload, GradientTarget};
 use mcmc_core::kernel::{GradientKernelStatistics, H2mc, Hmc, Kernel, Mala, Nuts, Trajectory};
 use mcmc_core::prelude::{Chain, MetropolisHastings, stream_rng};
+use mcmc_examples::posteriordb;
 use nuts_rs::{
     Chain as NutsChain, CpuLogpFunc, CpuMath, DiagNutsSettings, HasDims, LogpError, Settings,
 };
@@ -60,6 +73,7 @@ struct Report {
     runs: Vec<Run>,
 }
 
+#[derive(Clone)]
 struct Options {
     json: bool,
     chains: usize,
@@ -68,6 +82,8 @@ struct Options {
     seed: u64,
     hmc_time: Option<f64>,
     h2mc_tau: f64,
+    mala_steps: usize,
+    nuts_term_buffer: usize,
     samplers: Vec<String>,
 }
 
@@ -83,6 +99,8 @@ fn parse() -> Result<Options, String> {
         seed: 2026,
         hmc_time: None,
         h2mc_tau: 1.0,
+        mala_steps: 20,
+        nuts_term_buffer: 50,
         samplers: SAMPLERS.map(String::from).to_vec(),
     };
     let mut args = std::env::args().skip(1);
@@ -126,6 +144,16 @@ fn parse() -> Result<Options, String> {
                     ));
                 }
             }
+            "--nuts-term-buffer" => {
+                o.nuts_term_buffer = value("--nuts-term-buffer")?
+                    .parse()
+                    .map_err(|e| format!("--nuts-term-buffer: {e}"))?
+            }
+            "--mala-steps" => {
+                o.mala_steps = value("--mala-steps")?
+                    .parse()
+                    .map_err(|e| format!("--mala-steps: {e}"))?
+            }
             "--h2mc-tau" => {
                 o.h2mc_tau = value("--h2mc-tau")?
                     .parse()
@@ -133,13 +161,16 @@ fn parse() -> Result<Options, String> {
             }
             other => {
                 return Err(format!(
-                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --hmc-time T, --h2mc-tau τ, --samplers a,b)"
+                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --hmc-time T, --h2mc-tau τ, --mala-steps k, --nuts-term-buffer N, --samplers a,b)"
                 ));
             }
         }
     }
     if !(o.h2mc_tau > 0.0 && o.h2mc_tau <= 1.0) {
         return Err("--h2mc-tau must lie in (0, 1]".into());
+    }
+    if o.mala_steps == 0 {
+        return Err("--mala-steps must be at least 1".into());
     }
     if o.chains == 0 || o.draws < 4 {
         return Err("need at least 1 chain and 4 draws".into());
@@ -216,7 +247,16 @@ fn finish(target: &str, sampler: &str, seconds: f64, c: Counts, draws: &[Vec<Vec
     }
 }
 
-fn run_ours<G, K>(target_name: &str, sampler: &str, g: &G, make: impl Fn() -> K, o: &Options) -> Run
+/// Runs `o.chains` chains of the kernel `make()` builds: `o.warmup × thin`
+/// warm-up steps, then `o.draws` draws each `thin` steps apart.
+fn run_ours<G, K>(
+    target_name: &str,
+    sampler: &str,
+    g: &G,
+    make: impl Fn() -> K,
+    thin: usize,
+    o: &Options,
+) -> Run
 where
     G: GradientTarget + Clone,
     K: Kernel<Vec<f64>, GradientPayload> + Counted,
@@ -234,14 +274,16 @@ where
             stream_rng(o.seed, c as u64),
         )
         .expect("the initial point has a finite density");
-        for _ in 0..o.warmup {
+        for _ in 0..o.warmup * thin {
             chain.step(&t);
         }
         chain.freeze();
         let warm_divergences = chain.algorithm().kernel().counts().divergences;
         let mut draws = Vec::with_capacity(o.draws);
         for _ in 0..o.draws {
-            chain.step(&t);
+            for _ in 0..thin {
+                chain.step(&t);
+            }
             draws.push(chain.state().clone());
         }
         let k = chain.algorithm().kernel();
@@ -396,6 +438,21 @@ fn main() {
         o.hmc_time.unwrap_or(2.0),
         &o,
     ));
+    // Posteriordb posteriors: the NUTS comparison only (HMC's integration
+    // time is hand-chosen per target; MALA and H²MC are compared above).
+    let nuts_only = Options {
+        samplers: o
+            .samplers
+            .iter()
+            .filter(|s| *s == "nuts" || *s == "nuts-rs")
+            .cloned()
+            .collect(),
+        ..o.clone()
+    };
+    for name in ["arK-arK", "eight_schools-eight_schools_noncentered"] {
+        let p = posteriordb::load(name).unwrap_or_else(|e| fail(&e));
+        runs.extend(compare(name, &p.model, 1.0, &nuts_only));
+    }
     let report = Report {
         chains: o.chains,
         warmup: o.warmup,
@@ -410,7 +467,7 @@ fn main() {
         return;
     }
     println!(
-        "{:<13} {:<8} {:>8} {:>11} {:>9} {:>7} {:>9} {:>10} {:>5} {:>8}",
+        "{:<40} {:<8} {:>8} {:>11} {:>9} {:>7} {:>9} {:>10} {:>5} {:>8}",
         "target",
         "sampler",
         "seconds",
@@ -424,7 +481,7 @@ fn main() {
     );
     for r in &report.runs {
         println!(
-            "{:<13} {:<8} {:>8.3} {:>11} {:>9.0} {:>7.3} {:>9.0} {:>10.5} {:>5} {:>8.4}",
+            "{:<40} {:<8} {:>8.3} {:>11} {:>9.0} {:>7.3} {:>9.0} {:>10.5} {:>5} {:>8.4}",
             r.target,
             r.sampler,
             r.seconds,
@@ -453,13 +510,15 @@ fn compare<G: GradientTarget + Clone>(name: &str, g: &G, time: f64, o: &Options)
     let on = |s: &str| o.samplers.iter().any(|x| x == s);
     let mut runs = Vec::new();
     if on("nuts") {
-        runs.push(run_ours(name, "nuts", g, || nuts(g.clone(), w), o));
+        let tb = o.nuts_term_buffer;
+        runs.push(run_ours(name, "nuts", g, || nuts(g.clone(), w, tb), 1, o));
     }
     if on("hmc") {
-        runs.push(run_ours(name, "hmc", g, || hmc(g.clone(), time, w), o));
+        runs.push(run_ours(name, "hmc", g, || hmc(g.clone(), time, w), 1, o));
     }
     if on("mala") {
-        runs.push(run_ours(name, "mala", g, || mala(g.clone(), w), o));
+        let k = o.mala_steps;
+        runs.push(run_ours(name, "mala", g, || mala(g.clone(), w * k), k, o));
     }
     if on("h2mc") {
         runs.push(run_ours(
@@ -467,6 +526,7 @@ fn compare<G: GradientTarget + Clone>(name: &str, g: &G, time: f64, o: &Options)
             "h2mc",
             g,
             || h2mc(g.clone(), o.h2mc_tau, w),
+            1,
             o,
         ));
     }
@@ -482,10 +542,12 @@ fn fail(e: &str) -> ! {
 }
 
 /// Our NUTS with Stan's defaults: warm-up with the step-size heuristic,
-/// dual averaging to 0.8 and diagonal metric windows; maximum depth 10.
-fn nuts<G: GradientTarget>(g: G, warmup: usize) -> Nuts<G> {
+/// dual averaging to 0.8 and diagonal metric windows (75 / 25 /
+/// `term_buffer`); maximum depth 10.
+fn nuts<G: GradientTarget>(g: G, warmup: usize, term_buffer: usize) -> Nuts<G> {
     Nuts::new(g, 1.0)
         .and_then(|n| n.with_warmup(warmup, 0.8, MetricAdaptation::Diagonal))
+        .and_then(|n| n.with_warmup_schedule(WarmupSchedule::new(warmup, 75, 25, term_buffer)))
         .expect("valid settings")
 }
 
@@ -506,7 +568,8 @@ fn h2mc<G: GradientTarget>(g: G, tau: f64, warmup: usize) -> H2mc<G> {
         .expect("valid settings")
 }
 
-/// Our adaptive MALA: dual averaging to 0.574, diagonal metric windows.
+/// Our adaptive MALA: dual averaging to 0.574, diagonal metric windows
+/// growing with the warm-up (`Mala::with_warmup`).
 fn mala<G: GradientTarget>(g: G, warmup: usize) -> Mala<G> {
     Mala::new(g, 0.1)
         .and_then(|m| m.with_warmup(warmup, 0.574, MetricAdaptation::Diagonal))

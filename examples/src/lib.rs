@@ -5,6 +5,9 @@
 #[path = "../mixture/mod.rs"]
 pub mod mixture;
 
+#[path = "../posteriordb/mod.rs"]
+pub mod posteriordb;
+
 /// The code blocks of `docs/user-guide.md`, compiled and run as doctests.
 #[cfg(doctest)]
 #[doc = include_str!("../../docs/user-guide.md")]

@@ -52,6 +52,7 @@ mod linalg;
 pub mod math;
 pub mod mh;
 pub mod mtm;
+pub mod npz;
 pub mod replica;
 pub mod rng;
 pub mod runner;

@@ -54,6 +54,23 @@ pub fn accept(log_alpha: f64, rng: &mut ChainRng) -> bool {
     }
 }
 
+/// The acceptance probability `α = e^{ln α}` and the decision, with the
+/// same outcomes as [`accept`] (and the same uniform drawn, only when
+/// `−∞ < ln α < 0`) but testing `U < α`: the step needs `α` for its
+/// statistics anyway, so this saves a logarithm per step (and the `exp`
+/// when the move is certain).
+#[inline]
+pub fn accept_probability(log_alpha: f64, rng: &mut ChainRng) -> (f64, bool) {
+    if log_alpha >= 0.0 {
+        (1.0, true)
+    } else if log_alpha == f64::NEG_INFINITY {
+        (0.0, false)
+    } else {
+        let alpha = log_alpha.exp();
+        (alpha, uniform(rng) < alpha)
+    }
+}
+
 /// Metropolis–Hastings with one kernel (use [`crate::kernel::Mixture`] to
 /// combine several).
 #[derive(Clone, Debug)]
@@ -124,8 +141,7 @@ where
             };
             (log_alpha, outcome)
         };
-        let accepted = accept(log_alpha, &mut chain.rng);
-        let alpha = log_alpha.exp();
+        let (alpha, accepted) = accept_probability(log_alpha, &mut chain.rng);
         observer(&Transition {
             current: &chain.current,
             proposal: (!proposal.failed).then_some(&*scratch),

@@ -83,6 +83,20 @@ impl Warmup {
         })
     }
 
+    /// Replaces Stan's windows by `schedule` (e.g.
+    /// [`WarmupSchedule::proportional`]); it must cover the same number of
+    /// iterations and be set before the first observation.
+    pub fn with_schedule(mut self, schedule: WarmupSchedule) -> Result<Self> {
+        if schedule.iterations() != self.schedule.iterations() || self.iteration > 0 {
+            return Err(invalid(
+                "schedule",
+                "must cover the warm-up's iterations and be set before it starts",
+            ));
+        }
+        self.schedule = schedule;
+        Ok(self)
+    }
+
     /// True once warm-up is over.
     pub fn is_frozen(&self) -> bool {
         self.frozen

@@ -26,6 +26,30 @@ impl WarmupSchedule {
         Self::new(iterations, 75, 25, 50)
     }
 
+    /// Stan's buffers stretched in proportion to the warm-up length: for
+    /// `iterations = n ≥ 1000`, an initial buffer of 7.5 % of `n`, a first
+    /// slow window of 2.5 % and a terminal buffer of 5 % (Stan's 75 / 25 /
+    /// 50 at `n = 1000`, and Stan's schedule below). Stan's fixed lengths
+    /// assume nearly independent draws (NUTS); a kernel whose draws are
+    /// strongly autocorrelated (MALA: tens to hundreds of iterations per
+    /// independent draw in 100 dimensions) needs windows that grow with the
+    /// warm-up for its variance estimates and its final step size to settle.
+    ///
+    /// ```
+    /// use mcmc_core::adaptation::WarmupSchedule;
+    /// assert_eq!(WarmupSchedule::proportional(1000), WarmupSchedule::stan(1000));
+    /// assert_eq!(WarmupSchedule::proportional(10_000).window_ends(), vec![999, 1499, 2499, 4499, 9499]);
+    /// ```
+    pub fn proportional(iterations: usize) -> Self {
+        let f = iterations.max(1000) as f64 / 1000.0;
+        Self::new(
+            iterations,
+            (75.0 * f) as usize,
+            (25.0 * f) as usize,
+            (50.0 * f) as usize,
+        )
+    }
+
     /// A schedule with the given buffers and base window.
     pub fn new(iterations: usize, init: usize, base: usize, term: usize) -> Self {
         let (mut init, mut base, mut term) = (init, base, term);

@@ -34,7 +34,7 @@
 //! merely has larger energy errors across the seam.
 
 use super::{Kernel, Metric, Proposal, StepObservation};
-use crate::adaptation::{MetricAdaptation, Warmup};
+use crate::adaptation::{MetricAdaptation, Warmup, WarmupSchedule};
 use crate::error::{Result, invalid};
 use crate::gradient::{GradientPayload, GradientTarget, evaluate_checked};
 use crate::rng::{ChainRng, uniform};
@@ -203,6 +203,16 @@ impl<G: GradientTarget> Hmc<G> {
             metric,
             self.dim,
         )?);
+        Ok(self)
+    }
+
+    /// Replaces the windows of the warm-up set by [`Self::with_warmup`].
+    pub(crate) fn with_warmup_schedule(mut self, schedule: WarmupSchedule) -> Result<Self> {
+        let w = self
+            .warmup
+            .take()
+            .ok_or_else(|| invalid("schedule", "needs a warm-up"))?;
+        self.warmup = Some(w.with_schedule(schedule)?);
         Ok(self)
     }
 

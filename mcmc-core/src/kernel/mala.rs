@@ -1,7 +1,7 @@
 //! The Metropolis-adjusted Langevin algorithm: one leapfrog step.
 
 use super::{Boundary, GradientKernelStatistics, Hmc, Kernel, Metric, Proposal, StepObservation};
-use crate::adaptation::MetricAdaptation;
+use crate::adaptation::{MetricAdaptation, WarmupSchedule};
 use crate::error::Result;
 use crate::gradient::{GradientPayload, GradientTarget};
 use crate::rng::ChainRng;
@@ -44,19 +44,25 @@ impl<G: GradientTarget> Mala<G> {
         Mala(self.0.with_boundary(boundary))
     }
 
-    /// Warm-up adaptation as for [`Hmc::with_warmup`]; 0.574 is the
-    /// optimal mean acceptance of MALA (Roberts & Rosenthal 1998).
+    /// Warm-up adaptation as for [`Hmc::with_warmup`] (dual averaging of
+    /// the step size towards mean acceptance `target_accept`; 0.574 is the
+    /// optimal mean acceptance of MALA, Roberts & Rosenthal 1998), but with
+    /// windows that grow with the warm-up
+    /// ([`WarmupSchedule::proportional`]): MALA moves diffusively, so its
+    /// variance estimates need long windows and its step size a long final
+    /// buffer. In 100 dimensions MALA needs about 10⁴ warm-up iterations
+    /// (`examples/hmc_vs_nuts`, `docs/performance.md`).
     pub fn with_warmup(
         self,
         iterations: usize,
         target_accept: f64,
         metric: MetricAdaptation,
     ) -> Result<Self> {
-        Ok(Mala(self.0.with_warmup(
-            iterations,
-            target_accept,
-            metric,
-        )?))
+        Ok(Mala(
+            self.0
+                .with_warmup(iterations, target_accept, metric)?
+                .with_warmup_schedule(WarmupSchedule::proportional(iterations))?,
+        ))
     }
 
     /// Current step size.

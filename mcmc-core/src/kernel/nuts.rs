@@ -32,7 +32,7 @@
 //! divergence is counted. Nothing panics.
 
 use super::{Hmc, Kernel, Metric, Proposal, StepObservation};
-use crate::adaptation::MetricAdaptation;
+use crate::adaptation::{MetricAdaptation, WarmupSchedule};
 use crate::error::{Result, invalid};
 use crate::gradient::{GradientPayload, GradientTarget};
 use crate::kernel::GradientKernelStatistics;
@@ -211,6 +211,13 @@ impl<G: GradientTarget> Nuts<G> {
     ) -> Result<Self> {
         self.hmc = self.hmc.with_warmup(iterations, target_accept, metric)?;
         self.init_step_pending = iterations > 0;
+        Ok(self)
+    }
+
+    /// Replaces the Stan windows of [`Self::with_warmup`] by `schedule`
+    /// (same number of iterations).
+    pub fn with_warmup_schedule(mut self, schedule: WarmupSchedule) -> Result<Self> {
+        self.hmc = self.hmc.with_warmup_schedule(schedule)?;
         Ok(self)
     }
 
