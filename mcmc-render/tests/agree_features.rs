@@ -4,7 +4,10 @@
 //! `scenes/envmap-spheres.xml` at 16×16 and `max_depth` 5; so do LT, BDPT
 //! and MMLT on the spot light of `scenes/spot-floor.xml`, and LT, BDPT,
 //! PSSMLT and MMLT through the thin lens, crop window and tent filter of
-//! `scenes/dof-spheres.xml` (a 16×16 window of a 32×24 frame). (Agreement with
+//! `scenes/dof-spheres.xml` (a 16×16 window of a 32×24 frame); and LT,
+//! BDPT, PSSMLT and MMLT on `scenes/env-textured-plastic.xml` (a textured
+//! floor and sphere, a rough-plastic mesh with interpolated normals, an
+//! environment map), issue 12's combined check. (Agreement with
 //! Mitsuba 3: `mitsuba_scenes.rs`; BDPT's MIS weights with an environment
 //! are checked exactly in `bdpt_mis.rs`.)
 //!
@@ -279,5 +282,32 @@ fn mmlt_agrees_with_pt_through_a_thin_lens() {
         "lens mmlt",
         lens_pt(),
         &mlt_reps_of(scene, Mlt::Mmlt, 1024, 48, 1500),
+    );
+}
+
+#[test]
+fn every_integrator_agrees_with_pt_on_a_textured_plastic_scene_under_an_environment() {
+    let scene = &load("env-textured-plastic.xml");
+    assert!(scene.lights.environment().is_some());
+    let pt = mc_reps_of(scene, &pt_of(scene), 256, 24, 1600);
+    check_against(
+        "combined lt",
+        &pt,
+        &mc_reps_of(scene, &lt_of(scene), 1024, 32, 1700),
+    );
+    check_against(
+        "combined bdpt",
+        &pt,
+        &mc_reps_of(scene, &bdpt_of(scene), 64, 24, 1800),
+    );
+    check_against(
+        "combined pssmlt-bdpt",
+        &pt,
+        &mlt_reps_of(scene, Mlt::PssmltBdpt, 256, 24, 1900),
+    );
+    check_against(
+        "combined mmlt",
+        &pt,
+        &mlt_reps_of(scene, Mlt::Mmlt, 1024, 32, 2000),
     );
 }

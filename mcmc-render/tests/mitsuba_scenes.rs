@@ -86,3 +86,8 @@ fn spot_light_matches_mitsuba() {
 fn thin_lens_crop_window_and_tent_filter_match_mitsuba() {
     check_scene("dof-spheres", 16);
 }
+
+#[test]
+fn textured_normal_interpolated_plastic_under_an_environment_matches_mitsuba() {
+    check_scene("env-textured-plastic", 16);
+}
