@@ -26,17 +26,11 @@
 
 mod common;
 
-use common::{MeanAgreement, bdpt_of, image_mean, lt_of, mmlt_depths, pt_of, render_image};
+use common::{Budget, MeanAgreement, Mlt, bdpt_of, lt_of, mc_reps, mlt_reps, pt_of};
 use mcmc_render::integrators::Integrator;
-use mcmc_render::integrators::mmlt::render_family;
-use mcmc_render::integrators::pssmlt::render_pssmlt;
-use mcmc_render::markov::Normalization;
-use mcmc_render::observer::NoObserver;
-use mcmc_render::pss::PssmltSettings;
 use mcmc_render::scene::Scene;
 use std::collections::HashMap;
 use std::sync::OnceLock;
-use std::sync::atomic::AtomicBool;
 
 /// A repo scene at 16×16, `max_depth` 5.
 fn load(file: &str) -> Scene {
@@ -63,71 +57,31 @@ fn spot_scene() -> &'static Scene {
     SCENE.get_or_init(|| load("spot-floor.xml"))
 }
 
-/// Image means of `k` renders of a pixel-driven integrator on `scene`.
-fn mc_reps_of(
-    scene: &Scene,
-    integ: &dyn Integrator,
-    spp: u32,
-    k: u64,
-    seed0: u64,
-) -> Vec<[f64; 3]> {
-    (0..k)
-        .map(|s| image_mean(&render_image(scene, integ, spp, seed0 + s)))
-        .collect()
-}
-
-/// [`mc_reps_of`] on the environment scene.
-fn mc_reps(integ: &dyn Integrator, spp: u32, k: u64, seed0: u64) -> Vec<[f64; 3]> {
-    mc_reps_of(scene(), integ, spp, k, seed0)
+/// [`mc_reps`] on the environment scene.
+fn env_reps(integ: &dyn Integrator, spp: u32, k: u64, seed0: u64) -> Vec<[f64; 3]> {
+    mc_reps(scene(), integ, spp, k, seed0)
 }
 
 /// PT replicates shared by the tests.
 fn pt_reference() -> &'static [[f64; 3]] {
     static PT: OnceLock<Vec<[f64; 3]>> = OnceLock::new();
-    PT.get_or_init(|| mc_reps(&pt_of(scene()), 256, 32, 100))
+    PT.get_or_init(|| env_reps(&pt_of(scene()), 256, 32, 100))
 }
 
-/// Which Metropolis estimator.
-#[derive(Clone, Copy, Debug)]
-enum Mlt {
-    PssmltPt,
-    PssmltBdpt,
-    Mmlt,
-}
-
-/// Image means of `k` independent runs of `kind` (running normalisation,
-/// 20 000 bootstrap candidates, 256 chains, `mpp` mutations per pixel).
-fn mlt_reps(kind: Mlt, mpp: u64, k: u64, seed0: u64) -> Vec<[f64; 3]> {
-    mlt_reps_of(scene(), kind, mpp, k, seed0)
-}
-
-/// [`mlt_reps`] on any scene.
+/// [`mlt_reps`] with this file's budget: 20 000 bootstrap candidates,
+/// 256 chains, `mpp` mutations per pixel.
 fn mlt_reps_of(scene: &Scene, kind: Mlt, mpp: u64, k: u64, seed0: u64) -> Vec<[f64; 3]> {
-    let stop = AtomicBool::new(false);
-    (0..k)
-        .map(|s| {
-            let settings = PssmltSettings {
-                bootstrap: 20_000,
-                chains: 256,
-                mutations_per_pixel: Some(mpp),
-                seed: seed0 + s,
-                normalization: Normalization::Running,
-                ..PssmltSettings::default()
-            };
-            let r = match kind {
-                Mlt::PssmltPt => render_pssmlt(scene, pt_of(scene), &settings, &stop, &NoObserver),
-                Mlt::PssmltBdpt => {
-                    render_pssmlt(scene, bdpt_of(scene), &settings, &stop, &NoObserver)
-                }
-                Mlt::Mmlt => {
-                    render_family(scene, mmlt_depths(scene), &settings, &stop, &NoObserver)
-                }
-            }
-            .expect("mlt runs");
-            assert_eq!(r.chain_stats.invalid_density, 0, "{kind:?}: NaN/inf paths");
-            image_mean(&r.image())
-        })
-        .collect()
+    let budget = Budget {
+        bootstrap: 20_000,
+        chains: 256,
+        mpp,
+    };
+    mlt_reps(scene, kind, budget, k, seed0)
+}
+
+/// [`mlt_reps_of`] on the environment scene.
+fn env_mlt_reps(kind: Mlt, mpp: u64, k: u64, seed0: u64) -> Vec<[f64; 3]> {
+    mlt_reps_of(scene(), kind, mpp, k, seed0)
 }
 
 /// Asserts agreement with the environment scene's PT within 4σ and 1%,
@@ -155,24 +109,24 @@ fn check_against(what: &str, pt: &[[f64; 3]], test: &[[f64; 3]]) -> MeanAgreemen
 fn lt_agrees_with_pt_under_an_environment() {
     // Per-replicate spread ~1.7% at 128 light paths per pixel (the
     // environment seen directly is the noisiest part); 32 × 1024 for SE < 0.2%.
-    check("lt", &mc_reps(&lt_of(scene()), 1024, 32, 200));
+    check("lt", &env_reps(&lt_of(scene()), 1024, 32, 200));
 }
 
 #[test]
 fn bdpt_agrees_with_pt_under_an_environment() {
-    check("bdpt", &mc_reps(&bdpt_of(scene()), 64, 24, 300));
+    check("bdpt", &env_reps(&bdpt_of(scene()), 64, 24, 300));
 }
 
 #[test]
 fn pssmlt_agrees_with_pt_under_an_environment() {
-    check("pssmlt-pt", &mlt_reps(Mlt::PssmltPt, 512, 16, 400));
-    check("pssmlt-bdpt", &mlt_reps(Mlt::PssmltBdpt, 256, 16, 500));
+    check("pssmlt-pt", &env_mlt_reps(Mlt::PssmltPt, 512, 16, 400));
+    check("pssmlt-bdpt", &env_mlt_reps(Mlt::PssmltBdpt, 256, 16, 500));
 }
 
 /// MMLT replicates, shared by its test and the control.
 fn mmlt_reps() -> &'static [[f64; 3]] {
     static MMLT: OnceLock<Vec<[f64; 3]>> = OnceLock::new();
-    MMLT.get_or_init(|| mlt_reps(Mlt::Mmlt, 1024, 16, 600))
+    MMLT.get_or_init(|| env_mlt_reps(Mlt::Mmlt, 1024, 16, 600))
 }
 
 #[test]
@@ -195,16 +149,12 @@ fn a_one_percent_bias_is_rejected() {
 #[test]
 fn lt_bdpt_and_mmlt_agree_with_pt_under_a_spot_light() {
     let scene = spot_scene();
-    let pt = mc_reps_of(scene, &pt_of(scene), 256, 24, 700);
-    check_against(
-        "spot lt",
-        &pt,
-        &mc_reps_of(scene, &lt_of(scene), 256, 24, 800),
-    );
+    let pt = mc_reps(scene, &pt_of(scene), 256, 24, 700);
+    check_against("spot lt", &pt, &mc_reps(scene, &lt_of(scene), 256, 24, 800));
     check_against(
         "spot bdpt",
         &pt,
-        &mc_reps_of(scene, &bdpt_of(scene), 128, 24, 900),
+        &mc_reps(scene, &bdpt_of(scene), 128, 24, 900),
     );
     // MMLT's per-replicate spread is ~0.9% per channel here: 32 replicates.
     check_against(
@@ -243,7 +193,7 @@ fn lens_pt() -> &'static [[f64; 3]] {
     static PT: OnceLock<Vec<[f64; 3]>> = OnceLock::new();
     PT.get_or_init(|| {
         let scene = lens_scene();
-        mc_reps_of(scene, &pt_of(scene), 256, 24, 1100)
+        mc_reps(scene, &pt_of(scene), 256, 24, 1100)
     })
 }
 
@@ -257,12 +207,12 @@ fn lt_bdpt_and_pssmlt_agree_with_pt_through_a_thin_lens() {
         // Two thirds of LT's paths land outside the window, and the sky
         // seen through the lens is heavy-tailed: ~2% spread per replicate
         // at 4096 light paths per pixel; 64 replicates.
-        &mc_reps_of(scene, &lt_of(scene), 4096, 64, 1200),
+        &mc_reps(scene, &lt_of(scene), 4096, 64, 1200),
     );
     check_against(
         "lens bdpt",
         pt,
-        &mc_reps_of(scene, &bdpt_of(scene), 64, 24, 1300),
+        &mc_reps(scene, &bdpt_of(scene), 64, 24, 1300),
     );
     check_against(
         "lens pssmlt-bdpt",
@@ -289,16 +239,16 @@ fn mmlt_agrees_with_pt_through_a_thin_lens() {
 fn every_integrator_agrees_with_pt_on_a_textured_plastic_scene_under_an_environment() {
     let scene = &load("env-textured-plastic.xml");
     assert!(scene.lights.environment().is_some());
-    let pt = mc_reps_of(scene, &pt_of(scene), 256, 24, 1600);
+    let pt = mc_reps(scene, &pt_of(scene), 256, 24, 1600);
     check_against(
         "combined lt",
         &pt,
-        &mc_reps_of(scene, &lt_of(scene), 1024, 32, 1700),
+        &mc_reps(scene, &lt_of(scene), 1024, 32, 1700),
     );
     check_against(
         "combined bdpt",
         &pt,
-        &mc_reps_of(scene, &bdpt_of(scene), 64, 24, 1800),
+        &mc_reps(scene, &bdpt_of(scene), 64, 24, 1800),
     );
     check_against(
         "combined pssmlt-bdpt",

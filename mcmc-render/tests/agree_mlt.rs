@@ -39,12 +39,9 @@
 mod common;
 
 use common::{
-    MeanAgreement, bdpt_of, image_mean, mmlt_depths, pt_of, render_image, repo_scene_tilted,
+    Budget, MeanAgreement, Mlt, bdpt_of, image_mean, mc_reps, mlt_reps, pt_of, repo_scene_tilted,
 };
 use mcmc_core::replica::{ExchangeContext, ExchangeMove, Schedule};
-use mcmc_render::integrators::Integrator;
-use mcmc_render::integrators::mmlt::render_family;
-use mcmc_render::integrators::pssmlt::render_pssmlt;
 use mcmc_render::integrators::relt::{MakeExchange, Relt, ReltFamily};
 use mcmc_render::markov::{ChainSettings, Normalization};
 use mcmc_render::observer::NoObserver;
@@ -55,62 +52,6 @@ use std::sync::atomic::AtomicBool;
 
 const RES: u32 = 16;
 const DEPTH: u32 = 5;
-
-/// Image means of `k` renders of a pixel-driven integrator.
-fn mc_reps(scene: &Scene, integ: &dyn Integrator, spp: u32, k: u64, seed0: u64) -> Vec<[f64; 3]> {
-    (0..k)
-        .map(|s| image_mean(&render_image(scene, integ, spp, seed0 + s)))
-        .collect()
-}
-
-/// Which Metropolis estimator.
-#[derive(Clone, Copy, Debug)]
-enum Mlt {
-    PssmltPt,
-    PssmltBdpt,
-    Mmlt,
-}
-
-/// A replicate budget: bootstrap candidates (per member), chains,
-/// mutations per pixel.
-#[derive(Clone, Copy, Debug)]
-struct Budget {
-    bootstrap: usize,
-    chains: usize,
-    mpp: u64,
-}
-
-/// Image means of `k` independent runs of `kind`.
-fn mlt_reps(scene: &Scene, kind: Mlt, budget: Budget, k: u64, seed0: u64) -> Vec<[f64; 3]> {
-    let stop = AtomicBool::new(false);
-    (0..k)
-        .map(|s| {
-            let settings = PssmltSettings {
-                bootstrap: budget.bootstrap,
-                chains: budget.chains,
-                mutations_per_pixel: Some(budget.mpp),
-                seed: seed0 + s,
-                // b from the bootstrap and every large step: the large steps
-                // outnumber a small bootstrap, so b's variance falls with
-                // the mutations.
-                normalization: Normalization::Running,
-                ..PssmltSettings::default()
-            };
-            let r = match kind {
-                Mlt::PssmltPt => render_pssmlt(scene, pt_of(scene), &settings, &stop, &NoObserver),
-                Mlt::PssmltBdpt => {
-                    render_pssmlt(scene, bdpt_of(scene), &settings, &stop, &NoObserver)
-                }
-                Mlt::Mmlt => {
-                    render_family(scene, mmlt_depths(scene), &settings, &stop, &NoObserver)
-                }
-            }
-            .expect("mlt runs");
-            assert_eq!(r.chain_stats.invalid_density, 0, "{kind:?}: NaN/inf paths");
-            image_mean(&r.image())
-        })
-        .collect()
-}
 
 /// Asserts agreement within 4σ and 1%, with 5σ < 1%.
 fn check(what: &str, pt: &[[f64; 3]], test: &[[f64; 3]]) {

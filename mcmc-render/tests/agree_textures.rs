@@ -24,8 +24,7 @@
 
 mod common;
 
-use common::{MeanAgreement, bdpt_of, image_mean, pt_of, render_image, repo_scene_path};
-use mcmc_render::integrators::Integrator;
+use common::{MeanAgreement, bdpt_of, image_mean, mc_reps, pt_of, repo_scene_path};
 use mcmc_render::integrators::pssmlt::render_pssmlt;
 use mcmc_render::markov::Normalization;
 use mcmc_render::observer::NoObserver;
@@ -57,13 +56,6 @@ fn load(textured: bool) -> Scene {
 fn scene() -> &'static Scene {
     static SCENE: OnceLock<Scene> = OnceLock::new();
     SCENE.get_or_init(|| load(true))
-}
-
-/// Image means of `k` renders of a pixel-driven integrator.
-fn mc_reps(scene: &Scene, integ: &dyn Integrator, spp: u32, k: u64, seed0: u64) -> Vec<[f64; 3]> {
-    (0..k)
-        .map(|s| image_mean(&render_image(scene, integ, spp, seed0 + s)))
-        .collect()
 }
 
 /// PT replicates shared by the tests.

@@ -9,9 +9,13 @@ use mcmc_render::color::Rgb;
 use mcmc_render::integrators::Integrator;
 use mcmc_render::integrators::bdpt::{Bdpt, MisHeuristic};
 use mcmc_render::integrators::lt::LightTracer;
+use mcmc_render::integrators::mmlt::render_family;
+use mcmc_render::integrators::pssmlt::render_pssmlt;
 use mcmc_render::integrators::pt::PathTracer;
+use mcmc_render::markov::Normalization;
 use mcmc_render::observer::NoObserver;
 use mcmc_render::pss::MmltDepth;
+use mcmc_render::pss::PssmltSettings;
 use mcmc_render::render::{RenderSettings, render};
 use mcmc_render::scene::Scene;
 use std::collections::HashMap;
@@ -417,3 +421,73 @@ pub fn point_light_on_a_plane() -> (Scene, f64) {
 }
 
 pub mod tempered;
+
+/// Image means of `k` renders of a pixel-driven integrator (seeds
+/// `seed0..seed0 + k`).
+pub fn mc_reps(
+    scene: &Scene,
+    integ: &dyn Integrator,
+    spp: u32,
+    k: u64,
+    seed0: u64,
+) -> Vec<[f64; 3]> {
+    (0..k)
+        .map(|s| image_mean(&render_image(scene, integ, spp, seed0 + s)))
+        .collect()
+}
+
+/// Which Metropolis estimator.
+#[derive(Clone, Copy, Debug)]
+pub enum Mlt {
+    /// PSSMLT over PT.
+    PssmltPt,
+    /// PSSMLT over BDPT.
+    PssmltBdpt,
+    /// Multiplexed MLT.
+    Mmlt,
+}
+
+/// A replicate budget: bootstrap candidates (per member), chains,
+/// mutations per pixel.
+#[derive(Clone, Copy, Debug)]
+pub struct Budget {
+    /// Bootstrap candidates per member.
+    pub bootstrap: usize,
+    /// Chains.
+    pub chains: usize,
+    /// Mutations per pixel.
+    pub mpp: u64,
+}
+
+/// Image means of `k` independent runs of `kind` (seeds `seed0..seed0 + k`),
+/// with the running normalisation.
+pub fn mlt_reps(scene: &Scene, kind: Mlt, budget: Budget, k: u64, seed0: u64) -> Vec<[f64; 3]> {
+    let stop = AtomicBool::new(false);
+    (0..k)
+        .map(|s| {
+            let settings = PssmltSettings {
+                bootstrap: budget.bootstrap,
+                chains: budget.chains,
+                mutations_per_pixel: Some(budget.mpp),
+                seed: seed0 + s,
+                // b from the bootstrap and every large step: the large steps
+                // outnumber a small bootstrap, so b's variance falls with
+                // the mutations.
+                normalization: Normalization::Running,
+                ..PssmltSettings::default()
+            };
+            let r = match kind {
+                Mlt::PssmltPt => render_pssmlt(scene, pt_of(scene), &settings, &stop, &NoObserver),
+                Mlt::PssmltBdpt => {
+                    render_pssmlt(scene, bdpt_of(scene), &settings, &stop, &NoObserver)
+                }
+                Mlt::Mmlt => {
+                    render_family(scene, mmlt_depths(scene), &settings, &stop, &NoObserver)
+                }
+            }
+            .expect("mlt runs");
+            assert_eq!(r.chain_stats.invalid_density, 0, "{kind:?}: NaN/inf paths");
+            image_mean(&r.image())
+        })
+        .collect()
+}
