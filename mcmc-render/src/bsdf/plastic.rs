@@ -52,6 +52,12 @@ pub(crate) fn channel_mean(c: Rgb) -> f32 {
 }
 
 impl SmoothPlastic {
+    /// The diffuse base's albedo, for textures to set per hit (the lobe
+    /// weight keeps the value computed at construction).
+    pub(crate) fn diffuse_reflectance_mut(&mut self) -> &mut Rgb {
+        &mut self.diffuse_reflectance
+    }
+
     /// A plastic with relative index `eta` (int/ext, positive and not 1),
     /// base albedo `diffuse_reflectance` and specular scale `specular_reflectance`.
     pub fn new(

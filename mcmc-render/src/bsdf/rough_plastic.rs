@@ -100,6 +100,12 @@ fn transmittance_table(distribution: &Microfacet, eta: f32) -> &'static [f32; TR
 }
 
 impl RoughPlastic {
+    /// The diffuse base's albedo, for textures to set per hit (the lobe
+    /// weight keeps the value computed at construction).
+    pub(crate) fn diffuse_reflectance_mut(&mut self) -> &mut Rgb {
+        &mut self.diffuse_reflectance
+    }
+
     /// A rough plastic of roughness `alpha` (isotropic; clamped like every
     /// microfacet roughness), relative index `eta` (int/ext, positive, not 1).
     /// Precomputes the transmittance tables (about 1.1M sampler calls).

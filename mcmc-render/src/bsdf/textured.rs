@@ -22,6 +22,10 @@ pub enum TexturedParam {
     SpecularReflectance,
     /// `specular_transmittance` of `dielectric` and `roughdielectric`.
     SpecularTransmittance,
+    /// `diffuse_reflectance` of `plastic` and `roughplastic` (also inside
+    /// `twosided`). Their lobe-selection weight stays the one computed from
+    /// the texture's mean, as Mitsuba 3 computes it.
+    DiffuseReflectance,
 }
 
 impl TexturedParam {
@@ -31,6 +35,7 @@ impl TexturedParam {
             TexturedParam::Reflectance => "reflectance",
             TexturedParam::SpecularReflectance => "specular_reflectance",
             TexturedParam::SpecularTransmittance => "specular_transmittance",
+            TexturedParam::DiffuseReflectance => "diffuse_reflectance",
         }
     }
 
@@ -52,6 +57,13 @@ impl TexturedParam {
             (SpecularReflectance, Bsdf::RoughDielectric(b)) => &mut b.specular_reflectance,
             (SpecularTransmittance, Bsdf::Dielectric(b)) => &mut b.specular_transmittance,
             (SpecularTransmittance, Bsdf::RoughDielectric(b)) => &mut b.specular_transmittance,
+            (DiffuseReflectance, Bsdf::Plastic(b) | Bsdf::TwoSided(OneSided::Plastic(b))) => {
+                b.diffuse_reflectance_mut()
+            }
+            (
+                DiffuseReflectance,
+                Bsdf::RoughPlastic(b) | Bsdf::TwoSided(OneSided::RoughPlastic(b)),
+            ) => b.diffuse_reflectance_mut(),
             _ => return None,
         })
     }

@@ -770,7 +770,9 @@ impl Loader {
                         "int_ior and ext_ior must be positive and differ",
                     ));
                 }
-                let diffuse_reflectance = props.rgb("diffuse_reflectance", Rgb::splat(0.5))?;
+                // A texture's mean must lie in [0, 1] (its texels are not checked).
+                let diffuse_reflectance =
+                    color(self, &mut props, DiffuseReflectance, Rgb::splat(0.5))?;
                 if !diffuse_reflectance
                     .to_array()
                     .iter()
