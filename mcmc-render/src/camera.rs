@@ -85,11 +85,7 @@ impl Camera {
         let m = Mat3::from_mat4(desc.to_world);
         // Mitsuba scenes may mirror the camera (scale x = −1); any other
         // scale or shear would make W_e inconsistent with the ray mapping.
-        let ortho = (m.transpose() * m - Mat3::IDENTITY)
-            .to_cols_array()
-            .iter()
-            .all(|v| v.abs() < 1e-3);
-        if !ortho {
+        if !crate::frame::is_rotation(m) {
             return Err("sensor to_world must be a rotation/translation (optionally mirrored), without scaling".into());
         }
         let (w, h) = (width as f32, height as f32);

@@ -158,9 +158,7 @@ impl Environment {
     /// Errors when `to_world` is not a rotation (possibly mirrored): the
     /// densities assume directions keep their solid angle.
     pub fn new(radiance: EnvRadiance, to_world: Mat3) -> Result<Environment, String> {
-        let gram = to_world.transpose() * to_world;
-        let off = (gram - Mat3::IDENTITY).to_cols_array();
-        if off.iter().any(|e| !(e.abs() < 1e-4)) {
+        if !crate::frame::is_rotation(to_world) {
             return Err(
                 "an environment emitter's to_world must be a rotation (no scale or shear)".into(),
             );

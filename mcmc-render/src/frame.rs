@@ -1,7 +1,7 @@
 //! Orthonormal shading frames: BSDFs work in a local frame whose z axis is
 //! the shading normal.
 
-use glam::Vec3;
+use glam::{Mat3, Vec3};
 
 /// An orthonormal basis (s, t, n) with `n` the shading normal.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -34,4 +34,15 @@ impl Frame {
     pub fn to_world(&self, v: Vec3) -> Vec3 {
         self.s * v.x + self.t * v.y + self.n * v.z
     }
+}
+
+/// True when `m` is a rotation, possibly mirrored: `mᵀm` is the identity
+/// to 1e-3 per entry (scene transforms are parsed from text, so exactness
+/// is not expected). Cameras and emitters at infinity need it: scale or
+/// shear would change solid angles their densities assume preserved.
+pub fn is_rotation(m: Mat3) -> bool {
+    (m.transpose() * m - Mat3::IDENTITY)
+        .to_cols_array()
+        .iter()
+        .all(|e| e.abs() < 1e-3)
 }

@@ -95,12 +95,7 @@ impl SpotProfile {
                 "'beam_width' must be in (0, cutoff_angle = {cutoff_deg}] degrees, got {beam_deg}"
             ));
         }
-        let gram = to_world.transpose() * to_world;
-        if (gram - Mat3::IDENTITY)
-            .to_cols_array()
-            .iter()
-            .any(|e| !(e.abs() < 1e-4))
-        {
+        if !crate::frame::is_rotation(to_world) {
             return Err(
                 "a spot emitter's to_world must be a rotation and translation (no scale or shear)"
                     .into(),
@@ -158,11 +153,6 @@ impl SpotProfile {
 }
 
 impl Light {
-    /// True for emitters at infinity (directional lights, environments).
-    pub fn at_infinity(&self) -> bool {
-        matches!(self, Light::Directional { .. } | Light::Environment(_))
-    }
-
     /// True for emitters that are Dirac deltas in position or direction
     /// (point and directional lights): no ray can hit them.
     pub fn is_delta(&self) -> bool {

@@ -2,7 +2,7 @@
 
 use super::fresnel::{ConductorFresnel, reflect};
 use super::microfacet::Microfacet;
-use super::{BsdfSample, TransportMode};
+use super::{BsdfSample, TransportMode, reflection_sample};
 use crate::color::Rgb;
 use glam::Vec3;
 
@@ -95,20 +95,6 @@ impl RoughConductor {
         }
         let m = self.distribution.sample_visible(wo, u);
         let wi = reflect(wo, m).normalize_or_zero();
-        if wi.z <= 0.0 {
-            return None;
-        }
-        let (f, pdf) = self.eval_pdf(wo, wi);
-        if pdf.is_nan() || pdf <= 0.0 {
-            return None;
-        }
-        let weight = f * (wi.z / pdf);
-        weight.is_finite().then_some(BsdfSample {
-            wi,
-            weight,
-            pdf,
-            is_delta: false,
-            eta: 1.0,
-        })
+        reflection_sample(wi, self.eval_pdf(wo, wi))
     }
 }

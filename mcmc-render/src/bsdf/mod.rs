@@ -110,6 +110,24 @@ pub struct BsdfSample {
     pub eta: f32,
 }
 
+/// The sample of a non-delta reflection lobe at `wi` (upper hemisphere),
+/// given `(f, pdf) = eval_pdf(wo, wi)`: weight `f · cos θ_i / pdf`; `None`
+/// below the surface, for a zero or NaN density or a non-finite weight.
+#[inline]
+pub(crate) fn reflection_sample(wi: Vec3, (f, pdf): (Rgb, f32)) -> Option<BsdfSample> {
+    if wi.z <= 0.0 || !(pdf > 0.0) {
+        return None;
+    }
+    let weight = f * (wi.z / pdf);
+    weight.is_finite().then_some(BsdfSample {
+        wi,
+        weight,
+        pdf,
+        is_delta: false,
+        eta: 1.0,
+    })
+}
+
 /// Cosine of the angle to the local normal.
 pub fn cos_theta(w: Vec3) -> f32 {
     w.z

@@ -24,7 +24,7 @@
 
 use super::diffuse::square_to_cosine_hemisphere;
 use super::fresnel::{fresnel_dielectric, fresnel_diffuse_reflectance};
-use super::{BsdfSample, TransportMode};
+use super::{BsdfSample, TransportMode, reflection_sample};
 use crate::color::Rgb;
 use glam::Vec3;
 use std::f32::consts::FRAC_1_PI;
@@ -172,20 +172,6 @@ impl SmoothPlastic {
             });
         }
         let wi = square_to_cosine_hemisphere(u);
-        if wi.z <= 0.0 {
-            return None;
-        }
-        let (f, pdf) = self.eval_pdf(wo, wi);
-        if !(pdf > 0.0) {
-            return None;
-        }
-        let weight = f * (wi.z / pdf);
-        weight.is_finite().then_some(BsdfSample {
-            wi,
-            weight,
-            pdf,
-            is_delta: false,
-            eta: 1.0,
-        })
+        reflection_sample(wi, self.eval_pdf(wo, wi))
     }
 }

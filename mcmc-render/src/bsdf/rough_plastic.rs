@@ -40,7 +40,7 @@ use super::diffuse::square_to_cosine_hemisphere;
 use super::fresnel::{fresnel_dielectric, reflect, refract};
 use super::microfacet::Microfacet;
 use super::plastic::channel_mean;
-use super::{BsdfSample, TransportMode};
+use super::{BsdfSample, TransportMode, reflection_sample};
 use crate::color::Rgb;
 use crate::sampling::ONE_MINUS_EPSILON;
 use glam::Vec3;
@@ -304,21 +304,7 @@ impl RoughPlastic {
         } else {
             square_to_cosine_hemisphere(u)
         };
-        if wi.z <= 0.0 {
-            return None;
-        }
-        let (f, pdf) = self.eval_pdf(wo, wi);
-        if !(pdf > 0.0) {
-            return None;
-        }
-        let weight = f * (wi.z / pdf);
-        weight.is_finite().then_some(BsdfSample {
-            wi,
-            weight,
-            pdf,
-            is_delta: false,
-            eta: 1.0,
-        })
+        reflection_sample(wi, self.eval_pdf(wo, wi))
     }
 
     /// The numbers with which [`RoughPlastic::sample`] gives `wi`: both
