@@ -70,6 +70,12 @@ pub trait Algorithm<S, P> {
 
     /// Stops any adaptation (end of warm-up).
     fn freeze(&mut self);
+
+    /// Checks that a chain may start at `state` (its kernels'
+    /// [`Kernel::check_state`](crate::kernel::Kernel::check_state)).
+    fn check_initial(&self, _state: &S) -> Result<()> {
+        Ok(())
+    }
 }
 
 /// A Markov chain: state, stream, statistics and algorithm.
@@ -104,8 +110,10 @@ impl<S, P, A: Algorithm<S, P>> Chain<S, P, A> {
     }
 
     /// Starts a chain at an already evaluated sample (e.g. from start-up
-    /// resampling). Refuses a non-finite log density.
+    /// resampling). Refuses a non-finite log density and a state the
+    /// algorithm's kernels cannot move (e.g. of the wrong dimension).
     pub fn from_sample(current: Sample<S, P>, algorithm: A, rng: ChainRng) -> Result<Self> {
+        algorithm.check_initial(&current.state)?;
         if DensityClass::of(current.log_density) != DensityClass::Finite {
             return Err(CoreError::NonFiniteInitialState {
                 log_density: current.log_density,

@@ -89,6 +89,11 @@ where
     S: Clone,
     P: Clone,
 {
+    fn check_initial(&self, state: &S) -> crate::Result<()> {
+        self.first.check_state(state)?;
+        self.second.check_state(state)
+    }
+
     fn component_names(&self) -> Vec<String> {
         let mut names: Vec<String> = self
             .first

@@ -109,6 +109,10 @@ where
         self.kernel.component_names()
     }
 
+    fn check_initial(&self, state: &S) -> crate::Result<()> {
+        self.kernel.check_state(state)
+    }
+
     #[inline]
     fn step<T: Target<S, Payload = P>>(
         &mut self,

@@ -203,6 +203,10 @@ where
         self.kernel.component_names()
     }
 
+    fn check_initial(&self, state: &S) -> crate::Result<()> {
+        self.kernel.check_state(state)
+    }
+
     fn step<T: Target<S, Payload = P>>(
         &mut self,
         chain: &mut ChainState<S, P>,

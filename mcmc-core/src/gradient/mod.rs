@@ -101,6 +101,29 @@ impl GradientPayload {
 /// gradient at a finite density turns the density into NaN, so the
 /// standard acceptance step rejects and counts it as invalid.
 #[inline]
+/// Refuses a target of dimension 0: the gradient kernels size their
+/// buffers and factorisations by it.
+pub(crate) fn check_dimension<G: GradientTarget + ?Sized>(target: &G) -> crate::Result<()> {
+    if target.dim() == 0 {
+        return Err(crate::error::invalid(
+            "target",
+            "a gradient target must have dimension at least 1, got 0",
+        ));
+    }
+    Ok(())
+}
+
+/// Refuses a state whose length is not the kernel's dimension `dim`.
+pub(crate) fn check_state_dimension(dim: usize, state: &[f64]) -> crate::Result<()> {
+    if state.len() != dim {
+        return Err(crate::CoreError::DimensionMismatch {
+            expected: dim,
+            got: state.len(),
+        });
+    }
+    Ok(())
+}
+
 pub(crate) fn evaluate_checked<G: GradientTarget + ?Sized>(
     target: &G,
     x: &[f64],

@@ -183,4 +183,8 @@ impl<P> Kernel<Vec<f64>, P> for AdaptiveCovariance {
     fn component_names(&self) -> Vec<String> {
         vec!["adaptive covariance".into(), "fixed safety step".into()]
     }
+
+    fn check_state(&self, state: &Vec<f64>) -> Result<()> {
+        crate::gradient::check_state_dimension(self.dim, state)
+    }
 }

@@ -60,6 +60,16 @@ impl GaussianRandomWalk {
         })
     }
 
+    /// The dimension the kernel was built for (`None` for an isotropic
+    /// walk, which moves any dimension).
+    pub fn dim(&self) -> Option<usize> {
+        match &self.shape {
+            Shape::Isotropic(_) => None,
+            Shape::Diagonal(s) => Some(s.len()),
+            Shape::Full { lower, .. } => Some(lower.len().isqrt()),
+        }
+    }
+
     /// Writes `current + step` into `out`.
     pub(crate) fn step_into(&mut self, current: &[f64], out: &mut Vec<f64>, rng: &mut ChainRng) {
         // One pass that copies and perturbs, into a buffer that already
@@ -138,5 +148,12 @@ impl<P> Kernel<Vec<f64>, P> for GaussianRandomWalk {
 
     fn component_names(&self) -> Vec<String> {
         vec!["gaussian random walk".into()]
+    }
+
+    fn check_state(&self, state: &Vec<f64>) -> Result<()> {
+        match self.dim() {
+            Some(d) => crate::gradient::check_state_dimension(d, state),
+            None => Ok(()),
+        }
     }
 }

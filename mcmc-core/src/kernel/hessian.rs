@@ -29,7 +29,9 @@
 
 use super::{GradientKernelStatistics, Kernel, Proposal};
 use crate::error::{Result, invalid};
-use crate::gradient::{GradientPayload, GradientTarget, evaluate_checked, hessian_from_gradient};
+use crate::gradient::{
+    GradientPayload, GradientTarget, check_dimension, evaluate_checked, hessian_from_gradient,
+};
 use crate::rng::{ChainRng, standard_normal};
 use crate::sample::Sample;
 use nalgebra::{DMatrix, SymmetricEigen};
@@ -96,6 +98,7 @@ impl<G: GradientTarget> H2mc<G> {
         if !(tau > 0.0 && tau <= 1.0) {
             return Err(invalid("tau", format!("{tau} must lie in (0, 1]")));
         }
+        check_dimension(&target)?;
         let dim = target.dim();
         Ok(H2mc {
             target,
@@ -334,5 +337,9 @@ impl<G: GradientTarget> Kernel<Vec<f64>, GradientPayload> for H2mc<G> {
 
     fn component_names(&self) -> Vec<String> {
         vec!["h2mc".to_string()]
+    }
+
+    fn check_state(&self, state: &Vec<f64>) -> Result<()> {
+        crate::gradient::check_state_dimension(self.dim, state)
     }
 }

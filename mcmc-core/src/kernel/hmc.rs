@@ -36,7 +36,9 @@
 use super::{Kernel, Metric, Proposal, StepObservation};
 use crate::adaptation::{MetricAdaptation, Warmup, WarmupSchedule};
 use crate::error::{Result, invalid};
-use crate::gradient::{GradientPayload, GradientTarget, evaluate_checked};
+use crate::gradient::{
+    GradientPayload, GradientTarget, check_dimension, check_state_dimension, evaluate_checked,
+};
 use crate::rng::{ChainRng, uniform};
 use crate::sample::Sample;
 
@@ -119,6 +121,7 @@ impl<G: GradientTarget> Hmc<G> {
 
     /// HMC with the given trajectory length rule.
     pub fn with_trajectory(target: G, step_size: f64, trajectory: Trajectory) -> Result<Self> {
+        check_dimension(&target)?;
         if !(step_size.is_finite() && step_size > 0.0) {
             return Err(invalid(
                 "step_size",
@@ -455,5 +458,9 @@ impl<G: GradientTarget> Kernel<Vec<f64>, GradientPayload> for Hmc<G> {
 
     fn component_names(&self) -> Vec<String> {
         vec![self.name.to_string()]
+    }
+
+    fn check_state(&self, state: &Vec<f64>) -> Result<()> {
+        check_state_dimension(self.dim, state)
     }
 }

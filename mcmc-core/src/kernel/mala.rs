@@ -113,4 +113,8 @@ impl<G: GradientTarget> Kernel<Vec<f64>, GradientPayload> for Mala<G> {
     fn component_names(&self) -> Vec<String> {
         self.0.component_names()
     }
+
+    fn check_state(&self, state: &Vec<f64>) -> crate::Result<()> {
+        self.0.check_state(state)
+    }
 }

@@ -172,6 +172,12 @@ impl<S, P> Kernel<S, P> for Mixture<S, P> {
         }
     }
 
+    fn check_state(&self, state: &S) -> crate::Result<()> {
+        self.components
+            .iter()
+            .try_for_each(|c| c.check_state(state))
+    }
+
     fn component_names(&self) -> Vec<String> {
         self.components
             .iter()

@@ -135,6 +135,14 @@ pub trait Kernel<S, P = ()> {
     /// Names of the components, for statistics; one entry per component.
     fn component_names(&self) -> Vec<String>;
 
+    /// Checks that a chain may start at `state` with this kernel (e.g. the
+    /// state's dimension matches the kernel's); called by
+    /// [`Chain::from_sample`](crate::chain::Chain::from_sample). The default
+    /// accepts every state.
+    fn check_state(&self, _state: &S) -> crate::Result<()> {
+        Ok(())
+    }
+
     /// Every outcome of one proposal with its probability, on finite spaces.
     /// `None` when the kernel cannot enumerate.
     fn enumerate(&self, _from: &Sample<S, P>) -> Option<Vec<Enumerated<S>>> {

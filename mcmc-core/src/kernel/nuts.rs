@@ -689,6 +689,10 @@ impl<G: GradientTarget> Kernel<Vec<f64>, GradientPayload> for Nuts<G> {
     fn component_names(&self) -> Vec<String> {
         self.hmc.component_names()
     }
+
+    fn check_state(&self, state: &Vec<f64>) -> crate::Result<()> {
+        self.hmc.check_state(state)
+    }
 }
 
 #[cfg(test)]

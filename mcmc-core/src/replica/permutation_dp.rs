@@ -84,9 +84,25 @@ impl PermutationDp {
                 ));
             }
         }
+        // The limit is the caller's; the machine may still not have the
+        // memory. Ask for it fallibly, so a limit set too high gives an
+        // error instead of an allocation abort.
+        let mut table = Vec::new();
+        if table.try_reserve_exact(1usize << levels).is_err() {
+            return Err(invalid(
+                "levels",
+                format!(
+                    "importance-sampled permutations over M = {levels} levels need a table of \
+                     2^{levels} entries ({}), which could not be allocated; use fewer levels or \
+                     importance-sampled swaps (linear in M)",
+                    describe_bytes(levels)
+                ),
+            ));
+        }
+        table.resize(1usize << levels, 0.0);
         Ok(PermutationDp {
             m: levels,
-            table: vec![0.0; 1 << levels],
+            table,
             entries: vec![0.0; levels * levels],
             log_shift: 0.0,
             linear: true,
