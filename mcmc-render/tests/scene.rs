@@ -274,6 +274,19 @@ fn refusals_name_the_line() {
             r#"<shape type="sphere"><ref id="nothing"/></shape>"#,
             "nothing",
         ),
+        // Children of parameter tags and transform operations were ignored.
+        (
+            r#"<shape type="sphere"><transform name="to_world"><translate x="1"><scale value="2"/></translate></transform></shape>"#,
+            "unexpected <scale> inside <translate>",
+        ),
+        (
+            r#"<shape type="sphere"><float name="radius" value="1"><float name="x" value="2"/></float></shape>"#,
+            "unexpected <float> inside <float>",
+        ),
+        (
+            r#"<shape type="sphere"><float name="radius" value="1">2</float></shape>"#,
+            "unexpected text inside <float>",
+        ),
     ];
     for (body, needle) in cases {
         let e = desc_in(&dir, body, &[]).expect_err(body);

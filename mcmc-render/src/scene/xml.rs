@@ -505,6 +505,9 @@ impl Parser {
     }
 
     fn value(&self, node: roxmltree::Node, tag: &str, loc: &Loc) -> Result<Value, SceneError> {
+        if tag != "transform" {
+            check_leaf(node, loc)?;
+        }
         match tag {
             "float" => {
                 check_attrs(node, &["name", "value"], loc)?;
@@ -610,6 +613,7 @@ impl Parser {
     }
 
     fn transform_op(&self, op: roxmltree::Node, loc: &Loc) -> Result<Mat4, SceneError> {
+        check_leaf(op, loc)?;
         let tag = match op.tag_name().name() {
             "lookAt" if self.legacy => "lookat",
             t => t,
@@ -714,6 +718,33 @@ fn req_attr<'a>(
             ),
         )
     })
+}
+
+/// Refuses children (elements or text) inside an element that takes none
+/// — parameter tags and transform operations — instead of ignoring them.
+fn check_leaf(node: roxmltree::Node, loc: &Loc) -> Result<(), SceneError> {
+    let tag = node.tag_name().name();
+    for child in node.children() {
+        if child.is_element() {
+            return Err(err(
+                &Loc {
+                    file: loc.file.clone(),
+                    line: line_of(child),
+                },
+                format!(
+                    "unexpected <{}> inside <{tag}> (it takes no child elements)",
+                    child.tag_name().name()
+                ),
+            ));
+        }
+        if child.is_text() && child.text().is_some_and(|t| !t.trim().is_empty()) {
+            return Err(err(
+                loc,
+                format!("unexpected text inside <{tag}> (values go in attributes)"),
+            ));
+        }
+    }
+    Ok(())
 }
 
 fn check_attrs(node: roxmltree::Node, allowed: &[&str], loc: &Loc) -> Result<(), SceneError> {
