@@ -21,6 +21,13 @@ fn a_time_budget_too_large_for_a_duration_is_refused() {
 }
 
 #[test]
+fn a_sample_count_too_large_for_u32_is_refused() {
+    let dir = setup("limits-spp");
+    let out = run(&["render", "s.xml", "--spp", "5000000000", "--quiet"], &dir);
+    assert_clean_failure(&out, &["--spp 5000000000", "too large"]);
+}
+
+#[test]
 fn thousands_of_threads_are_refused() {
     let dir = setup("limits-threads");
     let out = run(&["render", "s.xml", "--threads", "100000", "--quiet"], &dir);

@@ -274,6 +274,11 @@ fn refusals_name_the_line() {
             r#"<shape type="sphere"><ref id="nothing"/></shape>"#,
             "nothing",
         ),
+        // Negative reflectance was accepted (negative radiance was not).
+        (
+            r#"<bsdf type="diffuse"><rgb name="reflectance" value="0.5, -0.1, 0.5"/></bsdf>"#,
+            "'reflectance' must be finite and non-negative",
+        ),
         // Children of parameter tags and transform operations were ignored.
         (
             r#"<shape type="sphere"><transform name="to_world"><translate x="1"><scale value="2"/></translate></transform></shape>"#,

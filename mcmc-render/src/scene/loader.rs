@@ -114,16 +114,29 @@ impl<'a> Props<'a> {
     }
 
     /// An `<rgb>` or a `<float>` (broadcast to grey), as Mitsuba allows.
+    /// Every colour the loader reads is a physical quantity (a
+    /// reflectance, transmittance, radiance or a conductor's η and k), so
+    /// a negative or non-finite one is refused here, at its line.
     fn opt_rgb(&mut self, name: &str) -> Result<Option<Rgb>, SceneError> {
-        match self.get(name) {
-            None => Ok(None),
-            Some(p) => match &p.value {
-                Value::Rgb(v) => Ok(Some(*v)),
-                Value::Float(v) => Ok(Some(Rgb::splat(*v))),
-                Value::Integer(v) => Ok(Some(Rgb::splat(*v as f32))),
-                _ => Err(self.type_err(p, "an <rgb> or a <float>")),
-            },
+        let Some(p) = self.get(name) else {
+            return Ok(None);
+        };
+        let v = match &p.value {
+            Value::Rgb(v) => *v,
+            Value::Float(v) => Rgb::splat(*v),
+            Value::Integer(v) => Rgb::splat(*v as f32),
+            _ => return Err(self.type_err(p, "an <rgb> or a <float>")),
+        };
+        if !v.to_array().iter().all(|c| c.is_finite() && *c >= 0.0) {
+            return Err(err(
+                &p.loc,
+                format!(
+                    "'{name}' must be finite and non-negative, got {:?}",
+                    v.to_array()
+                ),
+            ));
         }
+        Ok(Some(v))
     }
 
     fn rgb(&mut self, name: &str, default: Rgb) -> Result<Rgb, SceneError> {
