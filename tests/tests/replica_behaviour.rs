@@ -387,3 +387,85 @@ fn the_level_observer_sees_every_level_and_changes_nothing() {
         assert!(last.iter().all(|x| x.is_finite()), "{kind}: {last:?}");
     }
 }
+
+/// `E[α_{1,2}]` of the neighbour swap between `N(0, 1)` (β = 1) and its
+/// power `β = b` (`N(0, 1/b)`), by a midpoint rule over ±10 sd of each
+/// level, independent of the code under test: `α = min(1, exp((1 − b)(x² −
+/// y²)/2))` for `x ~ π_1`, `y ~ π_b`.
+fn exact_neighbour_acceptance(b: f64) -> f64 {
+    let n = 1500;
+    let h = 20.0 / n as f64; // in units of each level's standard deviation
+    let (hx, hy) = (h, h / b.sqrt());
+    let mut sum = 0.0;
+    for i in 0..n {
+        let x = -10.0 + (i as f64 + 0.5) * h;
+        let px = (-0.5 * x * x).exp() / (2.0 * std::f64::consts::PI).sqrt();
+        for j in 0..n {
+            let y = (-10.0 + (j as f64 + 0.5) * h) / b.sqrt();
+            let py = (-0.5 * b * y * y).exp() * (b / (2.0 * std::f64::consts::PI)).sqrt();
+            let alpha = (0.5 * (1.0 - b) * (x * x - y * y)).exp().min(1.0);
+            sum += alpha * px * py;
+        }
+    }
+    sum * hx * hy
+}
+
+#[test]
+fn the_barrier_is_estimated_under_every_move() {
+    // Λ = 1 − E[α_{1,2}] for a two-level power family of a standard normal.
+    // Before, only the neighbour and even–odd moves reported it; now every
+    // move does, from end-of-sweep probes of the neighbour swap.
+    //
+    // Tolerance: K = 30 independent ensembles of 2000 sweeps each give 30
+    // independent estimates of Λ; their mean has standard error s/√30
+    // (K ≥ 30, so the normal quantile applies); we accept |mean − Λ| ≤ 4·SE.
+    // Control: the exact Λ for β = 0.3 instead of 0.25 (ΔΛ = 0.048, about
+    // 15 SE here) must be rejected by the same criterion on the same data.
+    let b = 0.25;
+    let exact = 1.0 - exact_neighbour_acceptance(b);
+    let wrong = 1.0 - exact_neighbour_acceptance(0.3);
+    for kind in ["neighbour", "even-odd", "is-permutation", "is-swap", "eem"] {
+        let estimates: Vec<f64> = (0..30u64)
+            .map(|k| {
+                let family = PowerFamily::without_prior(
+                    (|x: &[f64]| -0.5 * x[0] * x[0]) as fn(&[f64]) -> f64,
+                    vec![1.0, b],
+                )
+                .unwrap();
+                let algs = [1.0, b]
+                    .iter()
+                    .map(|beta: &f64| {
+                        MetropolisHastings::new(
+                            GaussianRandomWalk::isotropic(2.4 / beta.sqrt()).unwrap(),
+                        )
+                    })
+                    .collect();
+                let mut re: Ensemble = ReplicaExchange::new(
+                    family,
+                    vec![vec![0.0]],
+                    algs,
+                    make_move(kind, 2),
+                    100 + k,
+                )
+                .unwrap();
+                for _ in 0..2000 {
+                    re.sweep();
+                }
+                re.statistics().barrier().unwrap()
+            })
+            .collect();
+        let k = estimates.len() as f64;
+        let mean = estimates.iter().sum::<f64>() / k;
+        let var = estimates.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / (k - 1.0);
+        let se = (var / k).sqrt();
+        eprintln!("{kind}: Λ = {mean:.4} ± {se:.4} (exact {exact:.4})");
+        assert!(
+            (mean - exact).abs() <= 4.0 * se,
+            "{kind}: Λ {mean} ± {se}, exact {exact}"
+        );
+        assert!(
+            (mean - wrong).abs() > 4.0 * se,
+            "{kind}: the control passed"
+        );
+    }
+}

@@ -123,6 +123,26 @@ impl<S, P: Clone> ExchangeContext<'_, S, P> {
         self.cache.values[k]
     }
 
+    /// Records every neighbour pair's swap acceptance probability in the
+    /// statistics (for Λ under any move), when cross densities are cheap.
+    pub(crate) fn probe_neighbours(&mut self) {
+        if !self.family.cross_densities_are_cheap() || self.levels() < 2 {
+            return;
+        }
+        let alphas: Vec<f64> = (0..self.levels() - 1)
+            .map(|i| {
+                let log_alpha = swap_log_acceptance(
+                    self.log_density(i, i),
+                    self.log_density(i + 1, i + 1),
+                    self.log_density(i, i + 1),
+                    self.log_density(i + 1, i),
+                );
+                log_alpha.exp()
+            })
+            .collect();
+        self.stats.record_neighbour_probe(alphas);
+    }
+
     /// The full matrix `out[level·M + at] = ln π_level(x_at)`.
     pub fn log_density_matrix(&mut self, out: &mut Vec<f64>) {
         let m = self.levels();

@@ -267,6 +267,7 @@ where
             frozen: self.frozen,
         };
         self.exchange.end_sweep(&mut cx);
+        cx.probe_neighbours();
         self.stats.end_sweep();
     }
 

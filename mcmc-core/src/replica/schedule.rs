@@ -165,17 +165,15 @@ where
     F::Payload: Send + Sync,
     A: Algorithm<S, F::Payload> + Send,
 {
-    /// Ends a tuning round: computes `Λ` from the neighbour swaps since the
-    /// last call, moves the levels to equalise rejection, re-targets every
-    /// chain's sample and clears the pair counts. Needs a move that tries
-    /// every neighbour pair (neighbour or even–odd swaps).
+    /// Ends a tuning round: computes `Λ` from the neighbour rejection rates
+    /// since the last call ([`ReplicaStatistics::neighbour_rejection`]:
+    /// end-of-sweep probes, so any exchange move works for a power family),
+    /// moves the levels to equalise rejection, re-targets every chain's
+    /// sample and clears the pair counts.
+    ///
+    /// [`ReplicaStatistics::neighbour_rejection`]: super::ReplicaStatistics::neighbour_rejection
     pub fn adapt_schedule(&mut self) -> Result<ScheduleUpdate> {
-        let rejections: Vec<f64> = self
-            .stats
-            .neighbour_acceptance()
-            .iter()
-            .map(|a| 1.0 - a)
-            .collect();
+        let rejections = self.stats.neighbour_rejection();
         let old = self.family.parameters();
         let new = equalised_schedule(&old, &rejections)?;
         self.family.set_parameters(new.clone())?;

@@ -132,6 +132,12 @@ pub struct ReplicaStatistics {
     /// Target evaluations made by exchange moves (cross-level densities,
     /// payload refreshes); 0 for families with cheap cross densities.
     pub evaluations: u64,
+    /// Per neighbour pair `(i, i+1)`: the sum of the swap acceptance
+    /// probability `α_{i,i+1}` evaluated at the end of every sweep, whatever
+    /// the move (families with cheap cross densities only).
+    neighbour_probe_sums: Vec<f64>,
+    /// Sweeps whose neighbour acceptance was probed.
+    neighbour_probes: u64,
 }
 
 impl ReplicaStatistics {
@@ -147,6 +153,8 @@ impl ReplicaStatistics {
             changed: vec![0; levels],
             touched: vec![false; levels],
             evaluations: 0,
+            neighbour_probe_sums: vec![0.0; levels.saturating_sub(1)],
+            neighbour_probes: 0,
         }
     }
 
@@ -162,6 +170,27 @@ impl ReplicaStatistics {
         p.attempted += 1;
         p.accepted += accepted as u64;
         p.sum_alpha += alpha;
+    }
+
+    /// Records the neighbour swap acceptance probabilities `α_{i,i+1}`
+    /// (one per pair, in order) of the configuration at the end of a sweep.
+    pub fn record_neighbour_probe(&mut self, alphas: impl IntoIterator<Item = f64>) {
+        for (sum, alpha) in self.neighbour_probe_sums.iter_mut().zip(alphas) {
+            *sum += alpha;
+        }
+        self.neighbour_probes += 1;
+    }
+
+    /// Mean neighbour swap acceptance `E[α_{i,i+1}]` from the end-of-sweep
+    /// probes, `None` when no sweep was probed (families whose cross
+    /// densities cost a target evaluation are not probed).
+    pub fn probed_neighbour_acceptance(&self) -> Option<Vec<f64>> {
+        (self.neighbour_probes > 0).then(|| {
+            self.neighbour_probe_sums
+                .iter()
+                .map(|s| s / self.neighbour_probes as f64)
+                .collect()
+        })
     }
 
     /// Marks that `level`'s state was replaced by an exchange in this sweep.
@@ -235,17 +264,37 @@ impl ReplicaStatistics {
     }
 
     /// Estimated communication barrier `Λ = Σ_i r_i`, the sum of neighbour
-    /// rejection rates `r_i = 1 − E[α_{i,i+1}]` (Syed et al. 2021). `None`
-    /// when some neighbour pair was never attempted. Meaningful for the
-    /// neighbour and even–odd moves, whose attempts are plain Eq. 4.11
-    /// swaps of neighbours; other moves record their own acceptance
-    /// probabilities, which are not the neighbour swap's.
+    /// rejection rates `r_i = 1 − E[α_{i,i+1}]` (Syed et al. 2021), for any
+    /// exchange move.
+    ///
+    /// For families with cheap cross densities (power families), the
+    /// ensemble evaluates every neighbour pair's Eq. 4.11 swap probability
+    /// at the end of every sweep ([`Self::probed_neighbour_acceptance`]),
+    /// whatever move it runs: the levels' states are then draws from their
+    /// own levels, so the mean is `E[α_{i,i+1}]` under `π_i ⊗ π_{i+1}`, the
+    /// quantity Λ is defined by, and it costs no evaluation. Otherwise Λ
+    /// comes from the attempted neighbour swaps, which only the neighbour
+    /// and even–odd moves make (other moves record their own acceptance
+    /// probabilities, which are not the neighbour swap's): `None` when some
+    /// neighbour pair was never attempted.
     pub fn barrier(&self) -> Option<f64> {
-        let acc = self.neighbour_acceptance();
-        if acc.iter().any(|a| a.is_nan()) {
+        let rejections = self.neighbour_rejection();
+        if rejections.iter().any(|r| r.is_nan()) {
             return None;
         }
-        Some(acc.iter().map(|a| 1.0 - a).sum())
+        Some(rejections.iter().sum())
+    }
+
+    /// The neighbour rejection rates `r_i = 1 − E[α_{i,i+1}]` that
+    /// [`Self::barrier`] sums: from the end-of-sweep probes when there are
+    /// any, else from the attempted neighbour swaps (NaN for a pair never
+    /// attempted).
+    pub fn neighbour_rejection(&self) -> Vec<f64> {
+        self.probed_neighbour_acceptance()
+            .unwrap_or_else(|| self.neighbour_acceptance())
+            .iter()
+            .map(|a| 1.0 - a)
+            .collect()
     }
 
     /// Forgets the pair counts (after a schedule change, whose old
@@ -254,6 +303,8 @@ impl ReplicaStatistics {
         self.pairs
             .iter_mut()
             .for_each(|p| *p = PairStatistics::default());
+        self.neighbour_probe_sums.iter_mut().for_each(|s| *s = 0.0);
+        self.neighbour_probes = 0;
     }
 }
 
