@@ -60,6 +60,24 @@ impl GaussianRandomWalk {
         })
     }
 
+    /// Multiplies every step by `factor` (the covariance by `factor²`),
+    /// e.g. after a tempering ladder moved the kernel's level; a factor
+    /// that is not finite and positive leaves the kernel unchanged.
+    pub fn scale(&mut self, factor: f64) {
+        if !(factor.is_finite() && factor > 0.0) {
+            return;
+        }
+        match &mut self.shape {
+            Shape::Isotropic(s) => *s *= factor,
+            Shape::Diagonal(s) => s.iter_mut().for_each(|v| *v *= factor),
+            Shape::Full { lower, log_det } => {
+                lower.iter_mut().for_each(|v| *v *= factor);
+                // log_det is ln|L|, L d×d lower triangular.
+                *log_det += (lower.len().isqrt() as f64) * factor.ln();
+            }
+        }
+    }
+
     /// The dimension the kernel was built for (`None` for an isotropic
     /// walk, which moves any dimension).
     pub fn dim(&self) -> Option<usize> {

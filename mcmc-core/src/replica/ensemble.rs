@@ -59,7 +59,7 @@ const EXCHANGE_STREAM: u64 = 0xE7C4_A4E0_0000_0000;
 pub struct ReplicaExchange<S, F: ReplicaFamily<S>, A> {
     pub(crate) family: F,
     pub(crate) chains: Vec<ChainState<S, F::Payload>>,
-    algorithms: Vec<A>,
+    pub(crate) algorithms: Vec<A>,
     exchange: Box<dyn ExchangeMove<S, F::Payload>>,
     rng: ChainRng,
     index: IndexProcess,

@@ -173,10 +173,26 @@ where
     ///
     /// [`ReplicaStatistics::neighbour_rejection`]: super::ReplicaStatistics::neighbour_rejection
     pub fn adapt_schedule(&mut self) -> Result<ScheduleUpdate> {
+        self.adapt_schedule_with(|_, _, _, _| {})
+    }
+
+    /// [`Self::adapt_schedule`], then `rescale(level, old, new, algorithm)`
+    /// for every level whose parameter moved, so that the level's kernel
+    /// can follow its density (a power family's level `β` is `1/√β` wide:
+    /// [`temperature_rescale`] gives the factor for a random walk).
+    pub fn adapt_schedule_with(
+        &mut self,
+        mut rescale: impl FnMut(usize, f64, f64, &mut A),
+    ) -> Result<ScheduleUpdate> {
         let rejections = self.stats.neighbour_rejection();
         let old = self.family.parameters();
         let new = equalised_schedule(&old, &rejections)?;
         self.family.set_parameters(new.clone())?;
+        for (level, algorithm) in self.algorithms.iter_mut().enumerate() {
+            if old[level] != new[level] {
+                rescale(level, old[level], new[level], algorithm);
+            }
+        }
         for (level, chain) in self.chains.iter_mut().enumerate() {
             let ld = self.family.log_density_of(level, &chain.current);
             self.family.retarget(level, &mut chain.current, ld);
@@ -193,15 +209,34 @@ where
     /// Pigeons-style tuning: `rounds` rounds of `2^r` sweeps (r = 0, 1, …),
     /// adapting the schedule after each. Returns the last update.
     pub fn tune_schedule(&mut self, rounds: u32) -> Result<Option<ScheduleUpdate>> {
+        self.tune_schedule_with(rounds, |_, _, _, _| {})
+    }
+
+    /// [`Self::tune_schedule`] with the kernels rescaled after every round
+    /// (see [`Self::adapt_schedule_with`]).
+    pub fn tune_schedule_with(
+        &mut self,
+        rounds: u32,
+        mut rescale: impl FnMut(usize, f64, f64, &mut A),
+    ) -> Result<Option<ScheduleUpdate>> {
         let mut last = None;
         for r in 0..rounds {
             for _ in 0..(1u64 << r) {
                 self.sweep();
             }
-            last = Some(self.adapt_schedule()?);
+            last = Some(self.adapt_schedule_with(&mut rescale)?);
         }
         Ok(last)
     }
+}
+
+/// The factor by which a random walk's scale should change when its
+/// level's inverse temperature moves from `old` to `new`: `√(old/new)`,
+/// since `π^β` of a density of width `w` has width `w/√β` (the rule
+/// [`super::kernel_scales`] uses). `None` when either `β` is 0 (a level
+/// that is the prior alone has no such width).
+pub fn temperature_rescale(old: f64, new: f64) -> Option<f64> {
+    (old > 0.0 && new > 0.0).then(|| (old / new).sqrt())
 }
 
 #[cfg(test)]
