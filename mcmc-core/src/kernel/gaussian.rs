@@ -175,3 +175,40 @@ impl<P> Kernel<Vec<f64>, P> for GaussianRandomWalk {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Scaling by `f` is the walk of covariance `f²Σ`, for every shape
+    /// (the full shape's cached `ln|L|` included).
+    #[test]
+    fn scaling_equals_building_with_the_scaled_covariance() {
+        let f: f64 = 1.7;
+        let cov = [vec![1.0, 0.5], vec![0.5, 2.0]];
+        let scaled: Vec<Vec<f64>> = cov
+            .iter()
+            .map(|r| r.iter().map(|v| v * f * f).collect())
+            .collect();
+        let pairs = [
+            (
+                GaussianRandomWalk::with_covariance(&cov).unwrap(),
+                GaussianRandomWalk::with_covariance(&scaled).unwrap(),
+            ),
+            (
+                GaussianRandomWalk::diagonal(vec![0.3, 2.0]).unwrap(),
+                GaussianRandomWalk::diagonal(vec![0.3 * f, 2.0 * f]).unwrap(),
+            ),
+            (
+                GaussianRandomWalk::isotropic(0.3).unwrap(),
+                GaussianRandomWalk::isotropic(0.3 * f).unwrap(),
+            ),
+        ];
+        for (mut a, b) in pairs {
+            a.scale(f);
+            let (x, y) = ([0.1, -0.2], [0.9, 1.4]);
+            let (da, db) = (a.log_density(&x, &y), b.log_density(&x, &y));
+            assert!((da - db).abs() < 1e-12, "{da} vs {db}");
+        }
+    }
+}
