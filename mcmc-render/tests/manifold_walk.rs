@@ -1,0 +1,429 @@
+//! The manifold walk of `mcmc_render::manifold` on three scenes: a plane
+//! mirror, a curved mirror (a sphere) and a glass sphere (refraction in
+//! and out, η = 1.5), each above a diffuse floor.
+//!
+//! - the Newton walk reaches targets around the endpoint with the endpoint
+//!   within 1e-5 of the chain length and every half-vector constraint
+//!   below 1e-5 (recomputed here from the positions);
+//! - the reverse walk brings every vertex back (and a control with a loose
+//!   forward tolerance is caught by the reverse check);
+//! - the generalised geometry term equals a finite-difference Jacobian of
+//!   ray-traced chains within 1e-3, and controls (a wrong η, a curved
+//!   mirror treated as flat, a dropped Jacobian block) miss it by more;
+//! - failures are classified (escaped, occluded).
+
+use glam::{DMat2, DVec2, DVec3, Vec3};
+use mcmc_render::geometry::Ray;
+use mcmc_render::manifold::constraint::{
+    ConstraintBlocks, constraint_values, generalized_geometry, geometry_term, tangent_map_with,
+};
+use mcmc_render::manifold::walk::{
+    WalkConfig, WalkFailure, WalkStats, trace, walk, walk_reversible,
+};
+use mcmc_render::manifold::{ManifoldVertex, Role, Specular, chain_length};
+use mcmc_render::scene::Scene;
+use std::path::Path;
+
+/// A scene with a 10×10 diffuse floor at z = 0 (shape 0), a diffuse
+/// ceiling at z = 4 facing down (shape 1), and `body`'s shapes (2, …).
+fn scene(body: &str) -> Scene {
+    let text = format!(
+        r#"<scene version="3.0.0"><sensor type="perspective"/>
+        <shape type="rectangle"><transform name="to_world"><scale x="5" y="5" z="1"/></transform>
+            <bsdf type="diffuse"/></shape>
+        <shape type="rectangle"><transform name="to_world"><scale x="5" y="5" z="1"/>
+            <rotate x="1" angle="180"/><translate z="4"/></transform><bsdf type="diffuse"/></shape>
+        {body}</scene>"#
+    );
+    Scene::load_str(&text, Path::new("manifold.xml"), Path::new(".")).expect("scene loads")
+}
+
+/// Shape 2: a mirror in the plane x = 2 facing −x, 4×4; shape 3: a
+/// 0.6×0.6 diffuse square at z = 0.6 around (−0.1, 1.3), an occluder.
+fn plane_mirror() -> Scene {
+    scene(
+        r#"<shape type="rectangle"><transform name="to_world"><scale value="2"/>
+            <rotate y="1" angle="-90"/><translate x="2" z="1"/></transform>
+            <bsdf type="conductor"><string name="material" value="none"/></bsdf></shape>
+           <shape type="rectangle"><transform name="to_world"><scale value="0.3"/>
+            <translate x="-0.1" y="1.3" z="0.6"/></transform><bsdf type="diffuse"/></shape>"#,
+    )
+}
+
+/// Shape 2: a mirror sphere of radius 1 at (0, 0, 1.5).
+fn sphere_mirror() -> Scene {
+    scene(
+        r#"<shape type="sphere"><point name="center" x="0" y="0" z="1.5"/><float name="radius" value="1"/>
+            <bsdf type="conductor"><string name="material" value="none"/></bsdf></shape>"#,
+    )
+}
+
+/// Shape 2: a glass sphere (η = 1.5) of radius 1 at (0, 0, 1.5).
+fn glass_sphere() -> Scene {
+    scene(
+        r#"<shape type="sphere"><point name="center" x="0" y="0" z="1.5"/><float name="radius" value="1"/>
+            <bsdf type="dielectric"><float name="int_ior" value="1.5"/></bsdf></shape>"#,
+    )
+}
+
+/// The surface vertex hit by a ray from `o` towards `to`.
+fn surface_vertex(s: &Scene, o: Vec3, to: Vec3, role: Role) -> ManifoldVertex {
+    let ray = Ray::new(o, (to - o).normalize());
+    let hit = s.geometry.intersect(&ray).expect("hit");
+    let sp = s.geometry.surface_point(&ray, &hit);
+    ManifoldVertex::at_hit(&s.geometry, &hit, sp, role).expect("regular point")
+}
+
+/// A chain from `anchor` through the point `aim` with the given roles.
+fn chain_through(
+    s: &Scene,
+    anchor: ManifoldVertex,
+    aim: Vec3,
+    roles: &[Role],
+) -> Vec<ManifoldVertex> {
+    let dir = (aim.as_dvec3() - anchor.p()).normalize();
+    let chain = trace(s, &anchor, dir, roles).expect("initial chain traces");
+    assert_eq!(
+        chain.last().unwrap().sp.shape,
+        0,
+        "the chain ends on the floor"
+    );
+    chain
+}
+
+const MIRROR: Role = Role::Specular(Specular::Reflect);
+const GLASS: Role = Role::Specular(Specular::Refract { eta: 1.5 });
+
+/// The three test chains: (name, scene, chain).
+fn cases() -> Vec<(&'static str, Scene, Vec<ManifoldVertex>)> {
+    let mut out = Vec::new();
+    // Ceiling → plane mirror → floor.
+    let s = plane_mirror();
+    let a = surface_vertex(
+        &s,
+        Vec3::new(-1.0, 0.3, 3.0),
+        Vec3::new(-1.0, 0.3, 4.0),
+        Role::Endpoint,
+    );
+    let c = chain_through(&s, a, Vec3::new(2.0, 0.2, 2.0), &[MIRROR, Role::Endpoint]);
+    out.push(("plane mirror", s, c));
+    // Ceiling → mirror sphere → floor.
+    let s = sphere_mirror();
+    let a = surface_vertex(
+        &s,
+        Vec3::new(2.5, 0.3, 3.0),
+        Vec3::new(2.5, 0.3, 4.0),
+        Role::Endpoint,
+    );
+    let c = chain_through(&s, a, Vec3::new(0.97, 0.1, 1.69), &[MIRROR, Role::Endpoint]);
+    out.push(("sphere mirror", s, c));
+    // Ceiling → glass sphere (in, out) → floor.
+    let s = glass_sphere();
+    let a = surface_vertex(
+        &s,
+        Vec3::new(0.5, 0.3, 3.0),
+        Vec3::new(0.5, 0.3, 4.0),
+        Role::Endpoint,
+    );
+    let c = chain_through(
+        &s,
+        a,
+        Vec3::new(0.3, 0.2, 2.4),
+        &[GLASS, GLASS, Role::Endpoint],
+    );
+    out.push(("glass sphere", s, c));
+    out
+}
+
+/// Largest half-vector constraint of a chain.
+fn max_constraint(chain: &[ManifoldVertex]) -> f64 {
+    constraint_values(chain)
+        .expect("constraints defined")
+        .iter()
+        .map(|c| c.length())
+        .fold(0.0, f64::max)
+}
+
+/// Targets on the floor around the endpoint, within `radius`, from a
+/// fixed-seed generator.
+fn targets(end: DVec3, radius: f64, n: usize) -> Vec<DVec3> {
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    (0..n)
+        .map(|_| {
+            let (r, phi) = (radius * next().sqrt(), std::f64::consts::TAU * next());
+            DVec3::new(end.x + r * phi.cos(), end.y + r * phi.sin(), 0.0)
+        })
+        .collect()
+}
+
+#[test]
+fn walks_converge_onto_the_manifold_and_reverse_to_the_start() {
+    let config = WalkConfig::default();
+    for (name, s, chain) in cases() {
+        let len = chain_length(&chain);
+        assert!(
+            max_constraint(&chain) < 1e-5,
+            "{name}: start off the manifold"
+        );
+        let end = chain.last().unwrap().p();
+        let mut stats = WalkStats::default();
+        // The glass sphere's chains lie near the focus of the ball lens,
+        // where the Jacobian changes fast (a fold at 0.2 from the start):
+        // its targets stay closer.
+        let radius = if name == "glass sphere" { 0.1 } else { 0.25 };
+        for target in targets(end, radius, 20) {
+            let result = walk(&s, &chain, target, &config);
+            stats.record(&result);
+            let w = result.unwrap_or_else(|f| panic!("{name}: walk to {target} failed: {f:?}"));
+            let reached = (w.chain.last().unwrap().p() - target).length();
+            assert!(
+                reached <= 1e-5 * len,
+                "{name}: endpoint {reached} from the target"
+            );
+            let c = max_constraint(&w.chain);
+            assert!(c <= 1e-5, "{name}: constraint {c} after the walk");
+            // Back to the start: every vertex returns.
+            let back = walk(&s, &w.chain, end, &config).expect("reverse walk converges");
+            let moved = back
+                .chain
+                .iter()
+                .zip(&chain)
+                .map(|(a, b)| (a.p() - b.p()).length())
+                .fold(0.0, f64::max);
+            assert!(
+                moved <= 1e-4 * len,
+                "{name}: reverse walk {moved} from the start"
+            );
+            assert!(walk_reversible(&s, &chain, target, &config).is_ok());
+        }
+        assert_eq!(stats.converged, 20);
+        // Newton converges fast: a handful of projections per walk.
+        assert!(
+            stats.iterations <= 20 * 12,
+            "{name}: {} projections",
+            stats.iterations
+        );
+    }
+}
+
+/// Control for the reverse check: a forward walk stopped at 1e-2 of the
+/// chain length leaves the path 1e-2 off, so walking back (with the same
+/// loose tolerance) cannot land within 1e-6 of the start.
+#[test]
+fn reverse_check_rejects_an_inexact_return() {
+    let loose = WalkConfig {
+        tolerance: 3e-2,
+        reverse_tolerance: 1e-6,
+        ..WalkConfig::default()
+    };
+    for (name, s, chain) in cases() {
+        let end = chain.last().unwrap().p();
+        let target = end + DVec3::new(0.2, -0.1, 0.0);
+        assert!(walk(&s, &chain, target, &loose).is_ok(), "{name}");
+        assert_eq!(
+            walk_reversible(&s, &chain, target, &loose).unwrap_err(),
+            WalkFailure::NotReversible,
+            "{name}"
+        );
+    }
+}
+
+/// `dσ⊥(x_0)/dA(x_{k+1})` by central differences: directions at the anchor
+/// `ω(a, b) = normalize(ω_0 + a e_1 + b e_2)` (orthonormal at a = b = 0, so
+/// `da db` is the solid angle there) traced to the floor, the endpoint's
+/// displacement taken in its tangent basis.
+///
+/// Error: O(h²) truncation with h = 1e-3 rad (≤ 1e-5 relative for these
+/// curvatures) plus the `f32` hit points' rounding, ~2e-7 absolute over a
+/// displacement of ~2h·(distance ≈ 3) = 6e-3, i.e. ~4e-5 relative per
+/// column: both far below the 1e-3 the test allows.
+fn fd_geometry(s: &Scene, chain: &[ManifoldVertex]) -> f64 {
+    let anchor = &chain[0];
+    let roles: Vec<Role> = chain[1..].iter().map(|v| v.role).collect();
+    let w0 = (chain[1].p() - anchor.p()).normalize();
+    let e1 = w0.any_orthonormal_vector();
+    let e2 = w0.cross(e1);
+    let end = chain.last().unwrap().geo;
+    let h = 1e-3;
+    let at = |a: f64, b: f64| {
+        let c = trace(s, anchor, (w0 + e1 * a + e2 * b).normalize(), &roles).expect("traces");
+        assert_eq!(c.last().unwrap().sp.shape, end_shape(chain));
+        c.last().unwrap().p()
+    };
+    let col = |a: f64, b: f64| {
+        let dp = at(h * a, h * b) - at(-h * a, -h * b);
+        DVec2::new(dp.dot(end.s), dp.dot(end.t)) / (2.0 * h)
+    };
+    let j = DMat2::from_cols(col(1.0, 0.0), col(0.0, 1.0));
+    let cos0 = if anchor.on_surface() {
+        anchor.geo.ng.dot(w0).abs()
+    } else {
+        1.0
+    };
+    cos0 / j.determinant().abs()
+}
+
+fn end_shape(chain: &[ManifoldVertex]) -> u32 {
+    chain.last().unwrap().sp.shape
+}
+
+fn rel(a: f64, b: f64) -> f64 {
+    (a - b).abs() / b.abs()
+}
+
+/// G from the tangent map with the blocks edited (the controls).
+fn edited_geometry(
+    chain: &[ManifoldVertex],
+    edit: impl Fn(ConstraintBlocks) -> ConstraintBlocks,
+) -> f64 {
+    let x = tangent_map_with(chain, edit).expect("regular");
+    geometry_term(&chain[0], &chain[1]) * x[0].determinant().abs()
+}
+
+#[test]
+fn generalized_geometry_matches_finite_differences() {
+    for (name, s, chain) in cases() {
+        let fd = fd_geometry(&s, &chain);
+        let g = generalized_geometry(&chain).expect("regular chain");
+        assert!(
+            rel(g, fd) < 1e-3,
+            "{name}: G {g} vs finite differences {fd}"
+        );
+        // Also after a walk, at another point of the manifold.
+        let target = chain.last().unwrap().p() + DVec3::new(-0.06, 0.05, 0.0);
+        let moved = walk(&s, &chain, target, &WalkConfig::default())
+            .expect("walks")
+            .chain;
+        let (g, fd) = (
+            generalized_geometry(&moved).unwrap(),
+            fd_geometry(&s, &moved),
+        );
+        assert!(rel(g, fd) < 1e-3, "{name} after a walk: G {g} vs {fd}");
+        // Every chain here starts and ends outside any medium: the term
+        // is symmetric (étendue), so the reversed chain gives it too.
+        let reversed: Vec<ManifoldVertex> = chain.iter().rev().copied().collect();
+        let g_rev = generalized_geometry(&reversed).unwrap();
+        let g = generalized_geometry(&chain).unwrap();
+        assert!(rel(g_rev, g) < 1e-4, "{name}: reversed {g_rev} vs {g}");
+    }
+}
+
+/// The plane mirror has a closed form: unfolding the reflection, the chain
+/// is one straight segment of length `d_01 + d_12`, so
+/// `G = |cos θ_0| |cos θ_2| / (d_01 + d_12)²` (exact up to rounding).
+#[test]
+fn plane_mirror_geometry_term_is_the_unfolded_one() {
+    let (_, _, chain) = cases().remove(0);
+    let (d01, d12) = (
+        (chain[1].p() - chain[0].p()).length(),
+        (chain[2].p() - chain[1].p()).length(),
+    );
+    let cos0 = chain[0]
+        .geo
+        .ng
+        .dot((chain[1].p() - chain[0].p()) / d01)
+        .abs();
+    let cos2 = chain[2]
+        .geo
+        .ng
+        .dot((chain[1].p() - chain[2].p()) / d12)
+        .abs();
+    let want = cos0 * cos2 / (d01 + d12).powi(2);
+    let g = generalized_geometry(&chain).unwrap();
+    assert!(rel(g, want) < 1e-6, "G {g} vs {want}");
+}
+
+/// Controls: each removes or changes one genuine factor and must miss the
+/// finite-difference value by more than the 1e-3 the test allows.
+#[test]
+fn generalized_geometry_controls_fail() {
+    let cases = cases();
+    // The curved mirror treated as flat (its normal's derivatives dropped).
+    let (_, s, chain) = &cases[1];
+    let fd = fd_geometry(s, chain);
+    let mut flat = chain.clone();
+    flat[1].geo.dnds = DVec3::ZERO;
+    flat[1].geo.dndt = DVec3::ZERO;
+    let g = generalized_geometry(&flat).unwrap();
+    assert!(rel(g, fd) > 1e-2, "flat mirror: {g} vs {fd}");
+    // The glass sphere: a wrong η (1.45 instead of 1.5) in the Jacobian.
+    let (_, s, chain) = &cases[2];
+    let fd = fd_geometry(s, chain);
+    let mut wrong = chain.clone();
+    for v in &mut wrong[1..3] {
+        v.role = Role::Specular(Specular::Refract { eta: 1.45 });
+    }
+    let g = generalized_geometry(&wrong).unwrap();
+    assert!(rel(g, fd) > 1e-2, "wrong eta: {g} vs {fd}");
+    // The glass sphere: the coupling of the exit vertex to the entry vertex
+    // (the sub-diagonal block) dropped.
+    let g = edited_geometry(chain, |b| ConstraintBlocks {
+        prev: DMat2::ZERO,
+        ..b
+    });
+    assert!(rel(g, fd) > 1e-2, "dropped block: {g} vs {fd}");
+    // And the glass sphere without its curvature.
+    let mut flat = chain.clone();
+    for v in &mut flat[1..3] {
+        v.geo.dnds = DVec3::ZERO;
+        v.geo.dndt = DVec3::ZERO;
+    }
+    let g = generalized_geometry(&flat).unwrap();
+    assert!(rel(g, fd) > 1e-2, "flat glass: {g} vs {fd}");
+}
+
+/// The pinhole-like anchor (a point off surfaces) through the mirror sphere.
+#[test]
+fn point_anchor_walks_and_matches_finite_differences() {
+    let s = sphere_mirror();
+    let anchor = ManifoldVertex::point(Vec3::new(2.5, 0.3, 3.5));
+    let chain = chain_through(
+        &s,
+        anchor,
+        Vec3::new(0.97, 0.1, 1.69),
+        &[MIRROR, Role::Endpoint],
+    );
+    let (g, fd) = (
+        generalized_geometry(&chain).unwrap(),
+        fd_geometry(&s, &chain),
+    );
+    assert!(rel(g, fd) < 1e-3, "G {g} vs {fd}");
+    let target = chain.last().unwrap().p() + DVec3::new(0.1, 0.1, 0.0);
+    let w = walk_reversible(&s, &chain, target, &WalkConfig::default()).expect("walks");
+    assert!(max_constraint(&w.chain) < 1e-5);
+}
+
+/// Failures are classified: a target the mirror cannot reach (the ray
+/// towards where the mirror would have to be meets the floor past its
+/// edge) and one behind the occluder; both are `Occluded` (a ray reached
+/// another shape than its vertex's), counted in the statistics.
+#[test]
+fn failures_are_classified() {
+    let (_, s, chain) = cases().remove(0);
+    let config = WalkConfig::default();
+    let mut stats = WalkStats::default();
+    // Beyond the mirror's edge (|y| ≤ 2 on the mirror): the mirror point
+    // of the path to (−1, 4.5, 0) would be at y = 2.4.
+    let far = DVec3::new(-1.0, 4.5, 0.0);
+    let r = walk(&s, &chain, far, &config);
+    stats.record(&r);
+    assert_eq!(r.unwrap_err(), WalkFailure::Occluded);
+    // Under the occluder: the path to (−1, 1.5, 0) reflects at (2, 0.9, 2)
+    // and its last segment crosses z = 0.6 at (−0.1, 1.32).
+    let hidden = DVec3::new(-1.0, 1.5, 0.0);
+    let r = walk(&s, &chain, hidden, &config);
+    stats.record(&r);
+    assert_eq!(r.unwrap_err(), WalkFailure::Occluded);
+    // A reachable target next to it still converges.
+    let r = walk(&s, &chain, DVec3::new(-1.0, 0.4, 0.0), &config);
+    stats.record(&r);
+    assert!(r.is_ok());
+    assert_eq!((stats.walks, stats.converged), (3, 1));
+    assert_eq!(stats.failures_of(WalkFailure::Occluded), 2);
+}
