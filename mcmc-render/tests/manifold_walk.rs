@@ -62,7 +62,7 @@ fn sphere_mirror() -> Scene {
 fn glass_sphere() -> Scene {
     scene(
         r#"<shape type="sphere"><point name="center" x="0" y="0" z="1.5"/><float name="radius" value="1"/>
-            <bsdf type="dielectric"><float name="int_ior" value="1.5"/></bsdf></shape>"#,
+            <bsdf type="dielectric"><float name="int_ior" value="1.5"/><float name="ext_ior" value="1"/></bsdf></shape>"#,
     )
 }
 
@@ -426,4 +426,55 @@ fn failures_are_classified() {
     assert!(r.is_ok());
     assert_eq!((stats.walks, stats.converged), (3, 1));
     assert_eq!(stats.failures_of(WalkFailure::Occluded), 2);
+}
+
+/// Descriptors from the renderer's path vertices: a smooth dielectric
+/// vertex refracts (η from the BSDF) or reflects depending on where the
+/// next vertex lies, a mirror reflects, a diffuse vertex is an endpoint
+/// (also when flagged delta: its BSDF has no Dirac lobe to follow), the
+/// pinhole is a point.
+#[test]
+fn descriptors_from_path_vertices() {
+    use mcmc_render::color::Rgb;
+    use mcmc_render::integrators::path_vertex::Vertex;
+    let s = glass_sphere();
+    let at = |o: Vec3, to: Vec3| {
+        let ray = Ray::new(o, (to - o).normalize());
+        let hit = s.geometry.intersect(&ray).expect("hit");
+        (hit, s.geometry.surface_point(&ray, &hit))
+    };
+    // The top of the glass sphere, reached from above.
+    let (hit, sp) = at(Vec3::new(0.3, 0.2, 4.0), Vec3::new(0.3, 0.2, 0.0));
+    assert_eq!(sp.shape, 2);
+    let mut v = Vertex::surface(&s, sp, Vec3::Z, Rgb::WHITE);
+    v.delta = true;
+    let inside = Vec3::new(0.0, 0.0, 1.5);
+    let above = sp.p + Vec3::new(0.5, 0.0, 1.0);
+    let refract = ManifoldVertex::from_path_vertex(&s, &v, Some(&hit), inside).unwrap();
+    assert_eq!(refract.role, GLASS);
+    let reflect = ManifoldVertex::from_path_vertex(&s, &v, Some(&hit), above).unwrap();
+    assert_eq!(reflect.role, MIRROR);
+    assert!((reflect.p() - sp.p.as_dvec3()).length() == 0.0);
+    // Without the hit a surface vertex has no differential geometry.
+    assert!(ManifoldVertex::from_path_vertex(&s, &v, None, inside).is_none());
+    // The diffuse floor.
+    let (hit, sp) = at(Vec3::new(3.0, 0.0, 1.0), Vec3::new(3.0, 0.0, 0.0));
+    let mut floor = Vertex::surface(&s, sp, Vec3::Z, Rgb::WHITE);
+    let d = ManifoldVertex::from_path_vertex(&s, &floor, Some(&hit), above).unwrap();
+    assert_eq!(d.role, Role::Endpoint);
+    floor.delta = true;
+    assert!(ManifoldVertex::from_path_vertex(&s, &floor, Some(&hit), above).is_none());
+    // The pinhole.
+    let cam = Vertex::camera(Vec3::new(0.0, -3.0, 1.0), glam::Vec2::ZERO, Rgb::WHITE);
+    let p = ManifoldVertex::from_path_vertex(&s, &cam, None, sp.p).unwrap();
+    assert!(!p.on_surface() && p.role == Role::Endpoint);
+    // A mirror sphere's vertex reflects.
+    let s = sphere_mirror();
+    let ray = Ray::new(Vec3::new(0.3, 0.2, 4.0), -Vec3::Z);
+    let hit = s.geometry.intersect(&ray).unwrap();
+    let sp = s.geometry.surface_point(&ray, &hit);
+    let mut v = Vertex::surface(&s, sp, Vec3::Z, Rgb::WHITE);
+    v.delta = true;
+    let m = ManifoldVertex::from_path_vertex(&s, &v, Some(&hit), above).unwrap();
+    assert_eq!(m.role, MIRROR);
 }

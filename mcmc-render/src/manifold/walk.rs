@@ -333,3 +333,33 @@ pub fn walk_reversible(
         iterations: forward.iterations + back.iterations,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Snell's law, the mirror law and total internal reflection, with
+    /// η = 1.5 from both sides.
+    #[test]
+    fn scatter_follows_snell_and_reflects() {
+        let n = DVec3::Z;
+        let theta = 0.6f64;
+        let wi = DVec3::new(theta.sin(), 0.0, theta.cos());
+        let r = scatter(Specular::Reflect, n, wi).unwrap();
+        assert!((r - DVec3::new(-wi.x, 0.0, wi.z)).length() < 1e-15);
+        let spec = Specular::Refract { eta: 1.5 };
+        // From outside: sin θ_t = sin θ_i / 1.5, below the surface.
+        let t = scatter(spec, n, wi).unwrap();
+        assert!((t.length() - 1.0).abs() < 1e-15 && t.z < 0.0);
+        assert!(((-t.x) - theta.sin() / 1.5).abs() < 1e-15);
+        // Arriving from inside along t, light leaves along wi.
+        let back = scatter(spec, n, t).unwrap();
+        assert!((back - wi).length() < 1e-14, "{back} vs {wi}");
+        // From inside beyond the critical angle (sin θ > 1/1.5).
+        let steep = DVec3::new(0.8, 0.0, -0.6);
+        assert_eq!(
+            scatter(spec, n, steep),
+            Err(WalkFailure::TotalInternalReflection)
+        );
+    }
+}
