@@ -478,3 +478,218 @@ fn descriptors_from_path_vertices() {
     let m = ManifoldVertex::from_path_vertex(&s, &v, Some(&hit), above).unwrap();
     assert_eq!(m.role, MIRROR);
 }
+
+/// The glass sphere and a plane mirror at x = 3 facing −x (shape 3): a
+/// path ceiling → glass (in, out) → floor → mirror → ceiling, whose middle
+/// non-specular vertex is the floor's (index 3).
+fn glass_and_mirror_path() -> (Scene, Vec<ManifoldVertex>) {
+    let s = scene(
+        r#"<shape type="sphere"><point name="center" x="0" y="0" z="1.5"/><float name="radius" value="1"/>
+            <bsdf type="dielectric"><float name="int_ior" value="1.5"/><float name="ext_ior" value="1"/></bsdf></shape>
+           <shape type="rectangle"><transform name="to_world"><scale value="2"/>
+            <rotate y="1" angle="-90"/><translate x="3" z="1.5"/></transform>
+            <bsdf type="conductor"><string name="material" value="none"/></bsdf></shape>"#,
+    );
+    let a = surface_vertex(
+        &s,
+        Vec3::new(0.5, 0.3, 3.0),
+        Vec3::new(0.5, 0.3, 4.0),
+        Role::Endpoint,
+    );
+    let mut path = chain_through(
+        &s,
+        a,
+        Vec3::new(0.3, 0.2, 2.4),
+        &[GLASS, GLASS, Role::Endpoint],
+    );
+    let b = path[3];
+    let dir = (DVec3::new(3.0, 0.0, 1.5) - b.p()).normalize();
+    let rest = trace(&s, &b, dir, &[MIRROR, Role::Endpoint]).expect("second chain");
+    assert_eq!(rest[1].sp.shape, 3);
+    assert_eq!(rest[2].sp.shape, 1, "the path ends on the ceiling");
+    path.extend(&rest[1..]);
+    (s, path)
+}
+
+/// A direction in the cone of half-angle `max` around `axis`, uniform in
+/// solid angle, from two uniform numbers; the cone's density is
+/// `1 / (2π (1 − cos max))`.
+fn cone_direction(axis: DVec3, max: f64, u: f64, v: f64) -> DVec3 {
+    let cos = 1.0 - u * (1.0 - max.cos());
+    let sin = (1.0 - cos * cos).max(0.0).sqrt();
+    let e1 = axis.any_orthonormal_vector();
+    let e2 = axis.cross(e1);
+    let phi = std::f64::consts::TAU * v;
+    axis * cos + (e1 * phi.cos() + e2 * phi.sin()) * sin
+}
+
+/// Uniform numbers from a fixed-seed xorshift.
+fn uniforms(seed: u64) -> impl FnMut() -> f64 {
+    let mut state = seed;
+    move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// The manifold perturbation's proposal density against a histogram of
+/// its proposals: directions uniform in a cone of 0.03 rad around the
+/// current one at the ceiling vertex, traced through the glass sphere to
+/// the floor. Cells: a 4×4 grid of squares inside the image of the cone,
+/// plus everything else. Expected counts `N ∫_cell p_A dA` by the midpoint
+/// rule (6×6 points per cell), the density at each point from the chain
+/// the walk finds ending there. Pearson's χ² with 16 degrees of freedom
+/// must stay below 39.25 (the 0.999 quantile); the density with the
+/// chain's Jacobian dropped (the glass treated as absent: `G(x_a ↔ x_1)`
+/// alone) and with a wrong η (1.45) must exceed it.
+#[test]
+fn perturbation_density_matches_a_histogram_of_proposals() {
+    use mcmc_render::manifold::perturbation::proposal_density;
+    let (s, path) = glass_and_mirror_path();
+    let chain: Vec<ManifoldVertex> = path[..=3].to_vec();
+    let (x_a, x_b) = (chain[0].p(), chain[3].p());
+    let axis = (chain[1].p() - x_a).normalize();
+    let max = 0.03f64;
+    let cone_pdf = 1.0 / (std::f64::consts::TAU * (1.0 - max.cos()));
+    let config = WalkConfig::default();
+    // The density at a floor point q, for a density function `density`
+    // of the walked chain: zero outside the cone.
+    let at = |q: DVec3, density: &dyn Fn(&[ManifoldVertex]) -> f64| {
+        let w = walk(&s, &chain, q, &config).expect("quadrature point reachable");
+        let dir = (w.chain[1].p() - x_a).normalize();
+        if dir.dot(axis) >= max.cos() {
+            density(&w.chain)
+        } else {
+            0.0
+        }
+    };
+    // Cells: the square of half-width `half` around x_b, inside the image
+    // of the cone: 0.55 × the cone's smallest image radius, from the
+    // endpoint's Jacobian by central differences of traced chains.
+    let roles: Vec<Role> = chain[1..].iter().map(|v| v.role).collect();
+    let end = |d: DVec3| trace(&s, &chain[0], d, &roles).unwrap()[3].p();
+    let (e1, e2) = (
+        axis.any_orthonormal_vector(),
+        axis.cross(axis.any_orthonormal_vector()),
+    );
+    let h = 1e-4;
+    let j1 = (end((axis + e1 * h).normalize()) - end((axis - e1 * h).normalize())) / (2.0 * h);
+    let j2 = (end((axis + e2 * h).normalize()) - end((axis - e2 * h).normalize())) / (2.0 * h);
+    let jm = DMat2::from_cols(DVec2::new(j1.x, j1.y), DVec2::new(j2.x, j2.y));
+    // Smallest singular value of the 2×2 map.
+    let (a, b) = (
+        jm.x_axis.length_squared() + jm.y_axis.length_squared(),
+        jm.determinant(),
+    );
+    let sigma_min = ((a - (a * a - 4.0 * b * b).max(0.0).sqrt()) / 2.0).sqrt();
+    let half = 0.55 * max * sigma_min;
+    let (grid, sub) = (4usize, 6usize);
+    let cell = 2.0 * half / grid as f64;
+    let corner = DVec3::new(x_b.x - half, x_b.y - half, 0.0);
+    // Precondition: every cell corner is reached from inside the cone.
+    for i in 0..=grid {
+        for j in 0..=grid {
+            let q = corner + DVec3::new(i as f64 * cell, j as f64 * cell, 0.0);
+            assert!(
+                at(q, &|_| 1.0) > 0.0,
+                "cell corner {q} outside the cone's image"
+            );
+        }
+    }
+    let expected = |density: &dyn Fn(&[ManifoldVertex]) -> f64| -> Vec<f64> {
+        let mut p = Vec::new();
+        for i in 0..grid {
+            for j in 0..grid {
+                let mut sum = 0.0;
+                for k in 0..sub {
+                    for l in 0..sub {
+                        let q = corner
+                            + DVec3::new(
+                                (i as f64 + (k as f64 + 0.5) / sub as f64) * cell,
+                                (j as f64 + (l as f64 + 0.5) / sub as f64) * cell,
+                                0.0,
+                            );
+                        sum += at(q, density);
+                    }
+                }
+                p.push(sum / (sub * sub) as f64 * cell * cell);
+            }
+        }
+        p
+    };
+    let reported = |c: &[ManifoldVertex]| proposal_density(c, cone_pdf).unwrap();
+    let dropped = |c: &[ManifoldVertex]| {
+        let cos_a = c[0].geo.ng.dot((c[1].p() - c[0].p()).normalize()).abs();
+        cone_pdf * geometry_term(&c[0], &c[1]) / cos_a
+    };
+    let wrong_eta = |c: &[ManifoldVertex]| {
+        let mut c = c.to_vec();
+        for v in &mut c[1..3] {
+            v.role = Role::Specular(Specular::Refract { eta: 1.45 });
+        }
+        proposal_density(&c, cone_pdf).unwrap()
+    };
+    // The histogram.
+    let n = 100_000usize;
+    let mut counts = vec![0u64; grid * grid + 1];
+    let mut next = uniforms(0x9e37_79b9_7f4a_7c15);
+    for _ in 0..n {
+        let d = cone_direction(axis, max, next(), next());
+        let c = mcmc_render::manifold::walk::propagate(&s, &chain, d).expect("traces");
+        let q = c[3].p() - corner;
+        let (i, j) = ((q.x / cell).floor(), (q.y / cell).floor());
+        let k = if (0.0..grid as f64).contains(&i) && (0.0..grid as f64).contains(&j) {
+            i as usize * grid + j as usize
+        } else {
+            grid * grid
+        };
+        counts[k] += 1;
+    }
+    let chi2 = |p: &[f64]| {
+        let rest = 1.0 - p.iter().sum::<f64>();
+        p.iter()
+            .chain(std::iter::once(&rest))
+            .zip(&counts)
+            .map(|(&p, &c)| {
+                let e = p * n as f64;
+                (c as f64 - e).powi(2) / e
+            })
+            .sum::<f64>()
+    };
+    let good = chi2(&expected(&reported));
+    assert!(good < 39.25, "chi2 {good}");
+    let bad = chi2(&expected(&dropped));
+    assert!(bad > 39.25, "dropped Jacobian: chi2 {bad}");
+    let bad_eta = chi2(&expected(&wrong_eta));
+    assert!(bad_eta > 39.25, "wrong eta: chi2 {bad_eta}");
+}
+
+/// The whole perturbation: new directions at the ceiling vertex, the glass
+/// chain traced to a new floor point, the mirror chain walked to it. The
+/// end vertex stays, the first chain is exact (ray traced), the walked
+/// chain meets its constraint to the walk's tolerance (its end is the
+/// traced `x_b'` within 1e-5 of the chain length, which moves the mirror's
+/// half-vector by at most that over the segment length: ≤ 1e-4 here).
+#[test]
+fn perturbation_proposals_stay_on_the_manifold() {
+    use mcmc_render::manifold::perturbation::{proposal_density, propose};
+    let (s, path) = glass_and_mirror_path();
+    let axis = (path[1].p() - path[0].p()).normalize();
+    let max = 0.03f64;
+    let cone_pdf = 1.0 / (std::f64::consts::TAU * (1.0 - max.cos()));
+    let mut next = uniforms(7);
+    for _ in 0..200 {
+        let d = cone_direction(axis, max, next(), next());
+        let p = propose(&s, &path, 3, d, cone_pdf, &WalkConfig::default()).expect("proposal");
+        assert_eq!(p.path.len(), path.len());
+        assert_eq!(p.path[5].p(), path[5].p());
+        assert_eq!(p.path[0].p(), path[0].p());
+        assert!(max_constraint(&p.path[..=3]) < 1e-5);
+        let c = max_constraint(&p.path[3..]);
+        assert!(c < 1e-4, "walked chain constraint {c}");
+        let density = proposal_density(&p.path[..=3], cone_pdf).unwrap();
+        assert_eq!(p.density, density);
+    }
+}

@@ -22,6 +22,7 @@
 //! "offset manifold" extension is on (not implemented here; see the docs).
 
 pub mod constraint;
+pub mod perturbation;
 pub mod walk;
 
 use crate::bsdf::Bsdf;
