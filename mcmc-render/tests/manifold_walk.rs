@@ -27,6 +27,11 @@ use std::path::Path;
 /// A scene with a 10×10 diffuse floor at z = 0 (shape 0), a diffuse
 /// ceiling at z = 4 facing down (shape 1), and `body`'s shapes (2, …).
 fn scene(body: &str) -> Scene {
+    scene_in(Path::new("."), body)
+}
+
+/// [`scene`] with files resolved in `dir`.
+fn scene_in(dir: &Path, body: &str) -> Scene {
     let text = format!(
         r#"<scene version="3.0.0"><sensor type="perspective"/>
         <shape type="rectangle"><transform name="to_world"><scale x="5" y="5" z="1"/></transform>
@@ -35,7 +40,7 @@ fn scene(body: &str) -> Scene {
             <rotate x="1" angle="180"/><translate z="4"/></transform><bsdf type="diffuse"/></shape>
         {body}</scene>"#
     );
-    Scene::load_str(&text, Path::new("manifold.xml"), Path::new(".")).expect("scene loads")
+    Scene::load_str(&text, Path::new("manifold.xml"), dir).expect("scene loads")
 }
 
 /// Shape 2: a mirror in the plane x = 2 facing −x, 4×4; shape 3: a
@@ -692,4 +697,112 @@ fn perturbation_proposals_stay_on_the_manifold() {
         let density = proposal_density(&p.path[..=3], cone_pdf).unwrap();
         assert_eq!(p.density, density);
     }
+}
+
+/// Shape 2: a curved mirror as a triangle mesh with (analytic) vertex
+/// normals: the patch `x = 2 + 0.1 (y² + (z − 2)²)`, |y| ≤ 1, 1 ≤ z ≤ 3,
+/// facing −x, 8×8 cells, written to an OBJ file (without normals and
+/// with `face_normals`, so that the loader computes none: faceted).
+fn mesh_mirror(dir: &Path, vertex_normals: bool) -> Scene {
+    let n = 8;
+    let mut obj = String::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            let (y, z) = (
+                -1.0 + 2.0 * i as f64 / n as f64,
+                1.0 + 2.0 * j as f64 / n as f64,
+            );
+            let x = 2.0 + 0.1 * (y * y + (z - 2.0) * (z - 2.0));
+            obj += &format!("v {x} {y} {z}\n");
+            let nrm = DVec3::new(-1.0, 0.2 * y, 0.2 * (z - 2.0)).normalize();
+            obj += &format!("vn {} {} {}\n", nrm.x, nrm.y, nrm.z);
+        }
+    }
+    for j in 0..n {
+        for i in 0..n {
+            let k = j * (n + 1) + i + 1;
+            let (a, b, c, d) = (k, k + 1, k + n + 2, k + n + 1);
+            for [p, q, r] in [[a, b, c], [a, c, d]] {
+                obj += &if vertex_normals {
+                    format!("f {p}//{p} {q}//{q} {r}//{r}\n")
+                } else {
+                    format!("f {p} {q} {r}\n")
+                };
+            }
+        }
+    }
+    std::fs::create_dir_all(dir).unwrap();
+    std::fs::write(dir.join("mirror.obj"), obj).unwrap();
+    scene_in(
+        dir,
+        &format!(
+            r#"<shape type="obj"><string name="filename" value="mirror.obj"/>
+            <boolean name="face_normals" value="{}"/>
+            <bsdf type="conductor"><string name="material" value="none"/></bsdf></shape>"#,
+            !vertex_normals
+        ),
+    )
+}
+
+/// A curved mirror made of triangles with interpolated (shading) normals:
+/// the walk follows the shading normals (its constraint and its
+/// reflection use them), so `G` matches the finite differences of traced
+/// chains when the derivatives of the interpolated normals enter the
+/// Jacobian, and misses them without; walks converge across triangle
+/// edges (where the normal field is continuous but not smooth).
+#[test]
+fn mesh_mirror_with_vertex_normals() {
+    let dir = std::env::temp_dir().join(format!("mcmc-render-manifold-{}", std::process::id()));
+    let s = mesh_mirror(&dir, true);
+    let a = surface_vertex(
+        &s,
+        Vec3::new(-1.0, 0.3, 3.0),
+        Vec3::new(-1.0, 0.3, 4.0),
+        Role::Endpoint,
+    );
+    // Inside the triangle of cell y ∈ [0, 0.25], z ∈ [2, 2.25], 0.028 from
+    // its diagonal: the finite differences (±3.6e-3 on the mirror) stay
+    // inside it.
+    let aim = Vec3::new(2.0017, 0.11, 2.07);
+    let chain = chain_through(&s, a, aim, &[MIRROR, Role::Endpoint]);
+    assert!(
+        chain[1].geo.ns.dot(chain[1].geo.ng) < 1.0 - 1e-6,
+        "shading normal differs"
+    );
+    let (g, fd) = (
+        generalized_geometry(&chain).unwrap(),
+        fd_geometry(&s, &chain),
+    );
+    assert!(rel(g, fd) < 1e-3, "G {g} vs {fd}");
+    let mut flat = chain.clone();
+    flat[1].geo.dnds = DVec3::ZERO;
+    flat[1].geo.dndt = DVec3::ZERO;
+    let g_flat = generalized_geometry(&flat).unwrap();
+    assert!(rel(g_flat, fd) > 1e-2, "flat normals: {g_flat} vs {fd}");
+    let end = chain.last().unwrap().p();
+    let len = chain_length(&chain);
+    for target in targets(end, 0.3, 10) {
+        let w = walk_reversible(&s, &chain, target, &WalkConfig::default())
+            .unwrap_or_else(|f| panic!("walk to {target}: {f:?}"));
+        assert!((w.chain[2].p() - target).length() <= 1e-5 * len);
+        assert!(max_constraint(&w.chain) <= 1e-5);
+    }
+    // The same mesh without vertex normals is a faceted mirror: G is the
+    // plane mirror's, with no curvature, and agrees with its own finite
+    // differences.
+    let s = mesh_mirror(&dir, false);
+    let a = surface_vertex(
+        &s,
+        Vec3::new(-1.0, 0.3, 3.0),
+        Vec3::new(-1.0, 0.3, 4.0),
+        Role::Endpoint,
+    );
+    let chain = chain_through(&s, a, aim, &[MIRROR, Role::Endpoint]);
+    assert_eq!(chain[1].geo.dnds, DVec3::ZERO);
+    let (g, fd) = (
+        generalized_geometry(&chain).unwrap(),
+        fd_geometry(&s, &chain),
+    );
+    assert!(rel(g, fd) < 1e-3, "faceted: G {g} vs {fd}");
+    let _ = std::fs::remove_dir_all(&dir);
 }

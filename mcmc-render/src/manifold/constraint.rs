@@ -190,7 +190,7 @@ pub fn geometry_term(a: &ManifoldVertex, b: &ManifoldVertex) -> f64 {
     cos(a) * cos(b) / len2
 }
 
-/// The generalised geometry term of a chain (Jakob & Marschner 2012 §4.4):
+/// The generalised geometry term of a chain (Jakob & Marschner 2012):
 /// `G(x_0 ↔ x_{k+1}) = G(x_0 ↔ x_1) · |det X_1|`, the projected solid
 /// angle at the anchor per unit area at the endpoint,
 /// `dσ⊥(x_0)/dA(x_{k+1})`, through the specular chain. `G(x_0 ↔ x_1)`

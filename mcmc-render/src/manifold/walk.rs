@@ -1,4 +1,4 @@
-//! The manifold walk (Jakob & Marschner 2012 §4.3): move a chain's
+//! The manifold walk (Jakob & Marschner 2012): move a chain's
 //! endpoint to a target while its specular vertices stay on the manifold.
 //!
 //! Each iteration takes a Newton step in the manifold's tangent space —
