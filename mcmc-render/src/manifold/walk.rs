@@ -4,7 +4,7 @@
 //! Each iteration takes a Newton step in the manifold's tangent space —
 //! the endpoint's offset to the target, in its tangent plane, mapped to
 //! the first specular vertex by `X_1 = ∂x_1/∂x_{k+1}`
-//! ([`tangent_map`](super::constraint::tangent_map)) — and projects it
+//! ([`tangent_map`]) — and projects it
 //! back onto the surfaces by ray tracing: a ray from the fixed anchor
 //! towards the moved `x_1`, reflected or refracted exactly at every
 //! specular vertex ([`propagate`]). The projected chain satisfies every
