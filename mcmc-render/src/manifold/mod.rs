@@ -17,9 +17,10 @@
 //! reverse-walk check. `docs/manifold.md` has the formulas and tests.
 //!
 //! Glossy vertices: the walk treats only Dirac (smooth) vertices as
-//! specular; a glossy vertex ends a chain (it is an endpoint), which is how
-//! Mitsuba 0.6's manifold perturbation treats rough surfaces unless its
-//! "offset manifold" extension is on (not implemented here; see the docs).
+//! specular; a glossy vertex ends a chain (it is an endpoint). Mitsuba
+//! 0.6 instead treats a rough vertex as specular with a roughness-dependent
+//! probability, keeping its half-vector offset ("offset manifolds", always
+//! on there); that is not implemented here (`docs/manifold.md`).
 
 pub mod constraint;
 pub mod perturbation;
