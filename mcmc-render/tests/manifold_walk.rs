@@ -806,3 +806,43 @@ fn mesh_mirror_with_vertex_normals() {
     assert!(rel(g, fd) < 1e-3, "faceted: G {g} vs {fd}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A chain that ends inside the glass: ceiling → refraction into the glass
+/// sphere → a diffuse disk inside it (r = 0.5 at z = 1.3, facing up).
+/// `G` matches the finite differences, and the reversed chain's term is
+/// smaller by (η_inside/η_outside)² = 2.25 (étendue `η² dA dσ⊥` is
+/// conserved: `G(ceiling → disk) = (η_disk/η_ceiling)² G(disk → ceiling)`).
+#[test]
+fn refraction_into_a_medium_scales_the_reversed_term_by_eta_squared() {
+    let s = scene(
+        r#"<shape type="sphere"><point name="center" x="0" y="0" z="1.5"/><float name="radius" value="1"/>
+            <bsdf type="dielectric"><float name="int_ior" value="1.5"/><float name="ext_ior" value="1"/></bsdf></shape>
+           <shape type="disk"><transform name="to_world"><scale value="0.5"/><translate z="1.3"/></transform>
+            <bsdf type="diffuse"/></shape>"#,
+    );
+    let a = surface_vertex(
+        &s,
+        Vec3::new(0.5, 0.3, 3.0),
+        Vec3::new(0.5, 0.3, 4.0),
+        Role::Endpoint,
+    );
+    let dir = (DVec3::new(0.3, 0.2, 2.4) - a.p()).normalize();
+    let chain = trace(&s, &a, dir, &[GLASS, Role::Endpoint]).expect("traces");
+    assert_eq!(chain[2].sp.shape, 3, "the chain ends on the disk");
+    let (g, fd) = (
+        generalized_geometry(&chain).unwrap(),
+        fd_geometry(&s, &chain),
+    );
+    assert!(rel(g, fd) < 1e-3, "G {g} vs {fd}");
+    let reversed: Vec<ManifoldVertex> = chain.iter().rev().copied().collect();
+    let g_rev = generalized_geometry(&reversed).unwrap();
+    assert!(
+        rel(g / g_rev, 2.25) < 1e-4,
+        "G {g}, reversed {g_rev}: ratio {}",
+        g / g_rev
+    );
+    // The walk moves the endpoint on the disk (polar parameterisation).
+    let target = chain[2].p() + DVec3::new(0.05, -0.04, 0.0);
+    let w = walk_reversible(&s, &chain, target, &WalkConfig::default()).expect("walks");
+    assert!(max_constraint(&w.chain) < 1e-5);
+}
