@@ -8,6 +8,7 @@
 //! geometric normal just past that bound ([`offset_ray_origin`]).
 
 mod bvh4;
+pub mod differential;
 mod tri_pack;
 
 use bvh4::Bvh4;

@@ -46,6 +46,7 @@ pub mod geometry;
 pub mod image_io;
 pub mod integrators;
 pub mod light;
+pub mod manifold;
 pub mod markov;
 pub mod observer;
 pub mod output;
