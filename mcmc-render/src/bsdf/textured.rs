@@ -7,10 +7,11 @@
 //! (a small `Copy` value) and writes the texture values at the point's UV
 //! into it: no allocation, and untextured BSDFs are lent as they are.
 
-use super::{Bsdf, OneSided};
+use super::perturb::Perturbed;
+use super::{Bsdf, BsdfSample, OneSided, TransportMode};
 use crate::color::Rgb;
 use crate::texture::Texture;
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 
 /// A colour parameter of a BSDF that may be textured.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -107,25 +108,100 @@ impl BsdfTextures {
     }
 }
 
-/// The BSDF at a surface point: lent from the scene when untextured, made
-/// for the point when textured. Dereferences to [`Bsdf`].
+/// The BSDF model at a surface point: lent from the scene when
+/// untextured, made for the point when textured.
 #[derive(Clone, Copy, Debug)]
-pub enum BsdfAt<'a> {
+pub enum BsdfRef<'a> {
     /// The scene's BSDF, unchanged.
     Shared(&'a Bsdf),
     /// A copy with the texture values at the point.
     Textured(Bsdf),
 }
 
-impl std::ops::Deref for BsdfAt<'_> {
-    type Target = Bsdf;
+/// The BSDF at a surface point, as every integrator sees it: the model
+/// (textured at the point's UV) and, under `normalmap` or `bumpmap`, the
+/// perturbed frame at the point ([`Perturbed`]). Its `eval`, `eval_pdf`,
+/// `sample` and `pdf` take directions in the point's shading frame
+/// (`Frame::from_normal(sp.ns)`), as [`Bsdf`]'s do.
+#[derive(Clone, Copy, Debug)]
+pub struct BsdfAt<'a> {
+    model: BsdfRef<'a>,
+    perturbed: Option<Perturbed>,
+}
 
+impl<'a> BsdfAt<'a> {
+    /// The BSDF `model`, perturbed or not.
     #[inline(always)]
-    fn deref(&self) -> &Bsdf {
-        match self {
-            BsdfAt::Shared(b) => b,
-            BsdfAt::Textured(b) => b,
+    pub fn new(model: BsdfRef<'a>, perturbed: Option<Perturbed>) -> Self {
+        BsdfAt { model, perturbed }
+    }
+
+    /// The (textured) model, without the perturbation.
+    #[inline(always)]
+    pub fn model(&self) -> &Bsdf {
+        match &self.model {
+            BsdfRef::Shared(b) => b,
+            BsdfRef::Textured(b) => b,
         }
+    }
+
+    /// The perturbed frame, under `normalmap` or `bumpmap`.
+    pub fn perturbed(&self) -> Option<&Perturbed> {
+        self.perturbed.as_ref()
+    }
+
+    /// [`Bsdf::eval`] at the point.
+    #[inline(always)]
+    pub fn eval(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
+        match &self.perturbed {
+            None => self.model().eval(wo, wi, mode),
+            Some(p) => p.eval(self.model(), wo, wi, mode),
+        }
+    }
+
+    /// [`Bsdf::eval_pdf`] at the point.
+    #[inline(always)]
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> (Rgb, f32) {
+        match &self.perturbed {
+            None => self.model().eval_pdf(wo, wi, mode),
+            Some(p) => p.eval_pdf(self.model(), wo, wi, mode),
+        }
+    }
+
+    /// [`Bsdf::sample`] at the point.
+    #[inline(always)]
+    pub fn sample(
+        &self,
+        wo: Vec3,
+        u_lobe: f32,
+        u: (f32, f32),
+        mode: TransportMode,
+    ) -> Option<BsdfSample> {
+        match &self.perturbed {
+            None => self.model().sample(wo, u_lobe, u, mode),
+            Some(p) => p.sample(self.model(), wo, u_lobe, u, mode),
+        }
+    }
+
+    /// [`Bsdf::pdf`] at the point.
+    #[inline(always)]
+    pub fn pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
+        match &self.perturbed {
+            None => self.model().pdf(wo, wi, mode),
+            Some(p) => p.pdf(self.model(), wo, wi, mode),
+        }
+    }
+
+    /// [`Bsdf::is_delta`] of the model (a perturbation tilts its lobes
+    /// but keeps them Dirac or not).
+    #[inline(always)]
+    pub fn is_delta(&self) -> bool {
+        self.model().is_delta()
+    }
+
+    /// [`Bsdf::has_delta_lobe`] of the model.
+    pub fn has_delta_lobe(&self) -> bool {
+        self.model().has_delta_lobe()
     }
 }
 
