@@ -176,8 +176,11 @@ impl Perturbed {
     }
 
     /// The wrapper's `(eval, pdf)` of `nested` (see [`Bsdf::eval_pdf`]):
+    /// out of line, as are the other methods: they are the rare case in
+    /// the integrators' loops.
     /// the value is Mitsuba's divided by `|cos θ|` of the sampled
     /// direction `wi` about the shading normal.
+    #[inline(never)]
     pub fn eval_pdf(&self, nested: &Bsdf, wo: Vec3, wi: Vec3, mode: TransportMode) -> (Rgb, f32) {
         let (w_cam, w_light) = Self::sides(wo, wi, mode);
         let n = self.normal_for(w_cam);
@@ -216,6 +219,7 @@ impl Perturbed {
     /// In importance mode with `flip_invalid_normals`, `u_lobe` first picks
     /// the unflipped or the flipped frame (½ each) and is rescaled for the
     /// nested BSDF.
+    #[inline(never)]
     pub fn sample(
         &self,
         nested: &Bsdf,

@@ -108,63 +108,57 @@ impl BsdfTextures {
     }
 }
 
-/// The BSDF model at a surface point: lent from the scene when
-/// untextured, made for the point when textured.
+/// The BSDF at a surface point, as every integrator sees it: the scene's
+/// model lent when untextured, a copy textured at the point's UV, or
+/// either under `normalmap` or `bumpmap` with the perturbed frame at the
+/// point ([`Perturbed`]). Its `eval`, `eval_pdf`, `sample` and `pdf` take
+/// directions in the point's shading frame (`Frame::from_normal(sp.ns)`),
+/// as [`Bsdf`]'s do.
 #[derive(Clone, Copy, Debug)]
-pub enum BsdfRef<'a> {
+pub enum BsdfAt<'a> {
     /// The scene's BSDF, unchanged.
     Shared(&'a Bsdf),
     /// A copy with the texture values at the point.
     Textured(Bsdf),
+    /// A (possibly textured) copy in a perturbed frame.
+    Perturbed(Bsdf, Perturbed),
 }
 
-/// The BSDF at a surface point, as every integrator sees it: the model
-/// (textured at the point's UV) and, under `normalmap` or `bumpmap`, the
-/// perturbed frame at the point ([`Perturbed`]). Its `eval`, `eval_pdf`,
-/// `sample` and `pdf` take directions in the point's shading frame
-/// (`Frame::from_normal(sp.ns)`), as [`Bsdf`]'s do.
-#[derive(Clone, Copy, Debug)]
-pub struct BsdfAt<'a> {
-    model: BsdfRef<'a>,
-    perturbed: Option<Perturbed>,
-}
-
-impl<'a> BsdfAt<'a> {
-    /// The BSDF `model`, perturbed or not.
-    #[inline(always)]
-    pub fn new(model: BsdfRef<'a>, perturbed: Option<Perturbed>) -> Self {
-        BsdfAt { model, perturbed }
-    }
-
+impl BsdfAt<'_> {
     /// The (textured) model, without the perturbation.
     #[inline(always)]
     pub fn model(&self) -> &Bsdf {
-        match &self.model {
-            BsdfRef::Shared(b) => b,
-            BsdfRef::Textured(b) => b,
+        match self {
+            BsdfAt::Shared(b) => b,
+            BsdfAt::Textured(b) | BsdfAt::Perturbed(b, _) => b,
         }
     }
 
     /// The perturbed frame, under `normalmap` or `bumpmap`.
     pub fn perturbed(&self) -> Option<&Perturbed> {
-        self.perturbed.as_ref()
+        match self {
+            BsdfAt::Perturbed(_, p) => Some(p),
+            _ => None,
+        }
     }
 
     /// [`Bsdf::eval`] at the point.
     #[inline(always)]
     pub fn eval(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
-        match &self.perturbed {
-            None => self.model().eval(wo, wi, mode),
-            Some(p) => p.eval(self.model(), wo, wi, mode),
+        match self {
+            BsdfAt::Shared(b) => b.eval(wo, wi, mode),
+            BsdfAt::Textured(b) => b.eval(wo, wi, mode),
+            BsdfAt::Perturbed(b, p) => p.eval(b, wo, wi, mode),
         }
     }
 
     /// [`Bsdf::eval_pdf`] at the point.
     #[inline(always)]
     pub fn eval_pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> (Rgb, f32) {
-        match &self.perturbed {
-            None => self.model().eval_pdf(wo, wi, mode),
-            Some(p) => p.eval_pdf(self.model(), wo, wi, mode),
+        match self {
+            BsdfAt::Shared(b) => b.eval_pdf(wo, wi, mode),
+            BsdfAt::Textured(b) => b.eval_pdf(wo, wi, mode),
+            BsdfAt::Perturbed(b, p) => p.eval_pdf(b, wo, wi, mode),
         }
     }
 
@@ -177,18 +171,20 @@ impl<'a> BsdfAt<'a> {
         u: (f32, f32),
         mode: TransportMode,
     ) -> Option<BsdfSample> {
-        match &self.perturbed {
-            None => self.model().sample(wo, u_lobe, u, mode),
-            Some(p) => p.sample(self.model(), wo, u_lobe, u, mode),
+        match self {
+            BsdfAt::Shared(b) => b.sample(wo, u_lobe, u, mode),
+            BsdfAt::Textured(b) => b.sample(wo, u_lobe, u, mode),
+            BsdfAt::Perturbed(b, p) => p.sample(b, wo, u_lobe, u, mode),
         }
     }
 
     /// [`Bsdf::pdf`] at the point.
     #[inline(always)]
     pub fn pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
-        match &self.perturbed {
-            None => self.model().pdf(wo, wi, mode),
-            Some(p) => p.pdf(self.model(), wo, wi, mode),
+        match self {
+            BsdfAt::Shared(b) => b.pdf(wo, wi, mode),
+            BsdfAt::Textured(b) => b.pdf(wo, wi, mode),
+            BsdfAt::Perturbed(b, p) => p.pdf(b, wo, wi, mode),
         }
     }
 

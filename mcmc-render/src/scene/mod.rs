@@ -11,7 +11,7 @@ pub mod upgrade;
 pub mod xml;
 
 use crate::bsdf::perturb::{Perturbation, Perturbed};
-use crate::bsdf::textured::{BsdfAt, BsdfRef, BsdfTextures};
+use crate::bsdf::textured::{BsdfAt, BsdfTextures};
 use crate::bsdf::{Bsdf, BsdfDesc};
 use crate::camera::Camera;
 use crate::color::Rgb;
@@ -460,14 +460,16 @@ impl Scene {
         let i = self.shapes[sp.shape as usize].bsdf as usize;
         let bsdf = &self.bsdfs[i];
         let model = match self.textures.get(i) {
-            Some(t) if !t.is_empty() => BsdfRef::Textured(t.apply(bsdf, sp.uv)),
-            _ => BsdfRef::Shared(bsdf),
+            Some(t) if !t.is_empty() => t.apply(bsdf, sp.uv),
+            _ => match self.perturbations.get(i) {
+                Some(Some(p)) => return BsdfAt::Perturbed(*bsdf, self.perturbed(p, sp)),
+                _ => return BsdfAt::Shared(bsdf),
+            },
         };
-        let perturbed = match self.perturbations.get(i) {
-            Some(Some(p)) => Some(self.perturbed(p, sp)),
-            _ => None,
-        };
-        BsdfAt::new(model, perturbed)
+        match self.perturbations.get(i) {
+            Some(Some(p)) => BsdfAt::Perturbed(model, self.perturbed(p, sp)),
+            _ => BsdfAt::Textured(model),
+        }
     }
 
     /// The frame `p` perturbs at `sp` (kept out of the hot path).
