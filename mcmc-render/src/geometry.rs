@@ -253,7 +253,14 @@ pub struct SurfacePoint {
     pub uv: Vec2,
     /// Index of the shape.
     pub shape: u32,
+    /// The BVH primitive of a hit point ([`NO_PRIM`] for points not found
+    /// by a ray, such as light samples): what [`Geometry::tangents`] needs
+    /// to find the triangle, for normal and bump maps.
+    pub prim: u32,
 }
+
+/// [`SurfacePoint::prim`] of a point that no ray hit.
+pub const NO_PRIM: u32 = u32::MAX;
 
 impl SurfacePoint {
     /// Ray leaving this point in unit direction `d`.
@@ -301,6 +308,7 @@ impl FlatTriangle {
             ns: self.ng,
             uv: Vec2::new(b1, b2),
             shape: self.shape,
+            prim: NO_PRIM,
         }
     }
 }
@@ -784,9 +792,12 @@ impl Geometry {
             if let Some([t0, t1, t2]) = self.flat_uv.get(hit.prim as usize) {
                 sp.uv = *t0 * b0 + *t1 * hit.u + *t2 * hit.v;
             }
+            sp.prim = hit.prim;
             return sp;
         }
-        self.surface_point_other(ray, hit)
+        let mut sp = self.surface_point_other(ray, hit);
+        sp.prim = hit.prim;
+        sp
     }
 
     /// [`Geometry::surface_point`] on all but flat triangles.
@@ -841,6 +852,83 @@ impl Geometry {
             ns,
             uv,
             shape,
+            prim: NO_PRIM,
+        }
+    }
+
+    /// The surface's derivatives (∂p/∂u, ∂p/∂v) at a hit point, with
+    /// Mitsuba 3's parametrisation of each shape: on mesh triangles from
+    /// the vertex UVs (an arbitrary basis of the face when they are
+    /// degenerate), from the barycentrics on meshes without UVs; spherical
+    /// and polar coordinates on spheres and disks. Only normal and bump
+    /// maps need it, so it is computed on demand rather than at every hit.
+    /// A point no ray hit ([`NO_PRIM`]) gets an arbitrary basis of its
+    /// tangent plane.
+    pub fn tangents(&self, sp: &SurfacePoint) -> (Vec3, Vec3) {
+        let basis = || {
+            let f = crate::frame::Frame::from_normal(sp.ng);
+            (f.s, f.t)
+        };
+        let Some(prim) = self.prims.get(sp.prim as usize) else {
+            return basis();
+        };
+        match *prim {
+            Prim::Triangle { shape, tri, .. } => {
+                let Surface::Mesh(m) = &self.shapes[shape as usize].surface else {
+                    return basis();
+                };
+                let idx = m.indices[tri as usize];
+                let [p0, p1, p2] = idx.map(|i| m.positions[i as usize]);
+                let (dp0, dp1) = (p1 - p0, p2 - p0);
+                let Some(uvs) = &m.uvs else {
+                    return (dp0, dp1);
+                };
+                let [t0, t1, t2] = idx.map(|i| uvs[i as usize]);
+                let (duv0, duv1) = (t1 - t0, t2 - t0);
+                let det = duv0.x * duv1.y - duv0.y * duv1.x;
+                if det == 0.0 {
+                    return basis();
+                }
+                let inv = 1.0 / det;
+                (
+                    (dp0 * duv1.y - dp1 * duv0.y) * inv,
+                    (dp1 * duv0.x - dp0 * duv1.x) * inv,
+                )
+            }
+            Prim::Sphere { shape, .. } => {
+                let Surface::Sphere {
+                    center,
+                    radius,
+                    frame,
+                } = self.shapes[shape as usize].surface
+                else {
+                    return basis();
+                };
+                // Object space: the unit sphere, scaled by the radius and
+                // rotated by `frame` into the world.
+                let q = frame.transpose() * ((sp.p - center) / radius);
+                let rd = (q.x * q.x + q.y * q.y).sqrt();
+                let du = Vec3::new(-q.y, q.x, 0.0) * (2.0 * std::f32::consts::PI);
+                let dv = if rd > 0.0 {
+                    Vec3::new(q.z * q.x / rd, q.z * q.y / rd, -rd)
+                } else {
+                    Vec3::X
+                } * std::f32::consts::PI;
+                (frame * du * radius, frame * dv * radius)
+            }
+            Prim::Disk { shape } => {
+                let Surface::Disk { to_world, .. } = &self.shapes[shape as usize].surface else {
+                    return basis();
+                };
+                let r = sp.uv.x;
+                let phi = sp.uv.y * 2.0 * std::f32::consts::PI;
+                let (sin, cos) = phi.sin_cos();
+                (
+                    to_world.transform_vector3(Vec3::new(cos, sin, 0.0)),
+                    to_world.transform_vector3(Vec3::new(-sin, cos, 0.0))
+                        * (2.0 * std::f32::consts::PI * r),
+                )
+            }
         }
     }
 
@@ -885,6 +973,7 @@ impl Geometry {
             ns: n,
             uv,
             shape,
+            prim: NO_PRIM,
         }
     }
 
@@ -915,6 +1004,7 @@ impl Geometry {
             ns: n,
             uv,
             shape,
+            prim: NO_PRIM,
         }
     }
 }

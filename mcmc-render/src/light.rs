@@ -482,6 +482,7 @@ impl Lights {
             ns: -d,
             uv: Vec2::ZERO,
             shape: u32::MAX,
+            prim: crate::geometry::NO_PRIM,
         }
     }
 
@@ -610,6 +611,7 @@ impl Lights {
                         ns: -wi,
                         uv: Vec2::ZERO,
                         shape: u32::MAX,
+                        prim: crate::geometry::NO_PRIM,
                     },
                     wi,
                     dist,
@@ -806,6 +808,7 @@ impl Lights {
                         ns: dir,
                         uv: Vec2::ZERO,
                         shape: u32::MAX,
+                        prim: crate::geometry::NO_PRIM,
                     },
                     dir,
                     weight: le / (pmf * pdf_dir),
@@ -873,6 +876,7 @@ impl Lights {
                 ns: dir,
                 uv: Vec2::ZERO,
                 shape: u32::MAX,
+                prim: crate::geometry::NO_PRIM,
             },
             dir,
             weight: le / (pdf_pos * pdf_dir),

@@ -239,6 +239,36 @@ impl Bitmap {
     }
 }
 
+impl Bitmap {
+    /// The gradient (∂/∂u, ∂/∂v) of the texture's luminance at surface UV
+    /// `uv`, as Mitsuba 3's `eval_1_grad` computes it for `bumpmap`: the
+    /// exact derivative of the bilinear interpolation inside the texel
+    /// cell `uv` falls in, through `to_uv` (chain rule); zero for the
+    /// `nearest` filter, whose value is piecewise constant.
+    pub fn luminance_gradient(&self, uv: Vec2) -> Vec2 {
+        if self.filter == FilterType::Nearest {
+            return Vec2::ZERO;
+        }
+        let t = self.to_uv.transform_point2(uv);
+        let size = Vec2::new(self.width as f32, self.height as f32);
+        let p = t * size - 0.5;
+        let p0 = p.floor();
+        let w1 = p - p0;
+        let w0 = Vec2::ONE - w1;
+        let (x, y) = (p0.x as i64, p0.y as i64);
+        let f = |dx: i64, dy: i64| self.texel(x + dx, y + dy).luminance();
+        let (f00, f10, f01, f11) = (f(0, 0), f(1, 0), f(0, 1), f(1, 1));
+        // Partial derivatives in texel units, then in the transformed UV.
+        let d_texel = Vec2::new(
+            w0.y * (f10 - f00) + w1.y * (f11 - f01),
+            w0.x * (f01 - f00) + w1.x * (f11 - f10),
+        ) * size;
+        // ∂f/∂uv = Jᵀ ∂f/∂t with J the linear part of `to_uv`.
+        let j = self.to_uv.matrix2;
+        Vec2::new(j.x_axis.dot(d_texel), j.y_axis.dot(d_texel))
+    }
+}
+
 /// sRGB-encoded `c` ∈ [0, 1] to linear (the exact sRGB curve); `c` itself
 /// when `raw`.
 fn decode(c: f32, raw: bool) -> f32 {

@@ -20,7 +20,7 @@ fn bsdf_at(s: &Scene, x: f32, y: f32) -> Bsdf {
     let hit = s
         .intersect(&Ray::new(Vec3::new(x, y, 1.0), Vec3::NEG_Z))
         .expect("hit");
-    *s.bsdf_at(&hit.sp)
+    *s.bsdf_at(&hit.sp).model()
 }
 
 #[test]
@@ -113,6 +113,114 @@ fn refusals_name_the_line() {
         let e = load(&body).err().expect("refused");
         for n in needles {
             assert!(e.contains(n), "'{n}' missing from: {e}");
+        }
+    }
+}
+
+/// `normalmap` and `bumpmap` refusals: one line with the line number.
+#[test]
+fn perturbation_refusals_name_the_line() {
+    let shape = |bsdf: &str| format!("<shape type=\"rectangle\">\n{bsdf}\n</shape>");
+    let bumps = r#"<texture type="bitmap"><string name="filename" value="../scenes/textures/bumps.png"/></texture>"#;
+    for (body, needles) in [
+        (
+            shape(
+                r#"<bsdf type="normalmap"><texture type="checkerboard" name="normalmap"/></bsdf>"#,
+            ),
+            &["t.xml:3", "normalmap needs a nested <bsdf>"][..],
+        ),
+        (
+            shape(r#"<bsdf type="normalmap"><bsdf type="diffuse"/></bsdf>"#),
+            &["t.xml:3", "normalmap needs a <texture name=\"normalmap\">"][..],
+        ),
+        (
+            shape(
+                "<bsdf type=\"bumpmap\">\n<texture type=\"checkerboard\"/><bsdf type=\"diffuse\"/></bsdf>",
+            ),
+            &["t.xml:4", "bumpmap needs a bitmap texture"][..],
+        ),
+        (
+            shape(&format!(
+                r#"<bsdf type="bumpmap">{bumps}<bsdf type="diffuse"/><bsdf type="diffuse"/></bsdf>"#
+            )),
+            &["t.xml:3", "exactly one nested"][..],
+        ),
+        (
+            shape(&format!(
+                r#"<bsdf type="bumpmap">{bumps}<bsdf type="normalmap"><texture type="checkerboard" name="normalmap"/><bsdf type="diffuse"/></bsdf></bsdf>"#
+            )),
+            &["t.xml:3", "cannot wrap another normalmap or bumpmap"][..],
+        ),
+        (
+            shape(&format!(
+                r#"<bsdf type="twosided"><bsdf type="bumpmap">{bumps}<bsdf type="diffuse"/></bsdf></bsdf>"#
+            )),
+            &["t.xml:3", "twosided cannot wrap normalmap or bumpmap"][..],
+        ),
+        (
+            shape(&format!(
+                r#"<bsdf type="bumpmap">{bumps}<ref id="nothing"/></bsdf>"#
+            )),
+            &["t.xml:3", "no <bsdf id=\"nothing\">"][..],
+        ),
+        (
+            shape(
+                "<bsdf type=\"bumpmap\"><texture type=\"bitmap\">\n<string name=\"filename\" value=\"missing.png\"/></texture><bsdf type=\"diffuse\"/></bsdf>",
+            ),
+            &["t.xml:4", "cannot load texture", "missing.png"][..],
+        ),
+        (
+            shape(&format!(
+                r#"<bsdf type="bumpmap">{bumps}<float name="strength" value="2"/><bsdf type="diffuse"/></bsdf>"#
+            )),
+            &["t.xml:3", "strength"][..],
+        ),
+    ] {
+        let e = load(&body).err().expect("refused");
+        assert!(!e.contains('\n'), "not one line: {e}");
+        for n in needles {
+            assert!(e.contains(n), "'{n}' missing from: {e}");
+        }
+    }
+}
+
+/// A constant normal map (0.8, 0.5, 0.8) tilts the rectangle's frame
+/// towards its ∂p/∂u (object +x): the radiance-mode value times the
+/// cosine about the shading normal is the nested diffuse value times the
+/// cosine about the normalised (0.6, 0, 0.6) — Mitsuba's definition —
+/// and an untilted map (0.5, 0.5, 1) gives the nested BSDF back.
+#[test]
+fn a_constant_normal_map_tilts_the_frame_towards_dp_du() {
+    use mcmc_render::bsdf::TransportMode;
+    use mcmc_render::frame::Frame;
+    let scene = |c: &str| {
+        load(&format!(
+            r#"<shape type="rectangle"><bsdf type="normalmap"><boolean name="use_shadowing_function" value="false"/>
+<texture type="checkerboard" name="normalmap"><rgb name="color0" value="{c}"/><rgb name="color1" value="{c}"/></texture>
+<bsdf type="diffuse"><rgb name="reflectance" value="0.6"/></bsdf></bsdf></shape>"#
+        ))
+        .expect("loads")
+    };
+    let (tilted, flat) = (scene("0.8, 0.5, 0.8"), scene("0.5, 0.5, 1"));
+    let n = Vec3::new(0.6, 0.0, 0.6).normalize();
+    let mode = TransportMode::Radiance;
+    for (x, y) in [(0.1f32, 0.2f32), (-0.5, 0.7)] {
+        for s in [&tilted, &flat] {
+            let hit = s
+                .intersect(&Ray::new(Vec3::new(x, y, 1.0), Vec3::NEG_Z))
+                .expect("hit");
+            let frame = Frame::from_normal(hit.sp.ns);
+            let b = s.bsdf_at(&hit.sp);
+            let wo = frame.to_local(Vec3::new(0.0, 0.3, 1.0).normalize());
+            let wi_world = Vec3::new(-0.2, 0.4, 0.8).normalize();
+            let wi = frame.to_local(wi_world);
+            let f = b.eval(wo, wi, mode).r * wi.z;
+            let want = if std::ptr::eq(s, &tilted) {
+                0.6 / std::f32::consts::PI * wi_world.dot(n)
+            } else {
+                0.6 / std::f32::consts::PI * wi_world.z
+            };
+            assert!((f - want).abs() < 1e-5, "{f} vs {want}");
         }
     }
 }

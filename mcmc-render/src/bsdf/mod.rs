@@ -63,6 +63,7 @@ pub mod fresnel;
 pub mod invert;
 pub mod microfacet;
 pub mod model;
+pub mod perturb;
 pub mod plastic;
 pub mod regularize;
 pub mod rough_plastic;

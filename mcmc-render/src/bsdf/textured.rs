@@ -7,10 +7,11 @@
 //! (a small `Copy` value) and writes the texture values at the point's UV
 //! into it: no allocation, and untextured BSDFs are lent as they are.
 
-use super::{Bsdf, OneSided};
+use super::perturb::Perturbed;
+use super::{Bsdf, BsdfSample, OneSided, TransportMode};
 use crate::color::Rgb;
 use crate::texture::Texture;
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 
 /// A colour parameter of a BSDF that may be textured.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -107,25 +108,96 @@ impl BsdfTextures {
     }
 }
 
-/// The BSDF at a surface point: lent from the scene when untextured, made
-/// for the point when textured. Dereferences to [`Bsdf`].
+/// The BSDF at a surface point, as every integrator sees it: the scene's
+/// model lent when untextured, a copy textured at the point's UV, or
+/// either under `normalmap` or `bumpmap` with the perturbed frame at the
+/// point ([`Perturbed`]). Its `eval`, `eval_pdf`, `sample` and `pdf` take
+/// directions in the point's shading frame (`Frame::from_normal(sp.ns)`),
+/// as [`Bsdf`]'s do.
 #[derive(Clone, Copy, Debug)]
 pub enum BsdfAt<'a> {
     /// The scene's BSDF, unchanged.
     Shared(&'a Bsdf),
     /// A copy with the texture values at the point.
     Textured(Bsdf),
+    /// A (possibly textured) copy in a perturbed frame.
+    Perturbed(Bsdf, Perturbed),
 }
 
-impl std::ops::Deref for BsdfAt<'_> {
-    type Target = Bsdf;
-
+impl BsdfAt<'_> {
+    /// The (textured) model, without the perturbation.
     #[inline(always)]
-    fn deref(&self) -> &Bsdf {
+    pub fn model(&self) -> &Bsdf {
         match self {
             BsdfAt::Shared(b) => b,
-            BsdfAt::Textured(b) => b,
+            BsdfAt::Textured(b) | BsdfAt::Perturbed(b, _) => b,
         }
+    }
+
+    /// The perturbed frame, under `normalmap` or `bumpmap`.
+    pub fn perturbed(&self) -> Option<&Perturbed> {
+        match self {
+            BsdfAt::Perturbed(_, p) => Some(p),
+            _ => None,
+        }
+    }
+
+    /// [`Bsdf::eval`] at the point.
+    #[inline(always)]
+    pub fn eval(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
+        match self {
+            BsdfAt::Shared(b) => b.eval(wo, wi, mode),
+            BsdfAt::Textured(b) => b.eval(wo, wi, mode),
+            BsdfAt::Perturbed(b, p) => p.eval(b, wo, wi, mode),
+        }
+    }
+
+    /// [`Bsdf::eval_pdf`] at the point.
+    #[inline(always)]
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> (Rgb, f32) {
+        match self {
+            BsdfAt::Shared(b) => b.eval_pdf(wo, wi, mode),
+            BsdfAt::Textured(b) => b.eval_pdf(wo, wi, mode),
+            BsdfAt::Perturbed(b, p) => p.eval_pdf(b, wo, wi, mode),
+        }
+    }
+
+    /// [`Bsdf::sample`] at the point.
+    #[inline(always)]
+    pub fn sample(
+        &self,
+        wo: Vec3,
+        u_lobe: f32,
+        u: (f32, f32),
+        mode: TransportMode,
+    ) -> Option<BsdfSample> {
+        match self {
+            BsdfAt::Shared(b) => b.sample(wo, u_lobe, u, mode),
+            BsdfAt::Textured(b) => b.sample(wo, u_lobe, u, mode),
+            BsdfAt::Perturbed(b, p) => p.sample(b, wo, u_lobe, u, mode),
+        }
+    }
+
+    /// [`Bsdf::pdf`] at the point.
+    #[inline(always)]
+    pub fn pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
+        match self {
+            BsdfAt::Shared(b) => b.pdf(wo, wi, mode),
+            BsdfAt::Textured(b) => b.pdf(wo, wi, mode),
+            BsdfAt::Perturbed(b, p) => p.pdf(b, wo, wi, mode),
+        }
+    }
+
+    /// [`Bsdf::is_delta`] of the model (a perturbation tilts its lobes
+    /// but keeps them Dirac or not).
+    #[inline(always)]
+    pub fn is_delta(&self) -> bool {
+        self.model().is_delta()
+    }
+
+    /// [`Bsdf::has_delta_lobe`] of the model.
+    pub fn has_delta_lobe(&self) -> bool {
+        self.model().has_delta_lobe()
     }
 }
 

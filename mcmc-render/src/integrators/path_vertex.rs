@@ -87,6 +87,7 @@ impl Vertex {
             ns: Vec3::ZERO,
             uv: Vec2::ZERO,
             shape: u32::MAX,
+            prim: crate::geometry::NO_PRIM,
         },
         wo: Vec3::ZERO,
         beta: Rgb::BLACK,

@@ -10,6 +10,7 @@ use super::{
     CameraDesc, FilmDesc, FilterKind, FovAxis, InfiniteLightDesc, IntegratorDesc,
     IntegratorElement, PointLightDesc, SceneDesc, SceneError, ShapeDesc, ShapeGeometry,
 };
+use crate::bsdf::perturb::{PerturbKind, Perturbation};
 use crate::bsdf::textured::{BsdfTextures, TexturedParam};
 use crate::bsdf::{BsdfDesc, MicrofacetKind};
 use crate::color::Rgb;
@@ -197,6 +198,10 @@ impl<'a> Props<'a> {
     }
 }
 
+/// A BSDF as the loader reads it: the model, its textured parameters and,
+/// under `normalmap` or `bumpmap`, the perturbation of its frame.
+type LoadedBsdf = (BsdfDesc, BsdfTextures, Option<Perturbation>);
+
 /// Loads everything the parsed tree describes.
 pub struct Loader {
     /// Directory that relative mesh paths are resolved against.
@@ -282,9 +287,10 @@ impl Loader {
         }
     }
 
-    fn push_bsdf(&mut self, (desc, textures): (BsdfDesc, BsdfTextures)) -> usize {
+    fn push_bsdf(&mut self, (desc, textures, perturbation): LoadedBsdf) -> usize {
         self.desc.bsdfs.push(desc);
         self.desc.bsdf_textures.push(textures);
+        self.desc.bsdf_perturbations.push(perturbation);
         self.desc.bsdfs.len() - 1
     }
 
@@ -696,7 +702,7 @@ impl Loader {
 
     /// A BSDF and its textured parameters (their constants in the
     /// description are the textures' means).
-    fn bsdf(&mut self, p: &Plugin) -> Result<(BsdfDesc, BsdfTextures), SceneError> {
+    fn bsdf(&mut self, p: &Plugin) -> Result<LoadedBsdf, SceneError> {
         let mut props = Props::new(p);
         let mut tex = TextureChildren::new(p);
         let mut textures = BsdfTextures::default();
@@ -858,8 +864,14 @@ impl Loader {
                     }
                     inner = Some(d);
                 }
-                let (inner, inner_textures) =
+                let (inner, inner_textures, perturbation) =
                     inner.ok_or_else(|| err(&p.loc, "twosided needs a nested <bsdf>"))?;
+                if perturbation.is_some() {
+                    return Err(err(
+                        &p.loc,
+                        "twosided cannot wrap normalmap or bumpmap (put the twosided inside them)",
+                    ));
+                }
                 if matches!(inner, BsdfDesc::TwoSided { .. }) {
                     return Err(err(&p.loc, "twosided cannot wrap another twosided"));
                 }
@@ -880,23 +892,113 @@ impl Loader {
                         inner: Box::new(inner),
                     },
                     inner_textures,
+                    None,
                 ));
             }
+            "normalmap" | "bumpmap" => return self.perturbed_bsdf(p),
             other => {
                 return Err(err(
                     &p.loc,
                     format!(
-                        "unsupported bsdf \"{other}\" (supported: diffuse, conductor, roughconductor, dielectric, roughdielectric, thindielectric, plastic, roughplastic, twosided)"
+                        "unsupported bsdf \"{other}\" (supported: diffuse, conductor, roughconductor, dielectric, roughdielectric, thindielectric, plastic, roughplastic, twosided, normalmap, bumpmap)"
                     ),
                 ));
             }
         };
         tex.finish()?;
         props.finish()?;
-        Ok((desc, textures))
+        Ok((desc, textures, None))
     }
 
-    fn bsdf_by_id(&self, id: &str, loc: &Loc) -> Result<(BsdfDesc, BsdfTextures), SceneError> {
+    /// `normalmap` (texture `normalmap`) or `bumpmap` (one texture, any
+    /// name, a bitmap) around exactly one nested BSDF or `<ref>`, with
+    /// `flip_invalid_normals`, `use_shadowing_function` and (bumpmap)
+    /// `scale`, as Mitsuba 3.9 reads them.
+    fn perturbed_bsdf(&mut self, p: &Plugin) -> Result<LoadedBsdf, SceneError> {
+        let mut props = Props::new(p);
+        let what = &p.kind;
+        let mut inner = None;
+        let mut map = None;
+        for child in &p.children {
+            let d = match child {
+                Child::Plugin(c) if c.tag == "bsdf" => self.bsdf(c)?,
+                Child::Ref { id, loc } => self.bsdf_by_id(id, loc)?,
+                Child::Plugin(c) if c.tag == "texture" => {
+                    let named = c.name.as_deref() == Some("normalmap");
+                    if map.is_some() || (what == "normalmap" && !named) {
+                        return Err(err(
+                            &c.loc,
+                            if what == "normalmap" {
+                                "normalmap takes one <texture name=\"normalmap\">".to_string()
+                            } else {
+                                "bumpmap takes one <texture>".to_string()
+                            },
+                        ));
+                    }
+                    map = Some((self.texture(c)?, c.loc.clone()));
+                    continue;
+                }
+                Child::Plugin(c) => {
+                    return Err(err(&c.loc, format!("<{}> is not allowed in {what}", c.tag)));
+                }
+            };
+            if inner.is_some() {
+                return Err(err(
+                    &p.loc,
+                    format!("{what} takes exactly one nested <bsdf> or <ref>"),
+                ));
+            }
+            inner = Some(d);
+        }
+        let (desc, textures, nested) = inner.ok_or_else(|| {
+            err(
+                &p.loc,
+                format!("{what} needs a nested <bsdf> (the BSDF whose frame it perturbs)"),
+            )
+        })?;
+        if nested.is_some() {
+            return Err(err(
+                &p.loc,
+                format!("{what} cannot wrap another normalmap or bumpmap"),
+            ));
+        }
+        let (texture, texture_loc) = map.ok_or_else(|| {
+            err(
+                &p.loc,
+                if what == "normalmap" {
+                    "normalmap needs a <texture name=\"normalmap\">".to_string()
+                } else {
+                    "bumpmap needs a height <texture>".to_string()
+                },
+            )
+        })?;
+        let kind = if what == "normalmap" {
+            PerturbKind::Normal(texture)
+        } else {
+            let scale = props.float("scale", 1.0)?;
+            if !scale.is_finite() {
+                return Err(err(&p.loc, "bumpmap scale must be finite"));
+            }
+            match texture {
+                Texture::Bitmap(height) => PerturbKind::Bump { height, scale },
+                _ => {
+                    return Err(err(
+                        &texture_loc,
+                        "bumpmap needs a bitmap texture (Mitsuba 3 computes height gradients only for bitmaps)",
+                    ));
+                }
+            }
+        };
+        let perturbation = Perturbation {
+            kind,
+            flip_invalid_normals: props.boolean("flip_invalid_normals", true)?,
+            use_shadowing_function: props.boolean("use_shadowing_function", true)?,
+        };
+        props.finish()?;
+        Ok((desc, textures, Some(perturbation)))
+    }
+
+    fn bsdf_by_id(&self, id: &str, loc: &Loc) -> Result<LoadedBsdf, SceneError> {
         let index = self.named_bsdfs.get(id).ok_or_else(|| {
             err(
                 loc,
@@ -906,6 +1008,7 @@ impl Loader {
         Ok((
             self.desc.bsdfs[*index].clone(),
             self.desc.bsdf_textures[*index].clone(),
+            self.desc.bsdf_perturbations[*index].clone(),
         ))
     }
 
@@ -1200,6 +1303,7 @@ impl Loader {
                     reflectance: Rgb::splat(0.5),
                 },
                 BsdfTextures::default(),
+                None,
             )),
         };
         self.desc.shapes.push(ShapeDesc {

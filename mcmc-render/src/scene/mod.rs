@@ -10,10 +10,12 @@ pub mod serialized;
 pub mod upgrade;
 pub mod xml;
 
+use crate::bsdf::perturb::{Perturbation, Perturbed};
 use crate::bsdf::textured::{BsdfAt, BsdfTextures};
 use crate::bsdf::{Bsdf, BsdfDesc};
 use crate::camera::Camera;
 use crate::color::Rgb;
+use crate::frame::Frame;
 use crate::geometry::{GeoShape, Geometry, Hit, MeshData, Ray, Surface, SurfacePoint};
 use crate::light::{DirectSample, Lights};
 use glam::{Mat3, Mat4, Vec3};
@@ -243,6 +245,9 @@ pub struct SceneDesc {
     pub bsdfs: Vec<BsdfDesc>,
     /// The textured parameters of each BSDF, indexed like `bsdfs`.
     pub bsdf_textures: Vec<BsdfTextures>,
+    /// The `normalmap` or `bumpmap` around each BSDF, if any, indexed like
+    /// `bsdfs`.
+    pub bsdf_perturbations: Vec<Option<Perturbation>>,
     /// Point lights.
     pub point_lights: Vec<PointLightDesc>,
     /// Emitters at infinity (at most one environment).
@@ -282,6 +287,9 @@ pub struct Scene {
     /// The textured parameters of each BSDF, indexed like `bsdfs`; empty
     /// when no BSDF of the scene is textured.
     textures: Vec<BsdfTextures>,
+    /// The `normalmap` or `bumpmap` around each BSDF, indexed like
+    /// `bsdfs`; empty when the scene has none.
+    perturbations: Vec<Option<Perturbation>>,
     /// Parsed BSDFs, for reporting.
     pub bsdf_descs: Vec<BsdfDesc>,
     /// Emitters and the light-selection distribution.
@@ -339,6 +347,11 @@ impl Scene {
             Vec::new()
         } else {
             desc.bsdf_textures
+        };
+        let perturbations = if desc.bsdf_perturbations.iter().all(Option::is_none) {
+            Vec::new()
+        } else {
+            desc.bsdf_perturbations
         };
         let no_geometry = desc.shapes.is_empty()
             && desc.point_lights.is_empty()
@@ -416,6 +429,7 @@ impl Scene {
             shapes,
             bsdfs,
             textures,
+            perturbations,
             bsdf_descs: desc.bsdfs,
             lights,
             camera,
@@ -438,15 +452,31 @@ impl Scene {
     }
 
     /// The BSDF at a surface point, with its textured parameters (if any)
-    /// evaluated at the point's UV.
+    /// evaluated at the point's UV and, under `normalmap` or `bumpmap`,
+    /// the perturbed frame at the point (relative to the shading frame
+    /// `Frame::from_normal(sp.ns)` the integrators use).
     #[inline(always)]
     pub fn bsdf_at(&self, sp: &SurfacePoint) -> BsdfAt<'_> {
         let i = self.shapes[sp.shape as usize].bsdf as usize;
         let bsdf = &self.bsdfs[i];
-        match self.textures.get(i) {
-            Some(t) if !t.is_empty() => BsdfAt::Textured(t.apply(bsdf, sp.uv)),
-            _ => BsdfAt::Shared(bsdf),
+        let model = match self.textures.get(i) {
+            Some(t) if !t.is_empty() => t.apply(bsdf, sp.uv),
+            _ => match self.perturbations.get(i) {
+                Some(Some(p)) => return BsdfAt::Perturbed(*bsdf, self.perturbed(p, sp)),
+                _ => return BsdfAt::Shared(bsdf),
+            },
+        };
+        match self.perturbations.get(i) {
+            Some(Some(p)) => BsdfAt::Perturbed(model, self.perturbed(p, sp)),
+            _ => BsdfAt::Textured(model),
         }
+    }
+
+    /// The frame `p` perturbs at `sp` (kept out of the hot path).
+    #[inline(never)]
+    fn perturbed(&self, p: &Perturbation, sp: &SurfacePoint) -> Perturbed {
+        let n = p.normal(sp.ns, sp.ng, sp.uv, self.geometry.tangents(sp));
+        p.at(&Frame::from_normal(sp.ns), n)
     }
 
     /// True when nothing blocks the light sample `ds` from `sp` (for an
