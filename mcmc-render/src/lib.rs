@@ -51,6 +51,7 @@ pub mod markov;
 pub mod observer;
 pub mod output;
 pub mod path_classes;
+pub mod path_space;
 pub mod pss;
 pub mod pss_dump;
 pub mod render;

@@ -124,7 +124,7 @@ pub type Roulette = Option<u32>;
 /// and sampling BSDFs, adding at most `max_surface` vertices. Returns the
 /// number added.
 #[allow(clippy::too_many_arguments)]
-fn random_walk(
+pub(crate) fn random_walk(
     scene: &Scene,
     mut ray: Ray,
     source: &mut dyn RandomSource,

@@ -51,6 +51,7 @@
 
 pub mod bdpt;
 pub mod lt;
+pub mod mlt;
 pub mod mmlt;
 pub mod path_vertex;
 pub mod pssmlt;

@@ -151,6 +151,7 @@ pub static REGISTRY: &[Registration] = &[
     register::<super::bdpt::BdptSettings>(),
     register::<super::pssmlt::Pssmlt>(),
     register::<super::mmlt::Mmlt>(),
+    register::<super::mlt::Mlt>(),
     register::<super::relt::Relt>(),
 ];
 

@@ -12,8 +12,9 @@ use mcmc_render::integrators::lt::LightTracer;
 use mcmc_render::integrators::mmlt::render_family;
 use mcmc_render::integrators::pssmlt::render_pssmlt;
 use mcmc_render::integrators::pt::PathTracer;
-use mcmc_render::markov::Normalization;
+use mcmc_render::markov::{ChainSettings, Normalization};
 use mcmc_render::observer::NoObserver;
+use mcmc_render::path_space::{PathFamily, PathMutations};
 use mcmc_render::pss::MmltDepth;
 use mcmc_render::pss::PssmltSettings;
 use mcmc_render::render::{RenderSettings, render};
@@ -445,6 +446,8 @@ pub enum Mlt {
     PssmltBdpt,
     /// Multiplexed MLT.
     Mmlt,
+    /// Path-space MLT (Veach's bidirectional mutation).
+    PathSpace,
 }
 
 /// A replicate budget: bootstrap candidates (per member), chains,
@@ -483,6 +486,20 @@ pub fn mlt_reps(scene: &Scene, kind: Mlt, budget: Budget, k: u64, seed0: u64) ->
                 }
                 Mlt::Mmlt => {
                     render_family(scene, mmlt_depths(scene), &settings, &stop, &NoObserver)
+                }
+                Mlt::PathSpace => {
+                    let settings = ChainSettings {
+                        mutation: PathMutations::default(),
+                        bootstrap: settings.bootstrap,
+                        chains: settings.chains,
+                        mutations_per_pixel: settings.mutations_per_pixel,
+                        seed: settings.seed,
+                        normalization: settings.normalization,
+                        ..ChainSettings::default()
+                    };
+                    let max = scene.integrator.max_depth;
+                    let family = PathFamily::new(scene, (max != u32::MAX).then_some(max as usize));
+                    mcmc_render::markov::run(scene, &family, &settings, &stop, &NoObserver)
                 }
             }
             .expect("mlt runs");

@@ -1,0 +1,245 @@
+//! Path space on the Markov-chain driver: one target (`I = lum f`), the
+//! mutation mixture, and start-up candidates drawn by bidirectional
+//! techniques.
+//!
+//! # Start-up candidates and their reference density
+//!
+//! A candidate picks its length `k` (uniform on `1..=max` segments, or
+//! `P(k) = 2^{−k}` when the depth is unbounded), a split `s` uniform over
+//! `[s_min, k]` (`s` light-walk vertices, `t = k + 1 − s ≥ 1` camera-walk
+//! vertices; `s_min = 1` when no emitter can be hit), grows both walks and
+//! connects them: one sample of one BDPT technique. Its reference density
+//! is that of the whole procedure, `P(k) · 1/#s · Σ_s p_s(x)` (the sum over
+//! every technique that could have drawn the path, as in the bidirectional
+//! mutation with everything deleted), so the driver's importance weights
+//! `I(x)/p₀(x)` are the one-sample MIS (balance heuristic) estimate of
+//! `b = ∫ I dμ`. The driver resamples the chains' start states from these
+//! candidates in proportion to the weights.
+
+use super::bidirectional::Bidirectional;
+use super::state::{Path, PathTarget};
+use super::walk::{ChainSource, camera_walk, light_walk};
+use crate::light::Light;
+use crate::markov::{CANDIDATE_STREAM, ChainFamily, MltError};
+use crate::pss::PathSample;
+use crate::scene::Scene;
+use mcmc_core::kernel::{Kernel, Mixture};
+use mcmc_core::math::log_sum_exp;
+use mcmc_core::rng::{ChainRng, stream_rng, uniform};
+
+/// The mutation mixture: one selection weight per mutation type
+/// (normalised over the types with non-zero weight). Mitsuba 0.6's `mlt`
+/// turns on the bidirectional mutation and the lens, caustic and
+/// multi-chain perturbations; only the bidirectional mutation exists so
+/// far, and [`PathMutations::kernel`] refuses a non-zero weight for the
+/// others.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PathMutations {
+    /// Weight of Veach's bidirectional mutation.
+    pub bidirectional: f64,
+    /// Keep path lengths fixed in the bidirectional mutation (seed 001's
+    /// variant) instead of Veach's length-changing move.
+    pub fixed_length: bool,
+    /// Weight of the lens perturbation (not built yet: must be 0).
+    pub lens_perturbation: f64,
+    /// Weight of the caustic perturbation (not built yet: must be 0).
+    pub caustic_perturbation: f64,
+    /// Weight of the multi-chain perturbation (not built yet: must be 0).
+    pub multi_chain_perturbation: f64,
+    /// Weight of the manifold perturbation (not built yet: must be 0).
+    pub manifold_perturbation: f64,
+}
+
+impl Default for PathMutations {
+    /// The bidirectional mutation alone, length-changing.
+    fn default() -> Self {
+        PathMutations {
+            bidirectional: 1.0,
+            fixed_length: false,
+            lens_perturbation: 0.0,
+            caustic_perturbation: 0.0,
+            multi_chain_perturbation: 0.0,
+            manifold_perturbation: 0.0,
+        }
+    }
+}
+
+impl PathMutations {
+    /// Checks the weights: finite, non-negative, not all zero, and zero for
+    /// the mutations that do not exist yet.
+    pub fn check(&self) -> Result<(), String> {
+        let unbuilt = [
+            ("lens_perturbation", self.lens_perturbation),
+            ("caustic_perturbation", self.caustic_perturbation),
+            ("multi_chain_perturbation", self.multi_chain_perturbation),
+            ("manifold_perturbation", self.manifold_perturbation),
+        ];
+        for (name, w) in unbuilt {
+            if w != 0.0 {
+                return Err(format!(
+                    "{name} = {w}: this mutation is not implemented yet; set it to 0 (only the bidirectional mutation exists)"
+                ));
+            }
+        }
+        if !(self.bidirectional.is_finite() && self.bidirectional > 0.0) {
+            return Err(format!(
+                "bidirectional_mutation = {} must be positive: it is the only mutation so far",
+                self.bidirectional
+            ));
+        }
+        Ok(())
+    }
+
+    /// The `mcmc-core` kernel for paths of at most `max_segments` segments
+    /// (`None`: unbounded): a [`Mixture`] of the enabled mutations.
+    pub fn kernel<'s>(
+        &self,
+        max_segments: Option<usize>,
+    ) -> Result<Mixture<Path<'s>, PathSample>, String> {
+        self.check()?;
+        let bidirectional: Box<dyn Kernel<Path<'s>, PathSample> + Send> =
+            Box::new(Bidirectional::new(1, max_segments, self.fixed_length));
+        Mixture::new(vec![(self.bidirectional, bidirectional)]).map_err(|e| e.to_string())
+    }
+}
+
+/// Path space over one scene as a [`ChainFamily`] with one member.
+pub struct PathFamily<'s> {
+    /// The scene.
+    pub scene: &'s Scene,
+    /// Longest path in segments (`None`: unbounded).
+    pub max_segments: Option<usize>,
+    target: PathTarget,
+    area_lights: bool,
+}
+
+impl<'s> PathFamily<'s> {
+    /// The family on `scene` with paths of at most `max_segments` segments.
+    pub fn new(scene: &'s Scene, max_segments: Option<usize>) -> Self {
+        PathFamily {
+            scene,
+            max_segments,
+            target: PathTarget,
+            area_lights: scene
+                .lights
+                .lights
+                .iter()
+                .any(|l| matches!(l, Light::Area { .. })),
+        }
+    }
+
+    /// `P(k)` of a start-up candidate's length.
+    fn length_probability(&self, k: usize) -> f64 {
+        match self.max_segments {
+            Some(m) if k >= 1 && k <= m => 1.0 / m as f64,
+            Some(_) => 0.0,
+            None if k >= 1 => 0.5f64.powi(k.min(1100) as i32),
+            None => 0.0,
+        }
+    }
+
+    /// Smallest split `s` of a candidate.
+    fn s_min(&self) -> usize {
+        usize::from(!self.area_lights)
+    }
+
+    /// Draws a start-up candidate with `rng` (see the module docs); a
+    /// candidate that failed has zero contribution.
+    pub fn draw_candidate(&self, rng: &mut ChainRng) -> Path<'s> {
+        let mut path = Path::new(self.scene);
+        let k = match self.max_segments {
+            Some(m) => 1 + ((uniform(rng) * m as f64) as usize).min(m.saturating_sub(1)),
+            None => {
+                let mut k = 1;
+                while k < 1100 && uniform(rng) < 0.5 {
+                    k += 1;
+                }
+                k
+            }
+        };
+        let s_min = self.s_min();
+        if s_min > k {
+            return path;
+        }
+        let count = k - s_min + 1;
+        let s = s_min + ((uniform(rng) * count as f64) as usize).min(count - 1);
+        let t = k + 1 - s;
+        let (mut light, mut camera) = (Vec::new(), Vec::new());
+        let mut source = ChainSource::new(rng);
+        if camera_walk(self.scene, &mut source, t, &mut camera) != t {
+            return path;
+        }
+        if s > 0 && light_walk(self.scene, &mut source, s, &mut light) != s {
+            return path;
+        }
+        path.assign_subpaths(&light, &camera);
+        let joined =
+            s == 0 || (path.connectible(s - 1) && path.connectible(s) && path.edge_visible(s - 1));
+        if !joined {
+            path.contribution = crate::color::Rgb::BLACK;
+        }
+        path
+    }
+
+    /// `ln p₀(x)`, the density of [`PathFamily::draw_candidate`] at `x`.
+    pub fn log_candidate_density(&self, path: &Path<'_>) -> f64 {
+        let k = path.segments();
+        let s_min = self.s_min();
+        if path.len() < 2 || s_min > k {
+            return f64::NEG_INFINITY;
+        }
+        let terms: Vec<f64> = (s_min..=k)
+            .map(|s| path.log_regrowth_density(0, k, s))
+            .collect();
+        self.length_probability(k).ln() - ((k - s_min + 1) as f64).ln() + log_sum_exp(&terms)
+    }
+}
+
+impl<'s> ChainFamily for PathFamily<'s> {
+    type State = Path<'s>;
+    type Target = PathTarget;
+    type Mutation = PathMutations;
+    type Kernel = Mixture<Path<'s>, PathSample>;
+
+    fn members(&self) -> usize {
+        1
+    }
+    fn target(&self, _member: usize) -> &PathTarget {
+        &self.target
+    }
+    fn kernel(&self, mutation: &PathMutations, _member: usize) -> Result<Self::Kernel, MltError> {
+        mutation
+            .kernel(self.max_segments)
+            .map_err(MltError::Setting)
+    }
+    fn independent_probability(&self, _mutation: &PathMutations) -> f64 {
+        // Path-space mutations are all local: the running normalisation
+        // then rests on the start-up candidates alone.
+        0.0
+    }
+    fn is_independent(&self, _component: usize) -> bool {
+        false
+    }
+    fn candidate(&self, seed: u64, index: u64) -> Path<'s> {
+        self.draw_candidate(&mut stream_rng(seed, CANDIDATE_STREAM + index))
+    }
+    fn reference_log_density(&self, state: &Path<'s>) -> f64 {
+        self.log_candidate_density(state)
+    }
+    fn candidate_log_weight(&self, _member: usize, state: &Path<'s>) -> f64 {
+        let log_i = state.log_density();
+        if log_i == f64::NEG_INFINITY {
+            return f64::NEG_INFINITY;
+        }
+        let log_p = self.log_candidate_density(state);
+        if !log_p.is_finite() {
+            // A drawn path whose density rounds to zero: an invalid
+            // candidate (counted), not an infinite weight.
+            return f64::NAN;
+        }
+        log_i - log_p
+    }
+    fn coordinates(&self, _state: &Path<'s>) -> Option<Vec<f64>> {
+        None
+    }
+}

@@ -1,0 +1,492 @@
+//! The path state: a light path `x_0 … x_k` (emitter to camera) with its
+//! measurement contribution `f(x)`, the scalar target `I(x) = lum f(x)`,
+//! the raster position it lands on, and per vertex the area densities with
+//! which a light walk and a camera walk would produce it.
+//!
+//! # Measure and contribution
+//!
+//! Paths live in Veach's path space: the product of the area measures at
+//! the vertices, with two conventions the rest of the renderer uses too
+//! (pbrt-v4's, BDPT's [`Vertex`] densities):
+//!
+//! - the **camera vertex** `x_k` (the pinhole, or a point on the thin lens)
+//!   is measured with the lens's *probability* measure (density 1 for any
+//!   sampler, a Dirac point for the pinhole), and the camera's importance is
+//!   the density of the raster position being uniform over the image, so
+//!   that `f(x)` splatted at the path's raster position, times the number of
+//!   pixels, is the image (as PSSMLT's splats are);
+//! - at a vertex that scatters through a **Dirac lobe** (mirror, smooth
+//!   dielectric, smooth plastic's coating; [`Vertex::delta`]) `f` and the
+//!   densities hold the *coefficients* of the Dirac distribution: the lobe's
+//!   value `c = weight · P` from [`crate::bsdf::Bsdf::sample`] and its
+//!   selection probability `P`, which cancel in every ratio a mutation forms.
+//!
+//! With `w` unit directions, `ng`/`ns` geometric/shading normals, and the
+//! radiance-mode BSDF `f_s(→camera, →light)`:
+//!
+//! ```text
+//! f(x) = L_e(x_0→x_1) · Π_{i<k} |ng_i·w_{i,i+1}| / d²_{i,i+1}           (no cosine at a point light)
+//!      · Π_{0<i<k} f_s(x_i) |ns_i·w_{i→i−1}|                             (c_rad at Dirac vertices)
+//!      · W(x_k→x_{k−1})                                                 (the camera's solid-angle density)
+//! ```
+//!
+//! which is the path tracer's estimate times its density: `f / p_{0,k+1}`
+//! is exactly PT's throughput, and for every bidirectional split `f / p_s`
+//! is BDPT's unweighted contribution. Visibility is *not* evaluated by
+//! [`Path::evaluate`]: a path is built from traced walks (visible by
+//! construction) and at most one connection, which its builder tests with
+//! [`Path::edge_visible`].
+//!
+//! # Densities
+//!
+//! [`Path::vertices`] are BDPT's [`Vertex`] values, light to camera, with
+//! these meanings (written by [`Path::evaluate`]):
+//!
+//! - `pdf_fwd` of `x_i`: area density with which a **light walk** produces
+//!   `x_i` (from `x_{i−1}`, having arrived from `x_{i−2}`); `x_0`: the
+//!   emitter point's density (selection × area); `x_k`: 0 (light walks never
+//!   hit the camera, as in BDPT);
+//! - `pdf_rev` of `x_i`: area density with which a **camera walk** produces
+//!   `x_i` (from `x_{i+1}`, having arrived from `x_{i+2}`); `x_k`: 1 (the
+//!   lens convention above); `x_0`: the density of the camera walk hitting
+//!   the emitter (0 for point lights);
+//! - `delta`: `x_i` scatters through a Dirac lobe;
+//! - `wo`: unit direction from `x_i` towards `x_{i+1}` (zero at `x_k`);
+//! - `beta` and `raster` are not used by path states (white, zero).
+//!
+//! At a Dirac vertex a camera walk's density is the lobe probability; a
+//! light walk's is the lobe probability times `lum(c_rad |ng·w_c| /
+//! |ng·w_l|) / lum(c_imp · shading correction)`, the change of variables
+//! between the importance-mode and radiance-mode Dirac distributions
+//! (it is 1 for mirrors and corrects refraction's η²), so that `f / p` is
+//! BDPT's light-walk throughput there too.
+//!
+//! A regrowth of vertices `first..=last` with `s` of them from the light
+//! side has density [`Path::log_regrowth_density`]: the product of those
+//! vertices' `pdf_fwd` (light part) and `pdf_rev` (camera part), zero when
+//! the connection between the parts touches a Dirac vertex or a delta
+//! emitter. The bidirectional mutation's `T(x→y)` and the start-up's
+//! reference density are sums of these.
+
+use crate::bsdf::TransportMode;
+use crate::color::Rgb;
+use crate::frame::Frame;
+use crate::integrators::path_vertex::{Vertex, VertexKind, shading_correction};
+use crate::light::Light;
+use crate::pss::{PathSample, Splat};
+use crate::scene::Scene;
+use glam::{Vec2, Vec3};
+use mcmc_core::target::{Evaluation, Target};
+
+/// A light path `x_0` (on an emitter) … `x_k` (the camera) in a scene,
+/// with its contribution and the densities mutations need (see the module
+/// docs).
+///
+/// The path holds its scene: `mcmc-core` kernels see only states, and a
+/// mutation traces rays in the scene of the path it mutates.
+#[derive(Clone)]
+pub struct Path<'s> {
+    /// The scene the path lies in.
+    pub scene: &'s Scene,
+    /// The vertices, light to camera: `x_0` has kind [`VertexKind::Light`],
+    /// `x_k` kind [`VertexKind::Camera`], the others
+    /// [`VertexKind::Surface`]. Field meanings as in the module docs.
+    pub vertices: Vec<Vertex>,
+    /// `f(x)`, RGB (zero when the path carries nothing or is malformed).
+    pub contribution: Rgb,
+    /// Raster position where the camera sees `x_{k−1}` (zero when outside).
+    pub raster: Vec2,
+}
+
+impl std::fmt::Debug for Path<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Path")
+            .field("vertices", &self.vertices)
+            .field("contribution", &self.contribution)
+            .field("raster", &self.raster)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<'s> Path<'s> {
+    /// An empty path in `scene` (zero contribution).
+    pub fn new(scene: &'s Scene) -> Self {
+        Path {
+            scene,
+            vertices: Vec::new(),
+            contribution: Rgb::BLACK,
+            raster: Vec2::ZERO,
+        }
+    }
+
+    /// Builds and evaluates the path `light` followed by `camera` reversed:
+    /// `light` is a light subpath (emitter first) and `camera` a camera
+    /// subpath (camera first), as BDPT's walks write them; either may be
+    /// empty as long as the path starts on an emitter and ends at the
+    /// camera. The vertex on an emitter that starts the path becomes a
+    /// [`VertexKind::Light`] vertex. Visibility of the joining edge is not
+    /// tested (see [`Path::edge_visible`]).
+    pub fn from_subpaths(scene: &'s Scene, light: &[Vertex], camera: &[Vertex]) -> Self {
+        let mut path = Path::new(scene);
+        path.assign_subpaths(light, camera);
+        path
+    }
+
+    /// [`Path::from_subpaths`] into an existing path, reusing its storage.
+    pub fn assign_subpaths(&mut self, light: &[Vertex], camera: &[Vertex]) {
+        self.vertices.clear();
+        self.vertices.extend_from_slice(light);
+        self.vertices.extend(camera.iter().rev().copied());
+        self.normalize_ends();
+        self.evaluate();
+    }
+
+    /// Gives the end vertices their path-state kinds: an emitter point hit
+    /// by a camera walk becomes the path's light vertex.
+    pub fn normalize_ends(&mut self) {
+        let scene = self.scene;
+        if let Some(first) = self.vertices.first_mut()
+            && first.kind == VertexKind::Surface
+            && first.is_light()
+        {
+            *first = Vertex::light(scene, first.light, first.sp, Rgb::WHITE, 0.0);
+        }
+    }
+
+    /// Number of vertices `k + 1`.
+    pub fn len(&self) -> usize {
+        self.vertices.len()
+    }
+
+    /// True for a path without vertices.
+    pub fn is_empty(&self) -> bool {
+        self.vertices.is_empty()
+    }
+
+    /// Number of segments `k` (the depth, as `max_depth` counts it).
+    pub fn segments(&self) -> usize {
+        self.vertices.len().saturating_sub(1)
+    }
+
+    /// The scalar target `I(x) = lum f(x)`, as the splat's luminance.
+    pub fn luminance(&self) -> f64 {
+        self.contribution.luminance() as f64
+    }
+
+    /// `ln I(x)`: `−∞` for a path that carries nothing, NaN for a NaN or
+    /// infinite contribution (which `mcmc-core` rejects and counts).
+    pub fn log_density(&self) -> f64 {
+        let i = self.luminance();
+        if !self.contribution.is_finite() || !i.is_finite() {
+            f64::NAN
+        } else if i > 0.0 {
+            i.ln()
+        } else {
+            f64::NEG_INFINITY
+        }
+    }
+
+    /// The payload the Markov-chain driver films: one splat of `f(x)` at
+    /// the raster position, depth `k`.
+    pub fn sample(&self) -> PathSample {
+        PathSample {
+            splats: vec![Splat {
+                p: self.raster,
+                l: self.contribution,
+                class: 0,
+            }],
+            depth: self.segments() as u32,
+        }
+    }
+
+    /// True when the segment `x_i x_{i+1}` is unoccluded (for the camera
+    /// vertex, also inside the clip range).
+    pub fn edge_visible(&self, i: usize) -> bool {
+        let scene = self.scene;
+        let (a, b) = (&self.vertices[i], &self.vertices[i + 1]);
+        if b.kind == VertexKind::Camera {
+            return scene
+                .geometry
+                .segment_clear(a.sp.spawn_origin(b.p()), b.p());
+        }
+        scene.geometry.visible(&a.sp, &b.sp)
+    }
+
+    /// True when every segment is unoccluded (tests and start-up checks;
+    /// mutations test only the edges they create).
+    pub fn all_visible(&self) -> bool {
+        (0..self.segments()).all(|i| self.edge_visible(i))
+    }
+
+    /// True when vertex `i` can end a deterministic connection: the camera,
+    /// an emitter point that is not a delta light, or a surface vertex that
+    /// does not scatter through a Dirac lobe and whose BSDF has a non-Dirac
+    /// part.
+    pub fn connectible(&self, i: usize) -> bool {
+        let scene = self.scene;
+        let v = &self.vertices[i];
+        match v.kind {
+            VertexKind::Camera => true,
+            VertexKind::Light => true,
+            VertexKind::Surface => !v.delta && !scene.bsdf_at(&v.sp).is_delta(),
+            VertexKind::Infinite => false,
+        }
+    }
+
+    /// `ln` of the area density with which a bidirectional regrowth
+    /// produces vertices `first..=last` (all others held fixed), `s` of
+    /// them by a light walk (from `x_{first−1}`, or from the emitters when
+    /// `first = 0`) and the rest by a camera walk (from `x_{last+1}`, or
+    /// from the camera when `last = k`), joined by a connection. `−∞` when
+    /// that split cannot produce the path: the connection touches a Dirac
+    /// vertex, the light walk would have to hit the camera, or the camera
+    /// walk a delta emitter.
+    pub fn log_regrowth_density(&self, first: usize, last: usize, s: usize) -> f64 {
+        let k = self.segments();
+        if last > k || first > last + 1 || s > last + 1 - first {
+            return f64::NEG_INFINITY;
+        }
+        let join = first + s; // first camera-walk vertex
+        if join > k {
+            // The light walk would produce the camera vertex.
+            return f64::NEG_INFINITY;
+        }
+        if join > 0 && !(self.connectible(join - 1) && self.connectible(join)) {
+            return f64::NEG_INFINITY;
+        }
+        let mut log_p = 0.0f64;
+        for (i, v) in self.vertices.iter().enumerate().take(last + 1).skip(first) {
+            let p = if i < join { v.pdf_fwd } else { v.pdf_rev };
+            if !(p > 0.0) {
+                return f64::NEG_INFINITY;
+            }
+            log_p += (p as f64).ln();
+        }
+        log_p
+    }
+
+    /// Recomputes the contribution, the raster position and every vertex's
+    /// densities, directions and Dirac coefficients from the vertex
+    /// positions, kinds, emitters and `delta` flags. Visibility is not
+    /// tested. A malformed path (fewer than two vertices, wrong end kinds)
+    /// gets a zero contribution.
+    pub fn evaluate(&mut self) {
+        let scene = self.scene;
+        self.contribution = Rgb::BLACK;
+        self.raster = Vec2::ZERO;
+        let n = self.vertices.len();
+        if n < 2 {
+            return;
+        }
+        let k = n - 1;
+        let vs = &mut self.vertices;
+        for i in 0..n {
+            vs[i].beta = Rgb::WHITE;
+            vs[i].raster = Vec2::ZERO;
+            vs[i].wo = if i < k {
+                vs[i].direction_to(&vs[i + 1]).unwrap_or(Vec3::ZERO)
+            } else {
+                Vec3::ZERO
+            };
+        }
+        for i in 0..n {
+            let fwd = match i {
+                0 => vs[0].pdf_light_origin(scene),
+                _ if i == k => 0.0,
+                1 => walk_density(scene, &vs[0], None, &vs[1], TransportMode::Importance),
+                _ => walk_density(
+                    scene,
+                    &vs[i - 1],
+                    Some(&vs[i - 2]),
+                    &vs[i],
+                    TransportMode::Importance,
+                ),
+            };
+            let rev = if i == k {
+                1.0
+            } else if i == 0 && vs[0].is_delta_light(scene) {
+                0.0
+            } else if i + 1 == k {
+                walk_density(scene, &vs[k], None, &vs[i], TransportMode::Radiance)
+            } else {
+                walk_density(
+                    scene,
+                    &vs[i + 1],
+                    Some(&vs[i + 2]),
+                    &vs[i],
+                    TransportMode::Radiance,
+                )
+            };
+            vs[i].pdf_fwd = fwd;
+            vs[i].pdf_rev = rev;
+        }
+        if vs[0].kind != VertexKind::Light || vs[k].kind != VertexKind::Camera {
+            return;
+        }
+        let Some(raster_dir) = vs[k].direction_to(&vs[k - 1]) else {
+            return;
+        };
+        let Some(cs) = scene.camera.connect(vs[k].p(), vs[k - 1].p()) else {
+            return;
+        };
+        let camera = scene.camera.pdf_we(vs[k].p(), raster_dir).1 as f64;
+        let le = emitted(scene, &vs[0], &vs[1]);
+        let mut f = [
+            le.r as f64 * camera,
+            le.g as f64 * camera,
+            le.b as f64 * camera,
+        ];
+        let mut scale = 1.0f64;
+        for i in 0..k {
+            scale *= edge_factor(&vs[i], &vs[i + 1]);
+        }
+        for i in 1..k {
+            let c = scattering(scene, &vs[i - 1], &vs[i], &vs[i + 1]);
+            f[0] *= c.r as f64;
+            f[1] *= c.g as f64;
+            f[2] *= c.b as f64;
+        }
+        self.contribution = Rgb::new(
+            (f[0] * scale) as f32,
+            (f[1] * scale) as f32,
+            (f[2] * scale) as f32,
+        );
+        self.raster = cs.raster;
+    }
+}
+
+/// `|ng_a · w| / d²` for the segment `a b` (no cosine at a vertex off any
+/// surface): the area-measure factor of `f` on that edge, the cosine taken
+/// at the light-side end (the camera-side end's is in its scattering term).
+fn edge_factor(a: &Vertex, b: &Vertex) -> f64 {
+    let d = b.p() - a.p();
+    let d2 = d.length_squared() as f64;
+    if !(d2 > 0.0) {
+        return 0.0;
+    }
+    let cos = if a.on_surface() {
+        (a.sp.ng.dot(d).abs() as f64) / d2.sqrt()
+    } else {
+        1.0
+    };
+    cos / d2
+}
+
+/// Radiance (area lights) or intensity (point lights) the path's emitter
+/// point `x0` sends towards `x1`.
+pub fn emitted(scene: &Scene, x0: &Vertex, x1: &Vertex) -> Rgb {
+    if !x0.is_light() {
+        return Rgb::BLACK;
+    }
+    let Some(w) = x0.direction_to(x1) else {
+        return Rgb::BLACK;
+    };
+    match &scene.lights.lights[x0.light as usize] {
+        Light::Area { .. } => scene.lights.area_radiance(x0.light, &x0.sp, w),
+        Light::Point {
+            intensity, spot, ..
+        } => *intensity * spot.map_or(1.0, |s| s.falloff(w)),
+        Light::Directional { .. } | Light::Environment(_) => Rgb::BLACK,
+    }
+}
+
+/// The Dirac lobe of `v`'s BSDF that scatters world direction `wo` into
+/// `wi`: its selection probability `P` and value coefficient `c = weight ·
+/// P` in `mode`, or `None` when no Dirac lobe of the BSDF maps `wo` to `wi`
+/// (to within 1e-4 in cosine).
+pub fn dirac_lobe(
+    scene: &Scene,
+    v: &Vertex,
+    wo: Vec3,
+    wi: Vec3,
+    mode: TransportMode,
+) -> Option<(f32, Rgb)> {
+    let frame = Frame::from_normal(v.sp.ns);
+    let bsdf = scene.bsdf_at(&v.sp);
+    let (lo, li) = (frame.to_local(wo), frame.to_local(wi));
+    let inverse = bsdf.invert(lo, li, 0.5)?;
+    let u_lobe = 0.5 * (inverse.u_lobe.0 + inverse.u_lobe.1);
+    let bs = bsdf.sample(lo, u_lobe, (0.5, 0.5), mode)?;
+    if !bs.is_delta || !(bs.pdf > 0.0) || bs.wi.dot(li) < 1.0 - 1e-4 {
+        return None;
+    }
+    Some((bs.pdf, bs.weight * bs.pdf))
+}
+
+/// The scattering factor of `f` at surface vertex `v` between its
+/// light-side neighbour `light` and camera-side neighbour `camera`:
+/// `f_s(→camera, →light) |ns·w_light|` in radiance mode, or the Dirac
+/// coefficient when `v.delta`.
+pub fn scattering(scene: &Scene, light: &Vertex, v: &Vertex, camera: &Vertex) -> Rgb {
+    if v.kind != VertexKind::Surface {
+        return Rgb::BLACK;
+    }
+    let (Some(wc), Some(wl)) = (v.direction_to(camera), v.direction_to(light)) else {
+        return Rgb::BLACK;
+    };
+    if v.delta {
+        return dirac_lobe(scene, v, wc, wl, TransportMode::Radiance).map_or(Rgb::BLACK, |l| l.1);
+    }
+    let frame = Frame::from_normal(v.sp.ns);
+    scene.bsdf_at(&v.sp).eval(
+        frame.to_local(wc),
+        frame.to_local(wl),
+        TransportMode::Radiance,
+    ) * v.sp.ns.dot(wl).abs()
+}
+
+/// Area density at `next` when a walk standing at `from` (having arrived
+/// from `behind`; `None` at an emitter point or the camera) samples it:
+/// `mode` is the walk's transport mode (importance for light walks). At a
+/// Dirac vertex, the coefficient convention of the module docs.
+pub fn walk_density(
+    scene: &Scene,
+    from: &Vertex,
+    behind: Option<&Vertex>,
+    next: &Vertex,
+    mode: TransportMode,
+) -> f32 {
+    if from.kind != VertexKind::Surface || !from.delta {
+        return from.pdf(scene, behind, next, mode);
+    }
+    let (Some(behind), Some(wn)) = (behind, from.direction_to(next)) else {
+        return 0.0;
+    };
+    let Some(wb) = from.direction_to(behind) else {
+        return 0.0;
+    };
+    let Some((p, c)) = dirac_lobe(scene, from, wb, wn, mode) else {
+        return 0.0;
+    };
+    let p = match mode {
+        TransportMode::Radiance => p,
+        TransportMode::Importance => {
+            // Light walk: wb points to the light side, wn to the camera side.
+            let Some((_, c_rad)) = dirac_lobe(scene, from, wn, wb, TransportMode::Radiance) else {
+                return 0.0;
+            };
+            let (ng, ns) = (from.sp.ng, from.sp.ns);
+            let rad = c_rad.luminance() * ng.dot(wn).abs() / ng.dot(wb).abs();
+            let imp = c.luminance() * shading_correction(wb, wn, ng, ns);
+            if !(imp > 0.0) || !rad.is_finite() {
+                return 0.0;
+            }
+            p * rad / imp
+        }
+    };
+    from.convert_density(p, next)
+}
+
+/// The path-space target `ln π(x) = ln I(x)`: it reads the contribution the
+/// path carries (mutations evaluate proposals when they build them), so an
+/// evaluation costs no rays. Its payload is [`Path::sample`].
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PathTarget;
+
+impl Target<Path<'_>> for PathTarget {
+    type Payload = PathSample;
+
+    fn evaluate(&self, state: &Path<'_>) -> Evaluation<PathSample> {
+        Evaluation::new(state.log_density(), state.sample())
+    }
+}
