@@ -195,6 +195,23 @@ impl BsdfAt<'_> {
         self.model().is_delta()
     }
 
+    /// [`Bsdf::invert`] at the point: the numbers that make
+    /// [`BsdfAt::sample`] return `wi`. Not implemented under a perturbed
+    /// frame (`normalmap`, `bumpmap`): `None` there, which inverse-sampling
+    /// callers treat as "no such sample".
+    pub fn invert(
+        &self,
+        wo: Vec3,
+        wi: Vec3,
+        u_choice: f32,
+    ) -> Option<crate::bsdf::invert::SampleInverse> {
+        match self {
+            BsdfAt::Shared(b) => b.invert(wo, wi, u_choice),
+            BsdfAt::Textured(b) => b.invert(wo, wi, u_choice),
+            BsdfAt::Perturbed(..) => None,
+        }
+    }
+
     /// [`Bsdf::has_delta_lobe`] of the model.
     pub fn has_delta_lobe(&self) -> bool {
         self.model().has_delta_lobe()

@@ -128,7 +128,13 @@ impl ManifoldVertex {
         let role = if v.kind == VertexKind::Surface && v.delta {
             let ng = v.sp.ng;
             let transmitted = (v.wo.dot(ng) > 0.0) != ((next - v.p()).dot(ng) > 0.0);
-            Role::Specular(specular_of(&scene.bsdf_at(&v.sp), transmitted)?)
+            // A normal- or bump-mapped specular surface reflects about the
+            // perturbed normal, which the constraint does not model.
+            let bsdf = scene.bsdf_at(&v.sp);
+            if bsdf.perturbed().is_some() {
+                return None;
+            }
+            Role::Specular(specular_of(bsdf.model(), transmitted)?)
         } else {
             Role::Endpoint
         };
