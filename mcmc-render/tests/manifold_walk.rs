@@ -460,8 +460,11 @@ fn descriptors_from_path_vertices() {
     let reflect = ManifoldVertex::from_path_vertex(&s, &v, Some(&hit), above).unwrap();
     assert_eq!(reflect.role, MIRROR);
     assert!((reflect.p() - sp.p.as_dvec3()).length() == 0.0);
-    // Without the hit a surface vertex has no differential geometry.
-    assert!(ManifoldVertex::from_path_vertex(&s, &v, None, inside).is_none());
+    // Without the hit, it is located again: the same descriptor.
+    let again = ManifoldVertex::from_path_vertex(&s, &v, None, inside).unwrap();
+    assert_eq!(again.role, GLASS);
+    assert!((again.geo.dnds - refract.geo.dnds).length() < 1e-6);
+    assert!((again.geo.s - refract.geo.s).length() < 1e-6);
     // The diffuse floor.
     let (hit, sp) = at(Vec3::new(3.0, 0.0, 1.0), Vec3::new(3.0, 0.0, 0.0));
     let mut floor = Vertex::surface(&s, sp, Vec3::Z, Rgb::WHITE);

@@ -100,8 +100,9 @@ impl ManifoldVertex {
     }
 
     /// The descriptor of a path vertex of the renderer. `hit` is the hit
-    /// that produced `v` (required for surface vertices; ignored for
-    /// camera and point-light vertices off surfaces) and `next` the
+    /// that produced `v` when the caller kept it (ignored for camera and
+    /// point-light vertices off surfaces); without it the hit is found
+    /// again with [`Geometry::locate`]. `next` is the
     /// position of the vertex after it along the chain, which says whether
     /// a dielectric reflected or refracted.
     ///
@@ -110,8 +111,8 @@ impl ManifoldVertex {
     /// smooth dielectric (reflection or refraction with its η). Every
     /// other vertex is an endpoint. `None` for what a chain cannot hold:
     /// emitters at infinity, transmission through a `thindielectric` (no
-    /// deflection, so no half-vector constraint), a missing hit, or a
-    /// singular parameterisation.
+    /// deflection, so no half-vector constraint), a surface point that
+    /// cannot be located, or a singular parameterisation.
     pub fn from_path_vertex(
         scene: &Scene,
         v: &Vertex,
@@ -132,7 +133,15 @@ impl ManifoldVertex {
         } else {
             Role::Endpoint
         };
-        Self::at_hit(&scene.geometry, hit?, v.sp, role)
+        let located;
+        let hit = match hit {
+            Some(h) => h,
+            None => {
+                located = scene.geometry.locate(&v.sp)?;
+                &located
+            }
+        };
+        Self::at_hit(&scene.geometry, hit, v.sp, role)
     }
 
     /// Position.
