@@ -32,7 +32,7 @@ use crate::geometry::differential::OrthonormalDifferential;
 use crate::geometry::{Geometry, Hit, SurfacePoint};
 use crate::integrators::path_vertex::{Vertex, VertexKind};
 use crate::scene::Scene;
-use glam::{DVec3, Vec3};
+use glam::{DVec2, DVec3, Vec3};
 
 /// How light scatters at a specular vertex.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -68,6 +68,11 @@ pub struct ManifoldVertex {
     pub geo: OrthonormalDifferential,
     /// Specular or endpoint.
     pub role: Role,
+    /// Half-vector offset `(o_s, o_t)` a specular vertex keeps (its
+    /// constraint is `c = (h·s, h·t) − offset`, see [`constraint`]): zero
+    /// for smooth surfaces; a glossy vertex treated as specular keeps its
+    /// current one ([`set_offsets`]).
+    pub offset: DVec2,
 }
 
 impl ManifoldVertex {
@@ -76,7 +81,12 @@ impl ManifoldVertex {
     /// centre): no tangent frame there.
     pub fn at_hit(geometry: &Geometry, hit: &Hit, sp: SurfacePoint, role: Role) -> Option<Self> {
         let geo = geometry.differential(hit, &sp).orthonormal()?;
-        Some(ManifoldVertex { sp, geo, role })
+        Some(ManifoldVertex {
+            sp,
+            geo,
+            role,
+            offset: DVec2::ZERO,
+        })
     }
 
     /// A fixed point that is not on a surface (the pinhole, a point
@@ -96,6 +106,7 @@ impl ManifoldVertex {
                 dndt: DVec3::ZERO,
             },
             role: Role::Endpoint,
+            offset: DVec2::ZERO,
         }
     }
 
@@ -144,6 +155,41 @@ impl ManifoldVertex {
         Self::at_hit(&scene.geometry, hit, v.sp, role)
     }
 
+    /// [`Self::from_path_vertex`] that also makes a **glossy** surface
+    /// vertex specular (rough conductor and `roughplastic` reflect, rough
+    /// dielectric reflects or refracts with its η), for the offset
+    /// manifolds of Jakob & Marschner: its offset is zero here; call
+    /// [`set_offsets`] on the chain to hold its current half-vector.
+    /// Whether to treat a glossy vertex so (Mitsuba 0.6 decides at random,
+    /// by roughness) is the mutation's choice.
+    pub fn from_glossy_path_vertex(
+        scene: &Scene,
+        v: &Vertex,
+        hit: Option<&Hit>,
+        next: Vec3,
+    ) -> Option<Self> {
+        let mut out = Self::from_path_vertex(scene, v, hit, next)?;
+        if v.kind == VertexKind::Surface && out.role == Role::Endpoint {
+            let ng = v.sp.ng;
+            let transmitted = (v.wo.dot(ng) > 0.0) != ((next - v.p()).dot(ng) > 0.0);
+            let glossy = match (&*scene.bsdf_at(&v.sp), transmitted) {
+                (Bsdf::RoughDielectric(d), true) => Some(Specular::Refract { eta: d.eta as f64 }),
+                (
+                    Bsdf::RoughDielectric(_)
+                    | Bsdf::RoughConductor(_)
+                    | Bsdf::RoughPlastic(_)
+                    | Bsdf::TwoSided(OneSided::RoughConductor(_) | OneSided::RoughPlastic(_)),
+                    false,
+                ) => Some(Specular::Reflect),
+                _ => None,
+            };
+            if let Some(spec) = glossy {
+                out.role = Role::Specular(spec);
+            }
+        }
+        Some(out)
+    }
+
     /// Position.
     #[inline]
     pub fn p(&self) -> DVec3 {
@@ -179,4 +225,20 @@ pub fn chain_length(chain: &[ManifoldVertex]) -> f64 {
         .windows(2)
         .map(|w| (w[1].p() - w[0].p()).length())
         .sum()
+}
+
+/// Sets every specular vertex's offset to its current half-vector, so that
+/// the chain lies on its offset manifold exactly (smooth vertices of a
+/// traced chain get offsets of the order of rounding). `None` where a
+/// constraint is undefined (see [`constraint::constraint_blocks`]).
+pub fn set_offsets(chain: &mut [ManifoldVertex]) -> Option<()> {
+    for i in 1..chain.len().saturating_sub(1) {
+        if let Role::Specular(_) = chain[i].role {
+            let mut v = chain[i];
+            v.offset = DVec2::ZERO;
+            chain[i].offset =
+                constraint::constraint_blocks(&chain[i - 1], &v, &chain[i + 1])?.value;
+        }
+    }
+    Some(())
 }
