@@ -16,11 +16,13 @@
 //! the anchor through the chain; [`walk::walk_reversible`] adds the
 //! reverse-walk check. `docs/manifold.md` has the formulas and tests.
 //!
-//! Glossy vertices: the walk treats only Dirac (smooth) vertices as
-//! specular; a glossy vertex ends a chain (it is an endpoint). Mitsuba
-//! 0.6 instead treats a rough vertex as specular with a roughness-dependent
-//! probability, keeping its half-vector offset ("offset manifolds", always
-//! on there); that is not implemented here (`docs/manifold.md`).
+//! Glossy vertices: [`ManifoldVertex::from_path_vertex`] makes only Dirac
+//! (smooth) vertices specular; [`ManifoldVertex::from_glossy_path_vertex`]
+//! and [`set_offsets`] put glossy ones on their **offset manifold** (the
+//! current half-vector held fixed in the normal's frame), as Mitsuba 0.6
+//! does for the rough vertices it chooses at random to treat as specular.
+//! Which ones to choose, and the acceptance ratio's extra determinant for
+//! several glossy vertices, are the mutation's (`docs/manifold.md`).
 
 pub mod constraint;
 pub mod perturbation;
