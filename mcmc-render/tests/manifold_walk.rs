@@ -152,13 +152,7 @@ fn max_constraint(chain: &[ManifoldVertex]) -> f64 {
 /// Targets on the floor around the endpoint, within `radius`, from a
 /// fixed-seed generator.
 fn targets(end: DVec3, radius: f64, n: usize) -> Vec<DVec3> {
-    let mut state = 0x2545_f491_4f6c_dd1du64;
-    let mut next = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut next = uniforms(0x2545_f491_4f6c_dd1d);
     (0..n)
         .map(|_| {
             let (r, phi) = (radius * next().sqrt(), std::f64::consts::TAU * next());
