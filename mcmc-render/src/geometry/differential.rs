@@ -18,7 +18,7 @@
 //! Jacobians (see [`crate::manifold`]) do not inherit `f32` rounding from
 //! the derivative arithmetic; the inputs are the scene's `f32` data.
 
-use super::{Geometry, Hit, Prim, Surface, SurfacePoint};
+use super::{Geometry, Hit, Prim, Ray, Surface, SurfacePoint};
 use glam::{DMat2, DVec2, DVec3};
 
 /// Position and shading-normal derivatives at a surface point.
@@ -100,6 +100,22 @@ fn d(v: glam::Vec3) -> DVec3 {
 }
 
 impl Geometry {
+    /// The hit that produced a surface point, found again for callers that
+    /// kept only the point (path vertices store a `SurfacePoint`): a ray
+    /// along `−ng` from just in front of the point, whose first hit must
+    /// be on `sp`'s shape within a short distance. `None` when another
+    /// surface is met first there (coincident geometry).
+    pub fn locate(&self, sp: &SurfacePoint) -> Option<Hit> {
+        // Well outside the point's error bound, and small at its scale.
+        let back = (sp.p_err.length() * 16.0)
+            .max(sp.p.abs().max_element() * 1e-5)
+            .max(1e-6);
+        let mut ray = Ray::new(sp.p + sp.ng * back, -sp.ng);
+        ray.tmax = 2.0 * back;
+        let hit = self.intersect(&ray)?;
+        (self.surface_point(&ray, &hit).shape == sp.shape).then_some(hit)
+    }
+
     /// The differential geometry at `sp`, the surface point of `hit`
     /// (from [`Geometry::surface_point`] for the same hit).
     pub fn differential(&self, hit: &Hit, sp: &SurfacePoint) -> Differential {
@@ -226,7 +242,7 @@ impl Geometry {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::{GeoShape, MeshData, Ray};
+    use crate::geometry::{GeoShape, MeshData};
     use glam::{Mat3, Mat4, Quat, Vec2, Vec3};
 
     /// A shape seen from `eye`: central differences of the hit position
@@ -486,6 +502,34 @@ mod tests {
             };
             let err = max_fd_error(&g, eye, &aims, identity);
             assert!(err < 1e-3, "{} triangles: {err}", raw.indices.len());
+        }
+    }
+
+    /// `locate` finds the hit of a surface point again: the same shape and
+    /// the same derivatives (to the `f32` rounding of the barycentrics).
+    #[test]
+    fn locate_recovers_the_hit() {
+        let g = Geometry::build(vec![
+            patch(true, true, false),
+            GeoShape {
+                surface: Surface::Sphere {
+                    center: Vec3::new(0.0, 0.0, 1.5),
+                    radius: 0.3,
+                    frame: Mat3::IDENTITY,
+                },
+                flip_normals: false,
+            },
+        ]);
+        let eye = Vec3::new(0.3, -0.4, 3.0);
+        let mut aims = patch_aims();
+        aims.push(Vec3::new(0.1, 0.1, 1.75));
+        for aim in aims {
+            let (hit, sp) = hit_at(&g, eye, (aim - eye).normalize()).unwrap();
+            let found = g.locate(&sp).expect("located");
+            let (a, b) = (g.differential(&hit, &sp), g.differential(&found, &sp));
+            assert!((a.dndu - b.dndu).length() < 1e-5 * (1.0 + a.dndu.length()));
+            assert!((a.dpdu - b.dpdu).length() < 1e-5 * a.dpdu.length());
+            assert!((a.dndv - b.dndv).length() < 1e-5 * (1.0 + a.dndv.length()));
         }
     }
 

@@ -7,17 +7,19 @@
 //! `ω_i = (x_{i−1} − x_i)/‖·‖`, `ω_o = (x_{i+1} − x_i)/‖·‖`, and the
 //! generalised half-vector (Walter et al. 2007) `H = η(ω_i) ω_i + η(ω_o) ω_o`
 //! with `η(ω)` the index of refraction on `ω`'s side (1 for both sides of
-//! a mirror). The constraint is `c_i = (h·s, h·t)` with `h = H/‖H‖` and
-//! `(s, t)` a tangent frame around the shading normal `n`: zero exactly
-//! when `h ∥ n` (the law of reflection, or Snell's law).
+//! a mirror). The constraint is `c_i = (h·s, h·t) − o_i` with `h = ±H/‖H‖`
+//! oriented towards the shading normal `n`, `(s, t)` the tangent frame of
+//! `n` ([`offset_frame`], a function of `n` alone) and `o_i` the vertex's
+//! half-vector offset: zero for smooth vertices, where `c_i = 0` exactly
+//! when `h ∥ n` (the law of reflection, or Snell's law); a glossy vertex
+//! treated as specular keeps a non-zero offset (its microfacet normal
+//! `o_s s + o_t t + √(1 − |o|²) n`, Jakob & Marschner's offset manifolds).
 //!
 //! Coordinates: every vertex moves in its orthonormal tangent basis
 //! ([`OrthonormalDifferential`]), so that the 2×2 blocks map area to area.
-//! The frame `(s, t)` follows the normal by the minimal rotation,
-//! `ds = −n (s·dn)`; any other rule adds a twist about `n`, which changes
-//! `c` only where `h` is not parallel to `n`, i.e. off the manifold. The
-//! walk evaluates the Jacobian only on the manifold (its steps are
-//! projected by ray tracing), where the blocks do not depend on the rule.
+//! The frame's change with the normal enters `∂c_i/∂x_i`; for a zero
+//! offset it drops out on the manifold (there `h ∥ n`), for a non-zero one
+//! it is what makes the Jacobian that of the traced chains.
 //!
 //! [`OrthonormalDifferential`]: crate::geometry::differential::OrthonormalDifferential
 
@@ -52,12 +54,34 @@ fn ior(spec: Specular, n: DVec3, w: DVec3) -> f64 {
     }
 }
 
-/// The tangent frame `(s, t)` around the shading normal: the surface's
-/// first tangent made orthogonal to `n`.
-fn shading_frame(v: &ManifoldVertex) -> Option<(DVec3, DVec3)> {
-    let n = v.geo.ns;
-    let s = (v.geo.s - n * n.dot(v.geo.s)).try_normalize()?;
-    Some((s, n.cross(s)))
+/// The tangent frame `(s, t)` around a unit normal `n`, a function of `n`
+/// alone (Duff et al. 2017, as [`crate::frame::Frame::from_normal`], in
+/// `f64`): the frame in which a vertex's half-vector offset is held.
+/// Continuous except across `n_z = 0`, where the branch flips.
+pub fn offset_frame(n: DVec3) -> (DVec3, DVec3) {
+    let sign = 1.0f64.copysign(n.z);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    (
+        DVec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x),
+        DVec3::new(b, sign + n.y * n.y * a, -n.y),
+    )
+}
+
+/// The change of [`offset_frame`] when the normal changes by `dn`.
+fn offset_frame_change(n: DVec3, dn: DVec3) -> (DVec3, DVec3) {
+    let sign = 1.0f64.copysign(n.z);
+    let a = -1.0 / (sign + n.z);
+    let da = dn.z / ((sign + n.z) * (sign + n.z));
+    let db = (dn.x * n.y + n.x * dn.y) * a + n.x * n.y * da;
+    (
+        DVec3::new(
+            sign * (2.0 * n.x * dn.x * a + n.x * n.x * da),
+            sign * db,
+            -sign * dn.x,
+        ),
+        DVec3::new(db, 2.0 * n.y * dn.y * a + n.y * n.y * da, -dn.y),
+    )
 }
 
 /// Constraint value and blocks at `cur` (a specular vertex) between `prev`
@@ -86,11 +110,13 @@ pub fn constraint_blocks(
     if !(h_len > 1e-12) {
         return None;
     }
-    let h = big_h / h_len;
-    let (s, t) = shading_frame(cur)?;
+    // h oriented towards n (refraction's H points into the denser side).
+    let orient = if big_h.dot(n) < 0.0 { -1.0 } else { 1.0 };
+    let h = big_h * (orient / h_len);
+    let (s, t) = offset_frame(n);
     let in_frame = |v: DVec3| DVec2::new(s.dot(v), t.dot(v));
-    // dh = (I − h hᵀ) dH / ‖H‖.
-    let dh = |d_big_h: DVec3| (d_big_h - h * h.dot(d_big_h)) / h_len;
+    // dh = ±(I − h hᵀ) dH / ‖H‖.
+    let dh = |d_big_h: DVec3| (d_big_h - h * h.dot(d_big_h)) * (orient / h_len);
     // Change of a unit direction towards a point moved by `m`.
     let dwi = |m: DVec3| (m - wi * wi.dot(m)) / d_i;
     let dwo = |m: DVec3| (m - wo * wo.dot(m)) / d_o;
@@ -98,14 +124,14 @@ pub fn constraint_blocks(
     let prev_block = cols(&|m| in_frame(dh(dwi(m) * eta_i)), prev.geo.s, prev.geo.t);
     let next_block = cols(&|m| in_frame(dh(dwo(m) * eta_o)), next.geo.s, next.geo.t);
     // Moving x itself moves both directions the other way, and turns the
-    // frame with the normal: h·ds = −(h·n)(s·dn).
-    let h_n = h.dot(n);
+    // frame with the normal.
     let own = |m: DVec3, dn: DVec3| {
-        in_frame(dh(-(dwi(m) * eta_i + dwo(m) * eta_o))) - DVec2::new(s.dot(dn), t.dot(dn)) * h_n
+        let (ds, dt) = offset_frame_change(n, dn);
+        in_frame(dh(-(dwi(m) * eta_i + dwo(m) * eta_o))) + DVec2::new(h.dot(ds), h.dot(dt))
     };
     let cur_block = DMat2::from_cols(own(cur.geo.s, cur.geo.dnds), own(cur.geo.t, cur.geo.dndt));
     Some(ConstraintBlocks {
-        value: in_frame(h),
+        value: in_frame(h) - cur.offset,
         prev: prev_block,
         cur: cur_block,
         next: next_block,

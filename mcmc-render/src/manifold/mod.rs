@@ -16,11 +16,13 @@
 //! the anchor through the chain; [`walk::walk_reversible`] adds the
 //! reverse-walk check. `docs/manifold.md` has the formulas and tests.
 //!
-//! Glossy vertices: the walk treats only Dirac (smooth) vertices as
-//! specular; a glossy vertex ends a chain (it is an endpoint). Mitsuba
-//! 0.6 instead treats a rough vertex as specular with a roughness-dependent
-//! probability, keeping its half-vector offset ("offset manifolds", always
-//! on there); that is not implemented here (`docs/manifold.md`).
+//! Glossy vertices: [`ManifoldVertex::from_path_vertex`] makes only Dirac
+//! (smooth) vertices specular; [`ManifoldVertex::from_glossy_path_vertex`]
+//! and [`set_offsets`] put glossy ones on their **offset manifold** (the
+//! current half-vector held fixed in the normal's frame), as Mitsuba 0.6
+//! does for the rough vertices it chooses at random to treat as specular.
+//! Which ones to choose, and the acceptance ratio's extra determinant for
+//! several glossy vertices, are the mutation's (`docs/manifold.md`).
 
 pub mod constraint;
 pub mod perturbation;
@@ -32,7 +34,7 @@ use crate::geometry::differential::OrthonormalDifferential;
 use crate::geometry::{Geometry, Hit, SurfacePoint};
 use crate::integrators::path_vertex::{Vertex, VertexKind};
 use crate::scene::Scene;
-use glam::{DVec3, Vec3};
+use glam::{DVec2, DVec3, Vec3};
 
 /// How light scatters at a specular vertex.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -68,6 +70,11 @@ pub struct ManifoldVertex {
     pub geo: OrthonormalDifferential,
     /// Specular or endpoint.
     pub role: Role,
+    /// Half-vector offset `(o_s, o_t)` a specular vertex keeps (its
+    /// constraint is `c = (h·s, h·t) − offset`, see [`constraint`]): zero
+    /// for smooth surfaces; a glossy vertex treated as specular keeps its
+    /// current one ([`set_offsets`]).
+    pub offset: DVec2,
 }
 
 impl ManifoldVertex {
@@ -76,7 +83,12 @@ impl ManifoldVertex {
     /// centre): no tangent frame there.
     pub fn at_hit(geometry: &Geometry, hit: &Hit, sp: SurfacePoint, role: Role) -> Option<Self> {
         let geo = geometry.differential(hit, &sp).orthonormal()?;
-        Some(ManifoldVertex { sp, geo, role })
+        Some(ManifoldVertex {
+            sp,
+            geo,
+            role,
+            offset: DVec2::ZERO,
+        })
     }
 
     /// A fixed point that is not on a surface (the pinhole, a point
@@ -96,12 +108,14 @@ impl ManifoldVertex {
                 dndt: DVec3::ZERO,
             },
             role: Role::Endpoint,
+            offset: DVec2::ZERO,
         }
     }
 
     /// The descriptor of a path vertex of the renderer. `hit` is the hit
-    /// that produced `v` (required for surface vertices; ignored for
-    /// camera and point-light vertices off surfaces) and `next` the
+    /// that produced `v` when the caller kept it (ignored for camera and
+    /// point-light vertices off surfaces); without it the hit is found
+    /// again with [`Geometry::locate`]. `next` is the
     /// position of the vertex after it along the chain, which says whether
     /// a dielectric reflected or refracted.
     ///
@@ -110,8 +124,8 @@ impl ManifoldVertex {
     /// smooth dielectric (reflection or refraction with its η). Every
     /// other vertex is an endpoint. `None` for what a chain cannot hold:
     /// emitters at infinity, transmission through a `thindielectric` (no
-    /// deflection, so no half-vector constraint), a missing hit, or a
-    /// singular parameterisation.
+    /// deflection, so no half-vector constraint), a surface point that
+    /// cannot be located, or a singular parameterisation.
     pub fn from_path_vertex(
         scene: &Scene,
         v: &Vertex,
@@ -138,7 +152,50 @@ impl ManifoldVertex {
         } else {
             Role::Endpoint
         };
-        Self::at_hit(&scene.geometry, hit?, v.sp, role)
+        let located;
+        let hit = match hit {
+            Some(h) => h,
+            None => {
+                located = scene.geometry.locate(&v.sp)?;
+                &located
+            }
+        };
+        Self::at_hit(&scene.geometry, hit, v.sp, role)
+    }
+
+    /// [`Self::from_path_vertex`] that also makes a **glossy** surface
+    /// vertex specular (rough conductor and `roughplastic` reflect, rough
+    /// dielectric reflects or refracts with its η), for the offset
+    /// manifolds of Jakob & Marschner: its offset is zero here; call
+    /// [`set_offsets`] on the chain to hold its current half-vector.
+    /// Whether to treat a glossy vertex so (Mitsuba 0.6 decides at random,
+    /// by roughness) is the mutation's choice.
+    pub fn from_glossy_path_vertex(
+        scene: &Scene,
+        v: &Vertex,
+        hit: Option<&Hit>,
+        next: Vec3,
+    ) -> Option<Self> {
+        let mut out = Self::from_path_vertex(scene, v, hit, next)?;
+        if v.kind == VertexKind::Surface && out.role == Role::Endpoint {
+            let ng = v.sp.ng;
+            let transmitted = (v.wo.dot(ng) > 0.0) != ((next - v.p()).dot(ng) > 0.0);
+            let glossy = match (&*scene.bsdf_at(&v.sp), transmitted) {
+                (Bsdf::RoughDielectric(d), true) => Some(Specular::Refract { eta: d.eta as f64 }),
+                (
+                    Bsdf::RoughDielectric(_)
+                    | Bsdf::RoughConductor(_)
+                    | Bsdf::RoughPlastic(_)
+                    | Bsdf::TwoSided(OneSided::RoughConductor(_) | OneSided::RoughPlastic(_)),
+                    false,
+                ) => Some(Specular::Reflect),
+                _ => None,
+            };
+            if let Some(spec) = glossy {
+                out.role = Role::Specular(spec);
+            }
+        }
+        Some(out)
     }
 
     /// Position.
@@ -176,4 +233,20 @@ pub fn chain_length(chain: &[ManifoldVertex]) -> f64 {
         .windows(2)
         .map(|w| (w[1].p() - w[0].p()).length())
         .sum()
+}
+
+/// Sets every specular vertex's offset to its current half-vector, so that
+/// the chain lies on its offset manifold exactly (smooth vertices of a
+/// traced chain get offsets of the order of rounding). `None` where a
+/// constraint is undefined (see [`constraint::constraint_blocks`]).
+pub fn set_offsets(chain: &mut [ManifoldVertex]) -> Option<()> {
+    for i in 1..chain.len().saturating_sub(1) {
+        if let Role::Specular(_) = chain[i].role {
+            let mut v = chain[i];
+            v.offset = DVec2::ZERO;
+            chain[i].offset =
+                constraint::constraint_blocks(&chain[i - 1], &v, &chain[i + 1])?.value;
+        }
+    }
+    Some(())
 }

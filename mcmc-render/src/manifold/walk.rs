@@ -13,7 +13,7 @@
 //! not reduce it, or whose ray leaves the pattern, is halved; an accepted
 //! one doubles the next step (up to the full Newton step).
 
-use super::constraint::tangent_map;
+use super::constraint::{offset_frame, tangent_map};
 use super::{ManifoldVertex, Role, Specular, chain_length};
 use crate::geometry::Ray;
 use crate::scene::Scene;
@@ -138,27 +138,47 @@ fn side(v: &ManifoldVertex, w: DVec3) -> bool {
     v.geo.ng.dot(w) > 0.0
 }
 
-/// The direction leaving specular vertex `v` for light arriving from the
-/// unit direction `wi` (pointing away from `v`, towards where it came from).
-fn scatter(spec: Specular, n: DVec3, wi: DVec3) -> Result<DVec3, WalkFailure> {
-    let cos_i = wi.dot(n);
+/// The direction leaving a specular vertex with shading normal `n` and
+/// microfacet normal `m` (`n` for a smooth vertex) for light arriving
+/// from the unit direction `wi` (pointing away from the vertex, towards
+/// where it came from). The side of `n` that `wi` lies on says which
+/// medium it is in.
+fn scatter(spec: Specular, n: DVec3, m: DVec3, wi: DVec3) -> Result<DVec3, WalkFailure> {
     match spec {
-        Specular::Reflect => Ok(n * (2.0 * cos_i) - wi),
+        Specular::Reflect => Ok(m * (2.0 * wi.dot(m)) - wi),
         Specular::Refract { eta } => {
-            // Orient the normal towards wi; r = η_i/η_t.
-            let (n, r, cos_i) = if cos_i >= 0.0 {
-                (n, 1.0 / eta, cos_i)
+            // Orient the microfacet normal towards wi; r = η_i/η_t.
+            let (m, r) = if wi.dot(n) >= 0.0 {
+                (m, 1.0 / eta)
             } else {
-                (-n, eta, -cos_i)
+                (-m, eta)
             };
+            let cos_i = wi.dot(m);
+            if !(cos_i > 0.0) {
+                // The microfacet faces away from the incoming light.
+                return Err(WalkFailure::PatternChange);
+            }
             let sin2_t = r * r * (1.0 - cos_i * cos_i);
             if sin2_t >= 1.0 {
                 return Err(WalkFailure::TotalInternalReflection);
             }
             let cos_t = (1.0 - sin2_t).sqrt();
-            Ok(n * (r * cos_i - cos_t) - wi * r)
+            Ok(m * (r * cos_i - cos_t) - wi * r)
         }
     }
+}
+
+/// The microfacet normal of a vertex with half-vector offset `o`.
+fn microfacet(n: DVec3, o: DVec2) -> Result<DVec3, WalkFailure> {
+    if o == DVec2::ZERO {
+        return Ok(n);
+    }
+    let z2 = 1.0 - o.length_squared();
+    if !(z2 > 0.0) {
+        return Err(WalkFailure::Degenerate);
+    }
+    let (s, t) = offset_frame(n);
+    Ok(s * o.x + t * o.y + n * z2.sqrt())
 }
 
 /// The chain traced from `anchor` in unit direction `dir`: one vertex per
@@ -172,7 +192,26 @@ pub fn trace(
     dir: DVec3,
     roles: &[Role],
 ) -> Result<Vec<ManifoldVertex>, WalkFailure> {
-    trace_following(scene, anchor, dir, roles, None)
+    trace_following(
+        scene,
+        anchor,
+        dir,
+        roles,
+        &vec![DVec2::ZERO; roles.len()],
+        None,
+    )
+}
+
+/// [`trace`] with a half-vector offset per vertex (used by the specular
+/// ones: glossy vertices on their offset manifolds).
+pub fn trace_with_offsets(
+    scene: &Scene,
+    anchor: &ManifoldVertex,
+    dir: DVec3,
+    roles: &[Role],
+    offsets: &[DVec2],
+) -> Result<Vec<ManifoldVertex>, WalkFailure> {
+    trace_following(scene, anchor, dir, roles, offsets, None)
 }
 
 /// The chain traced from its anchor in unit direction `dir` with the
@@ -187,7 +226,8 @@ pub fn propagate(
     dir: DVec3,
 ) -> Result<Vec<ManifoldVertex>, WalkFailure> {
     let roles: Vec<Role> = chain[1..].iter().map(|v| v.role).collect();
-    trace_following(scene, &chain[0], dir, &roles, Some(chain))
+    let offsets: Vec<DVec2> = chain[1..].iter().map(|v| v.offset).collect();
+    trace_following(scene, &chain[0], dir, &roles, &offsets, Some(chain))
 }
 
 /// [`trace`], checked vertex by vertex against `template` when given.
@@ -196,6 +236,7 @@ fn trace_following(
     anchor: &ManifoldVertex,
     dir: DVec3,
     roles: &[Role],
+    offsets: &[DVec2],
     template: Option<&[ManifoldVertex]>,
 ) -> Result<Vec<ManifoldVertex>, WalkFailure> {
     let mut out = Vec::with_capacity(roles.len() + 1);
@@ -215,8 +256,9 @@ fn trace_following(
         {
             return Err(WalkFailure::Occluded);
         }
-        let v = ManifoldVertex::at_hit(&scene.geometry, &hit, sp, role)
+        let mut v = ManifoldVertex::at_hit(&scene.geometry, &hit, sp, role)
             .ok_or(WalkFailure::Degenerate)?;
+        v.offset = offsets[i - 1];
         let same_side = |w: DVec3, j: usize| match template {
             Some(old) => side(&v, w) == side(&old[i], old[j].p() - old[i].p()),
             None => true,
@@ -225,7 +267,8 @@ fn trace_following(
             return Err(WalkFailure::PatternChange);
         }
         if let Role::Specular(spec) = role {
-            d = scatter(spec, v.geo.ns, -d)?.normalize();
+            let m = microfacet(v.geo.ns, v.offset)?;
+            d = scatter(spec, v.geo.ns, m, -d)?.normalize();
             if !same_side(d, i + 1) {
                 return Err(WalkFailure::PatternChange);
             }
@@ -345,20 +388,20 @@ mod tests {
         let n = DVec3::Z;
         let theta = 0.6f64;
         let wi = DVec3::new(theta.sin(), 0.0, theta.cos());
-        let r = scatter(Specular::Reflect, n, wi).unwrap();
+        let r = scatter(Specular::Reflect, n, n, wi).unwrap();
         assert!((r - DVec3::new(-wi.x, 0.0, wi.z)).length() < 1e-15);
         let spec = Specular::Refract { eta: 1.5 };
         // From outside: sin θ_t = sin θ_i / 1.5, below the surface.
-        let t = scatter(spec, n, wi).unwrap();
+        let t = scatter(spec, n, n, wi).unwrap();
         assert!((t.length() - 1.0).abs() < 1e-15 && t.z < 0.0);
         assert!(((-t.x) - theta.sin() / 1.5).abs() < 1e-15);
         // Arriving from inside along t, light leaves along wi.
-        let back = scatter(spec, n, t).unwrap();
+        let back = scatter(spec, n, n, t).unwrap();
         assert!((back - wi).length() < 1e-14, "{back} vs {wi}");
         // From inside beyond the critical angle (sin θ > 1/1.5).
         let steep = DVec3::new(0.8, 0.0, -0.6);
         assert_eq!(
-            scatter(spec, n, steep),
+            scatter(spec, n, n, steep),
             Err(WalkFailure::TotalInternalReflection)
         );
     }
