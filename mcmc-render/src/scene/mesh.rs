@@ -280,8 +280,8 @@ pub fn rectangle() -> RawMesh {
     }
 }
 
-/// Mitsuba's `cube`: [-1,1]³ with outward face normals; every face maps
-/// onto [0,1]² in UV as Mitsuba 3's cube does: its four corners, in the
+/// Mitsuba's `cube`: `[-1,1]³` with outward face normals; every face maps
+/// onto `[0,1]²` in UV as Mitsuba 3's cube does: its four corners, in the
 /// order listed, get UVs (0,1), (1,1), (1,0), (0,0).
 pub fn cube() -> RawMesh {
     // Per face: the corners (x, y, z), counter-clockwise seen from outside.
