@@ -57,7 +57,7 @@ crate::settings! {
         /// Samples per pixel of the direct-lighting pass (path tracing of paths up to two segments; the chains take the rest); -1: off, the chains do everything (Mitsuba's default is 16).
         pub direct_samples: i64 = -1, check direct_samples;
         flatten {
-            /// Path depth (rr_depth is unused: path-space walks have exact lengths).
+            /// Path depth (rr_depth applies to the direct pass only: path-space walks have exact lengths).
             pub depth: DepthParams = DepthParams::default();
             /// The driver (bootstrap = Mitsuba's luminanceSamples).
             pub chain: ChainParams = ChainParams::default();
