@@ -1,5 +1,6 @@
 //! relMSE against a long reference falls as expected with the budget, for
-//! every integrator: PT, LT, BDPT, PSSMLT (over PT) and MMLT, on the repo's
+//! every integrator: PT, LT, BDPT, PSSMLT (over PT), MMLT, RELT and path-space
+//! MLT, on the repo's
 //! Cornell box (32×32, `max_depth` 5, camera tilted down as in
 //! `agree_mlt.rs`).
 //!
@@ -54,6 +55,7 @@ use common::{
     rel_weights, render_image, repo_scene_tilted,
 };
 use mcmc_render::color::Rgb;
+use mcmc_render::integrators::mlt::Mlt;
 use mcmc_render::integrators::mmlt::render_family;
 use mcmc_render::integrators::pssmlt::render_pssmlt;
 use mcmc_render::integrators::registry::IntegratorSettings;
@@ -190,6 +192,28 @@ fn mmlt_relmse_falls_as_one_over_n() {
         render_family(scene, mmlt_depths(scene), &st, &stop, &NoObserver)
             .expect("mmlt runs")
             .image()
+    });
+}
+
+#[test]
+fn mlt_relmse_falls_as_one_over_n() {
+    // Path-space MLT (bidirectional mutation): 32 chains, 32 mutations per
+    // pixel and 2000 bootstrap candidates at N, both scaled alongside.
+    let scene = &reference().scene;
+    let stop = AtomicBool::new(false);
+    check_rate("mlt", |budget, seed| {
+        let mut mlt = Mlt::default();
+        mlt.depth.max_depth = 5;
+        mlt.chain.bootstrap = 2000 * budget as usize;
+        mlt.chain.chains = 32;
+        mlt.chain.mutations_per_pixel = Some(32 * budget);
+        let run = RunSettings {
+            seed,
+            ..RunSettings::default()
+        };
+        mlt.render(scene, &run, &stop, &NoObserver)
+            .expect("mlt runs")
+            .image
     });
 }
 

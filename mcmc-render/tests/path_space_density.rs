@@ -359,3 +359,82 @@ fn length_changing_choices_match_their_probabilities() {
         "record frequencies disagree: chi2 {chi2}, p {p:.2e}"
     );
 }
+
+#[test]
+fn two_tailed_geometric_is_a_pmf() {
+    // Bounded and unbounded supports, centres inside, at and outside the
+    // ends: the pmf sums to 1 (to 1e-12), has its mode at the centre when
+    // the centre is inside, halves per step away from it, and inversion
+    // returns every value with its probability on a fine grid of u.
+    use mcmc_render::path_space::bidirectional::TwoTailedGeometric;
+    for (center, lo, hi) in [
+        (2, 1, Some(5)),
+        (2, 2, Some(2)),
+        (5, 3, Some(12)),
+        (1, 3, Some(9)),
+        (20, 3, Some(9)),
+        (4, 3, None),
+        (0, 1, None),
+    ] {
+        let d = TwoTailedGeometric { center, lo, hi };
+        let top = hi.unwrap_or(lo + 80);
+        let total: f64 = (lo..=top).map(|i| d.pmf(i)).sum();
+        assert!((total - 1.0).abs() < 1e-12, "{d:?}: sums to {total}");
+        assert_eq!(d.pmf(lo - 1), 0.0);
+        if let Some(h) = hi {
+            assert_eq!(d.pmf(h + 1), 0.0);
+        }
+        if (lo + 1..=top).contains(&center) {
+            assert!((d.pmf(center - 1) / d.pmf(center) - 0.5).abs() < 1e-12);
+        }
+        let grid = 1 << 16;
+        let mut counts = HashMap::new();
+        for j in 0..grid {
+            let u = (j as f64 + 0.5) / grid as f64;
+            *counts
+                .entry(d.sample(u).expect("non-empty"))
+                .or_insert(0u64) += 1;
+        }
+        for (i, c) in counts {
+            let p = d.pmf(i);
+            assert!(p > 0.0, "{d:?}: sampled {i} outside the support");
+            assert!(
+                (c as f64 / grid as f64 - p).abs() <= 1.0 / grid as f64 + 1e-12,
+                "{d:?}: {i} drawn {c} times, pmf {p}"
+            );
+        }
+    }
+    let empty = TwoTailedGeometric {
+        center: 2,
+        lo: 4,
+        hi: Some(3),
+    };
+    assert_eq!(empty.sample(0.5), None);
+    assert_eq!(empty.pmf(3), 0.0);
+}
+
+#[test]
+fn degenerate_paths_are_outside_the_support() {
+    // An empty path, a lone vertex and a NaN contribution: ln I is −∞,
+    // −∞ and NaN (which mcmc-core rejects and counts).
+    use mcmc_core::target::Target;
+    use mcmc_render::path_space::PathTarget;
+    let scene = cornell();
+    let mut p = Path::new(scene);
+    assert_eq!(PathTarget.evaluate(&p).log_density, f64::NEG_INFINITY);
+    let x = start_path(scene);
+    p.vertices = vec![x.vertices[0]];
+    p.evaluate();
+    assert_eq!(p.log_density(), f64::NEG_INFINITY);
+    let mut q = x.clone();
+    q.contribution = Rgb::new(f32::NAN, 1.0, 1.0);
+    assert!(q.log_density().is_nan());
+    q.contribution = Rgb::new(f32::INFINITY, 1.0, 1.0);
+    assert!(q.log_density().is_nan());
+    // The start path: finite, positive, one splat at its raster position.
+    let e = PathTarget.evaluate(&x);
+    assert!(e.log_density.is_finite());
+    assert_eq!(e.payload.splats.len(), 1);
+    assert_eq!(e.payload.splats[0].p, x.raster);
+    assert_eq!(e.payload.depth, 3);
+}

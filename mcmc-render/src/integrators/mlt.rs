@@ -15,9 +15,17 @@
 //!   and the chains' start states; no mutation is an independent proposal,
 //!   so the running normalisation equals the bootstrap's (its standard
 //!   error is reported as `scale_standard_error`).
+//! - **Direct-lighting pass** (`direct_samples`, Mitsuba's `directSamples`;
+//!   off by default here, 16 in Mitsuba): paths of one and two segments
+//!   (emitters seen directly, direct light) are rendered by path tracing
+//!   with `max_depth` 2 at `direct_samples` samples per pixel, the chains
+//!   keep to paths of three or more segments, and the two images are
+//!   summed. With a time budget the pass runs first and the chains get
+//!   the rest. Previews during the run show the chains' part only.
 //! - Emitters at infinity (environment maps, directional lights) are not
 //!   supported yet; such scenes are refused.
 
+use super::pt::PathTracer;
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
 use crate::light::Light;
@@ -27,7 +35,9 @@ use crate::path_space::{PathFamily, PathMutations};
 use crate::pss_dump::DumpSampler;
 use crate::scene::Scene;
 use crate::settings::check;
+use serde_json::json;
 use std::sync::atomic::AtomicBool;
+use std::time::Instant;
 
 crate::settings! {
     /// Path-space MLT settings (Mitsuba 0.6's `mlt` names, snake case).
@@ -44,8 +54,10 @@ crate::settings! {
         pub multi_chain_perturbation: f64 = 0.0, check check::non_negative;
         /// Selection weight of the manifold perturbation (Mitsuba: off; not implemented yet, must be 0).
         pub manifold_perturbation: f64 = 0.0, check check::non_negative;
+        /// Samples per pixel of the direct-lighting pass (path tracing of paths up to two segments; the chains take the rest); -1: off, the chains do everything (Mitsuba's default is 16).
+        pub direct_samples: i64 = -1, check direct_samples;
         flatten {
-            /// Path depth (rr_depth is unused: path-space walks have exact lengths).
+            /// Path depth (rr_depth applies to the direct pass only: path-space walks have exact lengths).
             pub depth: DepthParams = DepthParams::default();
             /// The driver (bootstrap = Mitsuba's luminanceSamples).
             pub chain: ChainParams = ChainParams::default();
@@ -70,6 +82,25 @@ impl Mlt {
     pub fn max_segments(&self) -> Option<usize> {
         (self.depth.max_depth >= 0).then_some(self.depth.max_depth as usize)
     }
+
+    /// Samples per pixel of the direct-lighting pass, if it runs.
+    pub fn direct_pass(&self) -> Option<u32> {
+        (self.direct_samples > 0).then(|| self.direct_samples.min(i64::from(u32::MAX)) as u32)
+    }
+
+    /// Shortest path the chains sample: 3 segments with the direct pass.
+    pub fn min_segments(&self) -> usize {
+        if self.direct_pass().is_some() { 3 } else { 1 }
+    }
+}
+
+/// `direct_samples`: -1 (off) or at least 1.
+fn direct_samples(v: &i64) -> Result<(), String> {
+    if *v == -1 || *v >= 1 {
+        Ok(())
+    } else {
+        Err("must be -1 (off) or at least 1".into())
+    }
 }
 
 impl IntegratorSettings for Mlt {
@@ -79,6 +110,12 @@ impl IntegratorSettings for Mlt {
     fn validate(&self) -> Result<(), String> {
         if self.depth.max_depth == 0 {
             return Err("mlt needs max_depth ≥ 1 or -1 (unbounded)".into());
+        }
+        if self.direct_pass().is_some() && (1..=2).contains(&self.depth.max_depth) {
+            return Err(
+                "with direct_samples the chains sample paths of 3 or more segments: give max_depth ≥ 3 or -1, or direct_samples = -1"
+                    .into(),
+            );
         }
         self.mutations().check()
     }
@@ -95,14 +132,51 @@ impl IntegratorSettings for Mlt {
         observer: &dyn Observer,
     ) -> Result<Rendered, RenderError> {
         IntegratorSettings::validate(self).map_err(RenderError::Invalid)?;
-        let result = render_mlt(self, scene, run, stop, observer)?;
-        Ok(markov::report::rendered(
+        let start = Instant::now();
+        let direct = self.direct_pass().map(|spp| {
+            let pt = PathTracer {
+                max_depth: 2,
+                rr_depth: self.depth.rr_depth,
+            };
+            let pass = RunSettings {
+                spp: Some(spp),
+                time_budget: None,
+                ..run.clone()
+            };
+            crate::render::run_per_pixel(scene, &pt, &pass, stop, observer)
+        });
+        let chains_run = RunSettings {
+            time_budget: run.time_budget.map(|t| t.saturating_sub(start.elapsed())),
+            ..run.clone()
+        };
+        let result = render_mlt(self, scene, &chains_run, stop, observer)?;
+        let mut out = markov::report::rendered(
             &result,
             // Path states have no primary-sample coordinates: no dump.
             DumpSampler::Bdpt,
             self.depth.limit(),
             false,
-        ))
+        );
+        if let Some(direct) = direct {
+            for (p, d) in out.image.iter_mut().zip(&direct.image) {
+                *p += *d;
+            }
+            out.statistics.insert(
+                "direct_pass".into(),
+                json!({
+                    "samples_per_pixel": self.direct_samples,
+                    "seconds": direct.seconds,
+                    "interrupted": direct.interrupted,
+                }),
+            );
+            out.seconds = start.elapsed().as_secs_f64();
+            out.interrupted |= direct.interrupted;
+            out.summary = format!(
+                "direct pass {} spp in {:.2} s; {}",
+                self.direct_samples, direct.seconds, out.summary
+            );
+        }
+        Ok(out)
     }
 }
 
@@ -124,7 +198,7 @@ pub fn render_mlt(
             "mlt does not support emitters at infinity (environment, directional) yet".into(),
         ));
     }
-    let family = PathFamily::new(scene, settings.max_segments());
+    let family = PathFamily::between(scene, settings.min_segments(), settings.max_segments());
     markov::run(
         scene,
         &family,

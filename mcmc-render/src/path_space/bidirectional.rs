@@ -123,7 +123,8 @@ impl TwoTailedGeometric {
         let mut i = self.lo;
         loop {
             acc += 0.5f64.powi((i - self.center).unsigned_abs() as i32);
-            let last = self.hi.is_some_and(|h| i >= h) || (i > self.center + 60);
+            // Unbounded: the mass beyond 60 steps is below 2⁻⁶⁰ (rounding).
+            let last = self.hi.is_some_and(|h| i >= h) || i > self.center.max(self.lo) + 60;
             if target < acc || last {
                 return Some(i);
             }

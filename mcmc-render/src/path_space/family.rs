@@ -4,8 +4,9 @@
 //!
 //! # Start-up candidates and their reference density
 //!
-//! A candidate picks its length `k` (uniform on `1..=max` segments, or
-//! `P(k) = 2^{−k}` when the depth is unbounded), a split `s` uniform over
+//! A candidate picks its length `k` (uniform on `min..=max` segments, or
+//! `P(k) = 2^{−(k−min+1)}` when the depth is unbounded; `min` is 1, or 3
+//! with `mlt`'s direct-lighting pass), a split `s` uniform over
 //! `[s_min, k]` (`s` light-walk vertices, `t = k + 1 − s ≥ 1` camera-walk
 //! vertices; `s_min = 1` when no emitter can be hit), grows both walks and
 //! connects them: one sample of one BDPT technique. Its reference density
@@ -96,9 +97,21 @@ impl PathMutations {
         &self,
         max_segments: Option<usize>,
     ) -> Result<Mixture<Path<'s>, PathSample>, String> {
+        self.kernel_between(1, max_segments)
+    }
+
+    /// [`PathMutations::kernel`] for paths of `min_segments ..=
+    /// max_segments` segments (`mlt`'s direct-lighting pass leaves the
+    /// paths of one and two segments to path tracing).
+    pub fn kernel_between<'s>(
+        &self,
+        min_segments: usize,
+        max_segments: Option<usize>,
+    ) -> Result<Mixture<Path<'s>, PathSample>, String> {
         self.check()?;
-        let bidirectional: Box<dyn Kernel<Path<'s>, PathSample> + Send> =
-            Box::new(Bidirectional::new(1, max_segments, self.fixed_length));
+        let bidirectional: Box<dyn Kernel<Path<'s>, PathSample> + Send> = Box::new(
+            Bidirectional::new(min_segments, max_segments, self.fixed_length),
+        );
         Mixture::new(vec![(self.bidirectional, bidirectional)]).map_err(|e| e.to_string())
     }
 }
@@ -109,6 +122,8 @@ pub struct PathFamily<'s> {
     pub scene: &'s Scene,
     /// Longest path in segments (`None`: unbounded).
     pub max_segments: Option<usize>,
+    /// Shortest path in segments (≥ 1).
+    pub min_segments: usize,
     target: PathTarget,
     area_lights: bool,
 }
@@ -116,9 +131,16 @@ pub struct PathFamily<'s> {
 impl<'s> PathFamily<'s> {
     /// The family on `scene` with paths of at most `max_segments` segments.
     pub fn new(scene: &'s Scene, max_segments: Option<usize>) -> Self {
+        Self::between(scene, 1, max_segments)
+    }
+
+    /// The family on `scene` with paths of `min_segments ..= max_segments`
+    /// segments.
+    pub fn between(scene: &'s Scene, min_segments: usize, max_segments: Option<usize>) -> Self {
         PathFamily {
             scene,
             max_segments,
+            min_segments: min_segments.max(1),
             target: PathTarget,
             area_lights: scene
                 .lights
@@ -128,12 +150,14 @@ impl<'s> PathFamily<'s> {
         }
     }
 
-    /// `P(k)` of a start-up candidate's length.
+    /// `P(k)` of a start-up candidate's length: uniform on `min..=max`,
+    /// `2^{−(k − min + 1)}` when unbounded.
     fn length_probability(&self, k: usize) -> f64 {
+        let min = self.min_segments;
         match self.max_segments {
-            Some(m) if k >= 1 && k <= m => 1.0 / m as f64,
+            Some(m) if k >= min && k <= m => 1.0 / (m + 1 - min) as f64,
             Some(_) => 0.0,
-            None if k >= 1 => 0.5f64.powi(k.min(1100) as i32),
+            None if k >= min => 0.5f64.powi((k + 1 - min).min(1100) as i32),
             None => 0.0,
         }
     }
@@ -147,11 +171,16 @@ impl<'s> PathFamily<'s> {
     /// candidate that failed has zero contribution.
     pub fn draw_candidate(&self, rng: &mut ChainRng) -> Path<'s> {
         let mut path = Path::new(self.scene);
+        let min = self.min_segments;
         let k = match self.max_segments {
-            Some(m) => 1 + ((uniform(rng) * m as f64) as usize).min(m.saturating_sub(1)),
+            Some(m) if m < min => return path,
+            Some(m) => {
+                let count = m + 1 - min;
+                min + ((uniform(rng) * count as f64) as usize).min(count - 1)
+            }
             None => {
-                let mut k = 1;
-                while k < 1100 && uniform(rng) < 0.5 {
+                let mut k = min;
+                while k < min + 1100 && uniform(rng) < 0.5 {
                     k += 1;
                 }
                 k
@@ -209,7 +238,7 @@ impl<'s> ChainFamily for PathFamily<'s> {
     }
     fn kernel(&self, mutation: &PathMutations, _member: usize) -> Result<Self::Kernel, MltError> {
         mutation
-            .kernel(self.max_segments)
+            .kernel_between(self.min_segments, self.max_segments)
             .map_err(MltError::Setting)
     }
     fn independent_probability(&self, _mutation: &PathMutations) -> f64 {

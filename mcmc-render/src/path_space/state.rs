@@ -199,8 +199,8 @@ impl<'s> Path<'s> {
         }
     }
 
-    /// True when the segment `x_i x_{i+1}` is unoccluded (for the camera
-    /// vertex, also inside the clip range).
+    /// True when the segment `x_i x_{i+1}` is unoccluded (the camera's clip
+    /// range is part of [`Path::evaluate`], which zeroes `f` outside it).
     pub fn edge_visible(&self, i: usize) -> bool {
         let scene = self.scene;
         let (a, b) = (&self.vertices[i], &self.vertices[i + 1]);
