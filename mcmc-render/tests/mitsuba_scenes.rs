@@ -110,3 +110,17 @@ fn normal_and_bump_maps_match_mitsuba() {
         "a flat floor passed: {a:?}"
     );
 }
+
+#[test]
+fn alpha_cut_outs_match_mitsuba() {
+    check_scene("mask-leaves", 16);
+    // Control: another opacity image (the grey height field of the bump
+    // test) must be rejected.
+    let other = [("leaf_mask".to_string(), "textures/bumps.png".to_string())].into();
+    let a = against_mitsuba("mask-leaves", &ours_with("mask-leaves", 16, &other));
+    eprintln!("other mask: rel {:?}", a.rel());
+    assert!(
+        !a.failures(4.0, 0.01).is_empty(),
+        "another opacity image passed: {a:?}"
+    );
+}

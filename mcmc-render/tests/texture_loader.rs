@@ -155,7 +155,7 @@ fn perturbation_refusals_name_the_line() {
             shape(&format!(
                 r#"<bsdf type="twosided"><bsdf type="bumpmap">{bumps}<bsdf type="diffuse"/></bsdf></bsdf>"#
             )),
-            &["t.xml:3", "twosided cannot wrap normalmap or bumpmap"][..],
+            &["t.xml:3", "twosided cannot wrap normalmap, bumpmap or mask"][..],
         ),
         (
             shape(&format!(
@@ -221,6 +221,52 @@ fn a_constant_normal_map_tilts_the_frame_towards_dp_du() {
                 0.6 / std::f32::consts::PI * wi_world.z
             };
             assert!((f - want).abs() < 1e-5, "{f} vs {want}");
+        }
+    }
+}
+
+/// `mask` refusals: one line with the line number.
+#[test]
+fn mask_refusals_name_the_line() {
+    let shape = |bsdf: &str| format!("<shape type=\"rectangle\">\n{bsdf}\n</shape>");
+    for (body, needles) in [
+        (
+            shape(r#"<bsdf type="mask"><float name="opacity" value="0.3"/></bsdf>"#),
+            &["t.xml:3", "mask needs a nested <bsdf>"][..],
+        ),
+        (
+            shape(
+                r#"<bsdf type="twosided"><bsdf type="mask"><bsdf type="diffuse"/></bsdf></bsdf>"#,
+            ),
+            &["t.xml:3", "twosided cannot wrap normalmap, bumpmap or mask"][..],
+        ),
+        (
+            shape(
+                r#"<bsdf type="normalmap"><texture type="checkerboard" name="normalmap"/><bsdf type="mask"><bsdf type="diffuse"/></bsdf></bsdf>"#,
+            ),
+            &["t.xml:3", "cannot wrap a mask"][..],
+        ),
+        (
+            shape(r#"<bsdf type="mask"><bsdf type="mask"><bsdf type="diffuse"/></bsdf></bsdf>"#),
+            &["t.xml:3", "mask cannot wrap another mask"][..],
+        ),
+        (
+            shape(
+                "<bsdf type=\"mask\"><bsdf type=\"diffuse\"/>\n<texture type=\"checkerboard\" name=\"alpha\"/></bsdf>",
+            ),
+            &["t.xml:4", "mask takes one <texture name=\"opacity\">"][..],
+        ),
+        (
+            shape(
+                "<bsdf type=\"mask\"><bsdf type=\"diffuse\"/><texture type=\"bitmap\" name=\"opacity\">\n<string name=\"filename\" value=\"leaf-missing.png\"/></texture></bsdf>",
+            ),
+            &["t.xml:4", "cannot load texture", "leaf-missing.png"][..],
+        ),
+    ] {
+        let e = load(&body).err().expect("refused");
+        assert!(!e.contains('\n'), "not one line: {e}");
+        for n in needles {
+            assert!(e.contains(n), "'{n}' missing from: {e}");
         }
     }
 }

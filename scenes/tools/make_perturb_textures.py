@@ -1,11 +1,16 @@
 #!/usr/bin/env python3
-"""Write the textures of scenes/normalmap-bumpmap.xml (standard library only):
+"""Write the textures of scenes/normalmap-bumpmap.xml and scenes/mask-leaves.xml
+(standard library only):
 
 - scenes/textures/bumps.png: a 32x32 8-bit grey height field (a smooth egg-crate
   pattern, two periods per side, values 40..215), read by `bumpmap`;
 - scenes/textures/normals.png: a 32x32 8-bit RGB tangent-space normal map made
   from a tilted ridge pattern, encoded (n + 1) / 2 per channel, read with
-  raw = true by `normalmap`. Its normals tilt up to ~35 degrees, in x and y.
+  raw = true by `normalmap`. Its normals tilt up to ~35 degrees, in x and y;
+- scenes/textures/leaf.png: a 32x32 8-bit grey opacity mask for
+  scenes/mask-leaves.xml (read raw): a leaf-shaped ellipse, opaque (255)
+  except for a half-transparent (128) band along its midrib and two holes,
+  transparent (0) outside.
 
 Usage: python3 scenes/tools/make_perturb_textures.py [OUTDIR]
 """
@@ -54,6 +59,18 @@ def main() -> None:
         return [round(255 * (c / l + 1) / 2) for c in (nx, ny, 1.0)]
 
     png(out / "normals.png", n, n, 3, normal)
+
+    def leaf(x, y):
+        u, v = (x + 0.5) / n - 0.5, (y + 0.5) / n - 0.5
+        if (u / 0.45) ** 2 + (v / 0.3) ** 2 > 1.0:
+            return [0]
+        if (u - 0.15) ** 2 + (v - 0.1) ** 2 < 0.005 or (u + 0.2) ** 2 + (v + 0.08) ** 2 < 0.004:
+            return [0]
+        if abs(v) < 0.04:
+            return [128]
+        return [255]
+
+    png(out / "leaf.png", n, n, 1, leaf)
 
 
 if __name__ == "__main__":

@@ -70,6 +70,7 @@ pub mod rough_plastic;
 pub mod special;
 pub mod textured;
 pub mod thin_dielectric;
+pub mod wrapped;
 pub use desc::{BsdfDesc, MicrofacetKind};
 pub use model::{Bsdf, OneSided};
 

@@ -8,6 +8,7 @@
 //! into it: no allocation, and untextured BSDFs are lent as they are.
 
 use super::perturb::Perturbed;
+use super::wrapped::Wrap;
 use super::{Bsdf, BsdfSample, OneSided, TransportMode};
 use crate::color::Rgb;
 use crate::texture::Texture;
@@ -110,8 +111,8 @@ impl BsdfTextures {
 
 /// The BSDF at a surface point, as every integrator sees it: the scene's
 /// model lent when untextured, a copy textured at the point's UV, or
-/// either under `normalmap` or `bumpmap` with the perturbed frame at the
-/// point ([`Perturbed`]). Its `eval`, `eval_pdf`, `sample` and `pdf` take
+/// either under `normalmap`, `bumpmap` or `mask` with what they make of
+/// the point ([`Wrap`]: the perturbed frame, the opacity). Its `eval`, `eval_pdf`, `sample` and `pdf` take
 /// directions in the point's shading frame (`Frame::from_normal(sp.ns)`),
 /// as [`Bsdf`]'s do.
 #[derive(Clone, Copy, Debug)]
@@ -120,8 +121,8 @@ pub enum BsdfAt<'a> {
     Shared(&'a Bsdf),
     /// A copy with the texture values at the point.
     Textured(Bsdf),
-    /// A (possibly textured) copy in a perturbed frame.
-    Perturbed(Bsdf, Perturbed),
+    /// A (possibly textured) copy under wrappers.
+    Wrapped(Bsdf, Wrap),
 }
 
 impl BsdfAt<'_> {
@@ -130,14 +131,14 @@ impl BsdfAt<'_> {
     pub fn model(&self) -> &Bsdf {
         match self {
             BsdfAt::Shared(b) => b,
-            BsdfAt::Textured(b) | BsdfAt::Perturbed(b, _) => b,
+            BsdfAt::Textured(b) | BsdfAt::Wrapped(b, _) => b,
         }
     }
 
     /// The perturbed frame, under `normalmap` or `bumpmap`.
     pub fn perturbed(&self) -> Option<&Perturbed> {
         match self {
-            BsdfAt::Perturbed(_, p) => Some(p),
+            BsdfAt::Wrapped(_, w) => w.perturbed.as_ref(),
             _ => None,
         }
     }
@@ -148,7 +149,7 @@ impl BsdfAt<'_> {
         match self {
             BsdfAt::Shared(b) => b.eval(wo, wi, mode),
             BsdfAt::Textured(b) => b.eval(wo, wi, mode),
-            BsdfAt::Perturbed(b, p) => p.eval(b, wo, wi, mode),
+            BsdfAt::Wrapped(b, w) => w.eval_pdf(b, wo, wi, mode).0,
         }
     }
 
@@ -158,7 +159,7 @@ impl BsdfAt<'_> {
         match self {
             BsdfAt::Shared(b) => b.eval_pdf(wo, wi, mode),
             BsdfAt::Textured(b) => b.eval_pdf(wo, wi, mode),
-            BsdfAt::Perturbed(b, p) => p.eval_pdf(b, wo, wi, mode),
+            BsdfAt::Wrapped(b, w) => w.eval_pdf(b, wo, wi, mode),
         }
     }
 
@@ -174,7 +175,7 @@ impl BsdfAt<'_> {
         match self {
             BsdfAt::Shared(b) => b.sample(wo, u_lobe, u, mode),
             BsdfAt::Textured(b) => b.sample(wo, u_lobe, u, mode),
-            BsdfAt::Perturbed(b, p) => p.sample(b, wo, u_lobe, u, mode),
+            BsdfAt::Wrapped(b, w) => w.sample(b, wo, u_lobe, u, mode),
         }
     }
 
@@ -184,21 +185,25 @@ impl BsdfAt<'_> {
         match self {
             BsdfAt::Shared(b) => b.pdf(wo, wi, mode),
             BsdfAt::Textured(b) => b.pdf(wo, wi, mode),
-            BsdfAt::Perturbed(b, p) => p.pdf(b, wo, wi, mode),
+            BsdfAt::Wrapped(b, w) => w.eval_pdf(b, wo, wi, mode).1,
         }
     }
 
-    /// [`Bsdf::is_delta`] of the model (a perturbation tilts its lobes
-    /// but keeps them Dirac or not).
+    /// True when every lobe is a Dirac delta ([`Bsdf::is_delta`]; a
+    /// perturbation tilts lobes but keeps them Dirac or not; a fully
+    /// transparent masked point has only the null lobe).
     #[inline(always)]
     pub fn is_delta(&self) -> bool {
-        self.model().is_delta()
+        match self {
+            BsdfAt::Wrapped(b, w) => w.is_delta(b),
+            _ => self.model().is_delta(),
+        }
     }
 
     /// [`Bsdf::invert`] at the point: the numbers that make
-    /// [`BsdfAt::sample`] return `wi`. Not implemented under a perturbed
-    /// frame (`normalmap`, `bumpmap`): `None` there, which inverse-sampling
-    /// callers treat as "no such sample".
+    /// [`BsdfAt::sample`] return `wi`. Not implemented under wrappers
+    /// (`normalmap`, `bumpmap`, `mask`): `None` there, which
+    /// inverse-sampling callers treat as "no such sample".
     pub fn invert(
         &self,
         wo: Vec3,
@@ -208,13 +213,17 @@ impl BsdfAt<'_> {
         match self {
             BsdfAt::Shared(b) => b.invert(wo, wi, u_choice),
             BsdfAt::Textured(b) => b.invert(wo, wi, u_choice),
-            BsdfAt::Perturbed(..) => None,
+            BsdfAt::Wrapped(..) => None,
         }
     }
 
-    /// [`Bsdf::has_delta_lobe`] of the model.
+    /// True when a lobe is a Dirac delta ([`Bsdf::has_delta_lobe`], and
+    /// the null lobe of a masked point that is not fully opaque).
     pub fn has_delta_lobe(&self) -> bool {
-        self.model().has_delta_lobe()
+        match self {
+            BsdfAt::Wrapped(b, w) => w.has_delta_lobe(b),
+            _ => self.model().has_delta_lobe(),
+        }
     }
 }
 

@@ -88,10 +88,11 @@ impl Integrator for LightTracer {
             let lens = camera.lens_point(lens_numbers(camera, source));
             if !es.is_delta
                 && let Some(cs) = camera.connect(lens, lens + w)
-                && !geometry.occluded(&Ray::new(cs.origin, w))
+                && let Some((t, k)) = scene.camera_connection(cs.origin, None, w)
+                && k < self.max_depth
             {
                 let pmf = es.pdf_pos / scene.lights.infinite_disk_pdf();
-                let c = es.le * (cs.we / (cs.pdf * pmf * es.pdf_dir));
+                let c = es.le * (t * cs.we / (cs.pdf * pmf * es.pdf_dir));
                 splat(cs.raster, c, stats);
             }
         } else if self.max_depth >= 1
@@ -99,8 +100,12 @@ impl Integrator for LightTracer {
             && let Some(cs) = camera.sample_wi_lens(es.p.p, lens_numbers(camera, source))
         {
             let cos_l = es.p.ns.dot(cs.wi);
-            if cos_l > 0.0 && geometry.segment_clear(es.p.spawn_origin(cs.origin), cs.origin) {
-                let c = es.le * (cos_l / es.pdf_pos * cs.we / cs.pdf);
+            if cos_l > 0.0
+                && let Some((t, k)) =
+                    scene.camera_connection(es.p.spawn_origin(cs.origin), Some(cs.origin), cs.wi)
+                && k < self.max_depth
+            {
+                let c = es.le * (t * cos_l / es.pdf_pos * cs.we / cs.pdf);
                 splat(cs.raster, c, stats);
             }
         }
@@ -127,9 +132,13 @@ impl Integrator for LightTracer {
             {
                 let wi = frame.to_local(cs.wi);
                 let f = bsdf.eval(wo, wi, TransportMode::Importance);
-                if !f.is_black() && geometry.segment_clear(sp.spawn_origin(cs.origin), cs.origin) {
+                if !f.is_black()
+                    && let Some((t, k)) =
+                        scene.camera_connection(sp.spawn_origin(cs.origin), Some(cs.origin), cs.wi)
+                    && depth.saturating_add(1 + k) <= self.max_depth
+                {
                     let corr = shading_correction(wo_world, cs.wi, sp.ng, sp.ns);
-                    let c = beta * f * (wi.z.abs() * corr * cs.we / cs.pdf);
+                    let c = beta * f * (t * wi.z.abs() * corr * cs.we / cs.pdf);
                     splat(cs.raster, c, stats);
                 }
             }

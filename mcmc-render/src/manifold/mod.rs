@@ -143,9 +143,10 @@ impl ManifoldVertex {
             let ng = v.sp.ng;
             let transmitted = (v.wo.dot(ng) > 0.0) != ((next - v.p()).dot(ng) > 0.0);
             // A normal- or bump-mapped specular surface reflects about the
-            // perturbed normal, which the constraint does not model.
+            // perturbed normal, and a masked one may pass light straight
+            // through: the constraint models neither.
             let bsdf = scene.bsdf_at(&v.sp);
-            if bsdf.perturbed().is_some() {
+            if matches!(bsdf, crate::bsdf::textured::BsdfAt::Wrapped(..)) {
                 return None;
             }
             Role::Specular(specular_of(bsdf.model(), transmitted)?)
@@ -180,7 +181,11 @@ impl ManifoldVertex {
         if v.kind == VertexKind::Surface && out.role == Role::Endpoint {
             let ng = v.sp.ng;
             let transmitted = (v.wo.dot(ng) > 0.0) != ((next - v.p()).dot(ng) > 0.0);
-            let glossy = match (&*scene.bsdf_at(&v.sp), transmitted) {
+            let bsdf = scene.bsdf_at(&v.sp);
+            if matches!(bsdf, crate::bsdf::textured::BsdfAt::Wrapped(..)) {
+                return None;
+            }
+            let glossy = match (bsdf.model(), transmitted) {
                 (Bsdf::RoughDielectric(d), true) => Some(Specular::Refract { eta: d.eta as f64 }),
                 (
                     Bsdf::RoughDielectric(_)

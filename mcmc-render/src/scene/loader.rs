@@ -12,6 +12,7 @@ use super::{
 };
 use crate::bsdf::perturb::{PerturbKind, Perturbation};
 use crate::bsdf::textured::{BsdfTextures, TexturedParam};
+use crate::bsdf::wrapped::Wrappers;
 use crate::bsdf::{BsdfDesc, MicrofacetKind};
 use crate::color::Rgb;
 use crate::environment::{EnvRadiance, Environment, LatLong};
@@ -198,9 +199,9 @@ impl<'a> Props<'a> {
     }
 }
 
-/// A BSDF as the loader reads it: the model, its textured parameters and,
-/// under `normalmap` or `bumpmap`, the perturbation of its frame.
-type LoadedBsdf = (BsdfDesc, BsdfTextures, Option<Perturbation>);
+/// A BSDF as the loader reads it: the model, its textured parameters and
+/// the `normalmap`, `bumpmap` or `mask` around it.
+type LoadedBsdf = (BsdfDesc, BsdfTextures, Wrappers);
 
 /// Loads everything the parsed tree describes.
 pub struct Loader {
@@ -287,10 +288,10 @@ impl Loader {
         }
     }
 
-    fn push_bsdf(&mut self, (desc, textures, perturbation): LoadedBsdf) -> usize {
+    fn push_bsdf(&mut self, (desc, textures, wrappers): LoadedBsdf) -> usize {
         self.desc.bsdfs.push(desc);
         self.desc.bsdf_textures.push(textures);
-        self.desc.bsdf_perturbations.push(perturbation);
+        self.desc.bsdf_wrappers.push(wrappers);
         self.desc.bsdfs.len() - 1
     }
 
@@ -864,12 +865,12 @@ impl Loader {
                     }
                     inner = Some(d);
                 }
-                let (inner, inner_textures, perturbation) =
+                let (inner, inner_textures, wrappers) =
                     inner.ok_or_else(|| err(&p.loc, "twosided needs a nested <bsdf>"))?;
-                if perturbation.is_some() {
+                if !wrappers.is_empty() {
                     return Err(err(
                         &p.loc,
-                        "twosided cannot wrap normalmap or bumpmap (put the twosided inside them)",
+                        "twosided cannot wrap normalmap, bumpmap or mask (put the twosided inside them)",
                     ));
                 }
                 if matches!(inner, BsdfDesc::TwoSided { .. }) {
@@ -892,22 +893,76 @@ impl Loader {
                         inner: Box::new(inner),
                     },
                     inner_textures,
-                    None,
+                    Wrappers::default(),
                 ));
             }
             "normalmap" | "bumpmap" => return self.perturbed_bsdf(p),
+            "mask" => return self.mask(p),
             other => {
                 return Err(err(
                     &p.loc,
                     format!(
-                        "unsupported bsdf \"{other}\" (supported: diffuse, conductor, roughconductor, dielectric, roughdielectric, thindielectric, plastic, roughplastic, twosided, normalmap, bumpmap)"
+                        "unsupported bsdf \"{other}\" (supported: diffuse, conductor, roughconductor, dielectric, roughdielectric, thindielectric, plastic, roughplastic, twosided, normalmap, bumpmap, mask)"
                     ),
                 ));
             }
         };
         tex.finish()?;
         props.finish()?;
-        Ok((desc, textures, None))
+        Ok((desc, textures, Wrappers::default()))
+    }
+
+    /// `mask`: one nested `<bsdf>` or `<ref>` (which may be a `normalmap`
+    /// or `bumpmap`) and `opacity` (0.5), a number or a `<texture
+    /// name="opacity">`, as Mitsuba 3 reads it.
+    fn mask(&mut self, p: &Plugin) -> Result<LoadedBsdf, SceneError> {
+        let mut props = Props::new(p);
+        let mut tex = TextureChildren::new(p);
+        let opacity = match tex.take("opacity") {
+            Some(child) => {
+                if props.opt_rgb("opacity")?.is_some() {
+                    return Err(err(&child.loc, "'opacity' is given twice"));
+                }
+                self.texture(child)?
+            }
+            None => Texture::Constant(props.rgb("opacity", Rgb::splat(0.5))?),
+        };
+        let mut inner = None;
+        for child in &p.children {
+            let d = match child {
+                Child::Plugin(c) if c.tag == "bsdf" => self.bsdf(c)?,
+                Child::Ref { id, loc } => self.bsdf_by_id(id, loc)?,
+                Child::Plugin(c) if c.tag == "texture" && c.name.as_deref() == Some("opacity") => {
+                    continue;
+                }
+                Child::Plugin(c) => {
+                    return Err(err(
+                        &c.loc,
+                        if c.tag == "texture" {
+                            "mask takes one <texture name=\"opacity\">".to_string()
+                        } else {
+                            format!("<{}> is not allowed in mask", c.tag)
+                        },
+                    ));
+                }
+            };
+            if inner.is_some() {
+                return Err(err(&p.loc, "mask takes exactly one nested <bsdf> or <ref>"));
+            }
+            inner = Some(d);
+        }
+        let (desc, textures, mut wrappers) = inner.ok_or_else(|| {
+            err(
+                &p.loc,
+                "mask needs a nested <bsdf> (the BSDF of the opaque part)",
+            )
+        })?;
+        if wrappers.opacity.is_some() {
+            return Err(err(&p.loc, "mask cannot wrap another mask"));
+        }
+        wrappers.opacity = Some(opacity);
+        props.finish()?;
+        Ok((desc, textures, wrappers))
     }
 
     /// `normalmap` (texture `normalmap`) or `bumpmap` (one texture, any
@@ -956,10 +1011,16 @@ impl Loader {
                 format!("{what} needs a nested <bsdf> (the BSDF whose frame it perturbs)"),
             )
         })?;
-        if nested.is_some() {
+        if nested.perturbation.is_some() {
             return Err(err(
                 &p.loc,
                 format!("{what} cannot wrap another normalmap or bumpmap"),
+            ));
+        }
+        if nested.opacity.is_some() {
+            return Err(err(
+                &p.loc,
+                format!("{what} cannot wrap a mask (put the mask outside)"),
             ));
         }
         let (texture, texture_loc) = map.ok_or_else(|| {
@@ -995,7 +1056,11 @@ impl Loader {
             use_shadowing_function: props.boolean("use_shadowing_function", true)?,
         };
         props.finish()?;
-        Ok((desc, textures, Some(perturbation)))
+        let wrappers = Wrappers {
+            perturbation: Some(perturbation),
+            opacity: None,
+        };
+        Ok((desc, textures, wrappers))
     }
 
     fn bsdf_by_id(&self, id: &str, loc: &Loc) -> Result<LoadedBsdf, SceneError> {
@@ -1008,7 +1073,7 @@ impl Loader {
         Ok((
             self.desc.bsdfs[*index].clone(),
             self.desc.bsdf_textures[*index].clone(),
-            self.desc.bsdf_perturbations[*index].clone(),
+            self.desc.bsdf_wrappers[*index].clone(),
         ))
     }
 
@@ -1303,7 +1368,7 @@ impl Loader {
                     reflectance: Rgb::splat(0.5),
                 },
                 BsdfTextures::default(),
-                None,
+                Wrappers::default(),
             )),
         };
         self.desc.shapes.push(ShapeDesc {

@@ -10,8 +10,8 @@ pub mod serialized;
 pub mod upgrade;
 pub mod xml;
 
-use crate::bsdf::perturb::{Perturbation, Perturbed};
 use crate::bsdf::textured::{BsdfAt, BsdfTextures};
+use crate::bsdf::wrapped::{Wrap, Wrappers};
 use crate::bsdf::{Bsdf, BsdfDesc};
 use crate::camera::Camera;
 use crate::color::Rgb;
@@ -245,9 +245,9 @@ pub struct SceneDesc {
     pub bsdfs: Vec<BsdfDesc>,
     /// The textured parameters of each BSDF, indexed like `bsdfs`.
     pub bsdf_textures: Vec<BsdfTextures>,
-    /// The `normalmap` or `bumpmap` around each BSDF, if any, indexed like
-    /// `bsdfs`.
-    pub bsdf_perturbations: Vec<Option<Perturbation>>,
+    /// The `normalmap`, `bumpmap` and `mask` around each BSDF, indexed
+    /// like `bsdfs`.
+    pub bsdf_wrappers: Vec<Wrappers>,
     /// Point lights.
     pub point_lights: Vec<PointLightDesc>,
     /// Emitters at infinity (at most one environment).
@@ -287,9 +287,9 @@ pub struct Scene {
     /// The textured parameters of each BSDF, indexed like `bsdfs`; empty
     /// when no BSDF of the scene is textured.
     textures: Vec<BsdfTextures>,
-    /// The `normalmap` or `bumpmap` around each BSDF, indexed like
-    /// `bsdfs`; empty when the scene has none.
-    perturbations: Vec<Option<Perturbation>>,
+    /// The `normalmap`, `bumpmap` and `mask` around each BSDF, indexed
+    /// like `bsdfs`; empty when the scene has none.
+    wrappers: Vec<Wrappers>,
     /// Parsed BSDFs, for reporting.
     pub bsdf_descs: Vec<BsdfDesc>,
     /// Emitters and the light-selection distribution.
@@ -348,10 +348,10 @@ impl Scene {
         } else {
             desc.bsdf_textures
         };
-        let perturbations = if desc.bsdf_perturbations.iter().all(Option::is_none) {
+        let wrappers = if desc.bsdf_wrappers.iter().all(Wrappers::is_empty) {
             Vec::new()
         } else {
-            desc.bsdf_perturbations
+            desc.bsdf_wrappers
         };
         let no_geometry = desc.shapes.is_empty()
             && desc.point_lights.is_empty()
@@ -429,7 +429,7 @@ impl Scene {
             shapes,
             bsdfs,
             textures,
-            perturbations,
+            wrappers,
             bsdf_descs: desc.bsdfs,
             lights,
             camera,
@@ -461,22 +461,75 @@ impl Scene {
         let bsdf = &self.bsdfs[i];
         let model = match self.textures.get(i) {
             Some(t) if !t.is_empty() => t.apply(bsdf, sp.uv),
-            _ => match self.perturbations.get(i) {
-                Some(Some(p)) => return BsdfAt::Perturbed(*bsdf, self.perturbed(p, sp)),
+            _ => match self.wrappers.get(i) {
+                Some(w) if !w.is_empty() => return BsdfAt::Wrapped(*bsdf, self.wrap(w, sp)),
                 _ => return BsdfAt::Shared(bsdf),
             },
         };
-        match self.perturbations.get(i) {
-            Some(Some(p)) => BsdfAt::Perturbed(model, self.perturbed(p, sp)),
+        match self.wrappers.get(i) {
+            Some(w) if !w.is_empty() => BsdfAt::Wrapped(model, self.wrap(w, sp)),
             _ => BsdfAt::Textured(model),
         }
     }
 
-    /// The frame `p` perturbs at `sp` (kept out of the hot path).
+    /// What the wrappers `w` make of `sp` (kept out of the hot path).
     #[inline(never)]
-    fn perturbed(&self, p: &Perturbation, sp: &SurfacePoint) -> Perturbed {
-        let n = p.normal(sp.ns, sp.ng, sp.uv, self.geometry.tangents(sp));
-        p.at(&Frame::from_normal(sp.ns), n)
+    fn wrap(&self, w: &Wrappers, sp: &SurfacePoint) -> Wrap {
+        let perturbed = w.perturbation.as_ref().map(|p| {
+            let n = p.normal(sp.ns, sp.ng, sp.uv, self.geometry.tangents(sp));
+            p.at(&Frame::from_normal(sp.ns), n)
+        });
+        let opacity = w
+            .opacity
+            .as_ref()
+            .map_or(1.0, |t| t.eval(sp.uv).luminance().clamp(0.0, 1.0));
+        Wrap { perturbed, opacity }
+    }
+
+    /// The segment from `from` towards `to` (a point, or with `to = None`
+    /// the ray along the unit `d` to infinity) as light tracing connects
+    /// a vertex to the camera: `None` when a surface blocks it, else the
+    /// product of `1 − opacity` over the `mask` surfaces it crosses and
+    /// their count. Each crossing is the null lobe of a path vertex that
+    /// pure light tracing cannot sample (the camera is a point), so
+    /// connecting through it with this weight is that path's estimate;
+    /// it adds the crossings to the path's depth. (BDPT and path tracing
+    /// sample those vertices and keep masks opaque to shadow rays, as
+    /// Mitsuba 3 does.)
+    pub fn camera_connection(&self, from: Vec3, to: Option<Vec3>, d: Vec3) -> Option<(f32, u32)> {
+        let segment = |o: Vec3| -> Option<Ray> {
+            match to {
+                None => Some(Ray::new(o, d)),
+                Some(t) => {
+                    let delta = t - o;
+                    let dist = delta.length();
+                    if !(dist > 0.0) || !dist.is_finite() {
+                        return None;
+                    }
+                    let mut r = Ray::new(o, delta / dist);
+                    r.tmax = dist * (1.0 - 1e-4);
+                    Some(r)
+                }
+            }
+        };
+        let Some(mut ray) = segment(from) else {
+            return (to == Some(from)).then_some((1.0, 0));
+        };
+        if self.wrappers.iter().all(|w| w.opacity.is_none()) {
+            return (!self.geometry.occluded(&ray)).then_some((1.0, 0));
+        }
+        let (mut t, mut crossings) = (1.0f32, 0u32);
+        while let Some(its) = self.intersect(&ray) {
+            let i = self.shapes[its.sp.shape as usize].bsdf as usize;
+            let opacity = self.wrappers.get(i).and_then(|w| w.opacity.as_ref())?;
+            t *= 1.0 - opacity.eval(its.sp.uv).luminance().clamp(0.0, 1.0);
+            crossings += 1;
+            if !(t > 0.0) {
+                return None;
+            }
+            ray = segment(its.sp.spawn_ray(ray.d).o)?;
+        }
+        Some((t, crossings))
     }
 
     /// True when nothing blocks the light sample `ds` from `sp` (for an
