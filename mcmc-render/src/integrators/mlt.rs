@@ -12,9 +12,11 @@
 //! - **Start-up and normalisation**: `bootstrap` candidates (Mitsuba's
 //!   `luminanceSamples`, 100 000), each one sample of a BDPT technique with
 //!   its one-sample-MIS weight ([`crate::path_space::family`]), give `b`
-//!   and the chains' start states; no mutation is an independent proposal,
-//!   so the running normalisation equals the bootstrap's (its standard
-//!   error is reported as `scale_standard_error`).
+//!   and the chains' start states. Veach's mutations are all local, so by
+//!   default the running normalisation equals the bootstrap's (its
+//!   standard error is reported as `scale_standard_error`);
+//!   `independent_mutation > 0` adds a fresh start-up path as a large step
+//!   (not in Mitsuba), which the running normalisation then counts.
 //! - **Direct-lighting pass** (`direct_samples`, Mitsuba's `directSamples`;
 //!   off by default here, 16 in Mitsuba): paths of one and two segments
 //!   (emitters seen directly, direct light) are rendered by path tracing
@@ -46,6 +48,8 @@ crate::settings! {
         pub bidirectional_mutation: f64 = 1.0, check check::non_negative;
         /// Keep path lengths fixed in the bidirectional mutation (seed 001's variant).
         pub fixed_length: bool = false;
+        /// Selection weight of an independent proposal (a fresh start-up path; not in Mitsuba): lets the running normalisation refine b.
+        pub independent_mutation: f64 = 0.0, check check::non_negative;
         /// Selection weight of the lens perturbation (Mitsuba: on; not implemented yet, must be 0).
         pub lens_perturbation: f64 = 0.0, check check::non_negative;
         /// Selection weight of the caustic perturbation (Mitsuba: on; not implemented yet, must be 0).
@@ -75,6 +79,7 @@ impl Mlt {
             caustic_perturbation: self.caustic_perturbation,
             multi_chain_perturbation: self.multi_chain_perturbation,
             manifold_perturbation: self.manifold_perturbation,
+            independent: self.independent_mutation,
         }
     }
 

@@ -18,6 +18,7 @@
 //! candidates in proportion to the weights.
 
 use super::bidirectional::Bidirectional;
+use super::independent::IndependentPath;
 use super::state::{Path, PathTarget};
 use super::walk::{ChainSource, camera_walk, light_walk};
 use crate::light::Light;
@@ -49,7 +50,16 @@ pub struct PathMutations {
     pub multi_chain_perturbation: f64,
     /// Weight of the manifold perturbation (not built yet: must be 0).
     pub manifold_perturbation: f64,
+    /// Weight of the independent proposal ([`IndependentPath`]: a fresh
+    /// start-up candidate; not in Mitsuba).
+    pub independent: f64,
 }
+
+/// Kernel component of the independent proposal: the mixture always holds
+/// the bidirectional mutation's components (the mutation and its six
+/// failure reasons) first, then the independent proposal (weight 0 when
+/// off), then any later mutation.
+pub const INDEPENDENT_COMPONENT: usize = 7;
 
 impl Default for PathMutations {
     /// The bidirectional mutation alone, length-changing.
@@ -61,6 +71,7 @@ impl Default for PathMutations {
             caustic_perturbation: 0.0,
             multi_chain_perturbation: 0.0,
             manifold_perturbation: 0.0,
+            independent: 0.0,
         }
     }
 }
@@ -81,6 +92,12 @@ impl PathMutations {
                     "{name} = {w}: this mutation is not implemented yet; set it to 0 (only the bidirectional mutation exists)"
                 ));
             }
+        }
+        if !(self.independent.is_finite() && self.independent >= 0.0) {
+            return Err(format!(
+                "independent_mutation = {} must be finite and ≥ 0",
+                self.independent
+            ));
         }
         if !(self.bidirectional.is_finite() && self.bidirectional > 0.0) {
             return Err(format!(
@@ -112,7 +129,20 @@ impl PathMutations {
         let bidirectional: Box<dyn Kernel<Path<'s>, PathSample> + Send> = Box::new(
             Bidirectional::new(min_segments, max_segments, self.fixed_length),
         );
-        Mixture::new(vec![(self.bidirectional, bidirectional)]).map_err(|e| e.to_string())
+        let independent: Box<dyn Kernel<Path<'s>, PathSample> + Send> = Box::new(IndependentPath {
+            min_segments,
+            max_segments,
+        });
+        Mixture::new(vec![
+            (self.bidirectional, bidirectional),
+            (self.independent, independent),
+        ])
+        .map_err(|e| e.to_string())
+    }
+
+    /// The probability that the mixture proposes independently.
+    pub fn independent_probability(&self) -> f64 {
+        self.independent / (self.bidirectional + self.independent)
     }
 }
 
@@ -241,13 +271,13 @@ impl<'s> ChainFamily for PathFamily<'s> {
             .kernel_between(self.min_segments, self.max_segments)
             .map_err(MltError::Setting)
     }
-    fn independent_probability(&self, _mutation: &PathMutations) -> f64 {
-        // Path-space mutations are all local: the running normalisation
-        // then rests on the start-up candidates alone.
-        0.0
+    fn independent_probability(&self, mutation: &PathMutations) -> f64 {
+        // Without the independent proposal the running normalisation rests
+        // on the start-up candidates alone.
+        mutation.independent_probability()
     }
-    fn is_independent(&self, _component: usize) -> bool {
-        false
+    fn is_independent(&self, component: usize) -> bool {
+        component == INDEPENDENT_COMPONENT
     }
     fn candidate(&self, seed: u64, index: u64) -> Path<'s> {
         self.draw_candidate(&mut stream_rng(seed, CANDIDATE_STREAM + index))

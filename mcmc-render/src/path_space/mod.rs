@@ -9,6 +9,8 @@
 //!   onward from a kept vertex) on BDPT's walk code.
 //! - [`bidirectional`]: Veach's bidirectional mutation, length-changing or
 //!   fixed-length.
+//! - [`independent`]: a fresh start-up candidate as a large step (off by
+//!   default; feeds the running normalisation).
 //! - [`family`]: the driver's [`crate::markov::ChainFamily`] for path space
 //!   (start-up candidates by bidirectional techniques, the mutation
 //!   mixture).
@@ -37,6 +39,7 @@
 
 pub mod bidirectional;
 pub mod family;
+pub mod independent;
 pub mod state;
 pub mod walk;
 
