@@ -152,6 +152,7 @@ pub static REGISTRY: &[Registration] = &[
     register::<super::pssmlt::Pssmlt>(),
     register::<super::mmlt::Mmlt>(),
     register::<super::relt::Relt>(),
+    register::<super::vcm::VcmSettings>(),
 ];
 
 /// The registered names, comma-separated.
