@@ -248,6 +248,26 @@ fn scatter_pdf(scene: &Scene, v: &Vertex, wo: Vec3, wi: Vec3, mode: TransportMod
         .pdf(frame.to_local(wo), frame.to_local(wi), mode)
 }
 
+/// MIS weight of the technique whose camera subpath `z[..=j]` found the
+/// emitter `z[j]`.
+pub fn weight_emission(
+    scene: &Scene,
+    f: &MisFactors,
+    z: &[Vertex],
+    mis: &[PartialMis],
+    j: usize,
+) -> f32 {
+    // Seen directly: no other technique makes the path (BDPT's (1, 1) is
+    // not run), weight one.
+    if j == 1 {
+        return 1.0;
+    }
+    let e = &z[j];
+    let p_rev = f.m(e.pdf_light_origin(scene));
+    let p_rev_prev = f.m(e.pdf_light(scene, &z[j - 1]));
+    1.0 / (1.0 + p_rev * (mis[j].d_vcm + p_rev_prev * mis[j].d_vc))
+}
+
 /// Contribution of the technique whose camera subpath `z[..=j]` found an
 /// emitter at `z[j]`, MIS weight included (black when `z[j]` emits nothing
 /// towards `z[j − 1]`).
@@ -257,15 +277,33 @@ pub fn emission(scene: &Scene, f: &MisFactors, z: &[Vertex], mis: &[PartialMis],
     if le.is_black() {
         return Rgb::BLACK;
     }
-    // Seen directly: no other technique makes the path (BDPT's (1, 1) is
-    // not run), weight one.
-    if j == 1 {
-        return e.beta * le;
-    }
-    let p_rev = f.m(e.pdf_light_origin(scene));
-    let p_rev_prev = f.m(e.pdf_light(scene, &z[j - 1]));
-    let w_camera = p_rev * (mis[j].d_vcm + p_rev_prev * mis[j].d_vc);
-    e.beta * le / (1.0 + w_camera)
+    e.beta * le * weight_emission(scene, f, z, mis, j)
+}
+
+/// MIS weight of next-event estimation from camera vertex `z[j]` to the
+/// emitter vertex `lv` (whose `pdf_fwd` is its light-path origin density).
+pub fn weight_direct(
+    scene: &Scene,
+    f: &MisFactors,
+    lv: &Vertex,
+    z: &[Vertex],
+    mis: &[PartialMis],
+    j: usize,
+) -> f32 {
+    let pt = &z[j];
+    let w_light = if lv.is_delta_light(scene) {
+        0.0
+    } else {
+        f.m(pt.pdf(scene, Some(&z[j - 1]), lv, TransportMode::Radiance)) / f.m(lv.pdf_fwd)
+    };
+    let p_fwd = f.m(lv.pdf_light(scene, pt));
+    let p_fwd_prev = if j >= 2 {
+        f.m(pt.pdf(scene, Some(lv), &z[j - 1], TransportMode::Importance))
+    } else {
+        0.0
+    };
+    let w_camera = p_fwd * (f.vm + mis[j].d_vcm + p_fwd_prev * mis[j].d_vc);
+    1.0 / (w_light + 1.0 + w_camera)
 }
 
 /// Next-event estimation at camera vertex `z[j]` with the light-sample
@@ -295,19 +333,7 @@ pub fn direct(
     if l.is_black() || !(lv.pdf_fwd > 0.0) || !scene.light_visible(&pt.sp, &ds) {
         return None;
     }
-    let w_light = if lv.is_delta_light(scene) {
-        0.0
-    } else {
-        f.m(pt.pdf(scene, Some(&z[j - 1]), &lv, TransportMode::Radiance)) / f.m(lv.pdf_fwd)
-    };
-    let p_fwd = f.m(lv.pdf_light(scene, pt));
-    let p_fwd_prev = if j >= 2 {
-        f.m(pt.pdf(scene, Some(&lv), &z[j - 1], TransportMode::Importance))
-    } else {
-        0.0
-    };
-    let w_camera = p_fwd * (f.vm + mis[j].d_vcm + p_fwd_prev * mis[j].d_vc);
-    Some(l / (w_light + 1.0 + w_camera))
+    Some(l * weight_direct(scene, f, &lv, z, mis, j))
 }
 
 /// MIS weight of connecting light vertex `y` to camera vertex `z[j]`.
@@ -391,10 +417,20 @@ pub fn light_trace(
     {
         return None;
     }
+    Some((cs.raster, l * weight_light_trace(scene, f, y, &cam)))
+}
+
+/// MIS weight of connecting light vertex `y` to the camera vertex `cam`
+/// (light tracing).
+pub fn weight_light_trace(scene: &Scene, f: &MisFactors, y: &LightVertex, cam: &Vertex) -> f32 {
+    let yv = &y.v;
+    let Some(to_cam) = yv.direction_to(cam) else {
+        return 0.0;
+    };
     let p_rev = f.m(cam.pdf(scene, None, yv, TransportMode::Radiance));
-    let p_rev_prev = f.m(scatter_pdf(scene, yv, cs.wi, yv.wo, TransportMode::Radiance) * y.to_prev);
-    let w_light = p_rev * (f.vm + y.mis.d_vcm + p_rev_prev * y.mis.d_vc);
-    Some((cs.raster, l / (1.0 + w_light)))
+    let p_rev_prev =
+        f.m(scatter_pdf(scene, yv, to_cam, yv.wo, TransportMode::Radiance) * y.to_prev);
+    1.0 / (1.0 + p_rev * (f.vm + y.mis.d_vcm + p_rev_prev * y.mis.d_vc))
 }
 
 /// MIS weight of merging light vertex `y` at camera vertex `z[j]`, given
@@ -411,6 +447,23 @@ pub fn weight_merge(
     let w_light = f.vc * y.mis.d_vcm + f.m(pdf_dir * y.to_prev) * y.mis.d_vm;
     let w_camera = f.vc * mis.d_vcm + f.m(pdf_rev * to_camera_prev) * mis.d_vm;
     1.0 / (w_light + 1.0 + w_camera)
+}
+
+/// MIS weight of merging light vertex `y` at camera vertex `z[j]` (the
+/// densities evaluated here; the merge loop shares them with the BSDF value).
+pub fn weight_merge_at(
+    scene: &Scene,
+    f: &MisFactors,
+    y: &LightVertex,
+    z: &[Vertex],
+    mis: &[PartialMis],
+    j: usize,
+) -> f32 {
+    let zj = &z[j];
+    let pdf_dir = scatter_pdf(scene, zj, zj.wo, y.v.wo, TransportMode::Radiance);
+    let pdf_rev = scatter_pdf(scene, zj, y.v.wo, zj.wo, TransportMode::Importance);
+    let to_camera_prev = zj.convert_density(1.0, &z[j - 1]);
+    weight_merge(f, y, &mis[j], to_camera_prev, pdf_dir, pdf_rev)
 }
 
 /// Where a technique's energy is counted in the statistics.
