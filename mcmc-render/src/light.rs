@@ -465,6 +465,13 @@ impl Lights {
         }
     }
 
+    /// Radius of the scene's bounding sphere (1% margin included): the
+    /// disk of emitters at infinity, and the scale of `vcm`'s automatic
+    /// merge radius.
+    pub fn scene_radius(&self) -> f32 {
+        self.scene_radius
+    }
+
     /// Density of a light-path origin on the disk of an emitter at
     /// infinity (per unit area, selection excluded): `1/(πR²)`.
     pub fn infinite_disk_pdf(&self) -> f32 {

@@ -75,8 +75,9 @@ fn mix(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
-/// The generator of one work unit.
-fn unit_source(seed: u64, pass: u64, unit: u64) -> PixelSource {
+/// The generator of one work unit `unit` of pass `pass` (also used by
+/// integrators that run their own passes, such as `vcm`).
+pub fn unit_source(seed: u64, pass: u64, unit: u64) -> PixelSource {
     let s = mix(mix(mix(seed) ^ pass) ^ unit.wrapping_mul(0x2545_f491_4f6c_dd1d));
     IndependentSource::new(Xoshiro256PlusPlus::seed_from_u64(s))
 }

@@ -322,7 +322,7 @@ pub fn generate_light_subpath(
 
 /// `1/d² · |cos| · |cos|` between two vertices (shading normals; no cosine
 /// at a vertex that is not on a surface), times their mutual visibility.
-fn geometry_term(scene: &Scene, a: &Vertex, b: &Vertex) -> f32 {
+pub fn geometry_term(scene: &Scene, a: &Vertex, b: &Vertex) -> f32 {
     let d = b.p() - a.p();
     let d2 = d.length_squared();
     if !(d2 > 0.0) {

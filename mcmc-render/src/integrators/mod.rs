@@ -7,7 +7,8 @@
 //!
 //! - the per-pixel driver ([`crate::render`]) runs the Monte Carlo
 //!   integrators (`pt`, `lt`, `bdpt`), one sample at a time through the
-//!   per-sample [`Integrator`] interface below;
+//!   per-sample [`Integrator`] interface below (`vcm` runs its own loop of
+//!   iterations, each a light pass and a camera pass, see [`vcm`]);
 //! - the Markov-chain driver ([`crate::markov`]) runs every Metropolis-type
 //!   integrator (`pssmlt`, `mmlt`) from a [`crate::markov::ChainFamily`].
 //!
@@ -58,6 +59,7 @@ pub mod pssmlt;
 pub mod pt;
 pub mod registry;
 pub mod relt;
+pub mod vcm;
 
 use crate::color::Rgb;
 use crate::film::Film;

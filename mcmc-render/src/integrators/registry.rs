@@ -153,6 +153,7 @@ pub static REGISTRY: &[Registration] = &[
     register::<super::mmlt::Mmlt>(),
     register::<super::mlt::Mlt>(),
     register::<super::relt::Relt>(),
+    register::<super::vcm::VcmSettings>(),
 ];
 
 /// The registered names, comma-separated.
