@@ -359,16 +359,24 @@ fn lt_and_bdpt_agree_with_pt_through_alpha_cut_outs() {
 
 #[test]
 #[ignore]
-fn pssmlt_and_mmlt_agree_with_pt_through_alpha_cut_outs() {
+fn pssmlt_agrees_with_pt_through_alpha_cut_outs() {
     let scene = mask_scene();
     check_against(
         "mask pssmlt-bdpt",
         mask_pt(),
-        &mlt_reps_of(scene, Mlt::PssmltBdpt, 256, 24, 2900),
+        &mlt_reps_of(scene, Mlt::PssmltBdpt, 1024, 24, 2900),
     );
+}
+
+#[test]
+#[ignore]
+fn mmlt_agrees_with_pt_through_alpha_cut_outs() {
+    // 32 replicates of 4096 mutations per pixel resolved only ~1.4% at
+    // 5σ (per-replicate spread ~1.5%): 48 of 16384.
+    let scene = mask_scene();
     check_against(
         "mask mmlt",
         mask_pt(),
-        &mlt_reps_of(scene, Mlt::Mmlt, 1024, 32, 3000),
+        &mlt_reps_of(scene, Mlt::Mmlt, 16384, 48, 3000),
     );
 }

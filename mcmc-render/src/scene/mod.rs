@@ -290,6 +290,8 @@ pub struct Scene {
     /// The `normalmap`, `bumpmap` and `mask` around each BSDF, indexed
     /// like `bsdfs`; empty when the scene has none.
     wrappers: Vec<Wrappers>,
+    /// True when some BSDF is a `mask`.
+    has_masks: bool,
     /// Parsed BSDFs, for reporting.
     pub bsdf_descs: Vec<BsdfDesc>,
     /// Emitters and the light-selection distribution.
@@ -429,6 +431,7 @@ impl Scene {
             shapes,
             bsdfs,
             textures,
+            has_masks: wrappers.iter().any(|w| w.opacity.is_some()),
             wrappers,
             bsdf_descs: desc.bsdfs,
             lights,
@@ -515,7 +518,7 @@ impl Scene {
         let Some(mut ray) = segment(from) else {
             return (to == Some(from)).then_some((1.0, 0));
         };
-        if self.wrappers.iter().all(|w| w.opacity.is_none()) {
+        if !self.has_masks {
             return (!self.geometry.occluded(&ray)).then_some((1.0, 0));
         }
         let (mut t, mut crossings) = (1.0f32, 0u32);
