@@ -50,6 +50,7 @@
 //! connection); see the module documentation there.
 
 pub mod bdpt;
+pub mod guided;
 pub mod lt;
 pub mod mmlt;
 pub mod path_vertex;
