@@ -306,9 +306,10 @@ fn guided_without_nee_agrees_with_pt_on_the_cornell_box() {
     check("guided", pt_cornell(), &g);
 }
 
-/// The glossy-glass box needs 4× PT's budget and 16 × 8191 guided spp to
-/// resolve 1% (at 48 × 256 and 16 × 2047 σ was 0.27%): ~3 min of one
-/// core (ignored, as the glossy-glass MMLT tests of `agree_mlt.rs`).
+/// The glossy-glass box needs 4× PT's budget and 32 × 8191 guided spp to
+/// resolve 1% (at 48 × 256 and 16 × 2047 σ was 0.27%; at 48 × 1024 and
+/// 16 × 8191 blue's σ was 0.20%, (z + 1)σ = 1.02%): ~5 min of one core
+/// (ignored, as the glossy-glass MMLT tests of `agree_mlt.rs`).
 #[test]
 #[ignore]
 fn guided_agrees_with_pt_on_the_glossy_glass_box() {
