@@ -318,7 +318,7 @@ fn guided_agrees_with_pt_on_the_glossy_glass_box() {
         glossy_glass(),
         &guided_of(glossy_glass(), true),
         8191,
-        16,
+        32,
         7000,
     );
     check("guided+nee glossy-glass", &pt, &g);
