@@ -533,6 +533,31 @@ impl Geometry {
             + std::mem::size_of_val(self.flat_uv.as_slice())
     }
 
+    /// The axis-aligned box `(lo, hi)` of every shape (the corners of disks,
+    /// the boxes of spheres); `None` when there is no shape.
+    pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        let mut grow = |p: Vec3| {
+            lo = lo.min(p);
+            hi = hi.max(p);
+        };
+        for shape in &self.shapes {
+            match &shape.surface {
+                Surface::Mesh(m) => m.positions.iter().for_each(|&p| grow(p)),
+                Surface::Sphere { center, radius, .. } => {
+                    grow(*center - Vec3::splat(*radius));
+                    grow(*center + Vec3::splat(*radius));
+                }
+                Surface::Disk { to_world, .. } => {
+                    for (x, y) in [(-1.0, -1.0), (-1.0, 1.0), (1.0, -1.0), (1.0, 1.0)] {
+                        grow(to_world.transform_point3(Vec3::new(x, y, 0.0)));
+                    }
+                }
+            }
+        }
+        lo.cmple(hi).all().then_some((lo, hi))
+    }
+
     /// Number of primitives in the BVH.
     pub fn primitive_count(&self) -> usize {
         self.prims.len()

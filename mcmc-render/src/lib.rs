@@ -43,6 +43,7 @@ pub mod environment;
 pub mod film;
 pub mod frame;
 pub mod geometry;
+pub mod guiding;
 pub mod hash_grid;
 pub mod image_io;
 pub mod integrators;

@@ -235,28 +235,9 @@ pub struct Lights {
 
 /// Bounding sphere of every shape (centre, radius), at least radius 1e-3.
 fn bounding_sphere(geometry: &Geometry) -> (Vec3, f32) {
-    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-    let mut grow = |p: Vec3| {
-        lo = lo.min(p);
-        hi = hi.max(p);
-    };
-    for shape in &geometry.shapes {
-        match &shape.surface {
-            Surface::Mesh(m) => m.positions.iter().for_each(|&p| grow(p)),
-            Surface::Sphere { center, radius, .. } => {
-                grow(*center - Vec3::splat(*radius));
-                grow(*center + Vec3::splat(*radius));
-            }
-            Surface::Disk { to_world, .. } => {
-                for (x, y) in [(-1.0, -1.0), (-1.0, 1.0), (1.0, -1.0), (1.0, 1.0)] {
-                    grow(to_world.transform_point3(Vec3::new(x, y, 0.0)));
-                }
-            }
-        }
-    }
-    if !(lo.cmple(hi).all()) {
+    let Some((lo, hi)) = geometry.bounds() else {
         return (Vec3::ZERO, 1.0);
-    }
+    };
     let center = (lo + hi) * 0.5;
     // A little margin, so that disk origins lie strictly outside every shape.
     let radius = ((hi - lo).length() * 0.5 * 1.01).max(1e-3);

@@ -76,7 +76,7 @@ fn mix(mut z: u64) -> u64 {
 }
 
 /// The generator of one work unit `unit` of pass `pass` (also used by
-/// integrators that run their own passes, such as `vcm`).
+/// integrators that run their own passes, such as `vcm` and `guided`).
 pub fn unit_source(seed: u64, pass: u64, unit: u64) -> PixelSource {
     let s = mix(mix(mix(seed) ^ pass) ^ unit.wrapping_mul(0x2545_f491_4f6c_dd1d));
     IndependentSource::new(Xoshiro256PlusPlus::seed_from_u64(s))
@@ -86,6 +86,21 @@ pub fn unit_source(seed: u64, pass: u64, unit: u64) -> PixelSource {
 /// then at most `cap`; fixed by `total` alone (never by timing or threads).
 fn pass_schedule(pass: u64, cap: u32) -> u32 {
     (1u32 << pass.min(8)).min(cap)
+}
+
+/// The work units of pixel-driven integrators: `TILE`-pixel squares
+/// `(x0, y0, x1, y1)` (half-open) in scanline order, fixed by the image
+/// size alone.
+pub(crate) fn image_tiles(width: u32, height: u32) -> Vec<(u32, u32, u32, u32)> {
+    (0..height.div_ceil(TILE))
+        .flat_map(|ty| {
+            (0..width.div_ceil(TILE)).map(move |tx| {
+                let x0 = tx * TILE;
+                let y0 = ty * TILE;
+                (x0, y0, (x0 + TILE).min(width), (y0 + TILE).min(height))
+            })
+        })
+        .collect()
 }
 
 /// Renders `scene` with `integrator`. `stop` aborts (the pass in flight is discarded).
@@ -115,16 +130,7 @@ pub fn render(
     let mut pass = 0u64;
     let out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
 
-    // Tiles in scanline order.
-    let tiles: Vec<(u32, u32, u32, u32)> = (0..height.div_ceil(TILE))
-        .flat_map(|ty| {
-            (0..width.div_ceil(TILE)).map(move |tx| {
-                let x0 = tx * TILE;
-                let y0 = ty * TILE;
-                (x0, y0, (x0 + TILE).min(width), (y0 + TILE).min(height))
-            })
-        })
-        .collect();
+    let tiles = image_tiles(width, height);
     let mut light_films: Vec<Film> = if splats {
         (0..LIGHT_CHUNKS)
             .map(|_| {

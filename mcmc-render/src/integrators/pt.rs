@@ -7,16 +7,16 @@
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
 use super::{FilmSink, Integrator, SampleDomain, SampleStats, rr_probability};
-use crate::bsdf::TransportMode;
+use crate::bsdf::{Bsdf, TransportMode};
 use crate::color::Rgb;
 use crate::film::Film;
 use crate::frame::Frame;
-use crate::geometry::Ray;
+use crate::geometry::{Ray, SurfacePoint};
 use crate::observer::Observer;
 use crate::sampling::{PixelSource, RandomSource};
 use crate::scene::Scene;
 use crate::warp::power_heuristic;
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 use std::sync::atomic::AtomicBool;
 
 /// Path tracer settings.
@@ -46,41 +46,15 @@ impl PathTracer {
         let mut eta_scale = 1.0f32;
         let mut ray = ray;
         let mut depth: u32 = 0;
-        let mut prev_p = ray.o;
-        let mut prev_pdf = 1.0f32;
-        let mut prev_delta = true;
-        let geometry = &scene.geometry;
-        let lights = &scene.lights;
+        let mut from = ScatterOrigin::CAMERA;
         loop {
             let Some(its) = scene.intersect(&ray) else {
-                // The ray left the scene: the environment, MIS-weighted
-                // against light sampling as an area emitter is.
-                if lights.environment().is_some() {
-                    let le = lights.environment_radiance(ray.d);
-                    let w = if prev_delta {
-                        1.0
-                    } else {
-                        power_heuristic(prev_pdf, lights.pdf_environment(ray.d))
-                    };
-                    l += beta * le * w;
-                }
+                l += environment_hit(scene, beta, ray.d, &from, true);
                 break;
             };
             let sp = its.sp;
             let wo_world = -ray.d;
-
-            // Emission found by the BSDF-sampled ray (or the camera ray).
-            if let Some(light) = scene.shapes[sp.shape as usize].light {
-                let le = lights.area_radiance(light, &sp, wo_world);
-                if !le.is_black() {
-                    let w = if prev_delta {
-                        1.0
-                    } else {
-                        power_heuristic(prev_pdf, lights.pdf_direct(light, prev_p, &sp))
-                    };
-                    l += beta * le * w;
-                }
-            }
+            l += emitter_hit(scene, beta, &sp, wo_world, &from, true);
             if depth.saturating_add(1) >= self.max_depth {
                 break;
             }
@@ -92,22 +66,16 @@ impl PathTracer {
             // Next-event estimation (numbers drawn even when unused).
             let u_sel = source.next_1d();
             let u_light = source.next_2d();
-            if !bsdf.is_delta()
-                && let Some(ds) = lights.sample_direct(geometry, sp.p, u_sel, u_light)
-            {
-                let wi = frame.to_local(ds.wi);
-                // One dispatch for both: the glossy models share the half
-                // vector, D and G1, and the two-sided mapping is done once.
-                let (f, bsdf_pdf) = bsdf.eval_pdf(wo, wi, TransportMode::Radiance);
-                if !f.is_black() && scene.light_visible(&sp, &ds) {
-                    let w = if ds.is_delta {
-                        1.0
-                    } else {
-                        power_heuristic(ds.pdf, bsdf_pdf)
-                    };
-                    l += beta * f * ds.le * (wi.z.abs() * w / ds.pdf);
-                }
-            }
+            l += next_event(
+                scene,
+                beta,
+                &sp,
+                &frame,
+                &bsdf,
+                wo,
+                (u_sel, u_light),
+                |_, p| p,
+            );
 
             // BSDF sampling.
             let u_lobe = source.next_1d();
@@ -122,9 +90,11 @@ impl PathTracer {
             let wi_world = frame.to_world(bs.wi);
             beta *= bs.weight;
             eta_scale *= bs.eta * bs.eta;
-            prev_p = sp.p;
-            prev_pdf = bs.pdf;
-            prev_delta = bs.is_delta;
+            from = ScatterOrigin {
+                p: sp.p,
+                pdf: bs.pdf,
+                delta: bs.is_delta,
+            };
             ray = sp.spawn_ray(wi_world);
             depth += 1;
 
@@ -143,6 +113,143 @@ impl PathTracer {
     }
 }
 
+/// Where the ray being traced was scattered, for the MIS weight of the
+/// emission it finds (against light sampling from that point).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ScatterOrigin {
+    /// The scattering point.
+    pub p: Vec3,
+    /// Solid-angle density of the ray's direction (the discrete lobe
+    /// probability for delta lobes).
+    pub pdf: f32,
+    /// Sampled from a Dirac lobe (or a camera ray): no light sample could
+    /// have produced it, so its emission is weighted 1.
+    pub delta: bool,
+}
+
+impl ScatterOrigin {
+    /// A camera ray (emission seen directly is weighted 1).
+    pub const CAMERA: ScatterOrigin = ScatterOrigin {
+        p: Vec3::ZERO,
+        pdf: 1.0,
+        delta: true,
+    };
+}
+
+/// `beta · Le · w`: the environment seen by a ray leaving the scene in
+/// direction `d`, MIS-weighted (power heuristic) against light sampling at
+/// `from` when `nee` (next-event estimation also samples it), else 1.
+#[inline(always)]
+pub(crate) fn environment_hit(
+    scene: &Scene,
+    beta: Rgb,
+    d: Vec3,
+    from: &ScatterOrigin,
+    nee: bool,
+) -> Rgb {
+    let lights = &scene.lights;
+    if lights.environment().is_none() {
+        return Rgb::BLACK;
+    }
+    let le = lights.environment_radiance(d);
+    let w = if from.delta || !nee {
+        1.0
+    } else {
+        power_heuristic(from.pdf, lights.pdf_environment(d))
+    };
+    beta * le * w
+}
+
+/// `beta · Le · w`: the emission of the surface point `sp` towards
+/// `wo_world` found by a ray scattered at `from`, weighted as in
+/// [`environment_hit`].
+#[inline(always)]
+pub(crate) fn emitter_hit(
+    scene: &Scene,
+    beta: Rgb,
+    sp: &SurfacePoint,
+    wo_world: Vec3,
+    from: &ScatterOrigin,
+    nee: bool,
+) -> Rgb {
+    let Some(light) = scene.shapes[sp.shape as usize].light else {
+        return Rgb::BLACK;
+    };
+    let lights = &scene.lights;
+    let le = lights.area_radiance(light, sp, wo_world);
+    if le.is_black() {
+        return Rgb::BLACK;
+    }
+    let w = if from.delta || !nee {
+        1.0
+    } else {
+        power_heuristic(from.pdf, lights.pdf_direct(light, from.p, sp))
+    };
+    beta * le * w
+}
+
+/// Next-event estimation at `sp`: `beta · f · Le · |cos| · w / p_light`
+/// for one light sample drawn with `u = (u_sel, u_light)` (black at
+/// purely specular BSDFs, for occluded or zero samples), with the power
+/// heuristic against the density with which the path's own direction
+/// sampling would have produced the light direction:
+/// `direction_pdf(wi_world, bsdf_pdf)` (the BSDF density itself for plain
+/// path tracing, a mixture for guided tracing).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(crate) fn next_event(
+    scene: &Scene,
+    beta: Rgb,
+    sp: &SurfacePoint,
+    frame: &Frame,
+    bsdf: &Bsdf,
+    wo: Vec3,
+    (u_sel, u_light): (f32, (f32, f32)),
+    direction_pdf: impl FnOnce(Vec3, f32) -> f32,
+) -> Rgb {
+    if bsdf.is_delta() {
+        return Rgb::BLACK;
+    }
+    let Some(ds) = scene
+        .lights
+        .sample_direct(&scene.geometry, sp.p, u_sel, u_light)
+    else {
+        return Rgb::BLACK;
+    };
+    let wi = frame.to_local(ds.wi);
+    // One dispatch for both: the glossy models share the half vector, D
+    // and G1, and the two-sided mapping is done once.
+    let (f, bsdf_pdf) = bsdf.eval_pdf(wo, wi, TransportMode::Radiance);
+    if f.is_black() || !scene.light_visible(sp, &ds) {
+        return Rgb::BLACK;
+    }
+    let w = if ds.is_delta {
+        1.0
+    } else {
+        power_heuristic(ds.pdf, direction_pdf(ds.wi, bsdf_pdf))
+    };
+    beta * f * ds.le * (wi.z.abs() * w / ds.pdf)
+}
+
+/// A camera ray through pixel `(px, py)`: `next_2d` for the position in
+/// the pixel, then `next_2d` for the lens point of a thin-lens camera.
+/// Returns the raster position and the ray.
+#[inline(always)]
+pub(crate) fn camera_ray<S: RandomSource + ?Sized>(
+    scene: &Scene,
+    (px, py): (u32, u32),
+    source: &mut S,
+) -> (Vec2, Ray) {
+    let u = source.next_2d();
+    let raster = Vec2::new(px as f32 + u.0, py as f32 + u.1);
+    let ray = if scene.camera.has_lens() {
+        scene.camera.generate_ray_lens(raster, source.next_2d())
+    } else {
+        scene.camera.generate_ray(raster)
+    };
+    (raster, ray)
+}
+
 impl PathTracer {
     /// One camera sample for pixel `(px, py)`: [`Integrator::sample`] for
     /// any source and film (monomorphised in [`Integrator::render_pixels`]).
@@ -155,13 +262,7 @@ impl PathTracer {
         film: &mut F,
         stats: &mut SampleStats,
     ) {
-        let u = source.next_2d();
-        let raster = Vec2::new(px as f32 + u.0, py as f32 + u.1);
-        let ray = if scene.camera.has_lens() {
-            scene.camera.generate_ray_lens(raster, source.next_2d())
-        } else {
-            scene.camera.generate_ray(raster)
-        };
+        let (raster, ray) = camera_ray(scene, (px, py), source);
         let l = self.li(scene, ray, source);
         if l.is_finite() {
             film.add_sample(raster, l);

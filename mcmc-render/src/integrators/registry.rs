@@ -149,6 +149,7 @@ pub static REGISTRY: &[Registration] = &[
     register::<super::pt::PtSettings>(),
     register::<super::lt::LtSettings>(),
     register::<super::bdpt::BdptSettings>(),
+    register::<super::guided::GuidedSettings>(),
     register::<super::pssmlt::Pssmlt>(),
     register::<super::mmlt::Mmlt>(),
     register::<super::mlt::Mlt>(),

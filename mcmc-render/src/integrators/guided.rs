@@ -1,0 +1,521 @@
+//! Guided path tracing (Müller, Gross, Novák 2017): unidirectional path
+//! tracing whose directions come, at every non-specular vertex, from a
+//! one-sample mixture of the BSDF and a learnt SD-tree
+//! ([`crate::guiding`]), trained in iterations of doubling length.
+//!
+//! # Iterations
+//! Iteration `k` (from 1) renders `2^(k−1)` samples per pixel, guided by
+//! the tree that the iterations before it trained, and records into the
+//! tree's building half; then [`SdTree::end_iteration`] splits, swaps and
+//! refines. Iteration 1 samples the BSDF alone (nothing is trained yet).
+//! With a budget of `N` samples per pixel an iteration is the **last** when
+//! the one after it would not fit: when `3·2^(k−1)` exceeds what is left,
+//! this one takes all of it (`N = 2^K − 1` gives the paper's schedule
+//! `1, 2, …, 2^(K−1)`). With a time budget, the same rule on time: the
+//! next iteration is the last when three times its predicted duration
+//! (twice the previous one's) exceeds the time left, and it runs until the
+//! deadline. Only the **last iteration's** samples make the image (the
+//! thesis's choice; not the paper's inverse-variance combination). A run
+//! stopped early (Ctrl-C, deadline) returns the iteration in progress when
+//! it holds at least as many samples per pixel as the one before, else the
+//! one before; stopped passes are discarded as in [`crate::render`].
+//!
+//! # Radiance records
+//! Every vertex whose direction was not sampled from a delta lobe records,
+//! into the spatial leaf at its position, the radiance the path collected
+//! after it, divided by the throughput up to and including that vertex's
+//! scattering (Müller's `L_i = thr(X)/thr(x_k)·Le`, per channel, then the
+//! channel mean) and by the mixture density of its direction, so that a
+//! quadtree node's sum estimates the flux through it whatever sampled it.
+//! With next-event estimation on, what a vertex sees is the MIS-weighted
+//! sum (emission found by the sampled ray weighted against light
+//! sampling, and the light samples of the vertices after it).
+//!
+//! # Determinism
+//! Work units are the per-pixel driver's tiles, seeded from
+//! `(seed, pass, tile)`; each pass's tile films are added and its record
+//! buffers merged in tile order, and passes are fixed by the spp budget
+//! alone (at most 2¹⁹ camera samples per training pass, to bound record
+//! memory). One seed gives the same image and tree on any thread count.
+//!
+//! # Order in which random numbers are consumed
+//! Per camera sample: `next_2d` position in the pixel (`next_2d` lens for a
+//! thin lens), then for every surface vertex that is not the last one
+//! allowed by `max_depth`, 8 numbers: `next_1d` light selection and
+//! `next_2d` light position (drawn even without next-event estimation),
+//! `next_1d` tree-or-BSDF choice, `next_1d` BSDF lobe, `next_2d` direction
+//! (the tree's or the BSDF's), `next_1d` Russian roulette.
+
+use super::pt::{ScatterOrigin, camera_ray, emitter_hit, environment_hit, next_event};
+use super::registry::IntegratorSettings;
+use super::{DepthParams, RenderError, Rendered, RunSettings, SampleStats, rr_probability};
+use crate::color::Rgb;
+use crate::film::{Film, Filter};
+use crate::frame::Frame;
+use crate::geometry::Ray;
+use crate::guiding::{LeafId, Mixture, RecordBuffer, SdTree};
+use crate::observer::Observer;
+use crate::render::{image_tiles, unit_source};
+use crate::sampling::RandomSource;
+use crate::scene::Scene;
+use glam::Vec3;
+use rayon::prelude::*;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+/// Camera samples per training pass at most (record memory: about 16
+/// bytes per guided vertex).
+const TRAINING_PASS_SAMPLES: u64 = 1 << 19;
+/// Samples per pixel per pass at most (as the per-pixel driver).
+const PASS_SPP: u64 = 16;
+
+/// The guided path tracer of one iteration.
+#[derive(Clone, Copy, Debug)]
+pub struct GuidedPathTracer {
+    /// Longest path in segments (`u32::MAX` = unbounded).
+    pub max_depth: u32,
+    /// Depth from which Russian roulette applies.
+    pub rr_depth: u32,
+    /// Next-event estimation (light sampling, power heuristic against the
+    /// mixture density).
+    pub nee: bool,
+    /// Probability `q` of sampling the tree at a trained, non-specular vertex.
+    pub tree_probability: f32,
+}
+
+/// A vertex waiting for the radiance of the rest of its path.
+#[derive(Clone, Copy, Debug)]
+struct PendingVertex {
+    leaf: LeafId,
+    dir: Vec3,
+    /// Throughput after this vertex's scattering, before roulette.
+    beta: Rgb,
+    pdf: f32,
+    /// Radiance collected before this vertex scattered.
+    l_before: Rgb,
+}
+
+/// Where one work unit's training paths leave their records.
+#[derive(Debug, Default)]
+pub struct Training {
+    /// The records, for [`SdTree::merge`].
+    pub records: RecordBuffer,
+    path: Vec<PendingVertex>,
+}
+
+impl Training {
+    /// Records every pending vertex of a path that collected `l` in all.
+    fn finish(&mut self, l: Rgb) {
+        for v in self.path.drain(..) {
+            let d = l - v.l_before;
+            let ratio = |a: f32, b: f32| if b > 0.0 { a / b } else { 0.0 };
+            let li = (ratio(d.r, v.beta.r) + ratio(d.g, v.beta.g) + ratio(d.b, v.beta.b)) / 3.0;
+            self.records.push(v.leaf, v.dir, li / v.pdf);
+        }
+    }
+}
+
+impl GuidedPathTracer {
+    /// Radiance arriving along `ray`, guided by `tree`'s sampling half;
+    /// with `training`, the path's radiance records are added to it.
+    pub fn li<S: RandomSource + ?Sized>(
+        &self,
+        scene: &Scene,
+        ray: Ray,
+        source: &mut S,
+        tree: &SdTree,
+        mut training: Option<&mut Training>,
+    ) -> Rgb {
+        if self.max_depth == 0 {
+            return Rgb::BLACK;
+        }
+        let mut l = Rgb::BLACK;
+        let mut beta = Rgb::WHITE;
+        let mut eta_scale = 1.0f32;
+        let mut ray = ray;
+        let mut depth: u32 = 0;
+        let mut from = ScatterOrigin::CAMERA;
+        loop {
+            let Some(its) = scene.intersect(&ray) else {
+                l += environment_hit(scene, beta, ray.d, &from, self.nee);
+                break;
+            };
+            let sp = its.sp;
+            let wo_world = -ray.d;
+            l += emitter_hit(scene, beta, &sp, wo_world, &from, self.nee);
+            if depth.saturating_add(1) >= self.max_depth {
+                break;
+            }
+
+            let bsdf = scene.bsdf_at(&sp);
+            let frame = Frame::from_normal(sp.ns);
+            let wo = frame.to_local(wo_world);
+            let mixture = Mixture::new(tree, sp.p, &bsdf, self.tree_probability);
+
+            let u_sel = source.next_1d();
+            let u_light = source.next_2d();
+            if self.nee {
+                l += next_event(
+                    scene,
+                    beta,
+                    &sp,
+                    &frame,
+                    &bsdf,
+                    wo,
+                    (u_sel, u_light),
+                    |wi, bsdf_pdf| mixture.pdf(wi, bsdf_pdf),
+                );
+            }
+
+            let u_guide = source.next_1d();
+            let u_lobe = source.next_1d();
+            let u_dir = source.next_2d();
+            let u_rr = source.next_1d();
+            let Some(s) = mixture.sample(&bsdf, &frame, wo, u_guide, u_lobe, u_dir) else {
+                break;
+            };
+            if !(s.pdf > 0.0) || s.weight.is_black() {
+                break;
+            }
+            beta *= s.weight;
+            eta_scale *= s.eta * s.eta;
+            if let Some(t) = training.as_deref_mut()
+                && let Some(leaf) = mixture.leaf()
+                && !s.is_delta
+            {
+                t.path.push(PendingVertex {
+                    leaf,
+                    dir: s.wi_world,
+                    beta,
+                    pdf: s.pdf,
+                    l_before: l,
+                });
+            }
+            from = ScatterOrigin {
+                p: sp.p,
+                pdf: s.pdf,
+                delta: s.is_delta,
+            };
+            ray = sp.spawn_ray(s.wi_world);
+            depth += 1;
+
+            if depth >= self.rr_depth {
+                let q = rr_probability(beta, eta_scale);
+                if !(u_rr < q) {
+                    break;
+                }
+                beta = beta / q;
+            }
+            if beta.is_black() {
+                break;
+            }
+        }
+        if let Some(t) = training {
+            t.finish(l);
+        }
+        l
+    }
+
+    /// Renders `spp` samples of every pixel of `tile` into `film`.
+    #[allow(clippy::too_many_arguments)]
+    fn render_tile<S: RandomSource + ?Sized>(
+        &self,
+        scene: &Scene,
+        tree: &SdTree,
+        (x0, y0, x1, y1): (u32, u32, u32, u32),
+        spp: u32,
+        source: &mut S,
+        film: &mut Film,
+        mut training: Option<&mut Training>,
+        stats: &mut SampleStats,
+    ) {
+        for y in y0..y1 {
+            for x in x0..x1 {
+                for _ in 0..spp {
+                    let (raster, ray) = camera_ray(scene, (x, y), source);
+                    let l = self.li(scene, ray, source, tree, training.as_deref_mut());
+                    if l.is_finite() {
+                        film.add_sample(raster, l);
+                    } else {
+                        stats.nonfinite += 1;
+                    }
+                }
+            }
+        }
+    }
+}
+
+crate::settings! {
+    /// Guided path tracer settings, as the registry fills them.
+    pub struct GuidedSettings {
+        /// Next-event estimation (light sampling, MIS against the guided directions); the thesis's guided tracer has none.
+        pub nee: bool = false;
+        /// Probability q of sampling the SD-tree instead of the BSDF at a trained non-specular vertex, in [0, 1).
+        pub tree_probability: f64 = 0.5, check check_tree_probability;
+        /// Spatial split threshold c: a leaf splits after more than c·√(2^k) records in iteration k.
+        pub spatial_threshold: f64 = 12000.0, check crate::settings::check::positive;
+        /// Quadtree refinement threshold ρ: a node subdivides when its share of the leaf's energy exceeds ρ.
+        pub quadtree_threshold: f64 = 0.01, check check_share;
+        /// Levels of the initial full spatial tree (2^depth leaves), at most 48.
+        pub initial_depth: u32 = 5, check check_initial_depth;
+        flatten {
+            /// Path depth.
+            pub depth: DepthParams = DepthParams::default();
+        }
+    }
+}
+
+/// `q ∈ [0, 1)`: the BSDF must keep a positive probability (delta lobes,
+/// directions where the tree has no energy).
+fn check_tree_probability(v: &f64) -> Result<(), String> {
+    if (0.0..1.0).contains(v) {
+        Ok(())
+    } else {
+        Err("must lie in [0, 1)".into())
+    }
+}
+
+/// `ρ ∈ (0, 1]`.
+fn check_share(v: &f64) -> Result<(), String> {
+    if *v > 0.0 && *v <= 1.0 {
+        Ok(())
+    } else {
+        Err("must lie in (0, 1]".into())
+    }
+}
+
+/// At most [`crate::guiding::sd_tree::MAX_SPATIAL_DEPTH`].
+fn check_initial_depth(v: &u32) -> Result<(), String> {
+    if *v <= crate::guiding::sd_tree::MAX_SPATIAL_DEPTH {
+        Ok(())
+    } else {
+        Err(format!(
+            "must be at most {}",
+            crate::guiding::sd_tree::MAX_SPATIAL_DEPTH
+        ))
+    }
+}
+
+/// One finished (or interrupted) iteration, for the statistics.
+#[derive(Clone, Debug, serde::Serialize)]
+struct IterationStats {
+    spp: u64,
+    seconds: f64,
+    records: u64,
+}
+
+impl GuidedSettings {
+    /// The per-iteration tracer these settings describe.
+    pub fn tracer(&self) -> GuidedPathTracer {
+        GuidedPathTracer {
+            max_depth: self.depth.limit(),
+            rr_depth: self.depth.rr_depth,
+            nee: self.nee,
+            tree_probability: self.tree_probability as f32,
+        }
+    }
+}
+
+impl IntegratorSettings for GuidedSettings {
+    const NAME: &'static str = "guided";
+    const ALIASES: &'static [&'static str] = &["guided_path"];
+    const DESCRIPTION: &'static str = "Path tracing guided by an SD-tree learnt in doubling iterations (Müller et al. 2017); the last iteration makes the image.";
+
+    fn render(
+        &self,
+        scene: &Scene,
+        run: &RunSettings,
+        stop: &AtomicBool,
+        observer: &dyn Observer,
+    ) -> Result<Rendered, RenderError> {
+        let start = Instant::now();
+        let (width, height) = (scene.film.width, scene.film.height);
+        let pixels = u64::from(width) * u64::from(height);
+        let filter = Arc::new(Filter::new(scene.film.filter, width, height));
+        let bounds = scene
+            .geometry
+            .bounds()
+            .unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
+        let mut tree = SdTree::new(bounds, self.initial_depth);
+        let tracer = self.tracer();
+        let budget_spp: Option<u64> = match (run.spp, run.time_budget) {
+            (Some(n), _) => Some(u64::from(n)),
+            (None, Some(_)) => None,
+            (None, None) => Some(u64::from(scene.sample_count)),
+        };
+        let deadline = run.time_budget.map(|b| start + b);
+        let out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
+        let tiles = image_tiles(width, height);
+        let training_pass_spp = (TRAINING_PASS_SAMPLES / pixels.max(1)).clamp(1, PASS_SPP);
+
+        let mut iterations: Vec<IterationStats> = Vec::new();
+        let mut previous: Option<(Vec<Rgb>, u64)> = None;
+        let mut image: Option<(Vec<Rgb>, u64)> = None;
+        let mut spp_done = 0u64;
+        let mut pass = 0u64;
+        let mut stats = SampleStats::default();
+        let mut interrupted = false;
+        let mut nominal = 1u64;
+        for k in 1u32.. {
+            // Is this the last iteration, and how long is it?
+            let (iteration_spp, last) = match budget_spp {
+                Some(n) => {
+                    let left = n - spp_done;
+                    if nominal.saturating_mul(3) > left {
+                        (Some(left), true)
+                    } else {
+                        (Some(nominal), false)
+                    }
+                }
+                None => {
+                    let left = deadline.map_or(0.0, |d| {
+                        d.saturating_duration_since(Instant::now()).as_secs_f64()
+                    });
+                    let predicted = iterations.last().map(|it| 2.0 * it.seconds);
+                    if predicted.is_some_and(|t| 3.0 * t > left) {
+                        (None, true)
+                    } else {
+                        (Some(nominal), false)
+                    }
+                }
+            };
+            let iteration_start = Instant::now();
+            let mut film = Film::new(width, height, filter.clone());
+            let mut done = 0u64;
+            let mut records = 0u64;
+            loop {
+                if iteration_spp.is_some_and(|n| done >= n) {
+                    break;
+                }
+                if stop.load(Ordering::Relaxed) || out_of_time() {
+                    interrupted = true;
+                    break;
+                }
+                let cap = if last { PASS_SPP } else { training_pass_spp };
+                let spp = iteration_spp.map_or(cap, |n| (n - done).min(cap)) as u32;
+                let aborted = AtomicBool::new(false);
+                let check_abort = || {
+                    if stop.load(Ordering::Relaxed) || out_of_time() {
+                        aborted.store(true, Ordering::Relaxed);
+                    }
+                    aborted.load(Ordering::Relaxed)
+                };
+                let tree_ref = &tree;
+                let results: Vec<(Film, Option<Training>, SampleStats)> = tiles
+                    .par_iter()
+                    .enumerate()
+                    .map(|(i, &(x0, y0, x1, y1))| {
+                        let mut tile =
+                            Film::for_tile(width, height, x0, y0, x1, y1, filter.clone());
+                        let mut st = SampleStats::default();
+                        let mut training = (!last).then(Training::default);
+                        if check_abort() {
+                            return (tile, training, st);
+                        }
+                        let mut src = unit_source(run.seed, pass, i as u64);
+                        tracer.render_tile(
+                            scene,
+                            tree_ref,
+                            (x0, y0, x1, y1),
+                            spp,
+                            &mut src,
+                            &mut tile,
+                            training.as_mut(),
+                            &mut st,
+                        );
+                        observer.progress(u64::from((x1 - x0) * (y1 - y0)) * u64::from(spp));
+                        (tile, training, st)
+                    })
+                    .collect();
+                if aborted.load(Ordering::Relaxed) {
+                    interrupted = true;
+                    break;
+                }
+                for (tile, _, st) in &results {
+                    film.add_film(tile);
+                    stats.merge(st);
+                }
+                if !last {
+                    let buffers: Vec<&RecordBuffer> = results
+                        .iter()
+                        .filter_map(|r| r.1.as_ref().map(|t| &t.records))
+                        .collect();
+                    records += buffers.iter().map(|b| b.len() as u64).sum::<u64>();
+                    tree.merge(buffers.iter().copied());
+                }
+                done += u64::from(spp);
+                spp_done += u64::from(spp);
+                pass += 1;
+                let best = |film: &Film| match &previous {
+                    Some((img, n)) if *n > done => img.clone(),
+                    _ => film.develop(0.0),
+                };
+                observer.snapshot(&|| best(&film), spp_done * pixels);
+            }
+            iterations.push(IterationStats {
+                spp: done,
+                seconds: iteration_start.elapsed().as_secs_f64(),
+                records,
+            });
+            // The iteration in progress is the result if it holds at least
+            // as many samples as the one before.
+            let current = (done > 0 && previous.as_ref().is_none_or(|(_, n)| done >= *n))
+                .then(|| (film.develop(0.0), done));
+            if last || interrupted {
+                image = current.or(previous.take());
+                break;
+            }
+            previous = current;
+            tree.end_iteration(k, self.spatial_threshold, self.quadtree_threshold);
+            nominal = nominal.saturating_mul(2);
+        }
+
+        let seconds = start.elapsed().as_secs_f64();
+        let (image, image_spp) = image.unwrap_or_else(|| (vec![Rgb::BLACK; pixels as usize], 0));
+        let size = tree.size();
+        let samples = spp_done * pixels;
+        let samples_per_second = if seconds > 0.0 {
+            samples as f64 / seconds
+        } else {
+            0.0
+        };
+        let statistics = serde_json::json!({
+            "samples_per_second": samples_per_second,
+            "spp": image_spp,
+            "spp_total": spp_done,
+            "iterations": iterations.len(),
+            "spp_per_iteration": iterations.iter().map(|i| i.spp).collect::<Vec<_>>(),
+            "seconds_per_iteration": iterations.iter().map(|i| i.seconds).collect::<Vec<_>>(),
+            "records_per_iteration": iterations.iter().map(|i| i.records).collect::<Vec<_>>(),
+            "tree_nodes": size.spatial_nodes + size.sampling_nodes + size.building_nodes,
+            "tree_memory_bytes": size.bytes,
+            "tree": size,
+            "nonfinite_samples": stats.nonfinite,
+            "bvh_build_seconds": scene.geometry.build_time.as_secs_f64(),
+            "triangles": scene.geometry.triangles,
+        });
+        Ok(Rendered {
+            image,
+            seconds,
+            samples,
+            interrupted,
+            statistics: match statistics {
+                serde_json::Value::Object(m) => m,
+                _ => serde_json::Map::new(),
+            },
+            nonfinite_dump: None,
+            layers: Vec::new(),
+            summary: format!(
+                "{} iterations, {} spp in the image ({} in all) in {:.2} s, tree {} spatial leaves, {:.1} MB{}",
+                iterations.len(),
+                image_spp,
+                spp_done,
+                seconds,
+                size.spatial_leaves,
+                size.bytes as f64 / 1e6,
+                if interrupted { ", stopped early" } else { "" }
+            ),
+        })
+    }
+}
