@@ -36,7 +36,7 @@ crate::settings! {
         pub bidirectional_mutation: f64 = 1.0, check check::non_negative;
         /// Keep path lengths fixed in the bidirectional mutation (seed 001's variant).
         pub fixed_length: bool = false;
-        /// Selection weight of the lens perturbation (Mitsuba: on; not implemented yet, must be 0).
+        /// Selection weight of the lens perturbation (Mitsuba: on; 0 here until the agreement test with it exists).
         pub lens_perturbation: f64 = 0.0, check check::non_negative;
         /// Selection weight of the caustic perturbation (Mitsuba: on; not implemented yet, must be 0).
         pub caustic_perturbation: f64 = 0.0, check check::non_negative;

@@ -9,6 +9,7 @@
 //!   onward from a kept vertex) on BDPT's walk code.
 //! - [`bidirectional`]: Veach's bidirectional mutation, length-changing or
 //!   fixed-length.
+//! - [`lens_perturbation`]: Veach's lens perturbation.
 //! - [`family`]: the driver's [`crate::markov::ChainFamily`] for path space
 //!   (start-up candidates by bidirectional techniques, the mutation
 //!   mixture).
@@ -37,6 +38,7 @@
 
 pub mod bidirectional;
 pub mod family;
+pub mod lens_perturbation;
 pub mod state;
 pub mod walk;
 
