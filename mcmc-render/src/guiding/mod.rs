@@ -33,7 +33,8 @@ pub mod sd_tree;
 pub use quadtree::QuadTree;
 pub use sd_tree::{LeafId, RecordBuffer, SdTree, TreeSize};
 
-use crate::bsdf::{Bsdf, TransportMode};
+use crate::bsdf::TransportMode;
+use crate::bsdf::textured::BsdfAt;
 use crate::color::Rgb;
 use crate::frame::Frame;
 use crate::sampling::ONE_MINUS_EPSILON;
@@ -101,7 +102,7 @@ impl<'a> Mixture<'a> {
     /// the tree's leaf is trained and the BSDF has a non-delta lobe, else
     /// 0 (the BSDF alone, exactly as plain path tracing samples it).
     #[inline]
-    pub fn new(tree: &'a SdTree, p: Vec3, bsdf: &Bsdf, tree_probability: f32) -> Mixture<'a> {
+    pub fn new(tree: &'a SdTree, p: Vec3, bsdf: &BsdfAt<'_>, tree_probability: f32) -> Mixture<'a> {
         if bsdf.is_delta() {
             return Mixture {
                 tree,
@@ -153,7 +154,7 @@ impl<'a> Mixture<'a> {
     #[inline]
     pub fn sample(
         &self,
-        bsdf: &Bsdf,
+        bsdf: &BsdfAt<'_>,
         frame: &Frame,
         wo: Vec3,
         u_guide: f32,

@@ -50,7 +50,7 @@ crate::settings! {
         pub fixed_length: bool = false;
         /// Selection weight of an independent proposal (a fresh start-up path; not in Mitsuba): lets the running normalisation refine b.
         pub independent_mutation: f64 = 0.0, check check::non_negative;
-        /// Selection weight of the lens perturbation (Mitsuba: on; not implemented yet, must be 0).
+        /// Selection weight of the lens perturbation (Mitsuba: on; 0 here until the agreement test with it exists).
         pub lens_perturbation: f64 = 0.0, check check::non_negative;
         /// Selection weight of the caustic perturbation (Mitsuba: on; not implemented yet, must be 0).
         pub caustic_perturbation: f64 = 0.0, check check::non_negative;

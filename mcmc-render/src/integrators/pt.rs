@@ -7,7 +7,8 @@
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
 use super::{FilmSink, Integrator, SampleDomain, SampleStats, rr_probability};
-use crate::bsdf::{Bsdf, TransportMode};
+use crate::bsdf::TransportMode;
+use crate::bsdf::textured::BsdfAt;
 use crate::color::Rgb;
 use crate::film::Film;
 use crate::frame::Frame;
@@ -202,7 +203,7 @@ pub(crate) fn next_event(
     beta: Rgb,
     sp: &SurfacePoint,
     frame: &Frame,
-    bsdf: &Bsdf,
+    bsdf: &BsdfAt<'_>,
     wo: Vec3,
     (u_sel, u_light): (f32, (f32, f32)),
     direction_pdf: impl FnOnce(Vec3, f32) -> f32,

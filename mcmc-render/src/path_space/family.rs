@@ -19,6 +19,7 @@
 
 use super::bidirectional::Bidirectional;
 use super::independent::IndependentPath;
+use super::lens_perturbation::LensPerturbation;
 use super::state::{Path, PathTarget};
 use super::walk::{ChainSource, camera_walk, light_walk};
 use crate::light::Light;
@@ -32,9 +33,9 @@ use mcmc_core::rng::{ChainRng, stream_rng, uniform};
 /// The mutation mixture: one selection weight per mutation type
 /// (normalised over the types with non-zero weight). Mitsuba 0.6's `mlt`
 /// turns on the bidirectional mutation and the lens, caustic and
-/// multi-chain perturbations; only the bidirectional mutation exists so
-/// far, and [`PathMutations::kernel`] refuses a non-zero weight for the
-/// others.
+/// multi-chain perturbations; the bidirectional mutation and the lens
+/// perturbation exist so far, and [`PathMutations::kernel`] refuses a
+/// non-zero weight for the others.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PathMutations {
     /// Weight of Veach's bidirectional mutation.
@@ -42,7 +43,7 @@ pub struct PathMutations {
     /// Keep path lengths fixed in the bidirectional mutation (seed 001's
     /// variant) instead of Veach's length-changing move.
     pub fixed_length: bool,
-    /// Weight of the lens perturbation (not built yet: must be 0).
+    /// Weight of the lens perturbation ([`LensPerturbation`]).
     pub lens_perturbation: f64,
     /// Weight of the caustic perturbation (not built yet: must be 0).
     pub caustic_perturbation: f64,
@@ -81,7 +82,6 @@ impl PathMutations {
     /// the mutations that do not exist yet.
     pub fn check(&self) -> Result<(), String> {
         let unbuilt = [
-            ("lens_perturbation", self.lens_perturbation),
             ("caustic_perturbation", self.caustic_perturbation),
             ("multi_chain_perturbation", self.multi_chain_perturbation),
             ("manifold_perturbation", self.manifold_perturbation),
@@ -89,19 +89,25 @@ impl PathMutations {
         for (name, w) in unbuilt {
             if w != 0.0 {
                 return Err(format!(
-                    "{name} = {w}: this mutation is not implemented yet; set it to 0 (only the bidirectional mutation exists)"
+                    "{name} = {w}: this mutation is not implemented yet; set it to 0 (built: the bidirectional mutation, the lens perturbation)"
                 ));
             }
         }
-        if !(self.independent.is_finite() && self.independent >= 0.0) {
-            return Err(format!(
-                "independent_mutation = {} must be finite and ≥ 0",
-                self.independent
-            ));
+        let built = [
+            ("bidirectional_mutation", self.bidirectional),
+            ("independent_mutation", self.independent),
+            ("lens_perturbation", self.lens_perturbation),
+        ];
+        for (name, w) in built {
+            if !(w.is_finite() && w >= 0.0) {
+                return Err(format!("{name} = {w} must be finite and non-negative"));
+            }
         }
-        if !(self.bidirectional.is_finite() && self.bidirectional > 0.0) {
+        if !(self.bidirectional > 0.0) {
+            // The perturbations keep the path's length and its light end:
+            // without the bidirectional mutation the chain is not ergodic.
             return Err(format!(
-                "bidirectional_mutation = {} must be positive: it is the only mutation so far",
+                "bidirectional_mutation = {} must be positive: the perturbations alone do not reach every path",
                 self.bidirectional
             ));
         }
@@ -133,16 +139,24 @@ impl PathMutations {
             min_segments,
             max_segments,
         });
-        Mixture::new(vec![
+        // The independent proposal stays at its component index even with
+        // weight 0 (INDEPENDENT_COMPONENT); new mutations come after it.
+        let mut parts = vec![
             (self.bidirectional, bidirectional),
             (self.independent, independent),
-        ])
-        .map_err(|e| e.to_string())
+        ];
+        if self.lens_perturbation > 0.0 {
+            parts.push((
+                self.lens_perturbation,
+                Box::new(LensPerturbation::default()),
+            ));
+        }
+        Mixture::new(parts).map_err(|e| e.to_string())
     }
 
     /// The probability that the mixture proposes independently.
     pub fn independent_probability(&self) -> f64 {
-        self.independent / (self.bidirectional + self.independent)
+        self.independent / (self.bidirectional + self.independent + self.lens_perturbation)
     }
 }
 

@@ -11,6 +11,7 @@
 //!   fixed-length.
 //! - [`independent`]: a fresh start-up candidate as a large step (off by
 //!   default; feeds the running normalisation).
+//! - [`lens_perturbation`]: Veach's lens perturbation.
 //! - [`family`]: the driver's [`crate::markov::ChainFamily`] for path space
 //!   (start-up candidates by bidirectional techniques, the mutation
 //!   mixture).
@@ -40,6 +41,7 @@
 pub mod bidirectional;
 pub mod family;
 pub mod independent;
+pub mod lens_perturbation;
 pub mod state;
 pub mod walk;
 
