@@ -128,8 +128,8 @@ fn mlt_images_are_bit_identical_across_thread_counts() {
 
 #[test]
 fn unbuilt_mutations_are_refused_with_one_line() {
+    // The lens perturbation exists (tests/path_space_perturbations.rs).
     for name in [
-        "lens_perturbation",
         "caustic_perturbation",
         "multi_chain_perturbation",
         "manifold_perturbation",
