@@ -297,13 +297,31 @@ pub fn weight_direct(
         f.m(pt.pdf(scene, Some(&z[j - 1]), lv, TransportMode::Radiance)) / f.m(lv.pdf_fwd)
     };
     let p_fwd = f.m(lv.pdf_light(scene, pt));
+    let w_camera = camera_side_weight(scene, f, z, mis, j, lv, p_fwd);
+    1.0 / (w_light + 1.0 + w_camera)
+}
+
+/// The camera side's term of a connection between camera vertex `z[j]`
+/// and the vertex `other` of the light side: `p_fwd · (η_VM + dVCM_j +
+/// p_fwd_prev · dVC_j)`, where `p_fwd` is the density (already through
+/// [`MisFactors::m`]) with which `other`'s side produces `z[j]`, and
+/// `p_fwd_prev` the density with which `z[j]`, reached from `other`,
+/// produces `z[j − 1]`.
+fn camera_side_weight(
+    scene: &Scene,
+    f: &MisFactors,
+    z: &[Vertex],
+    mis: &[PartialMis],
+    j: usize,
+    other: &Vertex,
+    p_fwd: f32,
+) -> f32 {
     let p_fwd_prev = if j >= 2 {
-        f.m(pt.pdf(scene, Some(lv), &z[j - 1], TransportMode::Importance))
+        f.m(z[j].pdf(scene, Some(other), &z[j - 1], TransportMode::Importance))
     } else {
         0.0
     };
-    let w_camera = p_fwd * (f.vm + mis[j].d_vcm + p_fwd_prev * mis[j].d_vc);
-    1.0 / (w_light + 1.0 + w_camera)
+    p_fwd * (f.vm + mis[j].d_vcm + p_fwd_prev * mis[j].d_vc)
 }
 
 /// Next-event estimation at camera vertex `z[j]` with the light-sample
@@ -356,12 +374,7 @@ pub fn weight_connection(
         scatter_pdf(scene, yv, yv.wo, to_z, TransportMode::Importance),
         zj,
     ));
-    let p_fwd_prev = if j >= 2 {
-        f.m(zj.pdf(scene, Some(yv), &z[j - 1], TransportMode::Importance))
-    } else {
-        0.0
-    };
-    let w_camera = p_fwd * (f.vm + mis[j].d_vcm + p_fwd_prev * mis[j].d_vc);
+    let w_camera = camera_side_weight(scene, f, z, mis, j, yv, p_fwd);
     1.0 / (w_light + 1.0 + w_camera)
 }
 
