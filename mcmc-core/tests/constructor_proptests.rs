@@ -105,7 +105,14 @@ macro_rules! refuses_mismatch {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
+    // A fixed seed keeps CI deterministic (a random one found the
+    // zero-base-window bug in `WarmupSchedule::new` in one run of four);
+    // change it locally to explore other inputs.
+    #![proptest_config(ProptestConfig {
+        cases: 256,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(20261125),
+        ..ProptestConfig::default()
+    })]
 
     #[test]
     fn gaussian_random_walk(sigma in any_f64(), sigmas in any_vec(4), cov in any_matrix()) {
@@ -168,6 +175,9 @@ proptest! {
               init in 0usize..1000, base in 0usize..1000, term in 0usize..1000) {
         let schedule = WarmupSchedule::new(iterations, init, base, term);
         prop_assert!(schedule.window_ends().iter().all(|&e| e <= iterations));
+        // A zero base window once grew the window list without bound.
+        let zero_base = WarmupSchedule::new(iterations, init, 0, term);
+        prop_assert!(zero_base.window_ends().len() < 64);
         if let Ok(w) = Warmup::new(iterations, eps, accept, MetricAdaptation::Diagonal, dim) {
             let _ = w.with_schedule(schedule);
         }

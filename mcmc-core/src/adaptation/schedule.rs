@@ -50,9 +50,12 @@ impl WarmupSchedule {
         )
     }
 
-    /// A schedule with the given buffers and base window.
+    /// A schedule with the given buffers and base window. A base window of
+    /// 0 is taken as 1 (a window must hold an iteration; with 0 the
+    /// doubling never advanced and the window list grew until memory ran
+    /// out); buffers that do not fit fall back to Stan's 15% / 75% / 10%.
     pub fn new(iterations: usize, init: usize, base: usize, term: usize) -> Self {
-        let (mut init, mut base, mut term) = (init, base, term);
+        let (mut init, mut base, mut term) = (init, base.max(1), term);
         if iterations < 20 {
             return WarmupSchedule {
                 iterations,
@@ -61,7 +64,7 @@ impl WarmupSchedule {
                 ends: Vec::new(),
             };
         }
-        if init + base + term > iterations {
+        if init.saturating_add(base).saturating_add(term) > iterations {
             init = (0.15 * iterations as f64) as usize;
             term = (0.1 * iterations as f64) as usize;
             base = iterations - (init + term);
@@ -116,6 +119,17 @@ impl WarmupSchedule {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Regression (found by `constructor_proptests`): a zero base window
+    /// and buffers near `usize::MAX` give a finite, valid schedule.
+    #[test]
+    fn degenerate_windows_give_a_valid_schedule() {
+        for (init, base, term) in [(0, 0, 0), (10, 0, 10), (usize::MAX, 5, usize::MAX)] {
+            let s = WarmupSchedule::new(1000, init, base, term);
+            assert!(!s.window_ends().is_empty() && s.window_ends().len() < 64);
+            assert!(s.window_ends().iter().all(|&e| e < 1000));
+        }
+    }
 
     #[test]
     fn stan_windows_for_default_and_short_warmups() {
