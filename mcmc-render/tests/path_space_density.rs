@@ -219,30 +219,6 @@ fn histogram<'s>(x: &Path<'s>, seed: u64) -> (Vec<u64>, Option<Path<'s>>) {
     (counts, some_y)
 }
 
-/// Pearson's chi-square p-value of `counts` against `masses` (plus the
-/// rest cell), pooling cells expecting fewer than 5.
-fn p_value(counts: &[u64], masses: &[f64]) -> f64 {
-    let n = N as f64;
-    let mut cells: Vec<(f64, f64)> = Vec::new();
-    let (mut pool_e, mut pool_o) = (0.0, 0.0);
-    for (&o, &m) in counts.iter().zip(masses) {
-        let e = m * n;
-        if e < 5.0 {
-            pool_e += e;
-            pool_o += o as f64;
-        } else {
-            cells.push((e, o as f64));
-        }
-    }
-    let rest_e = n - masses.iter().sum::<f64>() * n;
-    let rest_o = n - counts.iter().sum::<u64>() as f64;
-    cells.push((rest_e + pool_e, rest_o + pool_o));
-    let chi2: f64 = cells.iter().map(|(e, o)| (o - e).powi(2) / e).sum();
-    let dof = cells.len() as f64 - 1.0;
-    eprintln!("chi2 = {chi2:.1}, dof = {dof}");
-    ChiSquared::new(dof).unwrap().sf(chi2)
-}
-
 #[test]
 fn bidirectional_density_matches_its_proposals() {
     let scene = cornell();
@@ -250,12 +226,12 @@ fn bidirectional_density_matches_its_proposals() {
     let kernel = Bidirectional::new(1, Some(3), true);
     let masses = expected_masses(&kernel, &x, Density::Reported);
     let (counts, y) = histogram(&x, 11);
-    let p = p_value(&counts, &masses);
+    let p = common::chi_square_p_value(&counts, &masses, N);
     assert!(p > 1e-4, "T(x→·) disagrees with the proposals: p = {p:.2e}");
 
     // The control: the camera walk's way alone.
     let wrong = expected_masses(&kernel, &x, Density::CameraWayOnly);
-    let p_wrong = p_value(&counts, &wrong);
+    let p_wrong = common::chi_square_p_value(&counts, &wrong, N);
     assert!(
         p_wrong < 1e-4,
         "a density without the sum over ways passed: p = {p_wrong:.2e}"
@@ -266,7 +242,7 @@ fn bidirectional_density_matches_its_proposals() {
     let y = y.expect("a valid proposal");
     let masses_y = expected_masses(&kernel, &y, Density::Reported);
     let (counts_y, _) = histogram(&y, 12);
-    let p_y = p_value(&counts_y, &masses_y);
+    let p_y = common::chi_square_p_value(&counts_y, &masses_y, N);
     assert!(
         p_y > 1e-4,
         "T(y→·) disagrees with the proposals: p = {p_y:.2e}"

@@ -59,7 +59,6 @@ use mcmc_render::path_space::lens_perturbation::{LensPerturbation, lens_chain};
 use mcmc_render::path_space::{Path, PathFamily, PathMutations};
 use mcmc_render::pss::PathSample;
 use mcmc_render::scene::Scene;
-use statrs::distribution::{ChiSquared, ContinuousCDF};
 use std::f64::consts::PI;
 use std::sync::OnceLock;
 use std::sync::atomic::AtomicBool;
@@ -241,36 +240,6 @@ fn expected_masses(kernel: &LensPerturbation, x: &Path, drop_cos: bool) -> Vec<f
     masses
 }
 
-/// Pearson's chi-square p-value of `counts` against `masses` (plus the
-/// rest cell), pooling cells expecting fewer than 5.
-fn p_value(counts: &[u64], masses: &[f64]) -> f64 {
-    let n = N as f64;
-    let mut cells: Vec<(f64, f64)> = Vec::new();
-    let (mut pool_e, mut pool_o) = (0.0, 0.0);
-    for (&o, &m) in counts.iter().zip(masses) {
-        let e = m * n;
-        if e < 5.0 {
-            pool_e += e;
-            pool_o += o as f64;
-        } else {
-            cells.push((e, o as f64));
-        }
-    }
-    let total: f64 = masses.iter().sum();
-    if total > 1.0 + 1e-9 {
-        // More than all proposals expected in the cells: not a density.
-        eprintln!("expected mass {total:.3} > 1");
-        return 0.0;
-    }
-    let rest_e = n - total * n;
-    let rest_o = n - counts.iter().sum::<u64>() as f64;
-    cells.push((rest_e + pool_e, rest_o + pool_o));
-    let chi2: f64 = cells.iter().map(|(e, o)| (o - e).powi(2) / e).sum();
-    let dof = cells.len() as f64 - 1.0;
-    eprintln!("chi2 = {chi2:.1}, dof = {dof}");
-    ChiSquared::new(dof).unwrap().sf(chi2)
-}
-
 #[test]
 fn lens_perturbation_density_matches_its_proposals() {
     let scene = mirror_box();
@@ -299,10 +268,10 @@ fn lens_perturbation_density_matches_its_proposals() {
         }
     }
     let masses = expected_masses(&kernel, &x, false);
-    let p = p_value(&counts, &masses);
+    let p = common::chi_square_p_value(&counts, &masses, N);
     assert!(p > 1e-4, "T(x→·) disagrees with the proposals: p = {p:.2e}");
     let wrong = expected_masses(&kernel, &x, true);
-    let p_wrong = p_value(&counts, &wrong);
+    let p_wrong = common::chi_square_p_value(&counts, &wrong, N);
     assert!(
         p_wrong < 1e-4,
         "a density without the cosine at y_1 passed: p = {p_wrong:.2e}"

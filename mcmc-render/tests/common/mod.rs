@@ -508,3 +508,36 @@ pub fn mlt_reps(scene: &Scene, kind: Mlt, budget: Budget, k: u64, seed0: u64) ->
         })
         .collect()
 }
+
+/// Pearson's chi-square p-value of the histogram `counts` of `n` draws
+/// against the expected probability `masses` of its cells, plus a "rest"
+/// cell holding what fell (or should fall) outside them; cells expecting
+/// fewer than 5 draws are pooled into the rest. Expected masses summing
+/// above 1 are not a density: p = 0.
+pub fn chi_square_p_value(counts: &[u64], masses: &[f64], n: usize) -> f64 {
+    use statrs::distribution::{ChiSquared, ContinuousCDF};
+    let n = n as f64;
+    let mut cells: Vec<(f64, f64)> = Vec::new();
+    let (mut pool_e, mut pool_o) = (0.0, 0.0);
+    for (&o, &m) in counts.iter().zip(masses) {
+        let e = m * n;
+        if e < 5.0 {
+            pool_e += e;
+            pool_o += o as f64;
+        } else {
+            cells.push((e, o as f64));
+        }
+    }
+    let total: f64 = masses.iter().sum();
+    if total > 1.0 + 1e-9 {
+        eprintln!("expected mass {total:.3} > 1");
+        return 0.0;
+    }
+    let rest_e = n - total * n;
+    let rest_o = n - counts.iter().sum::<u64>() as f64;
+    cells.push((rest_e + pool_e, rest_o + pool_o));
+    let chi2: f64 = cells.iter().map(|(e, o)| (o - e).powi(2) / e).sum();
+    let dof = cells.len() as f64 - 1.0;
+    eprintln!("chi2 = {chi2:.1}, dof = {dof}");
+    ChiSquared::new(dof).unwrap().sf(chi2)
+}
