@@ -129,18 +129,17 @@ impl<S, P: Clone> ExchangeContext<'_, S, P> {
         if !self.family.cross_densities_are_cheap() || self.levels() < 2 {
             return;
         }
-        let alphas: Vec<f64> = (0..self.levels() - 1)
-            .map(|i| {
-                let log_alpha = swap_log_acceptance(
-                    self.log_density(i, i),
-                    self.log_density(i + 1, i + 1),
-                    self.log_density(i, i + 1),
-                    self.log_density(i + 1, i),
-                );
-                log_alpha.exp()
-            })
-            .collect();
-        self.stats.record_neighbour_probe(alphas);
+        // Per sweep and per pair: no allocation (cheap families sweep fast).
+        for i in 0..self.levels() - 1 {
+            let log_alpha = swap_log_acceptance(
+                self.log_density(i, i),
+                self.log_density(i + 1, i + 1),
+                self.log_density(i, i + 1),
+                self.log_density(i + 1, i),
+            );
+            self.stats.add_neighbour_probe(i, log_alpha.exp());
+        }
+        self.stats.end_neighbour_probe();
     }
 
     /// The full matrix `out[level·M + at] = ln π_level(x_at)`.

@@ -172,12 +172,15 @@ impl ReplicaStatistics {
         p.sum_alpha += alpha;
     }
 
-    /// Records the neighbour swap acceptance probabilities `α_{i,i+1}`
-    /// (one per pair, in order) of the configuration at the end of a sweep.
-    pub fn record_neighbour_probe(&mut self, alphas: impl IntoIterator<Item = f64>) {
-        for (sum, alpha) in self.neighbour_probe_sums.iter_mut().zip(alphas) {
-            *sum += alpha;
-        }
+    /// Adds pair `(i, i+1)`'s swap acceptance probability `α_{i,i+1}` in
+    /// the configuration at the end of a sweep; call for every pair, then
+    /// [`Self::end_neighbour_probe`] once.
+    pub fn add_neighbour_probe(&mut self, i: usize, alpha: f64) {
+        self.neighbour_probe_sums[i] += alpha;
+    }
+
+    /// Closes one sweep's neighbour probe.
+    pub fn end_neighbour_probe(&mut self) {
         self.neighbour_probes += 1;
     }
 
