@@ -31,8 +31,12 @@ pub enum MoveKind {
     Eem,
     /// Frequent equi-energy moves (8 rings).
     FrequentEem,
-    /// The equi-energy sampler (8 rings, p_EEJ = 0.1).
+    /// The equi-energy sampler (8 rings, p_EEJ = 0.1), jumps enabled once
+    /// every ring set is filled (the thesis).
     Ees,
+    /// The equi-energy sampler with Kou et al.'s rule: a jump needs only the
+    /// current ring's set to be non-empty.
+    EesKou,
     /// The adaptive equi-energy sampler (16 quantile rings, p_EEJ = 0.1,
     /// at most 10 000 stored states per ring).
     AdaptiveEes,
@@ -49,6 +53,7 @@ impl MoveKind {
             MoveKind::Eem => "eem",
             MoveKind::FrequentEem => "frequent-eem",
             MoveKind::Ees => "ees",
+            MoveKind::EesKou => "ees-kou",
             MoveKind::AdaptiveEes => "adaptive-ees",
         }
     }

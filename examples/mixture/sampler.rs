@@ -10,8 +10,8 @@ use mcmc_core::mh::MetropolisHastings;
 use mcmc_core::mtm::{Lambda, MultipleTry};
 use mcmc_core::replica::{
     AdaptiveEquiEnergy, EquiEnergyMove, EquiEnergySampler, EvenOdd, ExchangeMove,
-    FrequentEquiEnergy, IsPermutation, IsSwap, NeighbourSwap, PowerFamily, ReplicaExchange,
-    RingRange, Tempered, betas_from_temperatures,
+    FrequentEquiEnergy, IsPermutation, IsSwap, JumpRule, NeighbourSwap, PowerFamily,
+    ReplicaExchange, RingRange, Tempered, betas_from_temperatures,
 };
 use mcmc_core::rng::ChainRng;
 use mcmc_core::runner::{run_chains, with_threads};
@@ -199,6 +199,11 @@ fn exchange_move(
         MoveKind::Ees => {
             Box::new(EquiEnergySampler::new(levels, 8, 0.1, RingRange::Observed).map_err(err)?)
         }
+        MoveKind::EesKou => Box::new(
+            EquiEnergySampler::new(levels, 8, 0.1, RingRange::Observed)
+                .map_err(err)?
+                .with_jump_rule(JumpRule::CurrentRingFilled),
+        ),
         MoveKind::AdaptiveEes => {
             Box::new(AdaptiveEquiEnergy::new(levels, 16, 0.1, 10_000).map_err(err)?)
         }

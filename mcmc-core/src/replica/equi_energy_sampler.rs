@@ -11,6 +11,18 @@
 //! neighbours only (footnote 4). The sampler is not a Markov chain (it uses
 //! the past); it is included because the thesis compares it, and its
 //! adaptive variant ([`super::AdaptiveEquiEnergy`]) has a convergence proof.
+//!
+//! # When jumps start
+//!
+//! The thesis enables chain `c_{j−1}`'s jumps once *every* ring set of `c_j`
+//! holds a sample ([`JumpRule::AllRingsFilled`], the default). With fixed
+//! rings taken from the burn-in range that can take forever: a ring that
+//! chain `j` rarely visits stays empty, and the chain below never jumps
+//! (in the 6-d synthetic study of `docs/replica-exchange.md` the main chain
+//! then misses 90% of the modes). Kou, Zhou & Wong (2006) start chain
+//! `j − 1` after chain `j` has run and draw from the ring set of the current
+//! state's ring; [`JumpRule::CurrentRingFilled`] takes that reading: a jump
+//! is attempted whenever that one ring set is non-empty.
 
 use super::context::{ExchangeContext, swap_log_acceptance};
 use super::family::ReplicaFamily;
@@ -79,10 +91,22 @@ pub(crate) fn validate(levels: usize, rings: usize, p_jump: f64) -> Result<()> {
     Ok(())
 }
 
+/// When a chain's equi-energy jumps are enabled (see the module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum JumpRule {
+    /// Once every ring set of the partner chain holds a state (the thesis).
+    #[default]
+    AllRingsFilled,
+    /// Whenever the ring set of the current state's ring is non-empty (Kou
+    /// et al. 2006).
+    CurrentRingFilled,
+}
+
 /// The equi-energy sampler with fixed (log-spaced) rings per chain.
 #[derive(Clone, Debug)]
 pub struct EquiEnergySampler<S> {
     p_jump: f64,
+    rule: JumpRule,
     /// `rings[j]`: the rings of chain `j` (on `ln π_{j−1}`); `rings[0]` unused.
     rings: Vec<EnergyRings>,
     /// `stores[j][i]`: chain `j`'s past states in ring `i`.
@@ -99,6 +123,7 @@ impl<S> EquiEnergySampler<S> {
         let r = EnergyRings::new(rings, range)?;
         Ok(EquiEnergySampler {
             p_jump: p_eej,
+            rule: JumpRule::default(),
             rings: vec![r; levels],
             stores: (0..levels)
                 .map(|_| (0..rings).map(|_| Vec::new()).collect())
@@ -107,15 +132,24 @@ impl<S> EquiEnergySampler<S> {
         })
     }
 
+    /// The sampler with jumps enabled by `rule` instead of the default
+    /// [`JumpRule::AllRingsFilled`].
+    pub fn with_jump_rule(mut self, rule: JumpRule) -> Self {
+        self.rule = rule;
+        self
+    }
+
     /// Number of stored states of every chain.
     pub fn stored_states(&self) -> usize {
         self.stores.iter().flatten().map(Vec::len).sum()
     }
 
-    fn ready(&self, level: usize) -> bool {
-        self.stores
-            .get(level)
-            .is_some_and(|s| s.iter().all(|ring| !ring.is_empty()))
+    /// Whether chain `level − 1` may jump into ring `ring` of chain `level`.
+    fn ready(&self, level: usize, ring: usize) -> bool {
+        self.stores.get(level).is_some_and(|s| match self.rule {
+            JumpRule::AllRingsFilled => s.iter().all(|r| !r.is_empty()),
+            JumpRule::CurrentRingFilled => s.get(ring).is_some_and(|r| !r.is_empty()),
+        })
     }
 }
 
@@ -138,10 +172,13 @@ impl<S: Clone + Send + Sync, P: Clone> ExchangeMove<S, P> for EquiEnergySampler<
         rng: &mut ChainRng,
     ) -> Jump<S, P> {
         let partner = level + 1;
-        if !self.frozen || !self.ready(partner) || uniform(rng) >= self.p_jump {
+        if !self.frozen || partner >= self.rings.len() {
             return Jump::None;
         }
         let ring = self.rings[partner].ring(current.log_density);
+        if !self.ready(partner, ring) || uniform(rng) >= self.p_jump {
+            return Jump::None;
+        }
         let set = &self.stores[partner][ring];
         let v = &set[((uniform(rng) * set.len() as f64) as usize).min(set.len() - 1)];
         jump_to(level, current, v, family, rng)
@@ -185,5 +222,62 @@ impl<S: Clone + Send + Sync, P: Clone> ExchangeMove<S, P> for EquiEnergySampler<
             .flatten()
             .map(|r| r.capacity() * std::mem::size_of::<Stored<S>>())
             .sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::replica::FnFamily;
+    use crate::rng::stream_rng;
+
+    /// Two levels, four fixed rings on `ln π_0 ∈ [−4, 0]`; chain 1 has
+    /// stored one state, in ring 3 (the top ring), so rings 0–2 are empty.
+    fn sampler_with_top_ring_filled(rule: JumpRule) -> EquiEnergySampler<f64> {
+        let range = RingRange::Fixed {
+            low: -4.0,
+            high: 0.0,
+        };
+        let mut ees = EquiEnergySampler::new(2, 4, 0.5, range)
+            .unwrap()
+            .with_jump_rule(rule);
+        ExchangeMove::<f64, ()>::freeze(&mut ees);
+        ees.stores[1][3].push(Stored {
+            state: 0.1,
+            log_own: -0.005,
+            log_lower: -0.5,
+        });
+        ees
+    }
+
+    /// Counts the jumps attempted from a level-0 state of log density
+    /// `log_density` over `n` draws.
+    fn attempts(ees: &EquiEnergySampler<f64>, log_density: f64, n: usize) -> usize {
+        let family = FnFamily::new(2, |l: usize, x: &f64| -x * x / (1.0 + l as f64));
+        let current = Sample {
+            state: (-log_density).sqrt(),
+            log_density,
+            payload: (),
+        };
+        let mut rng = stream_rng(7, 0);
+        (0..n)
+            .filter(|_| !matches!(ees.jump(0, &current, &family, &mut rng), Jump::None))
+            .count()
+    }
+
+    #[test]
+    fn the_thesis_rule_waits_for_every_ring_and_kous_for_the_current_one() {
+        let n = 10_000;
+        // Thesis: three of chain 1's four ring sets are empty → no jumps.
+        let all = sampler_with_top_ring_filled(JumpRule::AllRingsFilled);
+        assert_eq!(attempts(&all, -0.5, n), 0);
+        // Kou: a state in the filled ring (ln π_0 = −0.5 → ring 3) jumps
+        // with probability p_EEJ = 0.5: Binomial(10⁴, 0.5), sd 50, so
+        // ±300 is six standard deviations.
+        let kou = sampler_with_top_ring_filled(JumpRule::CurrentRingFilled);
+        let k = attempts(&kou, -0.5, n);
+        assert!((k as i64 - 5_000).abs() < 300, "{k} attempts of {n}");
+        // ... and one in an empty ring (ln π_0 = −3.5 → ring 0) never does.
+        assert_eq!(attempts(&kou, -3.5, n), 0);
     }
 }

@@ -56,7 +56,7 @@ pub use adaptive_equi_energy::AdaptiveEquiEnergy;
 pub use context::{ExchangeContext, swap_log_acceptance};
 pub use ensemble::{LevelObserver, ReplicaExchange};
 pub use equi_energy::{EquiEnergyMove, equi_energy_pair_probabilities};
-pub use equi_energy_sampler::EquiEnergySampler;
+pub use equi_energy_sampler::{EquiEnergySampler, JumpRule};
 pub use even_odd::EvenOdd;
 pub use family::{
     FlatPrior, FnFamily, LevelTarget, PowerFamily, ReplicaFamily, Tempered, TunableFamily,
