@@ -302,9 +302,9 @@ fn tempered_reps(scene: &Scene, control: bool, k: u64, seed0: u64) -> Vec<[f64; 
     (0..k)
         .map(|i| {
             let settings = PssmltSettings {
-                bootstrap: 20_000,
+                bootstrap: 10_000,
                 chains: 512,
-                mutations_per_pixel: Some(2048),
+                mutations_per_pixel: Some(1024),
                 seed: seed0 + i,
                 normalization: Normalization::Running,
                 ..PssmltSettings::default()
@@ -334,6 +334,9 @@ fn pt_reference() -> &'static [[f64; 3]] {
 
 #[test]
 fn tempered_pssmlt_agrees_with_pt_on_the_cornell_box() {
+    // 12 replicates of 1024 mutations per pixel (256 per level). Measured:
+    // −0.19%, +0.06%, +0.04% with σ 0.15%, 0.17%, 0.20% (5σ < 1% on
+    // every channel; the control reads +25%).
     let a = MeanAgreement::new(pt_reference(), &tempered_reps(cornell(), false, 12, 15_000));
     eprintln!("tempered-pssmlt: rel {:?}\n  {a:?}", a.rel());
     assert!(a.failures(4.0, 0.01).is_empty(), "disagrees with PT: {a:?}");
