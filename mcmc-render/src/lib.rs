@@ -61,5 +61,6 @@ pub mod resources;
 pub mod sampling;
 pub mod scene;
 pub mod settings;
+pub mod tempered;
 pub mod texture;
 pub mod warp;

@@ -27,13 +27,32 @@ impl Bsdf {
         if min_alpha.is_nan() || min_alpha <= 0.0 {
             return *self;
         }
+        self.tempered(1.0, min_alpha)
+    }
+
+    /// A copy whose microfacet roughnesses are `scale · max(α, floor)`
+    /// (each axis separately): the roughness tempering `ρ' = √T · ρ` of
+    /// spec seed000 Eq. 5.5 with `scale = √T`, after a regularisation
+    /// floor. Smooth conductors, dielectrics and plastics become rough
+    /// Beckmann ones of roughness `scale · floor` when `floor > 0` (as in
+    /// [`Bsdf::regularized`], which is `tempered(1, floor)`) and stay
+    /// smooth otherwise; diffuse, thin and index-matched dielectric
+    /// surfaces are unchanged. `scale = 1` with `floor <= 0` (or NaN)
+    /// returns a plain copy. Rough plastics recompute their tables (~0.1 s).
+    pub fn tempered(&self, scale: f32, floor: f32) -> Bsdf {
+        let floor = if floor.is_nan() { 0.0 } else { floor.max(0.0) };
+        if scale == 1.0 && floor == 0.0 {
+            return *self;
+        }
+        let alpha = |a: f32| scale * a.max(floor);
         let raise = |m: &Microfacet| {
             let (au, av) = m.alpha();
-            Microfacet::new(m.kind(), au.max(min_alpha), av.max(min_alpha))
+            Microfacet::new(m.kind(), alpha(au), alpha(av))
         };
-        let smooth = Microfacet::new(MicrofacetKind::Beckmann, min_alpha, min_alpha);
+        let smooth = Microfacet::new(MicrofacetKind::Beckmann, alpha(0.0), alpha(0.0));
         match self {
             Bsdf::Diffuse(_) => *self,
+            Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::Plastic(_) if floor == 0.0 => *self,
             Bsdf::Conductor(c) => Bsdf::RoughConductor(RoughConductor {
                 distribution: smooth,
                 fresnel: c.fresnel,
@@ -56,7 +75,7 @@ impl Bsdf {
             }),
             Bsdf::Plastic(p) => Bsdf::RoughPlastic(RoughPlastic::new(
                 MicrofacetKind::Beckmann,
-                min_alpha,
+                alpha(0.0),
                 true,
                 p.eta(),
                 p.diffuse_reflectance(),
@@ -65,17 +84,17 @@ impl Bsdf {
             )),
             Bsdf::RoughPlastic(p) => {
                 let (a, _) = p.distribution().alpha();
-                if a >= min_alpha {
+                if alpha(a) == a {
                     *self
                 } else {
-                    Bsdf::RoughPlastic(p.with_alpha(min_alpha))
+                    Bsdf::RoughPlastic(p.with_alpha(alpha(a)))
                 }
             }
             Bsdf::ThinDielectric(_) => *self,
             // Roughening keeps a model reflective-only (diffuse stays
             // diffuse, conductors stay conductors, plastics stay plastics).
             Bsdf::TwoSided(inner) => Bsdf::TwoSided(
-                OneSided::from_bsdf(inner.bsdf().regularized(min_alpha))
+                OneSided::from_bsdf(inner.bsdf().tempered(scale, floor))
                     .expect("a roughened reflective model is reflective"),
             ),
         }

@@ -50,7 +50,7 @@
 //! [`connect`] for one technique; PSSMLT over BDPT calls
 //! [`Bdpt::sample_all`], which returns every technique of one sample.
 
-use super::path_vertex::{Vertex, shading_correction};
+use super::path_vertex::{ConnectionBsdfs, SceneBsdfs, Vertex, shading_correction};
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
 use super::{FilmSink, Integrator, SampleDomain, SampleStats, rr_probability};
@@ -323,6 +323,17 @@ pub fn generate_light_subpath(
 /// `1/d² · |cos| · |cos|` between two vertices (shading normals; no cosine
 /// at a vertex that is not on a surface), times their mutual visibility.
 pub fn geometry_term(scene: &Scene, a: &Vertex, b: &Vertex) -> f32 {
+    let g = unoccluded_geometry_term(a, b);
+    if g > 0.0 && scene.geometry.visible(&a.sp, &b.sp) {
+        g
+    } else {
+        0.0
+    }
+}
+
+/// [`geometry_term`] without the visibility test.
+#[inline(always)]
+fn unoccluded_geometry_term(a: &Vertex, b: &Vertex) -> f32 {
     let d = b.p() - a.p();
     let d2 = d.length_squared();
     if !(d2 > 0.0) {
@@ -336,11 +347,7 @@ pub fn geometry_term(scene: &Scene, a: &Vertex, b: &Vertex) -> f32 {
     if b.on_surface() {
         g *= b.sp.ns.dot(w).abs();
     }
-    if g > 0.0 && scene.geometry.visible(&a.sp, &b.sp) {
-        g
-    } else {
-        0.0
-    }
+    g
 }
 
 /// Evaluates technique `(s, t)` on the first `s` vertices of `light` and the
@@ -360,96 +367,180 @@ pub fn connect(
     source: &mut dyn RandomSource,
     heuristic: MisHeuristic,
 ) -> Option<Connection> {
+    let mut out = [None];
+    connect_in(
+        scene,
+        &SceneBsdfs,
+        camera,
+        light,
+        s,
+        t,
+        source,
+        heuristic,
+        &mut out,
+    );
+    out[0]
+}
+
+/// [`connect`] under every level of `bsdfs` at once: `out[k]` receives the
+/// technique's contribution with the BSDFs of level `k` at the two
+/// connected vertices (contribution and MIS weight), or `None`. The
+/// subpaths, the sampled light or camera point and the visibility test
+/// (done once, when some level carries light) are shared by all levels.
+/// With a thin lens the lens numbers are drawn when the light vertex is
+/// connectible under some level. `out.len()` must be `bsdfs.levels()`.
+#[allow(clippy::too_many_arguments)]
+pub fn connect_in<B: ConnectionBsdfs>(
+    scene: &Scene,
+    bsdfs: &B,
+    camera: &[Vertex],
+    light: &[Vertex],
+    s: usize,
+    t: usize,
+    source: &mut dyn RandomSource,
+    heuristic: MisHeuristic,
+    out: &mut [Option<Connection>],
+) {
+    out.fill(None);
     if t == 0 || t > camera.len() || s > light.len() || (s == 1 && t == 1) {
-        return None;
+        return;
     }
+    let levels = out.len();
     let mut raster = camera[0].raster;
     let mut sampled: Option<Vertex> = None;
-    let l = if s == 0 {
+    // Per level: the unweighted contribution (black where it carries none).
+    let mut l = [Rgb::BLACK; MAX_CONNECTION_LEVELS];
+    let l = &mut l[..levels];
+    if s == 0 {
         let pt = &camera[t - 1];
         if t < 2 || !pt.is_light() {
-            return None;
+            return;
         }
-        pt.le(scene, &camera[t - 2]) * pt.beta
+        l.fill(pt.le(scene, &camera[t - 2]) * pt.beta);
     } else if t == 1 {
         let qs = &light[s - 1];
-        if !qs.is_connectible(scene) {
-            return None;
+        let connectible: [bool; MAX_CONNECTION_LEVELS] =
+            std::array::from_fn(|k| k < levels && qs.is_connectible_in(scene, bsdfs, k));
+        if !connectible.contains(&true) {
+            return;
         }
         let cs = if scene.camera.has_lens() {
-            scene.camera.sample_wi_lens(qs.p(), source.next_2d())?
+            scene.camera.sample_wi_lens(qs.p(), source.next_2d())
         } else {
-            scene.camera.sample_wi(qs.p())?
+            scene.camera.sample_wi(qs.p())
+        };
+        let Some(cs) = cs else {
+            return;
         };
         raster = cs.raster;
         let cam = Vertex::camera(cs.origin, cs.raster, Rgb::splat(cs.we / cs.pdf));
-        let mut l = qs.beta * qs.f(scene, &cam, TransportMode::Importance) * cam.beta;
-        if qs.on_surface() {
-            l *= cs.wi.dot(qs.sp.ns).abs();
+        for (k, lk) in l.iter_mut().enumerate() {
+            if !connectible[k] {
+                continue;
+            }
+            *lk = qs.beta * qs.f_in(scene, bsdfs, k, &cam, TransportMode::Importance) * cam.beta;
+            if qs.on_surface() {
+                *lk *= cs.wi.dot(qs.sp.ns).abs();
+            }
         }
-        if l.is_black()
+        if l.iter().all(|lk| lk.is_black())
             || !scene
                 .geometry
                 .segment_clear(qs.sp.spawn_origin(cs.origin), cs.origin)
         {
-            return None;
+            return;
         }
         sampled = Some(cam);
-        l
     } else if s == 1 {
         let u_sel = source.next_1d();
         let u_pos = source.next_2d();
         let pt = &camera[t - 1];
-        if !pt.is_connectible(scene) {
-            return None;
+        let connectible: [bool; MAX_CONNECTION_LEVELS] =
+            std::array::from_fn(|k| k < levels && pt.is_connectible_in(scene, bsdfs, k));
+        if !connectible.contains(&true) {
+            return;
         }
-        let (index, _) = scene.lights.select(u_sel)?;
-        let ds = scene
+        let Some((index, _)) = scene.lights.select(u_sel) else {
+            return;
+        };
+        let Some(ds) = scene
             .lights
-            .sample_direct(&scene.geometry, pt.p(), u_sel, u_pos)?;
+            .sample_direct(&scene.geometry, pt.p(), u_sel, u_pos)
+        else {
+            return;
+        };
         let mut lv = if ds.at_infinity {
             Vertex::infinite(index, ds.wi, ds.le / ds.pdf, 0.0)
         } else {
             Vertex::light(scene, index, ds.p, ds.le / ds.pdf, 0.0)
         };
         lv.pdf_fwd = lv.pdf_light_origin(scene);
-        let mut l = pt.beta * pt.f(scene, &lv, TransportMode::Radiance) * lv.beta;
-        if pt.on_surface() {
-            l *= ds.wi.dot(pt.sp.ns).abs();
+        for (k, lk) in l.iter_mut().enumerate() {
+            if !connectible[k] {
+                continue;
+            }
+            *lk = pt.beta * pt.f_in(scene, bsdfs, k, &lv, TransportMode::Radiance) * lv.beta;
+            if pt.on_surface() {
+                *lk *= ds.wi.dot(pt.sp.ns).abs();
+            }
         }
-        if l.is_black() || !scene.light_visible(&pt.sp, &ds) {
-            return None;
+        if l.iter().all(|lk| lk.is_black()) || !scene.light_visible(&pt.sp, &ds) {
+            return;
         }
         sampled = Some(lv);
-        l
     } else {
         let qs = &light[s - 1];
         let pt = &camera[t - 1];
-        if !qs.is_connectible(scene) || !pt.is_connectible(scene) {
-            return None;
+        for (k, lk) in l.iter_mut().enumerate() {
+            if !qs.is_connectible_in(scene, bsdfs, k) || !pt.is_connectible_in(scene, bsdfs, k) {
+                continue;
+            }
+            *lk = qs.beta
+                * qs.f_in(scene, bsdfs, k, pt, TransportMode::Importance)
+                * pt.f_in(scene, bsdfs, k, qs, TransportMode::Radiance)
+                * pt.beta;
         }
-        let l = qs.beta
-            * qs.f(scene, pt, TransportMode::Importance)
-            * pt.f(scene, qs, TransportMode::Radiance)
-            * pt.beta;
-        if l.is_black() {
-            return None;
+        if l.iter().all(|lk| lk.is_black()) {
+            return;
         }
-        l * geometry_term(scene, qs, pt)
-    };
-    if l.is_black() {
-        return None;
+        let g = unoccluded_geometry_term(qs, pt);
+        let g = if g > 0.0 && scene.geometry.visible(&qs.sp, &pt.sp) {
+            g
+        } else {
+            0.0
+        };
+        for lk in l.iter_mut() {
+            *lk *= g;
+        }
     }
-    let weight = mis_weight(scene, camera, light, s, t, sampled.as_ref(), heuristic);
-    Some(Connection {
-        l: l * weight,
-        weight,
-        raster,
-        splat: t == 1,
-        s,
-        t,
-    })
+    for (k, (o, &lk)) in out.iter_mut().zip(l.iter()).enumerate() {
+        if lk.is_black() {
+            continue;
+        }
+        let weight = mis_weight_in(
+            scene,
+            bsdfs,
+            k,
+            camera,
+            light,
+            s,
+            t,
+            sampled.as_ref(),
+            heuristic,
+        );
+        *o = Some(Connection {
+            l: lk * weight,
+            weight,
+            raster,
+            splat: t == 1,
+            s,
+            t,
+        });
+    }
 }
+
+/// Most levels [`connect_in`] evaluates at once.
+pub const MAX_CONNECTION_LEVELS: usize = 16;
 
 /// MIS weight of technique `(s, t)` for the path made of `light[..s]` and
 /// `camera[..t]` (pbrt-v4's `MISWeight`). `sampled` replaces the light
@@ -462,6 +553,36 @@ pub fn connect(
 /// from a point light's position by a camera hit are left out.
 pub fn mis_weight(
     scene: &Scene,
+    camera: &[Vertex],
+    light: &[Vertex],
+    s: usize,
+    t: usize,
+    sampled: Option<&Vertex>,
+    heuristic: MisHeuristic,
+) -> f32 {
+    mis_weight_in(
+        scene,
+        &SceneBsdfs,
+        0,
+        camera,
+        light,
+        s,
+        t,
+        sampled,
+        heuristic,
+    )
+}
+
+/// [`mis_weight`] with the BSDFs of level `level` of `bsdfs` at the two
+/// connected vertices: every technique's density through them is the
+/// roughened one (spec seed000 §5.2.1, tempered path space), the densities
+/// stored along the subpaths are the scene's.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub fn mis_weight_in<B: ConnectionBsdfs>(
+    scene: &Scene,
+    bsdfs: &B,
+    level: usize,
     camera: &[Vertex],
     light: &[Vertex],
     s: usize,
@@ -490,18 +611,27 @@ pub fn mis_weight(
 
     // Densities at the connection, as the opposite subpath would produce them.
     let pt_rev = match &qs {
-        Some(qs) => qs.pdf(scene, qs_minus, &pt, TransportMode::Importance),
+        Some(qs) => qs.pdf_in(
+            scene,
+            bsdfs,
+            level,
+            qs_minus,
+            &pt,
+            TransportMode::Importance,
+        ),
         None => pt.pdf_light_origin(scene),
     };
     let pt_minus_rev = pt_minus.map(|pm| match &qs {
-        Some(qs) => pt.pdf(scene, Some(qs), pm, TransportMode::Importance),
+        Some(qs) => pt.pdf_in(scene, bsdfs, level, Some(qs), pm, TransportMode::Importance),
         None => pt.pdf_light(scene, pm),
     });
     let qs_rev = qs
         .as_ref()
-        .map(|q| pt.pdf(scene, pt_minus, q, TransportMode::Radiance));
+        .map(|q| pt.pdf_in(scene, bsdfs, level, pt_minus, q, TransportMode::Radiance));
     let qs_minus_rev = match (&qs, qs_minus) {
-        (Some(q), Some(qm)) => Some(q.pdf(scene, Some(&pt), qm, TransportMode::Radiance)),
+        (Some(q), Some(qm)) => {
+            Some(q.pdf_in(scene, bsdfs, level, Some(&pt), qm, TransportMode::Radiance))
+        }
         _ => None,
     };
 
@@ -575,6 +705,27 @@ impl Bdpt {
         buffers: &mut SubpathBuffers,
         mut emit: impl FnMut(&Connection),
     ) {
+        self.sample_all_in(scene, &SceneBsdfs, raster, source, buffers, |c| {
+            if let Some(c) = &c[0] {
+                emit(c);
+            }
+        });
+    }
+
+    /// [`Bdpt::sample_all`] under every level of `bsdfs` at once
+    /// ([`connect_in`]): subpaths traced once, each technique passed to
+    /// `emit` as one entry per level (skipped when no level carries light).
+    pub fn sample_all_in<B: ConnectionBsdfs>(
+        &self,
+        scene: &Scene,
+        bsdfs: &B,
+        raster: Vec2,
+        source: &mut dyn RandomSource,
+        buffers: &mut SubpathBuffers,
+        mut emit: impl FnMut(&[Option<Connection>]),
+    ) {
+        let mut out = [None; MAX_CONNECTION_LEVELS];
+        let out = &mut out[..bsdfs.levels()];
         let rr = Some(self.rr_depth);
         source.set_stream(Stream::Camera);
         let nc = generate_camera_subpath(
@@ -600,16 +751,19 @@ impl Bdpt {
                 if (s == 1 && t == 1) || s + t < 2 || s + t - 1 > max_depth {
                     continue;
                 }
-                if let Some(c) = connect(
+                connect_in(
                     scene,
+                    bsdfs,
                     &buffers.camera,
                     &buffers.light,
                     s,
                     t,
                     source,
                     self.heuristic,
-                ) {
-                    emit(&c);
+                    out,
+                );
+                if out.iter().any(Option::is_some) {
+                    emit(out);
                 }
             }
         }

@@ -60,6 +60,7 @@ pub mod pssmlt;
 pub mod pt;
 pub mod registry;
 pub mod relt;
+pub mod tempered_pssmlt;
 pub mod vcm;
 
 use crate::color::Rgb;

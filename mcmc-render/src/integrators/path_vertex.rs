@@ -11,6 +11,7 @@
 //! overridden at the connection).
 
 use crate::bsdf::TransportMode;
+use crate::bsdf::textured::BsdfAt;
 use crate::color::Rgb;
 use crate::frame::Frame;
 use crate::geometry::SurfacePoint;
@@ -18,6 +19,32 @@ use crate::light::Light;
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
+
+/// Where the BSDFs at the vertices of a connection come from: the scene's
+/// own ([`SceneBsdfs`]), or one of several roughened copies of them (the
+/// levels of a tempered ladder, `crate::tempered`). A connection and its
+/// MIS weight are evaluated per level with the subpaths traced once.
+pub trait ConnectionBsdfs: Sync {
+    /// Number of levels.
+    fn levels(&self) -> usize;
+    /// The BSDF of level `level` at `sp`.
+    fn bsdf_at<'a>(&'a self, scene: &'a Scene, level: usize, sp: &SurfacePoint) -> BsdfAt<'a>;
+}
+
+/// The scene's own BSDFs: one level.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SceneBsdfs;
+
+impl ConnectionBsdfs for SceneBsdfs {
+    #[inline(always)]
+    fn levels(&self) -> usize {
+        1
+    }
+    #[inline(always)]
+    fn bsdf_at<'a>(&'a self, scene: &'a Scene, _level: usize, sp: &SurfacePoint) -> BsdfAt<'a> {
+        scene.bsdf_at(sp)
+    }
+}
 
 /// Marks "no emitter" in [`Vertex::light`].
 pub const NO_LIGHT: u32 = u32::MAX;
@@ -176,9 +203,20 @@ impl Vertex {
     /// True when a deterministic connection to this vertex can carry light:
     /// endpoints always, surfaces unless their BSDF is purely specular.
     pub fn is_connectible(&self, scene: &Scene) -> bool {
+        self.is_connectible_in(scene, &SceneBsdfs, 0)
+    }
+
+    /// [`Vertex::is_connectible`] with the BSDF of `level` of `bsdfs`.
+    #[inline(always)]
+    pub fn is_connectible_in<B: ConnectionBsdfs>(
+        &self,
+        scene: &Scene,
+        bsdfs: &B,
+        level: usize,
+    ) -> bool {
         match self.kind {
             VertexKind::Camera | VertexKind::Light | VertexKind::Infinite => true,
-            VertexKind::Surface => !scene.bsdf_at(&self.sp).is_delta(),
+            VertexKind::Surface => !bsdfs.bsdf_at(scene, level, &self.sp).is_delta(),
         }
     }
 
@@ -199,6 +237,19 @@ impl Vertex {
     /// the adjoint shading-normal correction for importance transport.
     /// Zero for non-surface vertices.
     pub fn f(&self, scene: &Scene, next: &Vertex, mode: TransportMode) -> Rgb {
+        self.f_in(scene, &SceneBsdfs, 0, next, mode)
+    }
+
+    /// [`Vertex::f`] with the BSDF of `level` of `bsdfs`.
+    #[inline(always)]
+    pub fn f_in<B: ConnectionBsdfs>(
+        &self,
+        scene: &Scene,
+        bsdfs: &B,
+        level: usize,
+        next: &Vertex,
+        mode: TransportMode,
+    ) -> Rgb {
         if self.kind != VertexKind::Surface {
             return Rgb::BLACK;
         }
@@ -206,9 +257,11 @@ impl Vertex {
             return Rgb::BLACK;
         };
         let frame = Frame::from_normal(self.sp.ns);
-        let f = scene
-            .bsdf_at(&self.sp)
-            .eval(frame.to_local(self.wo), frame.to_local(wi), mode);
+        let f = bsdfs.bsdf_at(scene, level, &self.sp).eval(
+            frame.to_local(self.wo),
+            frame.to_local(wi),
+            mode,
+        );
         match mode {
             TransportMode::Radiance => f,
             TransportMode::Importance => {
@@ -254,6 +307,20 @@ impl Vertex {
         next: &Vertex,
         mode: TransportMode,
     ) -> f32 {
+        self.pdf_in(scene, &SceneBsdfs, 0, prev, next, mode)
+    }
+
+    /// [`Vertex::pdf`] with the BSDF of `level` of `bsdfs`.
+    #[inline(always)]
+    pub fn pdf_in<B: ConnectionBsdfs>(
+        &self,
+        scene: &Scene,
+        bsdfs: &B,
+        level: usize,
+        prev: Option<&Vertex>,
+        next: &Vertex,
+        mode: TransportMode,
+    ) -> f32 {
         if matches!(self.kind, VertexKind::Light | VertexKind::Infinite) {
             return self.pdf_light(scene, next);
         }
@@ -267,9 +334,11 @@ impl Vertex {
                     return 0.0;
                 };
                 let frame = Frame::from_normal(self.sp.ns);
-                scene
-                    .bsdf_at(&self.sp)
-                    .pdf(frame.to_local(wp), frame.to_local(wn), mode)
+                bsdfs.bsdf_at(scene, level, &self.sp).pdf(
+                    frame.to_local(wp),
+                    frame.to_local(wn),
+                    mode,
+                )
             }
         };
         self.convert_density(pdf, next)

@@ -460,8 +460,16 @@ impl Scene {
     /// `Frame::from_normal(sp.ns)` the integrators use).
     #[inline(always)]
     pub fn bsdf_at(&self, sp: &SurfacePoint) -> BsdfAt<'_> {
+        self.bsdf_at_in(&self.bsdfs, sp)
+    }
+
+    /// [`Scene::bsdf_at`] with `bsdfs` (indexed like [`Scene::bsdfs`],
+    /// e.g. roughened copies of them) in place of the scene's BSDFs; the
+    /// textures and wrappers are the scene's.
+    #[inline(always)]
+    pub fn bsdf_at_in<'a>(&self, bsdfs: &'a [Bsdf], sp: &SurfacePoint) -> BsdfAt<'a> {
         let i = self.shapes[sp.shape as usize].bsdf as usize;
-        let bsdf = &self.bsdfs[i];
+        let bsdf = &bsdfs[i];
         let model = match self.textures.get(i) {
             Some(t) if !t.is_empty() => t.apply(bsdf, sp.uv),
             _ => match self.wrappers.get(i) {

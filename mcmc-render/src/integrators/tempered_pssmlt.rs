@@ -1,0 +1,309 @@
+//! Tempered replica exchange light transport, PSSMLT variant (Šik's thesis
+//! ch. 5; spec `seed000-ch5-6.md` §5.2–§5.4), on the Markov-chain driver.
+//!
+//! - **Levels**: `levels` replicas over one primary-sample state space,
+//!   temperatures log-evenly spaced from 1 to `t_max`; level `k` roughens
+//!   the BSDFs at the connecting vertices of every BDPT technique to
+//!   `√T_k · max(ρ, ρ_reg)` ([`crate::tempered`]). One evaluation of a
+//!   state gives every level's density (subpaths and visibility traced
+//!   once), so exchange moves trace nothing.
+//! - **Mutation**: every level's chain takes Kelemen's small step and a
+//!   large step (probability 0.3 by default).
+//! - **Exchanges**: `mcmc-core`'s moves between the levels of each replica
+//!   set, importance-sampled permutations by default (§5.3.2, §5.4).
+//! - **Start-up**: one shared pool of BDPT candidates, each traced once
+//!   and weighed by every level's (tempered) density, starts each level's
+//!   chains and gives its bootstrap `b̂_k`; every large step then updates
+//!   every level's running normalisation.
+//! - **Image** (Eq. 5.13): every level's samples, the `T = 1` contribution
+//!   `C(u)` weighted by the balance heuristic over chains,
+//!   `C(u) / (N Σ_j π_j(u)/b̂_j)` per sample, scaled by the level's `b`.
+//! - **Regularisation**: the schedule of [`Regularization`], evaluated at
+//!   sample index `regularization_n` and held for the run (the driver's
+//!   targets are stationary; see docs/tempered-replica-exchange.md).
+//!
+//! With one level (and no regularisation) the family is plain PSSMLT over
+//! BDPT ([`PssFamily`]), bit for bit.
+
+use super::registry::IntegratorSettings;
+use super::{DepthParams, RenderError, Rendered, RunSettings};
+use crate::integrators::bdpt::{Bdpt, MisHeuristic};
+use crate::markov::{self, ChainFamily, ChainParams, MltResult};
+use crate::observer::Observer;
+use crate::pss::{Mutation, MutationParams, PATH_CLASSES, PathSample, PssFamily, PssTarget};
+use crate::pss_dump::DumpSampler;
+use crate::scene::Scene;
+use crate::settings::check;
+use crate::tempered::{
+    MAX_LEVELS, Regularization, RegularizationSchedule, ScheduleKind, TemperedBdpt, TemperedBsdfs,
+    chain_mis_factors, ladder_json, level_density, log_of, temperatures,
+};
+use mcmc_core::kernel::Mixture;
+use mcmc_core::replica::{EvenOdd, ExchangeMove, IsPermutation, IsSwap, NeighbourSwap};
+use mcmc_core::space::TorusPoint;
+use mcmc_core::target::{Evaluation, Target};
+use serde_json::json;
+use std::sync::atomic::AtomicBool;
+
+crate::choice! {
+    /// The exchange move between levels.
+    pub enum TemperedExchange {
+        /// Importance-sampled permutation of all levels, after every level mutated (§5.3.2).
+        IsPermutation = "is_permutation",
+        /// Swap every neighbouring pair after the hotter one mutated (§5.3.1).
+        Neighbour = "neighbour",
+        /// Even or odd neighbour pairs, alternately.
+        EvenOdd = "even_odd",
+        /// Importance-sampled swap of one pair (§5.3.3).
+        IsSwap = "is_swap",
+        /// No exchanges: every level mixes alone.
+        None = "none",
+    }
+}
+
+fn level_count(v: &usize) -> Result<(), String> {
+    if (1..=MAX_LEVELS).contains(v) {
+        Ok(())
+    } else {
+        Err(format!("must lie in 1..={MAX_LEVELS}"))
+    }
+}
+
+crate::settings! {
+    /// Tempered PSSMLT settings (defaults from spec seed000 §5.4, §5.5).
+    pub struct TemperedPssmlt {
+        /// Number of levels (replicas), temperatures log-spaced from 1 to t_max.
+        pub levels: usize = 8, check level_count;
+        /// Hottest temperature T_max (roughness scale √T at the hottest level).
+        pub t_max: f64 = 2500.0, check check::at_least_one;
+        /// Exchange move: is_permutation, neighbour, even_odd, is_swap or none.
+        pub exchange: TemperedExchange = TemperedExchange::IsPermutation;
+        /// Regularisation schedule: off, constant (ρ0), geometric (ρ0·γ^n) or power (ρ0·(n+1)^-γ).
+        pub regularization: ScheduleKind = ScheduleKind::Off;
+        /// Initial regularisation roughness ρ0.
+        pub rho0: f64 = 4e-3, check check::non_negative;
+        /// Regularisation decline rate γ.
+        pub gamma: f64 = 1e-5, check check::non_negative;
+        /// Sample index n at which the schedule is evaluated (held for the run).
+        pub regularization_n: usize = 0;
+        flatten {
+            /// Path depth.
+            pub depth: DepthParams = DepthParams::default();
+            /// The mutation (Kelemen small step, large step 0.3).
+            pub mutation: MutationParams = MutationParams::default();
+            /// The driver (`kelemen_mis` only with one level).
+            pub chain: ChainParams = ChainParams::default();
+        }
+    }
+}
+
+impl TemperedPssmlt {
+    /// The regularisation schedule of these settings.
+    pub fn schedule(&self) -> Regularization {
+        Regularization {
+            kind: self.regularization,
+            rho0: self.rho0,
+            gamma: self.gamma,
+        }
+    }
+
+    /// The ladder's roughened BSDFs on `scene`.
+    pub fn ladder(&self, scene: &Scene) -> TemperedBsdfs {
+        TemperedBsdfs::new(
+            scene,
+            &temperatures(self.levels, self.t_max),
+            self.schedule().floor(self.regularization_n as u64),
+        )
+    }
+
+    /// The BDPT under the chains.
+    pub fn bdpt(&self) -> Bdpt {
+        Bdpt {
+            max_depth: self.depth.limit(),
+            rr_depth: self.depth.rr_depth,
+            heuristic: MisHeuristic::Power,
+        }
+    }
+}
+
+/// One level's target: `ln π_k` of the tempered BDPT sample.
+pub struct LevelTarget<'a> {
+    pss: PssTarget<'a, TemperedBdpt>,
+    level: usize,
+}
+
+impl Target<TorusPoint> for LevelTarget<'_> {
+    type Payload = PathSample;
+
+    fn evaluate(&self, state: &TorusPoint) -> Evaluation<PathSample> {
+        let e = self.pss.trace(state);
+        let pi = level_density(&e.payload, self.level).unwrap_or(f64::NAN);
+        Evaluation::new(log_of(pi), e.payload)
+    }
+}
+
+/// The tempered family: one member per level (at least two).
+pub struct TemperedFamily<'a> {
+    targets: Vec<LevelTarget<'a>>,
+    exchange: TemperedExchange,
+}
+
+impl<'a> TemperedFamily<'a> {
+    /// The family of `sampler`'s levels on `scene`.
+    pub fn new(scene: &'a Scene, sampler: &TemperedBdpt, exchange: TemperedExchange) -> Self {
+        let levels = sampler.bsdfs.temperatures().len();
+        TemperedFamily {
+            targets: (0..levels)
+                .map(|level| LevelTarget {
+                    pss: PssTarget {
+                        scene,
+                        sampler: sampler.clone(),
+                    },
+                    level,
+                })
+                .collect(),
+            exchange,
+        }
+    }
+}
+
+impl<'a> ChainFamily for TemperedFamily<'a> {
+    type State = TorusPoint;
+    type Target = LevelTarget<'a>;
+    type Mutation = Mutation;
+    type Kernel = Mixture<TorusPoint, PathSample>;
+
+    fn members(&self) -> usize {
+        self.targets.len()
+    }
+    fn target(&self, member: usize) -> &LevelTarget<'a> {
+        &self.targets[member]
+    }
+    fn kernel(
+        &self,
+        mutation: &Mutation,
+        _member: usize,
+    ) -> Result<Self::Kernel, markov::MltError> {
+        Ok(mutation.kernel()?)
+    }
+    fn independent_probability(&self, mutation: &Mutation) -> f64 {
+        mutation.large_step_probability
+    }
+    crate::primary_sample_space_family!();
+    fn exchange_move(&self) -> Option<Box<dyn ExchangeMove<TorusPoint, PathSample>>> {
+        let m = self.members();
+        match self.exchange {
+            TemperedExchange::IsPermutation => Some(Box::new(
+                IsPermutation::new(m).expect("IS permutations of at most 16 levels"),
+            )),
+            TemperedExchange::Neighbour => Some(Box::new(NeighbourSwap::new())),
+            TemperedExchange::EvenOdd => Some(Box::new(EvenOdd::new())),
+            TemperedExchange::IsSwap => Some(Box::new(IsSwap::new())),
+            TemperedExchange::None => None,
+        }
+    }
+    fn member_log_density(&self, member: usize, payload: &PathSample) -> Option<f64> {
+        Some(log_of(level_density(payload, member).unwrap_or(f64::NAN)))
+    }
+    fn class_weights(
+        &self,
+        member: usize,
+        payload: &PathSample,
+        b_hat: &[f64],
+    ) -> Option<[f64; PATH_CLASSES]> {
+        Some(chain_mis_factors(payload, member, b_hat))
+    }
+}
+
+impl IntegratorSettings for TemperedPssmlt {
+    const NAME: &'static str = "tempered-pssmlt";
+    const DESCRIPTION: &'static str = "Tempered replica exchange PSSMLT over BDPT (Šik's thesis ch. 5): connection BSDFs roughened by √T per level, IS permutations, all levels combined by MIS.";
+
+    fn validate(&self) -> Result<(), String> {
+        self.mutation.mutation()?;
+        if self.levels > 1 && self.chain.kelemen_mis {
+            return Err(
+                "tempered-pssmlt combines its levels by its own MIS; kelemen_mis needs levels=1"
+                    .into(),
+            );
+        }
+        if self.regularization != ScheduleKind::Off && !(self.rho0 > 0.0) {
+            return Err("regularization needs rho0 > 0".into());
+        }
+        Ok(())
+    }
+
+    fn planned_samples(&self, scene: &Scene, run: &RunSettings) -> Option<u64> {
+        self.chain.planned_mutations(scene, run)
+    }
+
+    fn render(
+        &self,
+        scene: &Scene,
+        run: &RunSettings,
+        stop: &AtomicBool,
+        observer: &dyn Observer,
+    ) -> Result<Rendered, RenderError> {
+        IntegratorSettings::validate(self).map_err(RenderError::Invalid)?;
+        let settings = self
+            .chain
+            .chain_settings(self.mutation.mutation().map_err(RenderError::Invalid)?, run);
+        let sampler = TemperedBdpt {
+            bdpt: self.bdpt(),
+            bsdfs: self.ladder(scene),
+        };
+        let result = if self.levels == 1 {
+            let family = PssFamily::new(scene, vec![sampler.clone()]);
+            markov::run(scene, &family, &settings, stop, observer)?
+        } else {
+            let family = TemperedFamily::new(scene, &sampler, self.exchange);
+            markov::run(scene, &family, &settings, stop, observer)?
+        };
+        Ok(report(&result, self, &sampler))
+    }
+}
+
+/// The registry's report of a tempered run: the driver's statistics (per
+/// level: `families[k]` acceptance, image share; `exchange`: pairs, round
+/// trips) plus the ladder, the swap acceptance matrix and round trips per
+/// hour.
+fn report(result: &MltResult, settings: &TemperedPssmlt, sampler: &TemperedBdpt) -> Rendered {
+    let max_depth = settings.depth.limit();
+    let mut rendered = markov::report::rendered(result, DumpSampler::Bdpt, max_depth, false);
+    let schedule = settings.schedule();
+    let n = settings.regularization_n as u64;
+    let mut ladder = ladder_json(&sampler.bsdfs, &schedule, n);
+    if let Some(ex) = &result.exchange {
+        let m = settings.levels;
+        let mut matrix = vec![vec![f64::NAN; m]; m];
+        for p in &ex.pairs {
+            if p.attempted > 0 {
+                let rate = p.accepted as f64 / p.attempted as f64;
+                matrix[p.i][p.j] = rate;
+                matrix[p.j][p.i] = rate;
+            }
+        }
+        let hours = result.seconds / 3600.0;
+        ladder["swap_acceptance_matrix"] = json!(matrix);
+        ladder["round_trips_per_hour"] = json!(if hours > 0.0 {
+            ex.round_trips as f64 / hours
+        } else {
+            0.0
+        });
+    }
+    ladder["level_acceptance"] = json!(
+        result
+            .member_stats
+            .iter()
+            .map(|s| s.as_ref().map(|s| s.acceptance_rate()))
+            .collect::<Vec<_>>()
+    );
+    rendered.statistics.insert("tempering".into(), ladder);
+    rendered.layers = result
+        .families
+        .iter()
+        .enumerate()
+        .map(|(k, f)| (format!("level-{k}"), f.image()))
+        .collect();
+    rendered
+}
