@@ -58,6 +58,8 @@ crate::settings! {
         pub multi_chain_perturbation: f64 = 0.0, check check::non_negative;
         /// Selection weight of the manifold perturbation (Mitsuba: off; not implemented yet, must be 0).
         pub manifold_perturbation: f64 = 0.0, check check::non_negative;
+        /// Selection weight of Veach's lens subpath mutation (not in Mitsuba; 0 by default).
+        pub lens_subpath_mutation: f64 = 0.0, check check::non_negative;
         /// Samples per pixel of the direct-lighting pass (path tracing of paths up to two segments; the chains take the rest); -1: off, the chains do everything (Mitsuba's default is 16).
         pub direct_samples: i64 = -1, check direct_samples;
         flatten {
@@ -79,6 +81,7 @@ impl Mlt {
             caustic_perturbation: self.caustic_perturbation,
             multi_chain_perturbation: self.multi_chain_perturbation,
             manifold_perturbation: self.manifold_perturbation,
+            lens_subpath: self.lens_subpath_mutation,
             independent: self.independent_mutation,
         }
     }

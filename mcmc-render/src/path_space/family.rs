@@ -21,6 +21,7 @@ use super::bidirectional::Bidirectional;
 use super::caustic_perturbation::CausticPerturbation;
 use super::independent::IndependentPath;
 use super::lens_perturbation::LensPerturbation;
+use super::lens_subpath::LensSubpath;
 use super::multi_chain_perturbation::MultiChainPerturbation;
 use super::state::{Path, PathTarget};
 use super::walk::{ChainSource, camera_walk, light_walk};
@@ -52,6 +53,9 @@ pub struct PathMutations {
     pub multi_chain_perturbation: f64,
     /// Weight of the manifold perturbation (not built yet: must be 0).
     pub manifold_perturbation: f64,
+    /// Weight of Veach's lens subpath mutation ([`LensSubpath`]; not in
+    /// Mitsuba).
+    pub lens_subpath: f64,
     /// Weight of the independent proposal ([`IndependentPath`]: a fresh
     /// start-up candidate; not in Mitsuba).
     pub independent: f64,
@@ -73,6 +77,7 @@ impl Default for PathMutations {
             caustic_perturbation: 0.0,
             multi_chain_perturbation: 0.0,
             manifold_perturbation: 0.0,
+            lens_subpath: 0.0,
             independent: 0.0,
         }
     }
@@ -96,6 +101,7 @@ impl PathMutations {
             ("lens_perturbation", self.lens_perturbation),
             ("caustic_perturbation", self.caustic_perturbation),
             ("multi_chain_perturbation", self.multi_chain_perturbation),
+            ("lens_subpath_mutation", self.lens_subpath),
         ];
         for (name, w) in built {
             if !(w.is_finite() && w >= 0.0) {
@@ -162,6 +168,9 @@ impl PathMutations {
                 Box::new(MultiChainPerturbation::default()),
             ));
         }
+        if self.lens_subpath > 0.0 {
+            parts.push((self.lens_subpath, Box::new(LensSubpath::default())));
+        }
         Mixture::new(parts).map_err(|e| e.to_string())
     }
 
@@ -172,7 +181,8 @@ impl PathMutations {
                 + self.independent
                 + self.lens_perturbation
                 + self.caustic_perturbation
-                + self.multi_chain_perturbation)
+                + self.multi_chain_perturbation
+                + self.lens_subpath)
     }
 }
 

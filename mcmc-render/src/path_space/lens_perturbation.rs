@@ -222,10 +222,25 @@ impl LensPerturbation {
         rng: &mut ChainRng,
     ) -> Result<usize, Invalid> {
         let j = lens_chain(x).ok_or(Invalid::Pattern)?;
+        let offset = self.offsets(x.scene).sample(uniform(rng), uniform(rng));
+        self.retrace(x, y, j, x.raster + offset, rng)?;
+        Ok(j)
+    }
+
+    /// Re-traces `x`'s camera chain `y_{k−1} … y_j` through `raster` (a
+    /// camera walk from `x`'s lens point) and reconnects it to the kept
+    /// `x_{j−1}` into `y` (the move's steps 2 and 3; the lens subpath
+    /// mutation draws `raster` uniformly instead).
+    pub(crate) fn retrace<'s>(
+        &mut self,
+        x: &Path<'s>,
+        y: &mut Path<'s>,
+        j: usize,
+        raster: glam::Vec2,
+        rng: &mut ChainRng,
+    ) -> Result<(), Invalid> {
         let scene = x.scene;
         let k = x.segments();
-        let offset = self.offsets(scene).sample(uniform(rng), uniform(rng));
-        let raster = x.raster + offset;
         if !on_image(scene, raster) {
             return Err(Invalid::OffImage);
         }
@@ -269,7 +284,7 @@ impl LensPerturbation {
         if y.contribution.is_black() {
             return Err(Invalid::ZeroContribution);
         }
-        Ok(j)
+        Ok(())
     }
 }
 

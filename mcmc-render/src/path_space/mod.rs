@@ -14,6 +14,7 @@
 //! - [`lens_perturbation`]: Veach's lens perturbation.
 //! - [`caustic_perturbation`]: Veach's caustic perturbation.
 //! - [`multi_chain_perturbation`]: Veach's multi-chain perturbation.
+//! - [`lens_subpath`]: Veach's lens subpath mutation.
 //! - [`family`]: the driver's [`crate::markov::ChainFamily`] for path space
 //!   (start-up candidates by bidirectional techniques, the mutation
 //!   mixture).
@@ -45,6 +46,7 @@ pub mod caustic_perturbation;
 pub mod family;
 pub mod independent;
 pub mod lens_perturbation;
+pub mod lens_subpath;
 pub mod multi_chain_perturbation;
 pub mod state;
 pub mod walk;
