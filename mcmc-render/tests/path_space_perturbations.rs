@@ -1121,9 +1121,9 @@ fn stationarity_z<'s, K: Kernel<Path<'s>, PathSample>>(
     worst
 }
 
-/// Each perturbation alone, on the paths of its pattern (which it keeps,
-/// so `π` restricted to them is invariant), and the mixture of all
-/// mutations at weight 1 on every path, started from exact samples:
+/// Each perturbation (and the lens subpath mutation) alone, on the paths
+/// of its pattern (which it keeps, so `π` restricted to them is
+/// invariant), and the mixture of all mutations at weight 1 on every path, started from exact samples:
 /// importance resampling from 200 000 start-up candidates (the driver's
 /// MIS weights), 2 000 chains of 300 steps (the last 200 averaged). The chains' average of raster
 /// x, raster y and squared radius must match a second, independent
@@ -1160,10 +1160,18 @@ fn perturbations_keep_exact_start_states_exact() {
         &multi,
         300,
     );
+    let z_subpath = stationarity_z(
+        "lens subpath",
+        &mut LensSubpath::default(),
+        &family,
+        &lens,
+        500,
+    );
     let mut mixture = PathMutations {
         lens_perturbation: 1.0,
         caustic_perturbation: 1.0,
         multi_chain_perturbation: 1.0,
+        lens_subpath: 1.0,
         ..PathMutations::default()
     }
     .kernel(Some(4))
@@ -1187,6 +1195,7 @@ fn perturbations_keep_exact_start_states_exact() {
         ("lens", z_lens),
         ("caustic", z_caustic),
         ("multi-chain", z_multi),
+        ("lens subpath", z_subpath),
         ("mixture", z_mixture),
     ] {
         assert!(z < 4.0, "{name}: the chains drift from π: |z| = {z:.2}");
