@@ -308,4 +308,13 @@ impl Camera {
             origin: lens,
         })
     }
+
+    /// Angle per pixel of the full film, the smaller of the horizontal and
+    /// vertical field of view over its pixels (Mitsuba 0.6's `radPerPixel`,
+    /// which sizes the caustic perturbation).
+    pub fn radians_per_pixel(&self) -> f32 {
+        let x = 2.0 * self.tan_x.atan() / self.full_width;
+        let y = 2.0 * self.tan_y.atan() / self.full_height;
+        x.min(y)
+    }
 }

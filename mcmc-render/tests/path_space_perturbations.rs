@@ -43,19 +43,41 @@
 //! (`p_Δ` is symmetric), within 1e-4 (finite differences in f32; measured
 //! 4.8e-6); the control, a symmetric kernel's ratio 0, must be off by more
 //! than 1e-2.
+//!
+//! # Caustic perturbation: method
+//!
+//! Same scene. From one fixed path `x = x_0 x_1 x_2 x_3` (light, the
+//! mirror, diffuse, camera: pattern `L S D E`, the chain starts at the
+//! light, `l = 0`) the caustic perturbation is run `N` times. Each valid
+//! proposal is binned by the direction `y_1 − x_0` in cells uniform in
+//! `(ln θ, φ)` about `x_1 − x_0` (θ between the kernel's `θ₁` and `θ₂`,
+//! φ in the test's own basis). A cell's expected count is `N ∫_cell
+//! T(x→y(ω)) · J(y) dω` with `y(ω)` traced by the test (light ray, mirror
+//! reflection, first hit) and `J = d₁² d₂² / (cos_m cos_2)` (`d₁`
+//! light–mirror, `d₂` mirror–`y_2`): the planar mirror's unfolded
+//! `|dA(y_2)/dω| = (d₁+d₂)²/cos_2` times the Dirac-coefficient factor of the
+//! lens test. Midpoint rule, 24×24 per cell; chi-square as above; the
+//! control drops the cosine at `y_2`. The ratio `ln T(y→x) − ln T(x→y)`
+//! must equal `ln J(y) − ln J(x)` within 1e-4 (`p_ω` is the same both
+//! ways), and a symmetric ratio must be off by more than 1e-2.
 
 mod common;
 
 use common::load_str;
-use glam::Vec2;
+use glam::{DVec3, Vec2, Vec3};
 use mcmc_core::kernel::Kernel;
 use mcmc_core::rng::stream_rng;
 use mcmc_core::sample::Sample;
 use mcmc_render::color::Rgb;
 use mcmc_render::integrators::path_vertex::Vertex;
-use mcmc_render::markov::{ChainSettings, Normalization};
+use mcmc_render::markov::{ChainFamily, ChainSettings, Normalization};
 use mcmc_render::observer::NoObserver;
+use mcmc_render::path_space::caustic_perturbation::{
+    AngleKernel, CausticPerturbation, caustic_chain,
+};
 use mcmc_render::path_space::lens_perturbation::{LensPerturbation, lens_chain};
+use mcmc_render::path_space::lens_subpath::LensSubpath;
+use mcmc_render::path_space::multi_chain_perturbation::{MultiChainPerturbation, multi_chain};
 use mcmc_render::path_space::{Path, PathFamily, PathMutations};
 use mcmc_render::pss::PathSample;
 use mcmc_render::scene::Scene;
@@ -164,14 +186,7 @@ fn valid(x: &Path, y: &Path) -> bool {
 /// density: `|dA(y_1)/dr| · d₁² d₂² / ((d₁+d₂)² cos_m)`, from the camera's
 /// ray map by central differences (`h` = 0.25 px; the map is smooth) and the mirror geometry.
 fn log_jacobian(y: &Path) -> f64 {
-    let scene = y.scene;
-    let cam = &scene.camera;
-    let h = 0.25f32;
-    let dir = |r: Vec2| cam.generate_ray(r).d.normalize().as_dvec3();
-    let r = y.raster;
-    let dx = (dir(r + Vec2::new(h, 0.0)) - dir(r - Vec2::new(h, 0.0))) / (2.0 * h as f64);
-    let dy = (dir(r + Vec2::new(0.0, h)) - dir(r - Vec2::new(0.0, h))) / (2.0 * h as f64);
-    let d_omega = dx.cross(dy).length();
+    let d_omega = pixel_solid_angle(y.scene, y.raster);
     let (c, m, y1) = (
         y.vertices[3].p().as_dvec3(),
         y.vertices[2].p().as_dvec3(),
@@ -184,6 +199,18 @@ fn log_jacobian(y: &Path) -> f64 {
     (da_dr * d1 * d1 * d2 * d2 / ((d1 + d2).powi(2) * cos_m)).ln()
 }
 
+/// `|dω/dr|`: the solid angle per unit raster area of the camera's rays
+/// at `r`, by central differences of `Camera::generate_ray` (`h` = 0.25
+/// px; the map is smooth).
+fn pixel_solid_angle(scene: &Scene, r: Vec2) -> f64 {
+    let cam = &scene.camera;
+    let h = 0.25f32;
+    let dir = |r: Vec2| cam.generate_ray(r).d.normalize().as_dvec3();
+    let dx = (dir(r + Vec2::new(h, 0.0)) - dir(r - Vec2::new(h, 0.0))) / (2.0 * h as f64);
+    let dy = (dir(r + Vec2::new(0.0, h)) - dir(r - Vec2::new(0.0, h))) / (2.0 * h as f64);
+    dx.cross(dy).length()
+}
+
 /// `ln cos θ` at `y_1` towards the mirror.
 fn log_cos_1(y: &Path) -> f64 {
     let w = (y.vertices[2].p() - y.vertices[1].p()).normalize();
@@ -192,16 +219,25 @@ fn log_cos_1(y: &Path) -> f64 {
 
 /// Cell of an offset (`None` outside `[r1, r2]`).
 fn cell_of(offset: Vec2, r1: f64, r2: f64) -> Option<usize> {
-    let r = offset.length() as f64;
+    polar_cell(offset_polar(offset), r1, r2, NR, NPHI)
+}
+
+/// `(|Δ|, φ)` of a film offset.
+fn offset_polar(offset: Vec2) -> (f64, f64) {
+    let phi = (offset.y as f64).atan2(offset.x as f64);
+    (offset.length() as f64, phi)
+}
+
+/// Cell of polar coordinates `(r, φ)` on an `nr × nphi` grid uniform in
+/// `(ln r, φ)` (`None` outside `[r1, r2]`).
+fn polar_cell((r, phi): (f64, f64), r1: f64, r2: f64, nr: usize, nphi: usize) -> Option<usize> {
     if !(r >= r1 && r < r2) {
         return None;
     }
-    let ir = (((r / r1).ln() / (r2 / r1).ln() * NR as f64) as usize).min(NR - 1);
-    let phi = (offset.y as f64)
-        .atan2(offset.x as f64)
-        .rem_euclid(2.0 * PI);
-    let ip = ((phi / (2.0 * PI) * NPHI as f64) as usize).min(NPHI - 1);
-    Some(ir * NPHI + ip)
+    let ir = (((r / r1).ln() / (r2 / r1).ln() * nr as f64) as usize).min(nr - 1);
+    let phi = phi.rem_euclid(2.0 * PI);
+    let ip = ((phi / (2.0 * PI) * nphi as f64) as usize).min(nphi - 1);
+    Some(ir * nphi + ip)
 }
 
 /// Expected probability per cell from the code's `T(x→·)`; `drop_cos`
@@ -401,4 +437,910 @@ fn mlt_with_lens_perturbation_agrees_with_pt_on_the_glass_box() {
     let biased: Vec<[f64; 3]> = mlt.iter().map(|m| m.map(|v| v * 1.01)).collect();
     let b = common::MeanAgreement::new(&pt, &biased);
     assert!(!b.failures(4.0, 0.01).is_empty(), "a 1% bias passed: {b:?}");
+}
+
+// ---------------------------------------------------------------------------
+// Caustic perturbation.
+
+/// A three-segment path light → mirror → diffuse → camera (pattern
+/// `L S D E`, the chain starts at the light) whose raster position is at
+/// least `margin` pixels inside the image.
+fn caustic_path(scene: &Scene, margin: f32) -> Path<'_> {
+    let family = PathFamily::new(scene, Some(3));
+    let mut rng = stream_rng(17, 0);
+    let r = RES as f32;
+    for _ in 0..1_000_000 {
+        let x = family.draw_candidate(&mut rng);
+        if x.segments() == 3
+            && x.luminance() > 0.0
+            && x.all_visible()
+            && x.vertices[1].delta
+            && caustic_chain(&x) == Some(0)
+            && x.raster.min_element() > margin
+            && x.raster.max_element() < r - margin
+        {
+            return x;
+        }
+    }
+    panic!("no light-mirror-diffuse-camera path found");
+}
+
+/// An orthonormal basis `(e1, e2)` about unit `w` (the test's own, for the
+/// azimuth of the histogram cells).
+fn basis(w: DVec3) -> (DVec3, DVec3) {
+    let helper = if w.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
+    let e1 = w.cross(helper).normalize();
+    (e1, w.cross(e1))
+}
+
+/// The direction of the ray spawned at surface vertex `from` towards `to`
+/// (from the offset origin, as the walks spawn rays: the perturbations'
+/// smallest angles are comparable to the offset).
+fn ray_dir(from: &Vertex, to: Vec3) -> DVec3 {
+    (to.as_dvec3() - from.sp.spawn_origin(to).as_dvec3()).normalize()
+}
+
+/// `(θ, φ)` of direction `d` about `w` in the basis of [`basis`].
+fn polar_of(w: DVec3, d: DVec3) -> (f64, f64) {
+    let (e1, e2) = basis(w);
+    let theta = w.cross(d).length().atan2(w.dot(d));
+    (theta, d.dot(e2).atan2(d.dot(e1)))
+}
+
+/// The path `x` with its light ray turned to `dir`, traced by the test:
+/// mirror hit, reflection, first hit. `None` when the ray misses the
+/// mirror or the reflected ray escapes.
+fn traced_from_light<'s>(x: &Path<'s>, dir: Vec3) -> Option<Path<'s>> {
+    let scene = x.scene;
+    let m = scene.intersect(&x.vertices[0].sp.spawn_ray(dir))?;
+    if !scene.bsdf_at(&m.sp).is_delta() {
+        return None;
+    }
+    let n = m.sp.ng;
+    let r = dir - 2.0 * dir.dot(n) * n;
+    let hit = scene.intersect(&m.sp.spawn_ray(r))?;
+    let mut y = x.clone();
+    let mut mirror = Vertex::surface(scene, m.sp, -dir, Rgb::WHITE);
+    mirror.delta = true;
+    y.vertices[1] = mirror;
+    y.vertices[2] = Vertex::surface(scene, hit.sp, -r, Rgb::WHITE);
+    y.normalize_ends();
+    y.evaluate();
+    Some(y)
+}
+
+/// True when `y` is a proposal the caustic perturbation makes from `x`:
+/// non-zero, pattern `L S D E`, camera visible, and the angle inside the
+/// reverse move's range (the kernel's support, read from the code).
+fn caustic_valid(kernel: &CausticPerturbation, x: &Path, y: &Path) -> bool {
+    y.contribution.luminance() > 0.0
+        && caustic_chain(y) == Some(0)
+        && y.edge_visible(2)
+        && kernel.log_transition_density(y, x) > f64::NEG_INFINITY
+}
+
+/// `ln` of the factor that turns the code's `T(x→y)` into a solid-angle
+/// density at `x_0`: `|dA(y_2)/dω| · d₁² d₂² / ((d₁+d₂)² cos_m P)` with the
+/// planar mirror unfolding `|dA(y_2)/dω| = (d₁+d₂)²/cos θ_2`, i.e.
+/// `d₁² d₂² / (cos_m cos_2)` (`P = 1`), from the geometry alone.
+fn caustic_log_jacobian(y: &Path) -> f64 {
+    let (l, m, y2) = (
+        y.vertices[0].p().as_dvec3(),
+        y.vertices[1].p().as_dvec3(),
+        y.vertices[2].p().as_dvec3(),
+    );
+    let (d1, d2) = ((m - l).length(), (y2 - m).length());
+    let cos_m = y.vertices[1].sp.ng.as_dvec3().dot((l - m) / d1).abs();
+    let cos_2 = y.vertices[2].sp.ng.as_dvec3().dot((m - y2) / d2).abs();
+    (d1 * d1 * d2 * d2 / (cos_m * cos_2)).ln()
+}
+
+/// `ln cos θ` at `y_2` towards the mirror.
+fn log_cos_2(y: &Path) -> f64 {
+    let w = (y.vertices[1].p() - y.vertices[2].p()).normalize();
+    (y.vertices[2].sp.ng.dot(w).abs() as f64).ln()
+}
+
+/// Expected probability per `(ln θ, φ)` cell from the code's `T(x→·)`;
+/// `drop_cos` removes the cosine at `y_2` (the control).
+fn caustic_masses(kernel: &CausticPerturbation, x: &Path, drop_cos: bool) -> Vec<f64> {
+    let angles = kernel.angles(x, 0).expect("angle kernel");
+    let (lt1, lt2) = (angles.theta1.ln(), angles.theta2.ln());
+    let w = ray_dir(&x.vertices[0], x.vertices[1].p());
+    let (e1, e2) = basis(w);
+    let mut masses = vec![0.0; NR * NPHI];
+    let dl = (lt2 - lt1) / (NR * QUAD) as f64;
+    let dphi = 2.0 * PI / (NPHI * QUAD) as f64;
+    for il in 0..NR * QUAD {
+        for ip in 0..NPHI * QUAD {
+            let theta = (lt1 + (il as f64 + 0.5) * dl).exp();
+            let phi = (ip as f64 + 0.5) * dphi;
+            let d = w * theta.cos() + (e1 * phi.cos() + e2 * phi.sin()) * theta.sin();
+            let Some(y) = traced_from_light(x, d.as_vec3()) else {
+                continue;
+            };
+            if !caustic_valid(kernel, x, &y) {
+                continue;
+            }
+            let mut ln_t = kernel.log_transition_density(x, &y);
+            if drop_cos {
+                ln_t -= log_cos_2(&y);
+            }
+            if ln_t == f64::NEG_INFINITY {
+                continue;
+            }
+            let q = (ln_t + caustic_log_jacobian(&y)).exp();
+            let cell = (il / QUAD) * NPHI + ip / QUAD;
+            // dω = sin θ dθ dφ = sin θ · θ d(ln θ) dφ.
+            masses[cell] += q * theta.sin() * theta * dl * dphi;
+        }
+    }
+    masses
+}
+
+#[test]
+fn caustic_perturbation_density_matches_its_proposals() {
+    let scene = mirror_box();
+    let mut kernel = CausticPerturbation::default();
+    let x = caustic_path(scene, 4.0);
+    let angles = kernel.angles(&x, 0).expect("angle kernel");
+    // Mitsuba's sizes: the lens perturbation's film offsets as angles
+    // seen from the camera, times |x_3 − x_2| / (|x_1 − x_0| + |x_2 − x_1|).
+    let p = |i: usize| x.vertices[i].p().as_dvec3();
+    let factor = (p(3) - p(2)).length() / ((p(1) - p(0)).length() + (p(2) - p(1)).length());
+    let per_pixel = scene.camera.radians_per_pixel() as f64;
+    let r2 = (0.05f64 * (RES * RES) as f64 / PI).sqrt();
+    assert!((angles.theta1 / (per_pixel * 0.1 * factor) - 1.0).abs() < 1e-9);
+    assert!((angles.theta2 / (per_pixel * r2 * factor) - 1.0).abs() < 1e-9);
+    eprintln!("θ1 = {:.2e}, θ2 = {:.2e} rad", angles.theta1, angles.theta2);
+    let current = sample_of(&x);
+    let mut proposal = sample_of(&x);
+    let mut rng = stream_rng(19, 0);
+    let mut counts = vec![0u64; NR * NPHI];
+    let mut ys = Vec::new();
+    let w = ray_dir(&x.vertices[0], x.vertices[1].p());
+    for _ in 0..N {
+        let prop = kernel.propose(&current, &mut proposal, &mut rng);
+        if prop.failed {
+            continue;
+        }
+        let y = &proposal.state;
+        let (theta, phi) = polar_of(w, ray_dir(&x.vertices[0], y.vertices[1].p()));
+        if let Some(c) = polar_cell((theta, phi), angles.theta1, angles.theta2, NR, NPHI) {
+            counts[c] += 1;
+        }
+        if ys.len() < 200 {
+            ys.push((y.clone(), prop.log_q_ratio));
+        }
+    }
+    let masses = caustic_masses(&kernel, &x, false);
+    let p_value = common::chi_square_p_value(&counts, &masses, N);
+    assert!(
+        p_value > 1e-4,
+        "T(x→·) disagrees with the proposals: p = {p_value:.2e}"
+    );
+    let wrong = caustic_masses(&kernel, &x, true);
+    let p_wrong = common::chi_square_p_value(&counts, &wrong, N);
+    assert!(
+        p_wrong < 1e-4,
+        "a density without the cosine at y_2 passed: p = {p_wrong:.2e}"
+    );
+
+    // The ratio, against the independent Jacobians (p_ω is the same both
+    // ways: T(x→y) = p_ω(θ) / J(y)).
+    assert!(ys.len() == 200, "too few valid proposals: {}", ys.len());
+    let (mut worst, mut worst_symmetric) = (0.0f64, 0.0f64);
+    for (y, reported) in &ys {
+        let forward = kernel.log_transition_density(&x, y);
+        let backward = kernel.log_transition_density(y, &x);
+        assert!(forward.is_finite() && backward.is_finite());
+        let code = backward - forward;
+        assert!(
+            (code - reported).abs() < 1e-9,
+            "kernel ratio {reported} vs densities {code}"
+        );
+        let independent = caustic_log_jacobian(y) - caustic_log_jacobian(&x);
+        worst = worst.max((code - independent).abs());
+        worst_symmetric = worst_symmetric.max(independent.abs());
+    }
+    eprintln!(
+        "worst |ln ratio − independent| = {worst:.2e}, symmetric control {worst_symmetric:.2e}"
+    );
+    assert!(worst < 1e-4, "T ratio off by {worst}");
+    assert!(
+        worst_symmetric > 1e-2,
+        "the control (ratio 0) passed: {worst_symmetric}"
+    );
+}
+
+#[test]
+fn caustic_perturbation_pattern() {
+    // Two-segment paths: L D E matches (the light's direction turns, no
+    // chain), L S E does not (the camera sees a mirror: no connection to
+    // the camera). A proposal from L D E never fails as a mismatch.
+    let scene = mirror_box();
+    let family = PathFamily::new(scene, Some(2));
+    let mut rng = stream_rng(23, 0);
+    let mut kernel = CausticPerturbation::default();
+    let (mut lde, mut lse) = (0, 0);
+    for _ in 0..50_000 {
+        let x = family.draw_candidate(&mut rng);
+        if x.segments() != 2 || x.luminance() <= 0.0 {
+            continue;
+        }
+        let current = sample_of(&x);
+        let mut proposal = sample_of(&x);
+        let p = kernel.propose(&current, &mut proposal, &mut rng);
+        if x.vertices[1].delta {
+            lse += 1;
+            assert_eq!(caustic_chain(&x), None);
+            assert!(p.failed && p.component == 1, "L S E must mismatch");
+        } else {
+            lde += 1;
+            assert_eq!(caustic_chain(&x), Some(0));
+            assert!(p.component != 1, "L D E matches the pattern");
+        }
+    }
+    eprintln!("L D E {lde}, L S E {lse}");
+    assert!(lde > 100, "too few L D E paths: {lde}");
+    // Component 0 and one per failure reason.
+    assert_eq!(kernel.component_names().len(), 10);
+}
+
+// ---------------------------------------------------------------------------
+// Multi-chain perturbation.
+
+/// Cells per polar axis of the multi-chain test (film offset and angle:
+/// 4 × 4 each, 256 joint cells).
+const NM: usize = 4;
+/// Quadrature points per cell and axis: film offset, angle (the angle
+/// kernel is uniform in `(ln θ, φ)`, so few points resolve it).
+const QM_OFFSET: usize = 12;
+const QM_ANGLE: usize = 4;
+
+/// A four-segment path light → diffuse → mirror → diffuse → camera
+/// (pattern `L D S D E`, `j = 1`) whose raster position is at least
+/// `margin` pixels inside the image.
+fn multi_chain_path(scene: &Scene, margin: f32) -> Path<'_> {
+    let family = PathFamily::new(scene, Some(4));
+    let mut rng = stream_rng(29, 0);
+    let r = RES as f32;
+    for _ in 0..2_000_000 {
+        let x = family.draw_candidate(&mut rng);
+        if x.segments() == 4
+            && x.luminance() > 0.0
+            && x.all_visible()
+            && x.vertices[2].delta
+            && multi_chain(&x) == Some(1)
+            && x.raster.min_element() > margin
+            && x.raster.max_element() < r - margin
+        {
+            return x;
+        }
+    }
+    panic!("no light-diffuse-mirror-diffuse-camera path found");
+}
+
+/// The path `x` with its camera ray through `raster` and the direction
+/// `dir` leaving the vertex the camera sees, traced by the test: diffuse
+/// hit, then mirror hit, reflection, first hit.
+fn traced_multi<'s>(x: &Path<'s>, raster: Vec2, dir: Vec3) -> Option<Path<'s>> {
+    let scene = x.scene;
+    let ray = scene.camera.generate_ray(raster);
+    let seen = scene.intersect(&ray)?;
+    if scene.bsdf_at(&seen.sp).is_delta() {
+        return None;
+    }
+    let m = scene.intersect(&seen.sp.spawn_ray(dir))?;
+    if !scene.bsdf_at(&m.sp).is_delta() {
+        return None;
+    }
+    let n = m.sp.ng;
+    let r = dir - 2.0 * dir.dot(n) * n;
+    let hit = scene.intersect(&m.sp.spawn_ray(r))?;
+    let mut y = x.clone();
+    y.vertices[3] = Vertex::surface(scene, seen.sp, -ray.d.normalize(), Rgb::WHITE);
+    let mut mirror = Vertex::surface(scene, m.sp, -dir, Rgb::WHITE);
+    mirror.delta = true;
+    y.vertices[2] = mirror;
+    y.vertices[1] = Vertex::surface(scene, hit.sp, -r, Rgb::WHITE);
+    y.normalize_ends();
+    y.evaluate();
+    Some(y)
+}
+
+/// True when `y` is a proposal the multi-chain perturbation accepts.
+fn multi_valid(x: &Path, y: &Path) -> bool {
+    let scene = x.scene;
+    y.contribution.luminance() > 0.0
+        && multi_chain(y) == Some(1)
+        && y.vertices[2].delta
+        && scene.geometry.visible(&x.vertices[0].sp, &y.vertices[1].sp)
+}
+
+/// `ln J(y)`, the factor that turns the code's `T(x→y)` into a density
+/// over (film offset, direction at `y_3`): the camera's `|dA(y_3)/dr| =
+/// |dω/dr| d_c² / cos_3` times the mirror chain's `d₁² d₂² / (cos_m
+/// cos_1)` (as in the caustic test), from the geometry alone.
+fn multi_log_jacobian(y: &Path) -> f64 {
+    let p = |i: usize| y.vertices[i].p().as_dvec3();
+    let ng = |i: usize| y.vertices[i].sp.ng.as_dvec3();
+    let d_c = (p(4) - p(3)).length();
+    let cos_3 = ng(3).dot((p(4) - p(3)) / d_c).abs();
+    let (d1, d2) = ((p(2) - p(3)).length(), (p(1) - p(2)).length());
+    let cos_m = ng(2).dot((p(3) - p(2)) / d1).abs();
+    let cos_1 = ng(1).dot((p(2) - p(1)) / d2).abs();
+    (pixel_solid_angle(y.scene, y.raster) * d_c * d_c / cos_3 * d1 * d1 * d2 * d2 / (cos_m * cos_1))
+        .ln()
+}
+
+/// The joint cell of a proposal: film offset cell × angle cell.
+fn multi_cell(
+    kernel: &MultiChainPerturbation,
+    x: &Path,
+    offset: (f64, f64),
+    angle: (f64, f64),
+) -> Option<usize> {
+    let o = kernel.offsets(x.scene);
+    let a = kernel.angles;
+    let co = polar_cell(offset, o.r1, o.r2, NM, NM)?;
+    let ca = polar_cell(angle, a.theta1, a.theta2, NM, NM)?;
+    Some(co * NM * NM + ca)
+}
+
+/// Expected probability per joint cell from the code's `T(x→·)`;
+/// `drop_cos` removes the cosine at `y_1` (the control).
+fn multi_masses(kernel: &MultiChainPerturbation, x: &Path, drop_cos: bool) -> Vec<f64> {
+    let o = kernel.offsets(x.scene);
+    let a = kernel.angles;
+    let w = ray_dir(&x.vertices[3], x.vertices[2].p());
+    let (e1, e2) = basis(w);
+    let mut masses = vec![0.0; NM.pow(4)];
+    let (no, na) = (NM * QM_OFFSET, NM * QM_ANGLE);
+    let dlo = (o.r2 / o.r1).ln() / no as f64;
+    let dla = (a.theta2 / a.theta1).ln() / na as f64;
+    let (dpo, dpa) = (2.0 * PI / no as f64, 2.0 * PI / na as f64);
+    for io in 0..no {
+        let r = o.r1 * ((io as f64 + 0.5) * dlo).exp();
+        for po in 0..no {
+            let phi = (po as f64 + 0.5) * dpo;
+            let raster = x.raster + Vec2::new((r * phi.cos()) as f32, (r * phi.sin()) as f32);
+            for ia in 0..na {
+                let theta = a.theta1 * ((ia as f64 + 0.5) * dla).exp();
+                for pa in 0..na {
+                    let psi = (pa as f64 + 0.5) * dpa;
+                    let d = w * theta.cos() + (e1 * psi.cos() + e2 * psi.sin()) * theta.sin();
+                    let Some(y) = traced_multi(x, raster, d.as_vec3()) else {
+                        continue;
+                    };
+                    if !multi_valid(x, &y) {
+                        continue;
+                    }
+                    let mut ln_t = kernel.log_transition_density(x, &y);
+                    if drop_cos {
+                        ln_t -= log_cos_1(&y);
+                    }
+                    if ln_t == f64::NEG_INFINITY {
+                        continue;
+                    }
+                    let q = (ln_t + multi_log_jacobian(&y)).exp();
+                    let Some(cell) = multi_cell(kernel, x, (r, phi), (theta, psi)) else {
+                        continue;
+                    };
+                    // d²Δ dω = r² d(ln r) dφ · θ sin θ d(ln θ) dψ.
+                    masses[cell] += q * r * r * dlo * dpo * theta * theta.sin() * dla * dpa;
+                }
+            }
+        }
+    }
+    masses
+}
+
+#[test]
+fn multi_chain_perturbation_density_matches_its_proposals() {
+    let scene = mirror_box();
+    let mut kernel = MultiChainPerturbation::default();
+    // Mitsuba's angle sizes by default.
+    assert!((kernel.angles.theta1 - 1e-4 * PI / 180.0).abs() < 1e-15);
+    assert!((kernel.angles.theta2 - 0.1 * PI / 180.0).abs() < 1e-15);
+    // Mitsuba's θ₁ = 1.7e-6 rad is within a few f32 ulps of the positions
+    // (directions between hit points are off by up to 5e-7 rad here,
+    // measured), which the histogram cannot resolve: the test runs the
+    // same kernel at θ₁ = 0.01°, θ₂ = 1°.
+    kernel.angles = AngleKernel {
+        theta1: 0.01f64.to_radians(),
+        theta2: 1f64.to_radians(),
+    };
+    let offsets = kernel.offsets(scene);
+    let x = multi_chain_path(scene, offsets.r2 as f32 + 1.0);
+    let current = sample_of(&x);
+    let mut proposal = sample_of(&x);
+    let mut rng = stream_rng(31, 0);
+    let mut counts = vec![0u64; NM.pow(4)];
+    let mut ys = Vec::new();
+    let w = ray_dir(&x.vertices[3], x.vertices[2].p());
+    for _ in 0..N {
+        let prop = kernel.propose(&current, &mut proposal, &mut rng);
+        if prop.failed {
+            continue;
+        }
+        let y = &proposal.state;
+        let d = ray_dir(&y.vertices[3], y.vertices[2].p());
+        let offset = offset_polar(y.raster - x.raster);
+        if let Some(c) = multi_cell(&kernel, &x, offset, polar_of(w, d)) {
+            counts[c] += 1;
+        }
+        if ys.len() < 200 {
+            ys.push((y.clone(), prop.log_q_ratio));
+        }
+    }
+    let masses = multi_masses(&kernel, &x, false);
+    let p = common::chi_square_p_value(&counts, &masses, N);
+    assert!(p > 1e-4, "T(x→·) disagrees with the proposals: p = {p:.2e}");
+    let wrong = multi_masses(&kernel, &x, true);
+    let p_wrong = common::chi_square_p_value(&counts, &wrong, N);
+    assert!(
+        p_wrong < 1e-4,
+        "a density without the cosine at y_1 passed: p = {p_wrong:.2e}"
+    );
+
+    // The ratio, against the independent Jacobians (T(x→y) = p_Δ p_ω / J(y)).
+    assert!(ys.len() == 200, "too few valid proposals: {}", ys.len());
+    let (mut worst, mut worst_symmetric) = (0.0f64, 0.0f64);
+    for (y, reported) in &ys {
+        let forward = kernel.log_transition_density(&x, y);
+        let backward = kernel.log_transition_density(y, &x);
+        assert!(forward.is_finite() && backward.is_finite());
+        let code = backward - forward;
+        assert!(
+            (code - reported).abs() < 1e-6,
+            "kernel ratio {reported} vs densities {code}"
+        );
+        let independent = multi_log_jacobian(y) - multi_log_jacobian(&x);
+        worst = worst.max((code - independent).abs());
+        worst_symmetric = worst_symmetric.max(independent.abs());
+    }
+    eprintln!(
+        "worst |ln ratio − independent| = {worst:.2e}, symmetric control {worst_symmetric:.2e}"
+    );
+    assert!(worst < 1e-4, "T ratio off by {worst}");
+    assert!(
+        worst_symmetric > 1e-2,
+        "the control (ratio 0) passed: {worst_symmetric}"
+    );
+}
+
+#[test]
+fn multi_chain_perturbation_pattern() {
+    // Four-segment paths: only L D S D E matches (j = 1); L D D S E, L D S
+    // S E, … do not, and their proposals fail as mismatches.
+    let scene = mirror_box();
+    let family = PathFamily::new(scene, Some(4));
+    let mut rng = stream_rng(37, 0);
+    let mut kernel = MultiChainPerturbation::default();
+    let (mut matched, mut other) = (0, 0);
+    for _ in 0..50_000 {
+        let x = family.draw_candidate(&mut rng);
+        if x.luminance() <= 0.0 {
+            continue;
+        }
+        let ldsde = x.segments() == 4
+            && (0..4).all(|i| x.vertices[i].delta == (i == 2))
+            && (0..4).all(|i| x.connectible(i) == (i != 2));
+        let current = sample_of(&x);
+        let mut proposal = sample_of(&x);
+        let p = kernel.propose(&current, &mut proposal, &mut rng);
+        if ldsde {
+            matched += 1;
+            assert_eq!(multi_chain(&x), Some(1));
+            assert!(p.component != 1, "L D S D E matches the pattern");
+        } else {
+            other += 1;
+            assert_eq!(multi_chain(&x), None, "{x:?}");
+            assert!(p.failed && p.component == 1, "only L D S D E matches");
+        }
+    }
+    eprintln!("L D S D E {matched}, others {other}");
+    assert!(matched > 20, "too few L D S D E paths: {matched}");
+    assert_eq!(kernel.component_names().len(), 8);
+}
+
+// ---------------------------------------------------------------------------
+// Stationarity from exact start states.
+
+/// A kernel whose reported ratio is replaced by 0 (a perturbation treated
+/// as symmetric: every Jacobian dropped). The control of the
+/// stationarity test.
+struct Symmetric<K>(K);
+
+impl<'s, K: Kernel<Path<'s>, PathSample>> Kernel<Path<'s>, PathSample> for Symmetric<K> {
+    fn propose(
+        &mut self,
+        current: &Sample<Path<'s>, PathSample>,
+        proposal: &mut Sample<Path<'s>, PathSample>,
+        rng: &mut mcmc_core::rng::ChainRng,
+    ) -> mcmc_core::kernel::Proposal {
+        let mut p = self.0.propose(current, proposal, rng);
+        if !p.failed {
+            p.log_q_ratio = 0.0;
+        }
+        p
+    }
+
+    fn component_names(&self) -> Vec<String> {
+        self.0.component_names()
+    }
+}
+
+/// Statistics of a path restricted to a set: `1`, raster x and y (in
+/// image widths), and the squared distance from the image centre, each
+/// times the set's indicator.
+fn stats(x: &Path, in_set: bool) -> [f64; 4] {
+    if !in_set {
+        return [0.0; 4];
+    }
+    let (rx, ry) = (
+        x.raster.x as f64 / RES as f64,
+        x.raster.y as f64 / RES as f64,
+    );
+    [1.0, rx, ry, (rx - 0.5).powi(2) + (ry - 0.5).powi(2)]
+}
+
+/// Self-normalised importance estimate of `E_π[h | set]` from `m`
+/// start-up candidates (seed `seed`), with its delta-method standard
+/// error, and the candidates in the set with their log weights.
+#[allow(clippy::type_complexity)]
+fn reference<'s>(
+    family: &PathFamily<'s>,
+    set: &dyn Fn(&Path) -> bool,
+    m: usize,
+    seed: u64,
+) -> ([f64; 4], [f64; 4], Vec<(Path<'s>, f64)>) {
+    let mut rng = stream_rng(seed, 0);
+    let mut kept = Vec::new();
+    for _ in 0..m {
+        let x = family.draw_candidate(&mut rng);
+        let lw = family.candidate_log_weight(0, &x);
+        if lw.is_finite() && set(&x) {
+            kept.push((x, lw));
+        }
+    }
+    let max = kept.iter().map(|c| c.1).fold(f64::NEG_INFINITY, f64::max);
+    let w: Vec<f64> = kept.iter().map(|c| (c.1 - max).exp()).collect();
+    let sw: f64 = w.iter().sum();
+    let mut mean = [0.0; 4];
+    for (c, wi) in kept.iter().zip(&w) {
+        let h = stats(&c.0, true);
+        for d in 0..4 {
+            mean[d] += wi * h[d] / sw;
+        }
+    }
+    let mut se = [0.0; 4];
+    for (c, wi) in kept.iter().zip(&w) {
+        let h = stats(&c.0, true);
+        for d in 0..4 {
+            se[d] += (wi / sw).powi(2) * (h[d] - mean[d]).powi(2);
+        }
+    }
+    (mean, se.map(f64::sqrt), kept)
+}
+
+/// Mean over `k` chains of the per-chain average of `stats` over the last
+/// two thirds of `n` Metropolis–Hastings steps (`mcmc-core`'s acceptance;
+/// every step's marginal is `π` for exact starts, and a wrong kernel has
+/// drifted furthest at the end) of `kernel`, each
+/// chain started from a candidate resampled in proportion to its weight;
+/// and the standard error from the `k` independent chain averages.
+fn chain_means<'s, K: Kernel<Path<'s>, PathSample>>(
+    kernel: &mut K,
+    starts: &[(Path<'s>, f64)],
+    k: usize,
+    n: usize,
+    seed: u64,
+) -> ([f64; 4], [f64; 4]) {
+    use mcmc_core::mh::{accept, mh_log_acceptance};
+    use mcmc_core::rng::uniform;
+    let max = starts.iter().map(|c| c.1).fold(f64::NEG_INFINITY, f64::max);
+    let mut cdf = Vec::with_capacity(starts.len());
+    let mut acc = 0.0;
+    for c in starts {
+        acc += (c.1 - max).exp();
+        cdf.push(acc);
+    }
+    let target = mcmc_render::path_space::PathTarget;
+    let mut per_chain = Vec::with_capacity(k);
+    for chain in 0..k {
+        let mut rng = stream_rng(seed, chain as u64);
+        let u = uniform(&mut rng) * acc;
+        let i = cdf.partition_point(|&c| c < u).min(starts.len() - 1);
+        let mut current = sample_of(&starts[i].0);
+        let mut scratch = current.clone();
+        let mut sum = [0.0; 4];
+        for step in 0..n {
+            let p = kernel.propose(&current, &mut scratch, &mut rng);
+            if !p.failed {
+                scratch.reevaluate(&target);
+                let (log_alpha, _) =
+                    mh_log_acceptance(current.log_density, scratch.log_density, p.log_q_ratio);
+                if accept(log_alpha, &mut rng) {
+                    std::mem::swap(&mut current, &mut scratch);
+                }
+            }
+            if step >= n / 3 {
+                let h = stats(&current.state, true);
+                for d in 0..4 {
+                    sum[d] += h[d] / (n - n / 3) as f64;
+                }
+            }
+        }
+        per_chain.push(sum);
+    }
+    let mut mean = [0.0; 4];
+    for s in &per_chain {
+        for d in 0..4 {
+            mean[d] += s[d] / k as f64;
+        }
+    }
+    let mut var = [0.0; 4];
+    for s in &per_chain {
+        for d in 0..4 {
+            var[d] += (s[d] - mean[d]).powi(2) / (k as f64 - 1.0);
+        }
+    }
+    (mean, var.map(|v| (v / k as f64).sqrt()))
+}
+
+/// Largest |z| over statistics 1–3 (raster x, y, radius²) between a
+/// kernel's chains and the reference.
+#[allow(clippy::too_many_arguments)]
+fn stationarity_z<'s, K: Kernel<Path<'s>, PathSample>>(
+    name: &str,
+    kernel: &mut K,
+    family: &PathFamily<'s>,
+    set: &dyn Fn(&Path) -> bool,
+    seed: u64,
+) -> f64 {
+    const M: usize = 200_000;
+    const K: usize = 2_000;
+    const STEPS: usize = 300;
+    let (truth, truth_se, _) = reference(family, set, M, seed);
+    let (start_mean, start_se, starts) = reference(family, set, M, seed + 1);
+    let (mean, se) = chain_means(kernel, &starts, K, STEPS, seed + 2);
+    let mut worst = 0.0f64;
+    for d in 1..4 {
+        // The chains' mean carries the start pool's error too (the starts
+        // are resampled from it): three independent errors.
+        let sigma = (se[d].powi(2) + truth_se[d].powi(2) + start_se[d].powi(2)).sqrt();
+        let z = (mean[d] - truth[d]) / sigma;
+        eprintln!(
+            "{name}: stat {d}: chains {:.5} ± {:.5}, reference {:.5} ± {:.5}, starts {:.5}; z = {z:+.2}",
+            mean[d], se[d], truth[d], truth_se[d], start_mean[d]
+        );
+        worst = worst.max(z.abs());
+    }
+    worst
+}
+
+/// Each perturbation (and the lens subpath mutation) alone, on the paths
+/// of its pattern (which it keeps, so `π` restricted to them is
+/// invariant), and the mixture of all mutations at weight 1 on every path, started from exact samples:
+/// importance resampling from 200 000 start-up candidates (the driver's
+/// MIS weights), 2 000 chains of 300 steps (the last 200 averaged). The chains' average of raster
+/// x, raster y and squared radius must match a second, independent
+/// importance estimate within 4σ (σ from the 2 000 independent chain
+/// averages, K ≥ 30, and both pools' delta-method errors). Control: the
+/// same kernels with their ratio replaced by 0 (all Jacobians dropped)
+/// must fail for the lens and caustic perturbations.
+#[test]
+fn perturbations_keep_exact_start_states_exact() {
+    let scene = mirror_box();
+    let family = PathFamily::new(scene, Some(4));
+    let lens = |x: &Path| lens_chain(x).is_some();
+    let caustic = |x: &Path| caustic_chain(x).is_some();
+    let multi = |x: &Path| multi_chain(x).is_some();
+    let all = |_: &Path| true;
+    let z_lens = stationarity_z(
+        "lens",
+        &mut LensPerturbation::default(),
+        &family,
+        &lens,
+        100,
+    );
+    let z_caustic = stationarity_z(
+        "caustic",
+        &mut CausticPerturbation::default(),
+        &family,
+        &caustic,
+        200,
+    );
+    let z_multi = stationarity_z(
+        "multi-chain",
+        &mut MultiChainPerturbation::default(),
+        &family,
+        &multi,
+        300,
+    );
+    let z_subpath = stationarity_z(
+        "lens subpath",
+        &mut LensSubpath::default(),
+        &family,
+        &lens,
+        500,
+    );
+    let mut mixture = PathMutations {
+        lens_perturbation: 1.0,
+        caustic_perturbation: 1.0,
+        multi_chain_perturbation: 1.0,
+        lens_subpath: 1.0,
+        ..PathMutations::default()
+    }
+    .kernel(Some(4))
+    .expect("mixture");
+    let z_mixture = stationarity_z("mixture", &mut mixture, &family, &all, 400);
+    let c_lens = stationarity_z(
+        "lens, ratio 0",
+        &mut Symmetric(LensPerturbation::default()),
+        &family,
+        &lens,
+        100,
+    );
+    let c_caustic = stationarity_z(
+        "caustic, ratio 0",
+        &mut Symmetric(CausticPerturbation::default()),
+        &family,
+        &caustic,
+        200,
+    );
+    for (name, z) in [
+        ("lens", z_lens),
+        ("caustic", z_caustic),
+        ("multi-chain", z_multi),
+        ("lens subpath", z_subpath),
+        ("mixture", z_mixture),
+    ] {
+        assert!(z < 4.0, "{name}: the chains drift from π: |z| = {z:.2}");
+    }
+    assert!(c_lens > 4.0, "lens control passed: |z| = {c_lens:.2}");
+    assert!(
+        c_caustic > 4.0,
+        "caustic control passed: |z| = {c_caustic:.2}"
+    );
+}
+
+/// `mlt` with every built mutation at Mitsuba 0.6's selection (all on,
+/// weight 1 each: bidirectional, lens, caustic, multi-chain) against PT on
+/// the tilted glossy-glass Cornell box, with the lens test's method and
+/// budget. Ignored: measured once (with the lens test, 1 081 s together
+/// on 2 cores at load 15–17), the means agree (rel −0.09%, −0.14%,
+/// +0.19%; σ 0.20%, 0.24%, 0.34%) but 5σ exceeds 1% on green and blue, so
+/// the test FAILS its resolution check: `mlt`'s replicate variance
+/// dominates; about 3× the replicates on both sides are needed
+/// (docs/path-space.md).
+#[test]
+#[ignore]
+fn mlt_with_all_perturbations_agrees_with_pt_on_the_glass_box() {
+    let scene = common::repo_scene_tilted("cornell-glossy-glass.xml", 16, 5);
+    let pt = common::mc_reps(&scene, &common::pt_of(&scene), 512, 96, 1000);
+    let mutation = PathMutations {
+        lens_perturbation: 1.0,
+        caustic_perturbation: 1.0,
+        multi_chain_perturbation: 1.0,
+        ..PathMutations::default()
+    };
+    let budget = common::Budget {
+        bootstrap: 400_000,
+        chains: 256,
+        mpp: 4096,
+    };
+    let mlt = path_mlt_reps(&scene, mutation, budget, 48, 7000);
+    let a = common::MeanAgreement::new(&pt, &mlt);
+    eprintln!("mlt+all: rel {:?}\n  {a:?}", a.rel());
+    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
+    assert!(
+        a.failures(4.0, 0.01).is_empty(),
+        "mlt+all disagrees with PT: {a:?}"
+    );
+    let biased: Vec<[f64; 3]> = mlt.iter().map(|m| m.map(|v| v * 1.01)).collect();
+    let b = common::MeanAgreement::new(&pt, &biased);
+    assert!(!b.failures(4.0, 0.01).is_empty(), "a 1% bias passed: {b:?}");
+}
+
+// ---------------------------------------------------------------------------
+// Lens subpath mutation.
+
+/// Expected probability per cell of an 8×8 grid over the image from the
+/// code's `T(x→·)` of the lens subpath mutation (the lens test's tracer and
+/// Jacobian); `drop_cos` removes the cosine at `y_1` (the control).
+fn subpath_masses(kernel: &LensSubpath, x: &Path, drop_cos: bool) -> Vec<f64> {
+    // 64 points per cell and axis (1/8 px): the cells are cut by the
+    // mirror's edges and the occlusion boundaries.
+    let cell = RES as f64 / NR as f64;
+    let n = NR * 64;
+    let h = RES as f64 / n as f64;
+    let mut masses = vec![0.0; NR * NR];
+    for ix in 0..n {
+        for iy in 0..n {
+            let raster = Vec2::new(
+                ((ix as f64 + 0.5) * h) as f32,
+                ((iy as f64 + 0.5) * h) as f32,
+            );
+            let Some(y) = traced(x, raster) else {
+                continue;
+            };
+            if !valid(x, &y) {
+                continue;
+            }
+            let mut ln_t = kernel.log_transition_density(x, &y);
+            if drop_cos {
+                ln_t -= log_cos_1(&y);
+            }
+            if ln_t == f64::NEG_INFINITY {
+                continue;
+            }
+            let q = (ln_t + log_jacobian(&y)).exp();
+            let c = ((ix as f64 * h / cell) as usize) * NR + (iy as f64 * h / cell) as usize;
+            masses[c] += q * h * h;
+        }
+    }
+    masses
+}
+
+/// The lens subpath mutation from one `L D S E` path of the mirror box:
+/// 100 000 proposals binned by raster position in 8×8 cells over the
+/// image, against the code's `T` times the lens test's independent
+/// Jacobian (midpoint rule, 64×64 per cell); chi-square p > 1e-4; the
+/// control without the cosine at `y_1` must fail; the ratio of 200
+/// proposals against the independent Jacobians within 1e-4.
+#[test]
+fn lens_subpath_density_matches_its_proposals() {
+    let scene = mirror_box();
+    let mut kernel = LensSubpath::default();
+    let x = mirror_path(scene, 1.0);
+    let current = sample_of(&x);
+    let mut proposal = sample_of(&x);
+    let mut rng = stream_rng(41, 0);
+    let mut counts = vec![0u64; NR * NR];
+    let mut ys = Vec::new();
+    let cell = RES as f32 / NR as f32;
+    for _ in 0..N {
+        let p = kernel.propose(&current, &mut proposal, &mut rng);
+        if p.failed {
+            continue;
+        }
+        let y = &proposal.state;
+        let (cx, cy) = ((y.raster.x / cell) as usize, (y.raster.y / cell) as usize);
+        counts[cx.min(NR - 1) * NR + cy.min(NR - 1)] += 1;
+        if ys.len() < 200 {
+            ys.push((y.clone(), p.log_q_ratio));
+        }
+    }
+    let masses = subpath_masses(&kernel, &x, false);
+    let p = common::chi_square_p_value(&counts, &masses, N);
+    assert!(p > 1e-4, "T(x→·) disagrees with the proposals: p = {p:.2e}");
+    let wrong = subpath_masses(&kernel, &x, true);
+    let p_wrong = common::chi_square_p_value(&counts, &wrong, N);
+    assert!(
+        p_wrong < 1e-4,
+        "a density without the cosine at y_1 passed: p = {p_wrong:.2e}"
+    );
+    assert!(ys.len() == 200, "too few valid proposals: {}", ys.len());
+    let (mut worst, mut worst_symmetric) = (0.0f64, 0.0f64);
+    for (y, reported) in &ys {
+        let code = kernel.log_transition_density(y, &x) - kernel.log_transition_density(&x, y);
+        assert!(
+            (code - reported).abs() < 1e-9,
+            "kernel ratio {reported} vs densities {code}"
+        );
+        let independent = log_jacobian(y) - log_jacobian(&x);
+        worst = worst.max((code - independent).abs());
+        worst_symmetric = worst_symmetric.max(independent.abs());
+    }
+    eprintln!(
+        "worst |ln ratio − independent| = {worst:.2e}, symmetric control {worst_symmetric:.2e}"
+    );
+    assert!(worst < 1e-4, "T ratio off by {worst}");
+    assert!(
+        worst_symmetric > 1e-2,
+        "the control (ratio 0) passed: {worst_symmetric}"
+    );
 }

@@ -4,11 +4,11 @@
 //!
 //! - **State and target**: a path `x_0 … x_k` and `ln lum f(x)`.
 //! - **Mutations**: `mcmc-core`'s mixture of the path-space mutations with
-//!   the selection weights of the settings. Only Veach's bidirectional
-//!   mutation exists so far; the lens, caustic and multi-chain
-//!   perturbations (on in Mitsuba 0.6) and the manifold perturbation (off
-//!   in Mitsuba 0.6) have their settings, which must stay 0 until they are
-//!   built.
+//!   the selection weights of the settings: Veach's bidirectional
+//!   mutation, the lens, caustic and multi-chain perturbations (on in
+//!   Mitsuba 0.6, off by default here until the agreement with them on
+//!   passes); the manifold perturbation (off in Mitsuba 0.6) has its
+//!   setting, which must stay 0 until it is built.
 //! - **Start-up and normalisation**: `bootstrap` candidates (Mitsuba's
 //!   `luminanceSamples`, 100 000), each one sample of a BDPT technique with
 //!   its one-sample-MIS weight ([`crate::path_space::family`]), give `b`
@@ -52,12 +52,14 @@ crate::settings! {
         pub independent_mutation: f64 = 0.0, check check::non_negative;
         /// Selection weight of the lens perturbation (Mitsuba: on; 0 here until the agreement test with it exists).
         pub lens_perturbation: f64 = 0.0, check check::non_negative;
-        /// Selection weight of the caustic perturbation (Mitsuba: on; not implemented yet, must be 0).
+        /// Selection weight of the caustic perturbation (Mitsuba: on; 0 here until the agreement test with it passes).
         pub caustic_perturbation: f64 = 0.0, check check::non_negative;
-        /// Selection weight of the multi-chain perturbation (Mitsuba: on; not implemented yet, must be 0).
+        /// Selection weight of the multi-chain perturbation (Mitsuba: on; 0 here until the agreement test with it passes).
         pub multi_chain_perturbation: f64 = 0.0, check check::non_negative;
         /// Selection weight of the manifold perturbation (Mitsuba: off; not implemented yet, must be 0).
         pub manifold_perturbation: f64 = 0.0, check check::non_negative;
+        /// Selection weight of Veach's lens subpath mutation (not in Mitsuba; 0 by default).
+        pub lens_subpath_mutation: f64 = 0.0, check check::non_negative;
         /// Samples per pixel of the direct-lighting pass (path tracing of paths up to two segments; the chains take the rest); -1: off, the chains do everything (Mitsuba's default is 16).
         pub direct_samples: i64 = -1, check direct_samples;
         flatten {
@@ -79,6 +81,7 @@ impl Mlt {
             caustic_perturbation: self.caustic_perturbation,
             multi_chain_perturbation: self.multi_chain_perturbation,
             manifold_perturbation: self.manifold_perturbation,
+            lens_subpath: self.lens_subpath_mutation,
             independent: self.independent_mutation,
         }
     }

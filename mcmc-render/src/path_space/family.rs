@@ -18,8 +18,11 @@
 //! candidates in proportion to the weights.
 
 use super::bidirectional::Bidirectional;
+use super::caustic_perturbation::CausticPerturbation;
 use super::independent::IndependentPath;
 use super::lens_perturbation::LensPerturbation;
+use super::lens_subpath::LensSubpath;
+use super::multi_chain_perturbation::MultiChainPerturbation;
 use super::state::{Path, PathTarget};
 use super::walk::{ChainSource, camera_walk, light_walk};
 use crate::light::Light;
@@ -33,9 +36,8 @@ use mcmc_core::rng::{ChainRng, stream_rng, uniform};
 /// The mutation mixture: one selection weight per mutation type
 /// (normalised over the types with non-zero weight). Mitsuba 0.6's `mlt`
 /// turns on the bidirectional mutation and the lens, caustic and
-/// multi-chain perturbations; the bidirectional mutation and the lens
-/// perturbation exist so far, and [`PathMutations::kernel`] refuses a
-/// non-zero weight for the others.
+/// multi-chain perturbations, which all exist; [`PathMutations::kernel`]
+/// refuses a non-zero weight for the mutations not built yet.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PathMutations {
     /// Weight of Veach's bidirectional mutation.
@@ -45,12 +47,15 @@ pub struct PathMutations {
     pub fixed_length: bool,
     /// Weight of the lens perturbation ([`LensPerturbation`]).
     pub lens_perturbation: f64,
-    /// Weight of the caustic perturbation (not built yet: must be 0).
+    /// Weight of the caustic perturbation ([`CausticPerturbation`]).
     pub caustic_perturbation: f64,
-    /// Weight of the multi-chain perturbation (not built yet: must be 0).
+    /// Weight of the multi-chain perturbation ([`MultiChainPerturbation`]).
     pub multi_chain_perturbation: f64,
     /// Weight of the manifold perturbation (not built yet: must be 0).
     pub manifold_perturbation: f64,
+    /// Weight of Veach's lens subpath mutation ([`LensSubpath`]; not in
+    /// Mitsuba).
+    pub lens_subpath: f64,
     /// Weight of the independent proposal ([`IndependentPath`]: a fresh
     /// start-up candidate; not in Mitsuba).
     pub independent: f64,
@@ -72,6 +77,7 @@ impl Default for PathMutations {
             caustic_perturbation: 0.0,
             multi_chain_perturbation: 0.0,
             manifold_perturbation: 0.0,
+            lens_subpath: 0.0,
             independent: 0.0,
         }
     }
@@ -81,15 +87,11 @@ impl PathMutations {
     /// Checks the weights: finite, non-negative, not all zero, and zero for
     /// the mutations that do not exist yet.
     pub fn check(&self) -> Result<(), String> {
-        let unbuilt = [
-            ("caustic_perturbation", self.caustic_perturbation),
-            ("multi_chain_perturbation", self.multi_chain_perturbation),
-            ("manifold_perturbation", self.manifold_perturbation),
-        ];
+        let unbuilt = [("manifold_perturbation", self.manifold_perturbation)];
         for (name, w) in unbuilt {
             if w != 0.0 {
                 return Err(format!(
-                    "{name} = {w}: this mutation is not implemented yet; set it to 0 (built: the bidirectional mutation, the lens perturbation)"
+                    "{name} = {w}: this mutation is not implemented yet; set it to 0 (built: the bidirectional mutation, the lens, caustic and multi-chain perturbations)"
                 ));
             }
         }
@@ -97,6 +99,9 @@ impl PathMutations {
             ("bidirectional_mutation", self.bidirectional),
             ("independent_mutation", self.independent),
             ("lens_perturbation", self.lens_perturbation),
+            ("caustic_perturbation", self.caustic_perturbation),
+            ("multi_chain_perturbation", self.multi_chain_perturbation),
+            ("lens_subpath_mutation", self.lens_subpath),
         ];
         for (name, w) in built {
             if !(w.is_finite() && w >= 0.0) {
@@ -151,12 +156,33 @@ impl PathMutations {
                 Box::new(LensPerturbation::default()),
             ));
         }
+        if self.caustic_perturbation > 0.0 {
+            parts.push((
+                self.caustic_perturbation,
+                Box::new(CausticPerturbation::default()),
+            ));
+        }
+        if self.multi_chain_perturbation > 0.0 {
+            parts.push((
+                self.multi_chain_perturbation,
+                Box::new(MultiChainPerturbation::default()),
+            ));
+        }
+        if self.lens_subpath > 0.0 {
+            parts.push((self.lens_subpath, Box::new(LensSubpath::default())));
+        }
         Mixture::new(parts).map_err(|e| e.to_string())
     }
 
     /// The probability that the mixture proposes independently.
     pub fn independent_probability(&self) -> f64 {
-        self.independent / (self.bidirectional + self.independent + self.lens_perturbation)
+        self.independent
+            / (self.bidirectional
+                + self.independent
+                + self.lens_perturbation
+                + self.caustic_perturbation
+                + self.multi_chain_perturbation
+                + self.lens_subpath)
     }
 }
 

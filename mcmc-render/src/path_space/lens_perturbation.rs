@@ -51,6 +51,7 @@ use super::state::Path;
 use super::walk::ChainSource;
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
+use crate::geometry::Ray;
 use crate::integrators::bdpt::random_walk;
 use crate::integrators::path_vertex::{Vertex, VertexKind};
 use crate::pss::PathSample;
@@ -221,26 +222,30 @@ impl LensPerturbation {
         rng: &mut ChainRng,
     ) -> Result<usize, Invalid> {
         let j = lens_chain(x).ok_or(Invalid::Pattern)?;
+        let offset = self.offsets(x.scene).sample(uniform(rng), uniform(rng));
+        self.retrace(x, y, j, x.raster + offset, rng)?;
+        Ok(j)
+    }
+
+    /// Re-traces `x`'s camera chain `y_{k−1} … y_j` through `raster` (a
+    /// camera walk from `x`'s lens point) and reconnects it to the kept
+    /// `x_{j−1}` into `y` (the move's steps 2 and 3; the lens subpath
+    /// mutation draws `raster` uniformly instead).
+    pub(crate) fn retrace<'s>(
+        &mut self,
+        x: &Path<'s>,
+        y: &mut Path<'s>,
+        j: usize,
+        raster: glam::Vec2,
+        rng: &mut ChainRng,
+    ) -> Result<(), Invalid> {
         let scene = x.scene;
         let k = x.segments();
-        let offset = self.offsets(scene).sample(uniform(rng), uniform(rng));
-        let raster = x.raster + offset;
-        let (w, h) = (scene.film.width as f32, scene.film.height as f32);
-        if !(raster.x >= 0.0 && raster.x < w && raster.y >= 0.0 && raster.y < h) {
+        if !on_image(scene, raster) {
             return Err(Invalid::OffImage);
         }
         let cam = &x.vertices[k];
-        let camera = &scene.camera;
-        let ray = if camera.has_lens() {
-            // Same lens point: the numbers that make it.
-            let dir = cam
-                .direction_to(&x.vertices[k - 1])
-                .ok_or(Invalid::Pattern)?;
-            let (_, u_lens) = camera.invert(cam.p(), dir).ok_or(Invalid::Pattern)?;
-            camera.generate_ray_lens(raster, u_lens)
-        } else {
-            camera.generate_ray(raster)
-        };
+        let ray = camera_ray(x, raster).ok_or(Invalid::Pattern)?;
         let count = k - j;
         self.walk.clear();
         self.walk.push(*cam);
@@ -279,7 +284,29 @@ impl LensPerturbation {
         if y.contribution.is_black() {
             return Err(Invalid::ZeroContribution);
         }
-        Ok(j)
+        Ok(())
+    }
+}
+
+/// True when `raster` lies on `scene`'s image.
+pub fn on_image(scene: &Scene, raster: Vec2) -> bool {
+    let (w, h) = (scene.film.width as f32, scene.film.height as f32);
+    raster.x >= 0.0 && raster.x < w && raster.y >= 0.0 && raster.y < h
+}
+
+/// The camera ray through `raster` from the lens point of `x`'s camera
+/// vertex (`None` when that point is not on the lens).
+pub fn camera_ray(x: &Path, raster: Vec2) -> Option<Ray> {
+    let k = x.segments();
+    let cam = &x.vertices[k];
+    let camera = &x.scene.camera;
+    if camera.has_lens() {
+        // Same lens point: the numbers that make it.
+        let dir = cam.direction_to(&x.vertices[k - 1])?;
+        let (_, u_lens) = camera.invert(cam.p(), dir)?;
+        Some(camera.generate_ray_lens(raster, u_lens))
+    } else {
+        Some(camera.generate_ray(raster))
     }
 }
 

@@ -12,6 +12,9 @@
 //! - [`independent`]: a fresh start-up candidate as a large step (off by
 //!   default; feeds the running normalisation).
 //! - [`lens_perturbation`]: Veach's lens perturbation.
+//! - [`caustic_perturbation`]: Veach's caustic perturbation.
+//! - [`multi_chain_perturbation`]: Veach's multi-chain perturbation.
+//! - [`lens_subpath`]: Veach's lens subpath mutation.
 //! - [`family`]: the driver's [`crate::markov::ChainFamily`] for path space
 //!   (start-up candidates by bidirectional techniques, the mutation
 //!   mixture).
@@ -39,9 +42,12 @@
 //! `docs/path-space.md` describes the state and each mutation's density.
 
 pub mod bidirectional;
+pub mod caustic_perturbation;
 pub mod family;
 pub mod independent;
 pub mod lens_perturbation;
+pub mod lens_subpath;
+pub mod multi_chain_perturbation;
 pub mod state;
 pub mod walk;
 
