@@ -129,11 +129,7 @@ fn mlt_images_are_bit_identical_across_thread_counts() {
 #[test]
 fn unbuilt_mutations_are_refused_with_one_line() {
     // The lens perturbation exists (tests/path_space_perturbations.rs).
-    for name in [
-        "caustic_perturbation",
-        "multi_chain_perturbation",
-        "manifold_perturbation",
-    ] {
+    for name in ["caustic_perturbation", "multi_chain_perturbation"] {
         let err = registry::configure(None, Some("mlt"), &[(name.into(), "1".into())])
             .err()
             .unwrap_or_else(|| panic!("{name} = 1 accepted"));

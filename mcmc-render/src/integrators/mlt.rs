@@ -56,7 +56,7 @@ crate::settings! {
         pub caustic_perturbation: f64 = 0.0, check check::non_negative;
         /// Selection weight of the multi-chain perturbation (Mitsuba: on; not implemented yet, must be 0).
         pub multi_chain_perturbation: f64 = 0.0, check check::non_negative;
-        /// Selection weight of the manifold perturbation (Mitsuba: off; not implemented yet, must be 0).
+        /// Selection weight of the manifold perturbation (Jakob & Marschner 2012; Mitsuba: off; on in `mept`).
         pub manifold_perturbation: f64 = 0.0, check check::non_negative;
         /// Samples per pixel of the direct-lighting pass (path tracing of paths up to two segments; the chains take the rest); -1: off, the chains do everything (Mitsuba's default is 16).
         pub direct_samples: i64 = -1, check direct_samples;

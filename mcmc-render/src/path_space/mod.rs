@@ -12,6 +12,7 @@
 //! - [`independent`]: a fresh start-up candidate as a large step (off by
 //!   default; feeds the running normalisation).
 //! - [`lens_perturbation`]: Veach's lens perturbation.
+//! - [`manifold_perturbation`]: Jakob & Marschner's manifold perturbation.
 //! - [`family`]: the driver's [`crate::markov::ChainFamily`] for path space
 //!   (start-up candidates by bidirectional techniques, the mutation
 //!   mixture).
@@ -42,6 +43,7 @@ pub mod bidirectional;
 pub mod family;
 pub mod independent;
 pub mod lens_perturbation;
+pub mod manifold_perturbation;
 pub mod state;
 pub mod walk;
 
