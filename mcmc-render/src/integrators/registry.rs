@@ -155,6 +155,8 @@ pub static REGISTRY: &[Registration] = &[
     register::<super::mlt::Mlt>(),
     register::<super::relt::Relt>(),
     register::<super::vcm::VcmSettings>(),
+    register::<super::mept::Mept>(),
+    register::<super::erpt::Erpt>(),
 ];
 
 /// The registered names, comma-separated.
