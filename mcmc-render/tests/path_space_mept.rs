@@ -175,6 +175,11 @@ fn mept_images_are_bit_identical_across_thread_counts() {
 /// seen through the sphere, where the manifold walk and the generalised
 /// geometry term enter the ratio). Ignored: minutes
 /// (`cargo test -p mcmc-render --test path_space_mept -- --ignored`).
+/// Run once (2026-11-25, 260 s on the loaded machine): rel −0.16%,
+/// −0.18%, −0.16% (R/G/B) with σ of the difference 0.23%, 0.24%, 0.35%:
+/// within 1σ, but 5σ on blue is 1.7% > 1.5%, so the resolution assertion
+/// fails (as `mlt`'s own glossy-glass test would at this budget: blue is
+/// the noisiest channel for both); it needs about twice the replicates.
 #[test]
 #[ignore]
 fn mept_agrees_with_pt_on_the_glossy_glass_box() {
