@@ -127,23 +127,34 @@ fn mlt_images_are_bit_identical_across_thread_counts() {
 }
 
 #[test]
-fn unbuilt_mutations_are_refused_with_one_line() {
-    // The lens, caustic and multi-chain perturbations exist
-    // (tests/path_space_perturbations.rs).
-    {
-        let name = "manifold_perturbation";
-        let err = registry::configure(None, Some("mlt"), &[(name.into(), "1".into())])
-            .err()
-            .unwrap_or_else(|| panic!("{name} = 1 accepted"));
-        let text = err.to_string();
-        assert!(
-            text.contains(name) && text.contains("not implemented") && !text.contains('\n'),
-            "{name}: {text}"
-        );
-    }
+fn every_mutation_is_accepted_and_bad_weights_are_refused_with_one_line() {
+    // Every mutation of the issue is built (tests/path_space_perturbations.rs,
+    // tests/path_space_manifold.rs): a weight of 1 is accepted, a negative
+    // or non-finite one refused with one line naming it.
+    let names = [
+        "lens_perturbation",
+        "caustic_perturbation",
+        "multi_chain_perturbation",
+        "lens_subpath_mutation",
+        "manifold_perturbation",
+        "independent_mutation",
+    ];
     assert!(registry::configure(None, Some("mlt"), &[]).is_ok());
-    for name in ["caustic_perturbation", "multi_chain_perturbation"] {
-        assert!(registry::configure(None, Some("mlt"), &[(name.into(), "1".into())]).is_ok());
+    for name in names {
+        assert!(
+            registry::configure(None, Some("mlt"), &[(name.into(), "1".into())]).is_ok(),
+            "{name} = 1 refused"
+        );
+        for bad in ["-1", "inf"] {
+            let err = registry::configure(None, Some("mlt"), &[(name.into(), bad.into())])
+                .err()
+                .unwrap_or_else(|| panic!("{name} = {bad} accepted"));
+            let text = err.to_string();
+            assert!(
+                text.contains(name) && !text.contains('\n'),
+                "{name} = {bad}: {text}"
+            );
+        }
     }
 }
 

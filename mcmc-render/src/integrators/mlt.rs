@@ -56,7 +56,7 @@ crate::settings! {
         pub caustic_perturbation: f64 = 0.0, check check::non_negative;
         /// Selection weight of the multi-chain perturbation (Mitsuba: on; 0 here until the agreement test with it passes).
         pub multi_chain_perturbation: f64 = 0.0, check check::non_negative;
-        /// Selection weight of the manifold perturbation (Mitsuba: off; not implemented yet, must be 0).
+        /// Selection weight of the manifold perturbation (Jakob & Marschner 2012; Mitsuba: off; on in `mept`).
         pub manifold_perturbation: f64 = 0.0, check check::non_negative;
         /// Selection weight of Veach's lens subpath mutation (not in Mitsuba; 0 by default).
         pub lens_subpath_mutation: f64 = 0.0, check check::non_negative;

@@ -51,8 +51,10 @@
 //! connection); see the module documentation there.
 
 pub mod bdpt;
+pub mod erpt;
 pub mod guided;
 pub mod lt;
+pub mod mept;
 pub mod mlt;
 pub mod mmlt;
 pub mod path_vertex;

@@ -156,6 +156,8 @@ pub static REGISTRY: &[Registration] = &[
     register::<super::relt::Relt>(),
     register::<super::vcm::VcmSettings>(),
     register::<super::tempered_pssmlt::TemperedPssmlt>(),
+    register::<super::mept::Mept>(),
+    register::<super::erpt::Erpt>(),
 ];
 
 /// The registered names, comma-separated.

@@ -23,6 +23,7 @@ use super::independent::IndependentPath;
 use super::lens_perturbation::LensPerturbation;
 use super::lens_subpath::LensSubpath;
 use super::multi_chain_perturbation::MultiChainPerturbation;
+use super::manifold_perturbation::ManifoldPerturbation;
 use super::state::{Path, PathTarget};
 use super::walk::{ChainSource, camera_walk, light_walk};
 use crate::light::Light;
@@ -51,7 +52,7 @@ pub struct PathMutations {
     pub caustic_perturbation: f64,
     /// Weight of the multi-chain perturbation ([`MultiChainPerturbation`]).
     pub multi_chain_perturbation: f64,
-    /// Weight of the manifold perturbation (not built yet: must be 0).
+    /// Weight of the manifold perturbation ([`ManifoldPerturbation`]).
     pub manifold_perturbation: f64,
     /// Weight of Veach's lens subpath mutation ([`LensSubpath`]; not in
     /// Mitsuba).
@@ -84,30 +85,10 @@ impl Default for PathMutations {
 }
 
 impl PathMutations {
-    /// Checks the weights: finite, non-negative, not all zero, and zero for
-    /// the mutations that do not exist yet.
+    /// Checks the weights ([`PathMutations::check_weights`]) and that the
+    /// bidirectional mutation is on (ergodicity of long chains).
     pub fn check(&self) -> Result<(), String> {
-        let unbuilt = [("manifold_perturbation", self.manifold_perturbation)];
-        for (name, w) in unbuilt {
-            if w != 0.0 {
-                return Err(format!(
-                    "{name} = {w}: this mutation is not implemented yet; set it to 0 (built: the bidirectional mutation, the lens, caustic and multi-chain perturbations)"
-                ));
-            }
-        }
-        let built = [
-            ("bidirectional_mutation", self.bidirectional),
-            ("independent_mutation", self.independent),
-            ("lens_perturbation", self.lens_perturbation),
-            ("caustic_perturbation", self.caustic_perturbation),
-            ("multi_chain_perturbation", self.multi_chain_perturbation),
-            ("lens_subpath_mutation", self.lens_subpath),
-        ];
-        for (name, w) in built {
-            if !(w.is_finite() && w >= 0.0) {
-                return Err(format!("{name} = {w} must be finite and non-negative"));
-            }
-        }
+        self.check_weights()?;
         if !(self.bidirectional > 0.0) {
             // The perturbations keep the path's length and its light end:
             // without the bidirectional mutation the chain is not ergodic.
@@ -115,6 +96,27 @@ impl PathMutations {
                 "bidirectional_mutation = {} must be positive: the perturbations alone do not reach every path",
                 self.bidirectional
             ));
+        }
+        Ok(())
+    }
+
+    /// [`PathMutations::check`] without requiring the bidirectional
+    /// mutation: for short chains restarted from independent seeds
+    /// (`erpt`), which need not reach every path.
+    pub fn check_weights(&self) -> Result<(), String> {
+        let weights = [
+            ("bidirectional_mutation", self.bidirectional),
+            ("independent_mutation", self.independent),
+            ("lens_perturbation", self.lens_perturbation),
+            ("caustic_perturbation", self.caustic_perturbation),
+            ("multi_chain_perturbation", self.multi_chain_perturbation),
+            ("lens_subpath_mutation", self.lens_subpath),
+            ("manifold_perturbation", self.manifold_perturbation),
+        ];
+        for (name, w) in weights {
+            if !(w.is_finite() && w >= 0.0) {
+                return Err(format!("{name} = {w} must be finite and non-negative"));
+            }
         }
         Ok(())
     }
@@ -130,13 +132,15 @@ impl PathMutations {
 
     /// [`PathMutations::kernel`] for paths of `min_segments ..=
     /// max_segments` segments (`mlt`'s direct-lighting pass leaves the
-    /// paths of one and two segments to path tracing).
+    /// paths of one and two segments to path tracing). Checks the weights
+    /// ([`PathMutations::check_weights`]); whether the mixture must be
+    /// ergodic ([`PathMutations::check`]) is the integrator's to check.
     pub fn kernel_between<'s>(
         &self,
         min_segments: usize,
         max_segments: Option<usize>,
     ) -> Result<Mixture<Path<'s>, PathSample>, String> {
-        self.check()?;
+        self.check_weights()?;
         let bidirectional: Box<dyn Kernel<Path<'s>, PathSample> + Send> = Box::new(
             Bidirectional::new(min_segments, max_segments, self.fixed_length),
         );
@@ -171,6 +175,12 @@ impl PathMutations {
         if self.lens_subpath > 0.0 {
             parts.push((self.lens_subpath, Box::new(LensSubpath::default())));
         }
+        if self.manifold_perturbation > 0.0 {
+            parts.push((
+                self.manifold_perturbation,
+                Box::new(ManifoldPerturbation::default()),
+            ));
+        }
         Mixture::new(parts).map_err(|e| e.to_string())
     }
 
@@ -182,7 +192,8 @@ impl PathMutations {
                 + self.lens_perturbation
                 + self.caustic_perturbation
                 + self.multi_chain_perturbation
-                + self.lens_subpath)
+                + self.lens_subpath
+                + self.manifold_perturbation)
     }
 }
 
@@ -307,6 +318,8 @@ impl<'s> ChainFamily for PathFamily<'s> {
         &self.target
     }
     fn kernel(&self, mutation: &PathMutations, _member: usize) -> Result<Self::Kernel, MltError> {
+        // Long chains must be ergodic (check), unlike erpt's short ones.
+        mutation.check().map_err(MltError::Setting)?;
         mutation
             .kernel_between(self.min_segments, self.max_segments)
             .map_err(MltError::Setting)

@@ -15,6 +15,7 @@
 //! - [`caustic_perturbation`]: Veach's caustic perturbation.
 //! - [`multi_chain_perturbation`]: Veach's multi-chain perturbation.
 //! - [`lens_subpath`]: Veach's lens subpath mutation.
+//! - [`manifold_perturbation`]: Jakob & Marschner's manifold perturbation.
 //! - [`family`]: the driver's [`crate::markov::ChainFamily`] for path space
 //!   (start-up candidates by bidirectional techniques, the mutation
 //!   mixture).
@@ -48,6 +49,7 @@ pub mod independent;
 pub mod lens_perturbation;
 pub mod lens_subpath;
 pub mod multi_chain_perturbation;
+pub mod manifold_perturbation;
 pub mod state;
 pub mod walk;
 

@@ -1,0 +1,407 @@
+//! Energy redistribution path tracing (Cline, Talbot & Egbert 2005;
+//! Mitsuba 0.6's `erpt`): path-traced seed paths, each starting a number
+//! of short Metropolis chains in proportion to its energy, every chain step
+//! depositing the same energy.
+//!
+//! # Seeds
+//!
+//! Every pass draws one camera walk per pixel (a raster position uniform
+//! in the pixel, no Russian roulette, at most `max_depth + 1` vertices;
+//! 64 when unbounded) and, at every prefix of it, the two paths path
+//! tracing with next-event estimation forms: the walk ending on an emitter
+//! (`s = 0`) and the walk connected to an emitter point drawn as BDPT
+//! draws it (`s = 1`). Each is a path state ([`crate::path_space::Path`])
+//! with energy `e(x) = lum f(x) / (p_0(x) + p_1(x))`, `p_s` the path's
+//! density under technique `s` ([`Path::log_regrowth_density`]): the
+//! balance heuristic over the two techniques, so the energies of one
+//! camera walk sum to its pixel's path-traced luminance estimate.
+//!
+//! # Chains and the equal-deposition rule
+//!
+//! A seed starts `n_c(x) = ⌊ξ + e(x) / (n_m e_d)⌋` chains (`ξ` uniform,
+//! capped by `max_chains` when it is set: biased, as in Mitsuba), each of
+//! `n_m = chain_length` Metropolis–Hastings steps of the path-space
+//! mutation mixture run by `mcmc-core` (`MetropolisHastings` over
+//! [`Path`]s with [`PathTarget`]: no acceptance test here). Every step
+//! deposits `e_d · f(y)/lum f(y)` at the raster position of the state it
+//! moves to, as expected values (`α` at the proposal, `1 − α` at the
+//! current state). With `e_d = L̄ / (n_m · num_chains)`, `L̄` the mean
+//! pixel luminance estimated beforehand from `luminance_samples`
+//! independent camera walks, a pass starts `num_chains` chains per pixel
+//! on average; the chains start in proportion to `lum f` and MH keeps that
+//! distribution, so one pass's deposits are an unbiased image (for any
+//! `e_d`: it sets the count of chains, not the mean). The image is the
+//! mean of the passes.
+//!
+//! # Defaults (Mitsuba 0.6 `erpt`)
+//!
+//! `numChains` 1, `maxChains` 0 (no cap), `chainLength` 100 (its code;
+//! its doc block says 1), `luminanceSamples` 15 000, `bidirectionalMutation`
+//! off, lens perturbation on, manifold perturbation off. Mitsuba also turns
+//! on the caustic and multi-chain perturbations and a 16-spp direct pass:
+//! not available here (see `docs/path-space.md`).
+//!
+//! Work units are bands of rows with their own streams, summed in order,
+//! so an image is bit-identical for any thread count; Ctrl-C and `--time`
+//! stop after the last complete pass (a pass interrupted midway is
+//! dropped).
+
+use super::registry::IntegratorSettings;
+use super::{DepthParams, RenderError, Rendered, RunSettings};
+use crate::color::Rgb;
+use crate::film::{Film, Filter};
+use crate::integrators::bdpt::generate_camera_subpath;
+use crate::integrators::path_vertex::{Vertex, VertexKind};
+use crate::light::Light;
+use crate::observer::Observer;
+use crate::path_space::walk::{ChainSource, light_walk};
+use crate::path_space::{Path, PathMutations, PathTarget};
+use crate::pss::PathSample;
+use crate::scene::Scene;
+use crate::settings::check;
+use glam::Vec2;
+use mcmc_core::chain::{Algorithm, ChainState};
+use mcmc_core::kernel::Mixture;
+use mcmc_core::mh::MetropolisHastings;
+use mcmc_core::rng::{ChainRng, splitmix64, uniform};
+use mcmc_core::runner::run_chains;
+use mcmc_core::sample::Sample;
+use mcmc_core::stats::ChainStatistics;
+use serde_json::json;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+crate::settings! {
+    /// Energy redistribution path tracing (Mitsuba 0.6's `erpt` names, snake case).
+    pub struct Erpt {
+        /// Average number of chains started per pixel and pass (Mitsuba's numChains).
+        pub num_chains: f64 = 1.0, check check::positive;
+        /// Most chains one seed path may start, 0: no cap (Mitsuba's maxChains; a cap biases bright paths).
+        pub max_chains: usize = 0;
+        /// Mutations per chain (Mitsuba's chainLength).
+        pub chain_length: usize = 100, check check::count;
+        /// Camera walks of the estimate of the mean pixel luminance that sets the deposited energy (Mitsuba's luminanceSamples).
+        pub luminance_samples: usize = 15_000, check check::count;
+        /// Selection weight of Veach's bidirectional mutation (Mitsuba's erpt: off).
+        pub bidirectional_mutation: f64 = 0.0, check check::non_negative;
+        /// Selection weight of the lens perturbation (Mitsuba: on).
+        pub lens_perturbation: f64 = 1.0, check check::non_negative;
+        /// Selection weight of the manifold perturbation (Mitsuba: off; MEPT turns it on).
+        pub manifold_perturbation: f64 = 0.0, check check::non_negative;
+        /// Selection weight of the caustic perturbation (Mitsuba: on; ours 0 until measured in erpt).
+        pub caustic_perturbation: f64 = 0.0, check check::non_negative;
+        /// Selection weight of the multi-chain perturbation (Mitsuba: on; ours 0 until measured in erpt).
+        pub multi_chain_perturbation: f64 = 0.0, check check::non_negative;
+        flatten {
+            /// Path depth (rr_depth is not used: seeds are walked without roulette).
+            pub depth: DepthParams = DepthParams::default();
+        }
+    }
+}
+
+/// Vertices of a camera walk when the depth is unbounded.
+const UNBOUNDED_WALK: usize = 64;
+
+/// Bands of rows per pass (work units).
+const BANDS: u32 = 32;
+
+impl Erpt {
+    /// The mutation mixture the chains run.
+    pub fn mutations(&self) -> PathMutations {
+        PathMutations {
+            bidirectional: self.bidirectional_mutation,
+            lens_perturbation: self.lens_perturbation,
+            manifold_perturbation: self.manifold_perturbation,
+            caustic_perturbation: self.caustic_perturbation,
+            multi_chain_perturbation: self.multi_chain_perturbation,
+            ..PathMutations::default()
+        }
+    }
+
+    /// Camera-walk vertices: `max_depth + 1`.
+    fn walk_vertices(&self) -> usize {
+        if self.depth.max_depth < 0 {
+            UNBOUNDED_WALK
+        } else {
+            self.depth.max_depth as usize + 1
+        }
+    }
+
+    fn kernel<'s>(&self) -> Result<Mixture<Path<'s>, PathSample>, String> {
+        let max = (self.depth.max_depth >= 0).then_some(self.depth.max_depth as usize);
+        self.mutations().kernel_between(1, max)
+    }
+}
+
+/// The seeds of one camera walk through `raster`: paths with their
+/// energies (module docs).
+fn seeds<'s>(
+    scene: &'s Scene,
+    raster: Vec2,
+    vertices: usize,
+    rng: &mut ChainRng,
+    camera: &mut Vec<Vertex>,
+    light: &mut Vec<Vertex>,
+) -> Vec<(Path<'s>, f64)> {
+    let mut out = Vec::new();
+    let mut source = ChainSource::new(rng);
+    let made = generate_camera_subpath(scene, raster, &mut source, vertices, None, camera);
+    for t in 2..=made {
+        let end = &camera[t - 1];
+        if end.kind != VertexKind::Surface {
+            break;
+        }
+        let mut candidates = Vec::with_capacity(2);
+        if end.is_light() {
+            candidates.push(Path::from_subpaths(scene, &[], &camera[..t]));
+        }
+        if t < vertices && light_walk(scene, &mut source, 1, light) == 1 {
+            let path = Path::from_subpaths(scene, &light[..1], &camera[..t]);
+            if path.connectible(0) && path.connectible(1) && path.edge_visible(0) {
+                candidates.push(path);
+            }
+        }
+        for path in candidates {
+            let i = path.luminance();
+            if !(i > 0.0) || !path.contribution.is_finite() {
+                continue;
+            }
+            let k = path.segments();
+            let p: f64 = (0..=1)
+                .map(|s| path.log_regrowth_density(0, k, s).exp())
+                .sum();
+            let e = i / p;
+            if e.is_finite() && e > 0.0 {
+                out.push((path, e));
+            }
+        }
+    }
+    out
+}
+
+/// A raster position uniform in pixel `(x, y)`.
+fn in_pixel(x: u32, y: u32, rng: &mut ChainRng) -> Vec2 {
+    Vec2::new(
+        x as f32 + uniform(rng) as f32,
+        y as f32 + uniform(rng) as f32,
+    )
+}
+
+/// What one band of one pass produced.
+struct Band {
+    film: Film,
+    stats: ChainStatistics,
+    seeds: u64,
+    chains: u64,
+    stopped: bool,
+}
+
+impl IntegratorSettings for Erpt {
+    const NAME: &'static str = "erpt";
+    const DESCRIPTION: &'static str = "Energy redistribution path tracing (Cline et al. 2005): path-traced seeds start short path-space Metropolis chains that deposit equal energy.";
+
+    fn validate(&self) -> Result<(), String> {
+        if self.depth.max_depth == 0 {
+            return Err("erpt needs max_depth ≥ 1 or -1 (unbounded)".into());
+        }
+        self.mutations().check_weights()
+    }
+
+    fn render(
+        &self,
+        scene: &Scene,
+        run: &RunSettings,
+        stop: &AtomicBool,
+        observer: &dyn Observer,
+    ) -> Result<Rendered, RenderError> {
+        IntegratorSettings::validate(self).map_err(RenderError::Invalid)?;
+        if scene
+            .lights
+            .lights
+            .iter()
+            .any(|l| matches!(l, Light::Directional { .. } | Light::Environment(_)))
+        {
+            return Err(RenderError::Invalid(
+                "erpt does not support emitters at infinity (environment, directional) yet".into(),
+            ));
+        }
+        let start = Instant::now();
+        let (w, h) = (scene.film.width, scene.film.height);
+        let vertices = self.walk_vertices();
+        let time_up = || {
+            stop.load(Ordering::Relaxed) || run.time_budget.is_some_and(|t| start.elapsed() >= t)
+        };
+        // L̄: mean pixel luminance from independent camera walks.
+        let lum: Vec<f64> = run_chains(
+            self.luminance_samples,
+            splitmix64(run.seed ^ 0x4c55_4d49),
+            |_, mut rng| {
+                let (mut camera, mut light) = (Vec::new(), Vec::new());
+                let raster = in_pixel(
+                    (uniform(&mut rng) * w as f64) as u32 % w,
+                    (uniform(&mut rng) * h as f64) as u32 % h,
+                    &mut rng,
+                );
+                seeds(scene, raster, vertices, &mut rng, &mut camera, &mut light)
+                    .iter()
+                    .map(|s| s.1)
+                    .sum()
+            },
+        );
+        let n = lum.len() as f64;
+        let mean_lum = lum.iter().sum::<f64>() / n;
+        let lum_se =
+            (lum.iter().map(|l| (l - mean_lum).powi(2)).sum::<f64>() / (n * (n - 1.0))).sqrt();
+        let e_d = mean_lum / (self.chain_length as f64 * self.num_chains);
+        let filter = Arc::new(Filter::new(scene.film.filter, w, h));
+        let mut film = Film::new_splat_only(w, h, filter.clone());
+        let kernel_names = self.kernel().map_err(RenderError::Invalid)?;
+        let mut stats =
+            ChainStatistics::new(mcmc_core::kernel::Kernel::component_names(&kernel_names));
+        let (mut passes, mut seeds_total, mut chains_total) = (0u64, 0u64, 0u64);
+        let planned = run.spp.map(u64::from);
+        let mut interrupted = false;
+        while mean_lum > 0.0 && planned.is_none_or(|p| passes < p) {
+            if time_up() {
+                // The time budget ends a run without a sample count as
+                // planned; Ctrl-C, or the budget before the count, stops it.
+                interrupted = stop.load(Ordering::Relaxed) || planned.is_some();
+                break;
+            }
+            let pass_seed = splitmix64(run.seed.wrapping_add(passes.wrapping_mul(0x9e37_79b9)));
+            let bands = run_chains(BANDS as usize, pass_seed, |band, mut rng| {
+                let mut out = Band {
+                    film: Film::new_splat_only(w, h, filter.clone()),
+                    stats: stats_like(&stats),
+                    seeds: 0,
+                    chains: 0,
+                    stopped: false,
+                };
+                let Ok(kernel) = self.kernel() else {
+                    return out;
+                };
+                let mut mh = MetropolisHastings::new(kernel);
+                let (mut camera, mut light) = (Vec::new(), Vec::new());
+                let rows = (band as u32 * h / BANDS)..((band as u32 + 1) * h / BANDS);
+                for y in rows {
+                    if time_up() {
+                        out.stopped = true;
+                        return out;
+                    }
+                    for x in 0..w {
+                        let raster = in_pixel(x, y, &mut rng);
+                        for (path, e) in
+                            seeds(scene, raster, vertices, &mut rng, &mut camera, &mut light)
+                        {
+                            out.seeds += 1;
+                            let mut chains =
+                                (uniform(&mut rng) + e / (self.chain_length as f64 * e_d)) as usize;
+                            if self.max_chains > 0 {
+                                chains = chains.min(self.max_chains);
+                            }
+                            let seed = Sample {
+                                log_density: path.log_density(),
+                                payload: path.sample(),
+                                state: path,
+                            };
+                            for _ in 0..chains {
+                                out.chains += 1;
+                                let mut chain = ChainState {
+                                    current: seed.clone(),
+                                    rng,
+                                    stats: std::mem::take(&mut out.stats),
+                                };
+                                let film = &mut out.film;
+                                for _ in 0..self.chain_length {
+                                    mh.step(&mut chain, &PathTarget, &mut |t| {
+                                        deposit(film, t.current, 1.0 - t.alpha, e_d);
+                                        if let Some(y) = t.proposal {
+                                            deposit(film, y, t.alpha, e_d);
+                                        }
+                                    });
+                                }
+                                rng = chain.rng;
+                                out.stats = chain.stats;
+                            }
+                        }
+                    }
+                }
+                out
+            });
+            if bands.iter().any(|b| b.stopped) {
+                interrupted = stop.load(Ordering::Relaxed) || planned.is_some();
+                break;
+            }
+            for b in &bands {
+                film.add_film(&b.film);
+                stats.merge(&b.stats);
+                seeds_total += b.seeds;
+                chains_total += b.chains;
+            }
+            passes += 1;
+            observer.progress(u64::from(w) * u64::from(h));
+            observer.snapshot(&|| film.develop(passes as f64), stats.steps);
+        }
+        let seconds = start.elapsed().as_secs_f64();
+        let image = if passes > 0 {
+            film.develop(passes as f64)
+        } else {
+            vec![Rgb::BLACK; (w * h) as usize]
+        };
+        let statistics = json!({
+            "passes": passes,
+            "seeds": seeds_total,
+            "chains": chains_total,
+            "chains_per_pixel_per_pass": chains_total as f64 / (passes.max(1) as f64 * f64::from(w * h)),
+            "mutations": stats.steps,
+            "mutations_per_second": stats.steps as f64 / seconds,
+            "mean_pixel_luminance": mean_lum,
+            "mean_pixel_luminance_standard_error": lum_se,
+            "deposit_energy": e_d,
+            "acceptance": stats.acceptance_rate(),
+            "acceptance_per_component": stats.components.iter().map(|c| json!({
+                "name": c.name,
+                "proposed": c.proposed,
+                "accepted": c.accepted,
+                "acceptance": c.acceptance_rate(),
+            })).collect::<Vec<_>>(),
+            "failed_proposals": stats.failed,
+            "nonfinite_contributions": stats.invalid_density,
+        });
+        let serde_json::Value::Object(statistics) = statistics else {
+            unreachable!("json! of an object literal is an object")
+        };
+        Ok(Rendered {
+            image,
+            seconds,
+            samples: stats.steps,
+            interrupted,
+            statistics,
+            nonfinite_dump: None,
+            layers: Vec::new(),
+            summary: format!(
+                "{passes} passes, {chains_total} chains, {} mutations in {seconds:.2} s, e_d = {e_d:.3e}{}",
+                stats.steps,
+                if interrupted { ", stopped early" } else { "" }
+            ),
+        })
+    }
+}
+
+/// Empty statistics with the components of `like`.
+fn stats_like(like: &ChainStatistics) -> ChainStatistics {
+    ChainStatistics::new(like.components.iter().map(|c| c.name.clone()).collect())
+}
+
+/// Deposits `weight · e_d · f/lum f` of `s` at its raster position.
+fn deposit(film: &mut Film, s: &Sample<Path<'_>, PathSample>, weight: f64, e_d: f64) {
+    let i = s.state.luminance();
+    if !(weight > 0.0 && i > 0.0) {
+        return;
+    }
+    film.splat(
+        s.state.raster,
+        s.state.contribution * ((weight * e_d / i) as f32),
+    );
+}

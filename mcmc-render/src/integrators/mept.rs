@@ -1,0 +1,52 @@
+//! Manifold exploration path-space MLT (Jakob & Marschner 2012; Mitsuba
+//! 0.6's "MEMLT"/"MEPT" images): [`crate::integrators::mlt`] with the
+//! manifold perturbation ([`crate::path_space::manifold_perturbation`])
+//! switched on.
+//!
+//! Mitsuba 0.6 has no `mept` plugin: manifold exploration is the
+//! `manifoldPerturbation` switch of `mlt` (and `erpt`). Here `mept` is a
+//! registered name of its own rather than an alias of `mlt`, because an
+//! alias shares `mlt`'s defaults and the point of the name is a different
+//! default: the settings are exactly `mlt`'s (every parameter, same names),
+//! with `manifold_perturbation` = 1 instead of 0. `--integrator mlt --set
+//! manifold_perturbation=1` runs the same thing.
+
+use super::mlt::Mlt;
+use super::registry::IntegratorSettings;
+use super::{RenderError, Rendered, RunSettings};
+use crate::observer::Observer;
+use crate::scene::Scene;
+use std::sync::atomic::AtomicBool;
+
+crate::settings! {
+    /// `mlt`'s settings with the manifold perturbation on.
+    pub struct Mept {
+        flatten {
+            /// Every `mlt` parameter (manifold_perturbation defaults to 1).
+            pub mlt: Mlt = Mlt { manifold_perturbation: 1.0, ..Mlt::default() };
+        }
+    }
+}
+
+impl IntegratorSettings for Mept {
+    const NAME: &'static str = "mept";
+    const DESCRIPTION: &'static str = "Path-space MLT with the manifold perturbation on (manifold exploration, Jakob & Marschner 2012): mlt with manifold_perturbation = 1.";
+
+    fn validate(&self) -> Result<(), String> {
+        IntegratorSettings::validate(&self.mlt)
+    }
+
+    fn planned_samples(&self, scene: &Scene, run: &RunSettings) -> Option<u64> {
+        IntegratorSettings::planned_samples(&self.mlt, scene, run)
+    }
+
+    fn render(
+        &self,
+        scene: &Scene,
+        run: &RunSettings,
+        stop: &AtomicBool,
+        observer: &dyn Observer,
+    ) -> Result<Rendered, RenderError> {
+        IntegratorSettings::render(&self.mlt, scene, run, stop, observer)
+    }
+}

@@ -1,0 +1,185 @@
+//! `erpt` (energy redistribution path tracing): agreement with path
+//! tracing on the repo's tilted Cornell box, bit-identical images for any
+//! thread count, the partial image on a stop, and its statistics.
+//!
+//! # Tolerances
+//!
+//! As `tests/path_space_mlt.rs`: `K` replicates with distinct fixed seeds
+//! against 48 PT replicates of 256 spp; `σ` is the standard error of the
+//! difference of the means (K ≥ 30 on both sides: normal quantiles); a
+//! channel passes within 4σ and 1%, and the budget must give 5σ < 1%
+//! (`MeanAgreement::resolves`). The control scales the replicates by 1.01
+//! and must fail.
+
+mod common;
+
+use common::{MeanAgreement, image_mean, mc_reps, pt_of, repo_scene_tilted};
+use mcmc_core::runner::with_threads;
+use mcmc_render::color::Rgb;
+use mcmc_render::integrators::RunSettings;
+use mcmc_render::integrators::erpt::Erpt;
+use mcmc_render::integrators::registry::{self, IntegratorSettings};
+use mcmc_render::observer::{NoObserver, Observer};
+use mcmc_render::scene::Scene;
+use std::sync::OnceLock;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+const RES: u32 = 16;
+const DEPTH: u32 = 5;
+
+fn cornell() -> &'static Scene {
+    static SCENE: OnceLock<Scene> = OnceLock::new();
+    SCENE.get_or_init(|| repo_scene_tilted("cornell-box.xml", RES, DEPTH))
+}
+
+fn pt_reference() -> &'static [[f64; 3]] {
+    static PT: OnceLock<Vec<[f64; 3]>> = OnceLock::new();
+    PT.get_or_init(|| mc_reps(cornell(), &pt_of(cornell()), 256, 48, 1000))
+}
+
+/// `erpt` at Mitsuba's defaults with `passes` camera samples per pixel.
+fn erpt(scene: &Scene, passes: u32, seed: u64) -> mcmc_render::integrators::Rendered {
+    let mut e = Erpt::default();
+    e.depth.max_depth = i64::from(scene.integrator.max_depth);
+    e.luminance_samples = 4000;
+    let run = RunSettings {
+        spp: Some(passes),
+        seed,
+        ..RunSettings::default()
+    };
+    e.render(scene, &run, &AtomicBool::new(false), &NoObserver)
+        .expect("erpt runs")
+}
+
+/// 32 replicates of `PASSES` passes.
+const PASSES: u32 = 64;
+
+fn erpt_replicates() -> &'static [[f64; 3]] {
+    static REPS: OnceLock<Vec<[f64; 3]>> = OnceLock::new();
+    REPS.get_or_init(|| {
+        (0..32)
+            .map(|k| {
+                let out = erpt(cornell(), PASSES, 31_000 + k);
+                assert_eq!(out.statistics["nonfinite_contributions"], 0);
+                image_mean(&out.image)
+            })
+            .collect()
+    })
+}
+
+/// Ignored: 6 minutes on the loaded shared machine (passed once,
+/// 2026-11-25: within 4σ and 1%, 5σ < 1%;
+/// `cargo test -p mcmc-render --test erpt -- --ignored`).
+#[test]
+#[ignore]
+fn erpt_agrees_with_pt_on_the_cornell_box() {
+    let a = MeanAgreement::new(pt_reference(), erpt_replicates());
+    eprintln!("erpt: rel {:?}\n  {a:?}", a.rel());
+    assert!(
+        a.failures(4.0, 0.01).is_empty(),
+        "erpt disagrees with PT: {a:?}"
+    );
+    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
+}
+
+/// Ignored with the agreement test whose replicates it scales.
+#[test]
+#[ignore]
+fn a_one_percent_bias_is_rejected() {
+    let biased: Vec<[f64; 3]> = erpt_replicates()
+        .iter()
+        .map(|m| m.map(|v| v * 1.01))
+        .collect();
+    let a = MeanAgreement::new(pt_reference(), &biased);
+    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
+    assert!(!a.failures(4.0, 0.01).is_empty(), "a 1% bias passed: {a:?}");
+}
+
+#[test]
+fn erpt_images_are_bit_identical_across_thread_counts() {
+    let scene = repo_scene_tilted("cornell-glossy-glass.xml", RES, DEPTH);
+    for manifold in ["0", "1"] {
+        let bits = |threads: usize, seed: u64| -> Vec<u32> {
+            let integ = registry::configure(
+                None,
+                Some("erpt"),
+                &[
+                    ("luminance_samples".into(), "1000".into()),
+                    ("manifold_perturbation".into(), manifold.into()),
+                ],
+            )
+            .expect("erpt");
+            let run = RunSettings {
+                spp: Some(2),
+                seed,
+                ..RunSettings::default()
+            };
+            let out = with_threads(threads, || {
+                integ.render(&scene, &run, &AtomicBool::new(false), &NoObserver)
+            })
+            .expect("erpt runs");
+            assert!(image_mean(&out.image)[1] > 0.0, "black image");
+            for key in [
+                "passes",
+                "chains",
+                "mutations",
+                "acceptance_per_component",
+                "deposit_energy",
+            ] {
+                assert!(out.statistics.contains_key(key), "{key} missing");
+            }
+            out.image
+                .iter()
+                .flat_map(|p| [p.r.to_bits(), p.g.to_bits(), p.b.to_bits()])
+                .collect()
+        };
+        let one = bits(1, 42);
+        assert!(
+            one == bits(2, 42),
+            "manifold {manifold}: 1 vs 2 threads differ"
+        );
+        assert!(one != bits(2, 43), "manifold {manifold}: seed ignored");
+    }
+}
+
+/// Sets the stop flag at the first snapshot (after the first pass).
+struct StopAfterFirst<'a>(&'a AtomicBool);
+
+impl Observer for StopAfterFirst<'_> {
+    fn snapshot(&self, _image: &dyn Fn() -> Vec<Rgb>, _samples: u64) {
+        self.0.store(true, Ordering::Relaxed);
+    }
+}
+
+#[test]
+fn a_stop_writes_the_partial_image() {
+    let stop = AtomicBool::new(false);
+    let e = Erpt {
+        luminance_samples: 1000,
+        ..Erpt::default()
+    };
+    let run = RunSettings {
+        spp: Some(1000),
+        seed: 3,
+        ..RunSettings::default()
+    };
+    let out = e
+        .render(cornell(), &run, &stop, &StopAfterFirst(&stop))
+        .expect("erpt runs");
+    assert!(out.interrupted, "not marked interrupted");
+    assert_eq!(out.statistics["passes"], 1);
+    assert!(image_mean(&out.image)[1] > 0.0, "no partial image");
+}
+
+#[test]
+fn erpt_refuses_unbuilt_mutations_and_zero_depth() {
+    for (k, v) in [
+        ("max_depth", "0"),
+        ("num_chains", "0"),
+        ("chain_length", "0"),
+    ] {
+        let err = registry::configure(None, Some("erpt"), &[(k.into(), v.into())]);
+        assert!(err.is_err(), "{k} = {v} accepted");
+    }
+    assert!(registry::configure(None, Some("erpt"), &[]).is_ok());
+}
