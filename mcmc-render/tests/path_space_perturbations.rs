@@ -589,6 +589,18 @@ fn caustic_perturbation_density_matches_its_proposals() {
     let p = |i: usize| x.vertices[i].p().as_dvec3();
     let factor = (p(3) - p(2)).length() / ((p(1) - p(0)).length() + (p(2) - p(1)).length());
     let per_pixel = scene.camera.radians_per_pixel() as f64;
+    // Mitsuba's radPerPixel: the fields of view (here from the camera's
+    // edge rays) over the pixels, the smaller of the two axes.
+    let edge = |r: Vec2| scene.camera.generate_ray(r).d.normalize().as_dvec3();
+    let fov = |a: Vec2, b: Vec2| polar_of(edge(a), edge(b)).0;
+    let half = RES as f32 / 2.0;
+    let xfov = fov(Vec2::new(0.0, half), Vec2::new(RES as f32, half));
+    let yfov = fov(Vec2::new(half, 0.0), Vec2::new(half, RES as f32));
+    let expected = (xfov / RES as f64).min(yfov / RES as f64);
+    assert!(
+        (per_pixel / expected - 1.0).abs() < 1e-5,
+        "{per_pixel} vs {expected}"
+    );
     let r2 = (0.05f64 * (RES * RES) as f64 / PI).sqrt();
     assert!((angles.theta1 / (per_pixel * 0.1 * factor) - 1.0).abs() < 1e-9);
     assert!((angles.theta2 / (per_pixel * r2 * factor) - 1.0).abs() < 1e-9);
