@@ -63,3 +63,4 @@ pub mod scene;
 pub mod settings;
 pub mod texture;
 pub mod warp;
+pub mod inverse;
