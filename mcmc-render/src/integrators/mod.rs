@@ -51,6 +51,7 @@
 //! connection); see the module documentation there.
 
 pub mod bdpt;
+pub mod fused;
 pub mod guided;
 pub mod lt;
 pub mod mlt;
