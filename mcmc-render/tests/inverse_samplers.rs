@@ -327,3 +327,111 @@ fn camera_raster_and_lens_round_trip() {
     eprintln!("raster max |u' - u| {worst:e}");
     assert!(worst < 1e-4);
 }
+
+/// BSDF inverses at the extremes the fused chain meets: roughness 1e-4
+/// and 1 (GGX and Beckmann, conductors and dielectrics) and η = 1.001
+/// (smooth and rough glass, where Fresnel reflection is ~1e-7 and the
+/// reflection interval nearly empty). Sampling with the inverse's numbers
+/// (the lobe number drawn inside its interval, as the fused inverse does)
+/// gives the same lobe and direction back; the direction numbers come back
+/// to a tolerance set by the map's conditioning (~1/α² at small α, where u
+/// is ill-conditioned but the direction is what matters).
+#[test]
+fn bsdf_inverses_at_extreme_roughness_and_eta_near_one() {
+    use mcmc_render::bsdf::{Bsdf, BsdfDesc, MicrofacetKind, TransportMode};
+    use mcmc_render::color::Rgb;
+    use mcmc_render::inverse::in_interval;
+    let mut models: Vec<(String, BsdfDesc)> = Vec::new();
+    for kind in [MicrofacetKind::Ggx, MicrofacetKind::Beckmann] {
+        for alpha in [1e-4f32, 1.0] {
+            models.push((
+                format!("roughconductor {kind:?} {alpha}"),
+                BsdfDesc::RoughConductor {
+                    distribution: kind,
+                    alpha_u: alpha,
+                    alpha_v: alpha,
+                    eta: Rgb::splat(0.2),
+                    k: Rgb::splat(3.0),
+                    specular_reflectance: Rgb::WHITE,
+                },
+            ));
+            for eta in [1.5f32, 1.001] {
+                models.push((
+                    format!("roughdielectric {kind:?} {alpha} eta {eta}"),
+                    BsdfDesc::RoughDielectric {
+                        distribution: kind,
+                        alpha_u: alpha,
+                        alpha_v: alpha,
+                        int_ior: eta,
+                        ext_ior: 1.0,
+                        specular_reflectance: Rgb::WHITE,
+                        specular_transmittance: Rgb::WHITE,
+                    },
+                ));
+            }
+        }
+    }
+    models.push((
+        "dielectric eta 1.001".into(),
+        BsdfDesc::Dielectric {
+            int_ior: 1.001,
+            ext_ior: 1.0,
+            specular_reflectance: Rgb::WHITE,
+            specular_transmittance: Rgb::WHITE,
+        },
+    ));
+    let mut src = IndependentSource::new(Xoshiro256PlusPlus::seed_from_u64(21));
+    for (name, desc) in models {
+        let b = Bsdf::from_desc(&desc).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let (mut n, mut worst, mut none) = (0usize, 0.0f32, 0usize);
+        for i in 0..N {
+            // Grazing to normal incidence, both sides.
+            let (a, c) = src.next_2d();
+            let cos = if i % 10 == 0 {
+                1e-3 * a + 1e-4
+            } else {
+                a.max(1e-4)
+            };
+            let sin = (1.0 - cos * cos).sqrt();
+            let phi = std::f32::consts::TAU * c;
+            let mut wo = Vec3::new(sin * phi.cos(), sin * phi.sin(), cos);
+            if i % 2 == 1 && !name.starts_with("roughconductor") {
+                wo.z = -wo.z;
+            }
+            let ul = src.next_1d();
+            let u = src.next_2d();
+            let Some(s) = b.sample(wo, ul, u, TransportMode::Radiance) else {
+                continue;
+            };
+            let Some(inv) = b.invert(wo, s.wi, 0.5) else {
+                none += 1;
+                continue;
+            };
+            let Some(ul2) = in_interval(inv.u_lobe.0, inv.u_lobe.1, f64::from(src.next_1d()))
+            else {
+                none += 1;
+                continue;
+            };
+            let Some(again) = b.sample(
+                wo,
+                ul2,
+                if inv.u_used { inv.u } else { u },
+                TransportMode::Radiance,
+            ) else {
+                none += 1;
+                continue;
+            };
+            assert_eq!(again.wi.z > 0.0, s.wi.z > 0.0, "{name}: lobe changed");
+            worst = worst.max((again.wi - s.wi).length());
+            n += 1;
+        }
+        eprintln!("{name}: {n} round trips, {none} failed, max |Δwi| {worst:e}");
+        // A failed inverse is a counted round-trip failure in the chain; it
+        // must stay rare, except at α = 1e-4 where f32 cannot resolve the
+        // lobe (measured and reported in docs/fused.md, not asserted).
+        if !name.contains(" 0.0001") {
+            assert!(none * 1000 <= N, "{name}: {none} without inverse");
+            assert!(worst < 2e-3, "{name}: |Δwi| {worst}");
+        }
+    }
+}
