@@ -54,6 +54,7 @@ crate::settings! {
 
 impl Fused {
     /// The fused kernel's settings.
+    #[allow(clippy::needless_update)]
     pub fn fused_mutation(&self) -> Result<FusedMutation, String> {
         let m = FusedMutation {
             pss: self.mutation.mutation()?,
@@ -66,6 +67,8 @@ impl Fused {
                 multi_chain_perturbation: self.multi_chain_perturbation,
                 manifold_perturbation: self.manifold_perturbation,
                 independent: 0.0,
+                // Mutations added to the mixture later keep their defaults.
+                ..PathMutations::default()
             },
             path_probability: self.path_space_probability,
             drop_jacobian: false,
