@@ -142,6 +142,23 @@ impl SpotProfile {
         (w.normalize(), 1.0 / self.cone_solid_angle())
     }
 
+    /// The numbers with which [`SpotProfile::sample`] returns the unit
+    /// world direction `w` (the inverse sampler of `crate::inverse`), or
+    /// `None` outside the cone.
+    pub fn invert(&self, w: Vec3) -> Option<(f32, f32)> {
+        let l = (self.to_local * w).as_dvec3();
+        let width = 1.0 - f64::from(self.cos_cutoff);
+        // The cone's rim (u₀ → 1) can come back a rounding error outside.
+        if !(l.z > f64::from(self.cos_cutoff) - 1e-6) || !(width > 0.0) {
+            return None;
+        }
+        let u0 = ((1.0 - l.z) / width).clamp(0.0, 1.0);
+        Some((
+            crate::sampling::to_unit_f32(u0),
+            crate::inverse::angle_to_unit(l.y.atan2(l.x)),
+        ))
+    }
+
     /// Density of [`SpotProfile::sample`] at the unit world direction `w`.
     pub fn pdf(&self, w: Vec3) -> f32 {
         if (self.to_local * w).z > self.cos_cutoff {
@@ -495,6 +512,15 @@ impl Lights {
             .min(self.lights.len() - 1);
         let p = self.pmf[i];
         (p > 0.0).then_some((i as u32, p))
+    }
+
+    /// The interval `[lo, hi)` of selection numbers `u` for which
+    /// [`Lights::select`] picks light `i` (empty for a light of zero
+    /// power).
+    pub fn selection_interval(&self, i: u32) -> (f32, f32) {
+        let i = i as usize;
+        let lo = if i == 0 { 0.0 } else { self.cdf[i - 1] };
+        (lo, self.cdf[i])
     }
 
     /// Uniform point on an area light; returns it with its area density.

@@ -24,7 +24,7 @@
 
 use crate::color::Rgb;
 use crate::integrators::bdpt::{
-    Bdpt, SubpathBuffers, connect, generate_camera_subpath, generate_light_subpath,
+    Bdpt, Connection, SubpathBuffers, connect, generate_camera_subpath, generate_light_subpath,
 };
 use crate::integrators::pt::PathTracer;
 use crate::markov::{CANDIDATE_STREAM, ChainFamily, ChainSettings, MltError};
@@ -220,15 +220,23 @@ impl MmltDepth {
     }
 }
 
-impl PssPathSampler for MmltDepth {
-    fn streams(&self) -> usize {
-        Stream::COUNT
-    }
-
-    fn trace(&self, scene: &Scene, source: &mut PssSource<'_>, out: &mut Vec<Splat>) -> u32 {
+impl MmltDepth {
+    /// One MMLT sample from `source` into `buffers`: the technique chosen
+    /// by the connection stream's first number, its two subpaths, and the
+    /// connection (MIS weight included) with the splat it makes (the
+    /// contribution times the number of techniques). `None` when a subpath
+    /// falls short or the connection carries nothing. The fused state
+    /// space ([`crate::fused_space`]) rebuilds the path from `buffers` and
+    /// the connection's sampled endpoint.
+    pub fn sample_technique(
+        &self,
+        scene: &Scene,
+        source: &mut PssSource<'_>,
+        buffers: &mut SubpathBuffers,
+    ) -> Option<(Connection, Splat)> {
         let techniques = self.techniques();
         if techniques.is_empty() {
-            return self.depth as u32;
+            return None;
         }
         source.set_stream(Stream::Connection);
         let n = techniques.len();
@@ -236,31 +244,43 @@ impl PssPathSampler for MmltDepth {
         let (s, t) = techniques[k];
         source.set_stream(Stream::Camera);
         let raster = raster_of(scene, source);
+        let nc = generate_camera_subpath(scene, raster, source, t, None, &mut buffers.camera);
+        if nc != t {
+            return None;
+        }
+        source.set_stream(Stream::Light);
+        let nl = generate_light_subpath(scene, source, s, None, &mut buffers.light);
+        if nl != s {
+            return None;
+        }
+        source.set_stream(Stream::Connection);
+        let c = connect(
+            scene,
+            &buffers.camera,
+            &buffers.light,
+            s,
+            t,
+            source,
+            self.bdpt.heuristic,
+        )?;
+        let splat = Splat {
+            p: if c.splat { c.raster } else { raster },
+            l: c.l * n as f32,
+            class: 0,
+        };
+        Some((c, splat))
+    }
+}
+
+impl PssPathSampler for MmltDepth {
+    fn streams(&self) -> usize {
+        Stream::COUNT
+    }
+
+    fn trace(&self, scene: &Scene, source: &mut PssSource<'_>, out: &mut Vec<Splat>) -> u32 {
         BUFFERS.with_borrow_mut(|b| {
-            let nc = generate_camera_subpath(scene, raster, source, t, None, &mut b.camera);
-            if nc != t {
-                return;
-            }
-            source.set_stream(Stream::Light);
-            let nl = generate_light_subpath(scene, source, s, None, &mut b.light);
-            if nl != s {
-                return;
-            }
-            source.set_stream(Stream::Connection);
-            if let Some(c) = connect(
-                scene,
-                &b.camera,
-                &b.light,
-                s,
-                t,
-                source,
-                self.bdpt.heuristic,
-            ) {
-                out.push(Splat {
-                    p: if c.splat { c.raster } else { raster },
-                    l: c.l * n as f32,
-                    class: 0,
-                });
+            if let Some((_, splat)) = self.sample_technique(scene, source, b) {
+                out.push(splat);
             }
         });
         self.depth as u32

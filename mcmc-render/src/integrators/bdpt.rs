@@ -114,6 +114,10 @@ pub struct Connection {
     pub s: usize,
     /// Camera vertices of the technique (the path has `s + t − 1` segments).
     pub t: usize,
+    /// The endpoint the connection sampled: the light vertex for `s = 1`,
+    /// the camera vertex for `t = 1` (the fused state space rebuilds the
+    /// path from it).
+    pub sampled: Option<Vertex>,
 }
 
 /// Russian roulette setting for a walk: `Some(rr_depth)` or `None` (off,
@@ -535,6 +539,7 @@ pub fn connect_in<B: ConnectionBsdfs>(
             splat: t == 1,
             s,
             t,
+            sampled,
         });
     }
 }

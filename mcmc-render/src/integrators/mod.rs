@@ -52,6 +52,7 @@
 
 pub mod bdpt;
 pub mod erpt;
+pub mod fused;
 pub mod guided;
 pub mod lt;
 pub mod mept;

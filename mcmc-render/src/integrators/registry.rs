@@ -158,6 +158,7 @@ pub static REGISTRY: &[Registration] = &[
     register::<super::tempered_pssmlt::TemperedPssmlt>(),
     register::<super::mept::Mept>(),
     register::<super::erpt::Erpt>(),
+    register::<super::fused::Fused>(),
 ];
 
 /// The registered names, comma-separated.

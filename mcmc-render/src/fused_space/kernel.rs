@@ -1,0 +1,339 @@
+//! The fused chain's kernel (spec seed001 §5.1, Algorithm 1): each step
+//! draws one mutation with state-independent probabilities (so selection
+//! probabilities cancel in every ratio; a path-space mutation that does
+//! not apply to the current path fails and is counted, option (b) of
+//! spec seed001 §3):
+//!
+//! - with probability `1 − p_tc − p_path`, MMLT's primary-sample mutation
+//!   (`mcmc-core`'s mixture of a small step and a large step), then the
+//!   proposal is traced (Eq. 11: the ratio of the targets);
+//! - with probability `p_tc`, a change of technique: the technique number
+//!   alone is redrawn (symmetric);
+//! - with probability `p_path`, a path-space mutation of the cached path,
+//!   mapped back by the inverse path sampler (Eq. 24, see the module docs
+//!   of [`crate::fused_space`]).
+//!
+//! # The round trip and its bias
+//!
+//! A path-space proposal `y` is inverted to `v` and `v` re-traced; the
+//! proposal is the re-traced state (its cache is exactly `P_t^{-1}(v)`),
+//! and it fails when re-tracing gives another technique or nothing
+//! (spec seed001 §5.1). The paper checks only the proposal, which makes
+//! the chain prefer the set `A` of paths that survive the round trip: a
+//! move from `x ∉ A` to `y ∈ A` can be accepted but its reverse never is.
+//! Here a path-space move also fails when the *current* path does not
+//! survive it (checked once per state and cached), so path-space moves
+//! run only inside `A × A`, where they satisfy detailed balance; the
+//! primary-sample moves cover everything. What remains is `f32` rounding
+//! between `y` and its re-trace.
+
+use super::inverse_path::{RoundTripFailure, round_trip, trace};
+use super::{FusedMutation, FusedState};
+use crate::path_space::Path;
+use crate::pss::{MmltDepth, PathSample};
+use crate::scene::Scene;
+use mcmc_core::kernel::{Kernel, Mixture, Proposal, StepObservation};
+use mcmc_core::rng::{ChainRng, child_rng, uniform};
+use mcmc_core::sample::Sample;
+use mcmc_core::space::TorusPoint;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
+
+/// Counters of the conversions between the two spaces, summed over every
+/// chain of a render (timings only: the image does not depend on them).
+#[derive(Debug, Default)]
+pub struct FusedCounters {
+    /// Path → primary sample inversions (each followed by a re-trace).
+    pub inversions: AtomicU64,
+    /// Nanoseconds spent inverting and re-tracing.
+    pub conversion_nanos: AtomicU64,
+    /// Nanoseconds spent in the kernel's proposals, conversions included.
+    pub propose_nanos: AtomicU64,
+}
+
+/// Probability of a primary-sample (small or large step) mutation.
+pub fn pss_probability(m: &FusedMutation) -> f64 {
+    (1.0 - m.technique_change - m.path_probability).max(0.0)
+}
+
+/// Failure reasons of path-space moves beyond the mutations' own.
+const PATH_FAILURES: [&str; 4] = [
+    "path: technique cannot produce the proposal",
+    "path: proposal not invertible",
+    "path: round trip failed",
+    "path: current path not invertible",
+];
+
+/// The fused kernel of one depth (one per chain).
+pub struct FusedKernel<'s> {
+    scene: &'s Scene,
+    depth: MmltDepth,
+    pss: Mixture<TorusPoint, PathSample>,
+    path: Mixture<Path<'s>, PathSample>,
+    p_pss: f64,
+    p_tc: f64,
+    drop_jacobian: bool,
+    counters: Arc<FusedCounters>,
+    n_pss: usize,
+    n_path: usize,
+    pss_cur: Option<Sample<TorusPoint, PathSample>>,
+    pss_prop: Option<Sample<TorusPoint, PathSample>>,
+    path_cur: Option<Sample<Path<'s>, PathSample>>,
+    path_prop: Option<Sample<Path<'s>, PathSample>>,
+    scratch: Option<FusedState<'s>>,
+    /// Whether the current state's path survives the round trip (`None`:
+    /// not checked since the state last changed).
+    current_invertible: Option<bool>,
+}
+
+impl<'s> FusedKernel<'s> {
+    /// The kernel of `depth` with `mutation`'s settings.
+    pub fn new(
+        scene: &'s Scene,
+        depth: MmltDepth,
+        mutation: &FusedMutation,
+        counters: Arc<FusedCounters>,
+    ) -> Result<Self, String> {
+        let pss = mutation.pss.kernel().map_err(|e| e.to_string())?;
+        let path = mutation
+            .path_mutations()
+            .kernel_between(depth.depth, Some(depth.depth))?;
+        let (n_pss, n_path) = (pss.component_names().len(), path.component_names().len());
+        Ok(FusedKernel {
+            scene,
+            depth,
+            pss,
+            path,
+            p_pss: pss_probability(mutation),
+            p_tc: mutation.technique_change,
+            drop_jacobian: mutation.drop_jacobian,
+            counters,
+            n_pss,
+            n_path,
+            pss_cur: None,
+            pss_prop: None,
+            path_cur: None,
+            path_prop: None,
+            scratch: None,
+            current_invertible: None,
+        })
+    }
+
+    /// Component index of the change of technique.
+    fn technique_component(&self) -> usize {
+        self.n_pss
+    }
+
+    /// Component index of path-space failure reason `i` of [`PATH_FAILURES`].
+    fn failure(&self, i: usize) -> usize {
+        self.n_pss + 1 + self.n_path + i
+    }
+
+    /// Writes the traced state at `point` into `proposal`.
+    fn finish(
+        &self,
+        point: TorusPoint,
+        proposal: &mut Sample<FusedState<'s>, PathSample>,
+        log_q_ratio: f64,
+        component: usize,
+    ) -> Proposal {
+        proposal.state.point = point;
+        trace(self.scene, &self.depth, &mut proposal.state);
+        proposal.log_density = proposal.state.log_density;
+        proposal.payload.clone_from(&proposal.state.sample);
+        Proposal {
+            log_q_ratio,
+            component,
+            evaluated: true,
+            failed: false,
+        }
+    }
+
+    fn propose_pss(
+        &mut self,
+        current: &Sample<FusedState<'s>, PathSample>,
+        proposal: &mut Sample<FusedState<'s>, PathSample>,
+        rng: &mut ChainRng,
+    ) -> Proposal {
+        let cur = self.pss_cur.get_or_insert_with(|| Sample {
+            state: current.state.point.clone(),
+            log_density: current.log_density,
+            payload: PathSample::default(),
+        });
+        cur.state.clone_from(&current.state.point);
+        cur.log_density = current.log_density;
+        let prop = self.pss_prop.get_or_insert_with(|| cur.clone());
+        let p = self.pss.propose(cur, prop, rng);
+        if p.failed {
+            return p;
+        }
+        let point = std::mem::replace(&mut prop.state, TorusPoint::fresh(child_rng(rng)));
+        self.finish(point, proposal, p.log_q_ratio, p.component)
+    }
+
+    fn propose_technique(
+        &mut self,
+        current: &Sample<FusedState<'s>, PathSample>,
+        proposal: &mut Sample<FusedState<'s>, PathSample>,
+        rng: &mut ChainRng,
+    ) -> Proposal {
+        // Connection stream, number 0: coordinate 2 of the interleaved layout.
+        let mut values = current.state.point.materialize();
+        if values.len() < 3 {
+            values.resize(3, 0.5);
+            // Coordinates never read are uniform: draw the missing ones.
+            for v in values.iter_mut().skip(current.state.point.len()) {
+                *v = uniform(rng);
+            }
+        }
+        values[2] = uniform(rng);
+        let point = TorusPoint::from_values(&values, child_rng(rng));
+        // Redrawing one coordinate uniformly is symmetric.
+        self.finish(point, proposal, 0.0, self.technique_component())
+    }
+
+    fn propose_path(
+        &mut self,
+        current: &Sample<FusedState<'s>, PathSample>,
+        proposal: &mut Sample<FusedState<'s>, PathSample>,
+        rng: &mut ChainRng,
+    ) -> Proposal {
+        let offset = self.n_pss + 1;
+        let fail = [0, 1, 2, 3].map(|i| self.failure(i));
+        // The current path: cached, or traced once (a start-up state).
+        let scene = self.scene;
+        let depth = self.depth;
+        let traced;
+        let x = if current.state.depth == Some(depth.depth) {
+            &current.state
+        } else {
+            traced = FusedState::traced(scene, &depth, current.state.point.clone());
+            &traced
+        };
+        let Some((s, _)) = x.technique else {
+            return Proposal::failed(fail[3]);
+        };
+        let cur = self.path_cur.get_or_insert_with(|| Sample {
+            state: x.path.clone(),
+            log_density: x.path.log_density(),
+            payload: PathSample::default(),
+        });
+        cur.state.clone_from(&x.path);
+        cur.log_density = x.path.log_density();
+        let prop = self.path_prop.get_or_insert_with(|| cur.clone());
+        let p = self.path.propose(cur, prop, rng);
+        if p.failed {
+            return Proposal::failed(offset + p.component);
+        }
+        let k = depth.depth;
+        let y = &prop.state;
+        let log_p_y = y.log_regrowth_density(0, k, s);
+        let log_p_x = x.path.log_regrowth_density(0, k, s);
+        if !(log_p_y > f64::NEG_INFINITY) || !(log_p_x > f64::NEG_INFINITY) {
+            return Proposal::failed(fail[0]);
+        }
+        let start = Instant::now();
+        let out = self
+            .scratch
+            .get_or_insert_with(|| FusedState::untraced(scene, TorusPoint::fresh(child_rng(rng))));
+        let result = round_trip(scene, &depth, y, s, rng, out);
+        self.counters.inversions.fetch_add(1, Ordering::Relaxed);
+        let outcome = match result {
+            Err(RoundTripFailure::Inverse(_)) => Some(fail[1]),
+            Err(RoundTripFailure::Retrace) => Some(fail[2]),
+            Ok(()) => {
+                // The reverse move needs the current path's round trip.
+                let ok = match self.current_invertible {
+                    Some(ok) => ok,
+                    None => {
+                        let mut probe =
+                            FusedState::untraced(scene, TorusPoint::fresh(child_rng(rng)));
+                        let ok = round_trip(scene, &depth, &x.path, s, rng, &mut probe).is_ok();
+                        self.counters.inversions.fetch_add(1, Ordering::Relaxed);
+                        self.current_invertible = Some(ok);
+                        ok
+                    }
+                };
+                (!ok).then_some(fail[3])
+            }
+        };
+        self.counters
+            .conversion_nanos
+            .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        if let Some(component) = outcome {
+            return Proposal::failed(component);
+        }
+        let jacobian = if self.drop_jacobian {
+            0.0
+        } else {
+            log_p_y - log_p_x
+        };
+        let out = self.scratch.as_mut().expect("set above");
+        std::mem::swap(&mut proposal.state, out);
+        proposal.log_density = proposal.state.log_density;
+        proposal.payload.clone_from(&proposal.state.sample);
+        Proposal {
+            log_q_ratio: p.log_q_ratio + jacobian,
+            component: offset + p.component,
+            evaluated: true,
+            failed: false,
+        }
+    }
+}
+
+impl<'s> Kernel<FusedState<'s>, PathSample> for FusedKernel<'s> {
+    fn propose(
+        &mut self,
+        current: &Sample<FusedState<'s>, PathSample>,
+        proposal: &mut Sample<FusedState<'s>, PathSample>,
+        rng: &mut ChainRng,
+    ) -> Proposal {
+        let start = Instant::now();
+        let r = uniform(rng);
+        let p = if r < self.p_pss {
+            self.propose_pss(current, proposal, rng)
+        } else if r < self.p_pss + self.p_tc {
+            self.propose_technique(current, proposal, rng)
+        } else {
+            self.propose_path(current, proposal, rng)
+        };
+        self.counters
+            .propose_nanos
+            .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        p
+    }
+
+    fn observe(&mut self, obs: &StepObservation<'_, FusedState<'s>>) {
+        if obs.accepted {
+            self.current_invertible = None;
+        }
+        if obs.component < self.n_pss {
+            self.pss.observe(&StepObservation {
+                component: obs.component,
+                alpha: obs.alpha,
+                accepted: obs.accepted,
+                own: obs.own,
+                state: &obs.state.point,
+            });
+        }
+    }
+
+    fn freeze(&mut self) {
+        self.pss.freeze();
+        self.path.freeze();
+    }
+
+    fn component_names(&self) -> Vec<String> {
+        let mut names = self.pss.component_names();
+        names.push("technique change".into());
+        names.extend(
+            self.path
+                .component_names()
+                .into_iter()
+                .map(|n| format!("path: {n}")),
+        );
+        names.extend(PATH_FAILURES.iter().map(|s| s.to_string()));
+        names
+    }
+}

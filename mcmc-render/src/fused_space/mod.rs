@@ -1,0 +1,233 @@
+//! Fused state spaces (Otsu et al. 2017, spec seed001): one Markov chain
+//! per MMLT path depth whose state is MMLT's multiplexed primary sample
+//! `[u, t]` *and* the path `x = P_t^{-1}(u)` it maps to, so that each step
+//! may be a primary-sample mutation (Kelemen/Gaussian small step, large
+//! step, change of technique) or any path-space mutation of
+//! [`crate::path_space::PathMutations`] (the fixed-length bidirectional
+//! mutation, the lens perturbation, and whatever else that mixture holds).
+//!
+//! - [`inverse_path`]: the two maps (`trace`, the MMLT sampler keeping its
+//!   path; `invert`, the inverse path sampler) and the round trip.
+//! - [`kernel`]: the mixed kernel and its acceptance ratio (Eq. 11 for
+//!   primary-sample moves, Eq. 24 for path-space moves).
+//!
+//! The target of depth `d` is MMLT's, `π(u, t) = lum(n · w_t · C_t(u))`
+//! over primary sample space ([`crate::pss::MmltDepth`]); the chain lives
+//! there, so the driver's start-up, normalisation and splatting are
+//! MMLT's. A path-space move is a proposal in primary sample space: map
+//! `u → x`, mutate `x → y` with the path-space kernel `T_P`, map back
+//! `y → v = P_t(y)` (fresh uniforms where the sampler is many-to-one). Its
+//! density in `v` is `T_P(x→y) / p_t(y)` (spec seed001 §3), so the kernel
+//! reports `ln T_U(v→u) − ln T_U(u→v) = ln T_P(y→x) − ln T_P(x→y) + ln
+//! p_t(y) − ln p_t(x)`; with `π(v) = n w_t(y) f(y)/p_t(y)` the Metropolis–
+//! Hastings ratio is Eq. 24, `w_t(y) f(y) T_P(y→x) / (w_t(x) f(x) T_P(x→y))`.
+//! `p_t` is the path's density under technique `t`'s sampler, the product
+//! of its light-walk and camera-walk vertex densities
+//! ([`Path::log_regrowth_density`] with every vertex regrown).
+
+pub mod inverse_path;
+pub mod kernel;
+
+use crate::markov::{ChainFamily, MltError};
+use crate::path_space::{Path, PathMutations};
+use crate::pss::{MmltDepth, Mutation, PathSample, bootstrap_point};
+use crate::scene::Scene;
+use inverse_path::{empty_sample, trace};
+pub use kernel::{FusedCounters, FusedKernel};
+use mcmc_core::space::TorusPoint;
+use mcmc_core::target::{Evaluation, Target};
+use std::sync::Arc;
+
+/// A state of the fused chain: the multiplexed primary sample and the
+/// cached path it maps to under one depth's sampler.
+#[derive(Clone, Debug)]
+pub struct FusedState<'s> {
+    /// The primary sample `[u, t]` (MMLT's coordinate layout).
+    pub point: TorusPoint,
+    /// `P_t^{-1}(u)`, light to camera (empty when `u` carries nothing or
+    /// was not traced).
+    pub path: Path<'s>,
+    /// The depth the cache was traced for (`None`: not traced yet).
+    pub depth: Option<usize>,
+    /// The technique `(s, t)` of the cached path.
+    pub technique: Option<(usize, usize)>,
+    /// MMLT's splat of the cached path.
+    pub sample: PathSample,
+    /// `ln π(u)` of the cached path (MMLT's target).
+    pub log_density: f64,
+}
+
+impl<'s> FusedState<'s> {
+    /// A state at `point`, not traced yet.
+    pub fn untraced(scene: &'s Scene, point: TorusPoint) -> Self {
+        FusedState {
+            point,
+            path: Path::new(scene),
+            depth: None,
+            technique: None,
+            sample: empty_sample(0),
+            log_density: f64::NEG_INFINITY,
+        }
+    }
+
+    /// The state at `point` traced with `depth`'s sampler.
+    pub fn traced(scene: &'s Scene, depth: &MmltDepth, point: TorusPoint) -> Self {
+        let mut s = FusedState::untraced(scene, point);
+        trace(scene, depth, &mut s);
+        s
+    }
+}
+
+/// MMLT's target of one depth, read from a state's cache when the state
+/// was traced for this depth (every state the kernel proposes is), traced
+/// otherwise (start-up candidates).
+pub struct FusedTarget<'s> {
+    /// The scene.
+    pub scene: &'s Scene,
+    /// The depth's sampler.
+    pub depth: MmltDepth,
+}
+
+impl<'s> Target<FusedState<'s>> for FusedTarget<'s> {
+    type Payload = PathSample;
+
+    fn evaluate(&self, state: &FusedState<'s>) -> Evaluation<PathSample> {
+        if state.depth == Some(self.depth.depth) {
+            return Evaluation::new(state.log_density, state.sample.clone());
+        }
+        let traced = FusedState::traced(self.scene, &self.depth, state.point.clone());
+        Evaluation::new(traced.log_density, traced.sample)
+    }
+}
+
+/// The fused chain's mutation settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FusedMutation {
+    /// The primary-sample mutation (small and large step).
+    pub pss: Mutation,
+    /// Probability of a change of technique (the connection stream's first
+    /// number redrawn, everything else kept).
+    pub technique_change: f64,
+    /// The path-space mutations (their relative weights; the bidirectional
+    /// one is made fixed-length and the independent proposal is off).
+    pub path: PathMutations,
+    /// Probability of a path-space mutation.
+    pub path_probability: f64,
+    /// A control for the tests: leave out the inverse sampler's Jacobian
+    /// `p_t(y)/p_t(x)` from the path-space moves' ratio (wrong on purpose).
+    pub drop_jacobian: bool,
+}
+
+impl Default for FusedMutation {
+    /// The `fused` integrator's defaults: MMLT's Gaussian small step with
+    /// large steps at 0.3, path-space moves half of the time (the
+    /// fixed-length bidirectional mutation and the lens perturbation with
+    /// equal weights), no change of technique.
+    fn default() -> Self {
+        FusedMutation {
+            pss: Mutation {
+                small: crate::pss::SmallStepKind::Gaussian { sigma: 0.01 },
+                large_step_probability: 0.3,
+            },
+            technique_change: 0.0,
+            path: PathMutations {
+                bidirectional: 1.0,
+                fixed_length: true,
+                lens_perturbation: 1.0,
+                ..PathMutations::default()
+            },
+            path_probability: 0.5,
+            drop_jacobian: false,
+        }
+    }
+}
+
+impl FusedMutation {
+    /// Checks the probabilities and the path-space mixture.
+    pub fn check(&self) -> Result<(), String> {
+        let (a, b) = (self.technique_change, self.path_probability);
+        if !(a >= 0.0 && b >= 0.0 && a + b <= 1.0) {
+            return Err(format!(
+                "technique_change_probability {a} and path_space_probability {b} must be non-negative with a sum ≤ 1"
+            ));
+        }
+        self.pss
+            .kernel::<()>()
+            .map_err(|e| format!("MLT mutation: {e}"))?;
+        self.path_mutations().check()
+    }
+
+    /// The path-space mixture the kernel uses: fixed-length, no
+    /// independent proposal (the large step is the independent move).
+    pub fn path_mutations(&self) -> PathMutations {
+        PathMutations {
+            fixed_length: true,
+            independent: 0.0,
+            ..self.path
+        }
+    }
+}
+
+/// The fused chains of every depth `1..=max_depth` on one scene.
+pub struct FusedFamily<'s> {
+    /// The scene.
+    pub scene: &'s Scene,
+    /// One target per depth.
+    pub targets: Vec<FusedTarget<'s>>,
+    /// Conversion counters shared by every chain's kernel.
+    pub counters: Arc<FusedCounters>,
+}
+
+impl<'s> FusedFamily<'s> {
+    /// The family of `depths` (MMLT's, [`crate::integrators::mmlt::Mmlt::depths`]).
+    pub fn new(scene: &'s Scene, depths: Vec<MmltDepth>) -> Self {
+        FusedFamily {
+            scene,
+            targets: depths
+                .into_iter()
+                .map(|depth| FusedTarget { scene, depth })
+                .collect(),
+            counters: Arc::new(FusedCounters::default()),
+        }
+    }
+}
+
+impl<'s> ChainFamily for FusedFamily<'s> {
+    type State = FusedState<'s>;
+    type Target = FusedTarget<'s>;
+    type Mutation = FusedMutation;
+    type Kernel = FusedKernel<'s>;
+
+    fn members(&self) -> usize {
+        self.targets.len()
+    }
+    fn target(&self, member: usize) -> &FusedTarget<'s> {
+        &self.targets[member]
+    }
+    fn kernel(&self, mutation: &FusedMutation, member: usize) -> Result<Self::Kernel, MltError> {
+        mutation.check().map_err(MltError::Setting)?;
+        FusedKernel::new(
+            self.scene,
+            self.targets[member].depth,
+            mutation,
+            self.counters.clone(),
+        )
+        .map_err(MltError::Setting)
+    }
+    fn independent_probability(&self, mutation: &FusedMutation) -> f64 {
+        kernel::pss_probability(mutation) * mutation.pss.large_step_probability
+    }
+    fn is_independent(&self, component: usize) -> bool {
+        component == crate::pss::LARGE_STEP_COMPONENT
+    }
+    fn candidate(&self, seed: u64, index: u64) -> FusedState<'s> {
+        FusedState::untraced(self.scene, bootstrap_point(seed, index as usize))
+    }
+    fn reference_log_density(&self, _state: &FusedState<'s>) -> f64 {
+        // Uniform on the unit torus.
+        0.0
+    }
+    fn coordinates(&self, state: &FusedState<'s>) -> Option<Vec<f64>> {
+        Some(state.point.materialize())
+    }
+}

@@ -1,0 +1,336 @@
+//! Fused state spaces (`fused`): the whole-path inverse round trip, the
+//! exactness of the mixed chain on a scene with a closed-form image (and a
+//! control whose inverse Jacobian is dropped, which must fail), and
+//! thread-count determinism. Agreement with path tracing on the Cornell
+//! variants is in `agree_mlt.rs`.
+
+mod common;
+
+use common::{load_str, mean_se1, repo_scene};
+use mcmc_core::rng::stream_rng;
+use mcmc_core::runner::with_threads;
+use mcmc_core::space::TorusPoint;
+use mcmc_render::color::Rgb;
+use mcmc_render::fused_space::inverse_path::{InverseFailure, RoundTripFailure, round_trip};
+use mcmc_render::fused_space::{FusedFamily, FusedMutation, FusedState};
+use mcmc_render::integrators::bdpt::{Bdpt, MisHeuristic};
+use mcmc_render::markov::{ChainSettings, Normalization};
+use mcmc_render::observer::NoObserver;
+use mcmc_render::pss::{MmltDepth, bootstrap_point};
+use mcmc_render::scene::Scene;
+use std::sync::atomic::AtomicBool;
+
+fn depths(max_depth: u32) -> Vec<MmltDepth> {
+    let bdpt = Bdpt {
+        max_depth,
+        rr_depth: 5,
+        heuristic: MisHeuristic::Power,
+    };
+    (1..=max_depth as usize)
+        .map(|depth| MmltDepth { bdpt, depth })
+        .collect()
+}
+
+/// Round-trip outcomes over `n` primary samples per depth.
+#[derive(Debug, Default)]
+struct RoundTrips {
+    paths: usize,
+    ok: usize,
+    inverse: [usize; 4],
+    retrace: usize,
+    /// Successful round trips whose path or contribution moved by more
+    /// than 1e-3 (relative).
+    moved: usize,
+    worst_position: f32,
+}
+
+fn round_trips(scene: &Scene, max_depth: u32, n: usize, seed: u64) -> RoundTrips {
+    let mut r = RoundTrips::default();
+    for d in depths(max_depth) {
+        for i in 0..n {
+            let x = FusedState::traced(scene, &d, bootstrap_point(seed + d.depth as u64, i));
+            let Some((s, _)) = x.technique else { continue };
+            if !x.log_density.is_finite() {
+                continue;
+            }
+            r.paths += 1;
+            let mut rng = stream_rng(seed, i as u64);
+            let mut out = FusedState::untraced(scene, TorusPoint::fresh(stream_rng(seed, 1 << 50)));
+            match round_trip(scene, &d, &x.path, s, &mut rng, &mut out) {
+                Ok(()) => {
+                    r.ok += 1;
+                    let mut worst = 0.0f32;
+                    for (a, b) in x.path.vertices.iter().zip(&out.path.vertices) {
+                        worst = worst.max((a.p() - b.p()).length() / (a.p().length() + 1.0));
+                    }
+                    let (la, lb) = (x.log_density, out.log_density);
+                    if worst > 1e-3 || (la - lb).abs() > 1e-3 {
+                        r.moved += 1;
+                    }
+                    r.worst_position = r.worst_position.max(worst);
+                }
+                Err(RoundTripFailure::Retrace) => r.retrace += 1,
+                Err(RoundTripFailure::Inverse(e)) => {
+                    r.inverse[match e {
+                        InverseFailure::Technique => 0,
+                        InverseFailure::Bsdf => 1,
+                        InverseFailure::Emitter => 2,
+                        InverseFailure::Camera => 3,
+                    }] += 1
+                }
+            }
+        }
+    }
+    r
+}
+
+/// Every MMLT path of the Cornell box (diffuse) and of the glossy-glass
+/// box (glossy gold, smooth glass) maps back to numbers that re-trace it
+/// with the same technique: forward ∘ inverse is the identity on the used
+/// dimensions, for every technique of depths 1–5.
+#[test]
+fn whole_paths_round_trip_on_the_cornell_variants() {
+    for (name, n, max_failures) in [
+        ("cornell-box.xml", 6000, 0.0),
+        ("cornell-glossy-glass.xml", 6000, 0.01),
+    ] {
+        let scene = repo_scene(name, 16);
+        let r = round_trips(&scene, 5, n, 7);
+        eprintln!("{name}: {r:?}");
+        let failed = r.paths - r.ok;
+        assert!(r.paths > 5000, "{name}: too few paths {r:?}");
+        assert!(
+            failed as f64 <= max_failures * r.paths as f64,
+            "{name}: {failed} round trips failed of {}: {r:?}",
+            r.paths
+        );
+        assert!(
+            (r.moved as f64) <= 1e-3 * r.ok as f64,
+            "{name}: re-traced paths moved: {r:?}"
+        );
+    }
+}
+
+/// A normal-mapped BSDF has no inverse (`BsdfAt::invert` returns `None`
+/// under wrappers): such paths fail the round trip, counted as BSDF
+/// failures, and nothing panics.
+#[test]
+fn wrapped_bsdfs_fail_the_round_trip_and_are_counted() {
+    let scene = repo_scene("normalmap-bumpmap.xml", 16);
+    let r = round_trips(&scene, 3, 3000, 9);
+    eprintln!("normalmap-bumpmap: {r:?}");
+    assert!(r.inverse[1] > 0, "{r:?}");
+    assert_eq!(r.paths, r.ok + r.retrace + r.inverse.iter().sum::<usize>());
+}
+
+/// A diffuse plane (albedo ρ = 0.5) lit by a point light (intensity 3)
+/// at height 1, seen obliquely, so that both the camera's and the light's
+/// area densities on the plane vary across the image (seen head-on, a
+/// pinhole's area density on a plane is constant, and a Jacobian error
+/// could not show). Direct light only (`max_depth` 2).
+fn oblique_plane() -> Scene {
+    load_str(
+        r#"<scene version="3.0.0">
+    <integrator type="path"><integer name="max_depth" value="2"/></integrator>
+    <sensor type="perspective">
+        <float name="fov" value="40"/>
+        <transform name="to_world"><lookat origin="0,-3,2" target="0,0,0" up="0,0,1"/></transform>
+        <film type="hdrfilm">
+            <integer name="width" value="12"/><integer name="height" value="10"/>
+            <rfilter type="box"/>
+        </film>
+    </sensor>
+    <shape type="rectangle">
+        <transform name="to_world"><scale value="20"/></transform>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0.5"/></bsdf>
+    </shape>
+    <emitter type="point">
+        <rgb name="intensity" value="3"/>
+        <point name="position" x="0" y="0" z="1"/>
+    </emitter>
+</scene>"#,
+    )
+}
+
+/// The exact image mean and fraction of the image's top half of
+/// [`oblique_plane`]: `L = ρ/π · I h / d³` at the plane point each pixel
+/// sees, averaged over each pixel by a 16×16 midpoint rule.
+fn oblique_plane_exact(scene: &Scene) -> (f64, f64) {
+    let (w, h) = scene.camera.resolution();
+    let (mut top, mut total) = (0.0f64, 0.0f64);
+    for y in 0..h * 16 {
+        for x in 0..w * 16 {
+            let raster = glam::Vec2::new((x as f32 + 0.5) / 16.0, (y as f32 + 0.5) / 16.0);
+            let ray = scene.camera.generate_ray(raster);
+            let t = -ray.o.z / ray.d.z;
+            assert!(t > 0.0);
+            let p = ray.o + ray.d * t;
+            assert!(
+                p.x.abs() < 20.0 && p.y.abs() < 20.0,
+                "pixel sees past the plane"
+            );
+            let d = (f64::from(p.x).powi(2) + f64::from(p.y).powi(2) + 1.0).sqrt();
+            let v = 0.5 / std::f64::consts::PI * 3.0 / (d * d * d);
+            total += v;
+            if y / 16 < h / 2 {
+                top += v;
+            }
+        }
+    }
+    (total / f64::from(w * h * 256), top / total)
+}
+
+/// Image means and top-half fractions of `k` fused runs on `scene` (paths
+/// of two segments; one family member), path-space moves 90% of the time.
+fn plane_reps(scene: &Scene, drop_jacobian: bool, k: u64) -> (Vec<f64>, Vec<f64>) {
+    let stop = AtomicBool::new(false);
+    let (w, h) = scene.camera.resolution();
+    let bdpt = Bdpt {
+        max_depth: 2,
+        rr_depth: 5,
+        heuristic: MisHeuristic::Power,
+    };
+    let (mut means, mut fractions) = (Vec::new(), Vec::new());
+    for seed in 0..k {
+        let family = FusedFamily::new(scene, vec![MmltDepth { bdpt, depth: 2 }]);
+        let settings = ChainSettings {
+            mutation: FusedMutation {
+                path_probability: 0.9,
+                drop_jacobian,
+                ..FusedMutation::default()
+            },
+            bootstrap: 2000,
+            chains: 32,
+            mutations_per_pixel: Some(1000),
+            seed: 100 + seed,
+            normalization: Normalization::Running,
+            ..ChainSettings::default()
+        };
+        let r = mcmc_render::markov::run(scene, &family, &settings, &stop, &NoObserver)
+            .expect("fused runs");
+        let img = r.image();
+        let lum = |p: &Rgb| f64::from(p.luminance());
+        let total: f64 = img.iter().map(lum).sum();
+        let top: f64 = img
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| (*i as u32 / w) < h / 2)
+            .map(|(_, p)| lum(p))
+            .sum();
+        means.push(total / img.len() as f64);
+        fractions.push(top / total);
+    }
+    (means, fractions)
+}
+
+/// Exactness of the mixed chain: with path-space moves 90% of the time,
+/// the fused chain's image of the oblique plane has the exact mean and the
+/// exact split between the image's halves (the mean alone cannot tell a
+/// wrong stationary law: every splat carries `b`). A chain whose path-space
+/// moves leave out the inverse's Jacobian `p_t(y)/p_t(x)` samples paths
+/// `∝ w f / p_t` instead of `w f`: the right mean, the wrong split; it must
+/// fail.
+///
+/// Tolerance: K = 12 replicates, SE from their spread; |Δ| < 4.5 SE, a
+/// false-alarm rate of 7e-4 for Student's t with 11 degrees of freedom.
+#[test]
+fn the_mixed_chain_is_exact_and_a_dropped_jacobian_is_not() {
+    let scene = oblique_plane();
+    let (exact_mean, exact) = oblique_plane_exact(&scene);
+    let (means, fr) = plane_reps(&scene, false, 12);
+    let (f, f_se) = mean_se1(&fr);
+    let (m, m_se) = mean_se1(&means);
+    eprintln!(
+        "fused: top fraction {f:.5} ± {f_se:.5} (exact {exact:.5}), mean {m:.5} ± {m_se:.5} (exact {exact_mean:.5})"
+    );
+    assert!((f - exact).abs() < 4.5 * f_se, "fraction {f} vs {exact}");
+    assert!(
+        (m - exact_mean).abs() < 4.5 * m_se,
+        "mean {m} vs {exact_mean}"
+    );
+    let (_, fr) = plane_reps(&scene, true, 12);
+    let (fc, fc_se) = mean_se1(&fr);
+    eprintln!("control (no Jacobian): top fraction {fc:.5} ± {fc_se:.5}");
+    assert!(
+        (fc - exact).abs() > 4.5 * fc_se,
+        "the dropped Jacobian passed: {fc} ± {fc_se} vs {exact}"
+    );
+}
+
+#[test]
+fn fused_is_bit_identical_across_thread_counts() {
+    let scene = repo_scene("cornell-glossy-glass.xml", 12);
+    let bits = |threads: usize, seed: u64| -> Vec<u32> {
+        let family = FusedFamily::new(&scene, depths(4));
+        let st = ChainSettings {
+            mutation: FusedMutation::default(),
+            bootstrap: 2000,
+            chains: 64,
+            mutations_per_pixel: Some(8),
+            seed,
+            normalization: Normalization::Running,
+            ..ChainSettings::default()
+        };
+        let stop = AtomicBool::new(false);
+        let r = with_threads(threads, || {
+            mcmc_render::markov::run(&scene, &family, &st, &stop, &NoObserver)
+        })
+        .expect("fused runs");
+        r.image()
+            .iter()
+            .flat_map(|p| [p.r.to_bits(), p.g.to_bits(), p.b.to_bits()])
+            .collect()
+    };
+    let one = bits(1, 42);
+    assert!(one == bits(2, 42), "1 vs 2 threads differ");
+    assert!(one != bits(2, 43), "seed ignored");
+}
+
+/// The integrator through the registry: refuses emitters at infinity with
+/// one line, renders the Cornell box with statistics in the sidecar.
+#[test]
+fn fused_runs_from_the_registry_with_its_statistics() {
+    use mcmc_render::integrators::RunSettings;
+    use mcmc_render::integrators::registry;
+    let scene = repo_scene("cornell-box.xml", 8);
+    let integ = registry::configure(
+        None,
+        Some("fused"),
+        &[
+            ("max_depth".into(), "4".into()),
+            ("bootstrap".into(), "2000".into()),
+            ("chains".into(), "32".into()),
+            ("mutations_per_pixel".into(), "16".into()),
+        ],
+    )
+    .expect("fused configures");
+    let out = integ
+        .render(
+            &scene,
+            &RunSettings::default(),
+            &AtomicBool::new(false),
+            &NoObserver,
+        )
+        .expect("fused renders");
+    let fused = &out.statistics["fused"];
+    eprintln!("{fused:#}");
+    assert!(fused["transitions_per_mutation"].as_f64().unwrap() > 0.0);
+    assert!(fused["inversions"].as_u64().unwrap() > 0);
+    assert!(fused["acceptance_path_space"].as_f64().unwrap() > 0.0);
+    let env = load_str(
+        r#"<scene version="3.0.0">
+    <sensor type="perspective"><film type="hdrfilm"><integer name="width" value="4"/><integer name="height" value="4"/></film></sensor>
+    <emitter type="constant"><rgb name="radiance" value="1"/></emitter>
+    <shape type="sphere"><bsdf type="diffuse"/></shape>
+</scene>"#,
+    );
+    let err = integ
+        .render(
+            &env,
+            &RunSettings::default(),
+            &AtomicBool::new(false),
+            &NoObserver,
+        )
+        .expect_err("environment refused");
+    assert!(err.to_string().contains("emitters at infinity"), "{err}");
+}
