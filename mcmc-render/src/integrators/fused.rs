@@ -54,7 +54,6 @@ crate::settings! {
 
 impl Fused {
     /// The fused kernel's settings.
-    #[allow(clippy::needless_update)]
     pub fn fused_mutation(&self) -> Result<FusedMutation, String> {
         let m = FusedMutation {
             pss: self.mutation.mutation()?,
