@@ -53,6 +53,7 @@
 pub mod bdpt;
 pub mod guided;
 pub mod lt;
+pub mod mcmc_vcm;
 pub mod mlt;
 pub mod mmlt;
 pub mod path_vertex;

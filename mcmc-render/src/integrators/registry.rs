@@ -155,6 +155,7 @@ pub static REGISTRY: &[Registration] = &[
     register::<super::mlt::Mlt>(),
     register::<super::relt::Relt>(),
     register::<super::vcm::VcmSettings>(),
+    register::<super::mcmc_vcm::McmcVcmSettings>(),
 ];
 
 /// The registered names, comma-separated.
