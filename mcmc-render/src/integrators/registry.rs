@@ -159,6 +159,7 @@ pub static REGISTRY: &[Registration] = &[
     register::<super::mept::Mept>(),
     register::<super::erpt::Erpt>(),
     register::<super::fused::Fused>(),
+    register::<super::mcmc_vcm::McmcVcmSettings>(),
 ];
 
 /// The registered names, comma-separated.

@@ -82,6 +82,7 @@ use super::path_vertex::{Vertex, VertexKind};
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
 use crate::bsdf::TransportMode;
+use crate::bsdf::textured::BsdfAt;
 use crate::color::Rgb;
 use crate::film::{Film, Filter};
 use crate::frame::Frame;
@@ -138,6 +139,12 @@ pub struct MisFactors {
     pub vm: f32,
     /// `m(1/η)` (0 without connections).
     pub vc: f32,
+    /// `m(1/k)`: the factor on the densities of the path-tracing techniques
+    /// (emitter found, next-event estimation) relative to those of the
+    /// light-subpath techniques (light tracing, connections, merging) when
+    /// the light subpaths are drawn with `k` times their tracing density
+    /// (MCMC over light subpaths, [`super::mcmc_vcm`]); 1 in `vcm`.
+    pub pt: f32,
 }
 
 impl MisFactors {
@@ -148,6 +155,7 @@ impl MisFactors {
             heuristic,
             vm: 0.0,
             vc: 0.0,
+            pt: 1.0,
         };
         if mode.merges() {
             f.vm = f.m(eta);
@@ -156,6 +164,14 @@ impl MisFactors {
             f.vc = f.m(1.0 / eta);
         }
         f
+    }
+
+    /// The same factors for light subpaths drawn with `k` times their
+    /// tracing density: every light-subpath technique's density is `k`
+    /// times its own, the path-tracing techniques' unchanged.
+    pub fn with_light_density_scale(mut self, k: f32) -> Self {
+        self.pt = self.m(1.0 / k);
+        self
     }
 
     /// The heuristic's power of `x`.
@@ -187,11 +203,14 @@ pub fn partial_mis(scene: &Scene, path: &[Vertex], f: &MisFactors, out: &mut Vec
     let Some(origin) = path.first() else {
         return;
     };
-    let hit_origin =
-        origin.kind != VertexKind::Camera && !origin.is_delta_light(scene) && origin.pdf_fwd > 0.0;
+    let light_path = origin.kind != VertexKind::Camera;
+    let hit_origin = light_path && !origin.is_delta_light(scene) && origin.pdf_fwd > 0.0;
+    // On a light subpath, `dVCM_0` and `dVCM_1` are the two path-tracing
+    // techniques (emitter found, next-event estimation): the recursion
+    // carries them, scaled by `f.pt`, into every later quantity.
     out.push(PartialMis {
         d_vcm: if hit_origin {
-            1.0 / f.m(origin.pdf_fwd)
+            f.pt / f.m(origin.pdf_fwd)
         } else {
             0.0
         },
@@ -216,7 +235,11 @@ pub fn partial_mis(scene: &Scene, path: &[Vertex], f: &MisFactors, out: &mut Vec
                 (0.0, 0.0)
             };
             PartialMis {
-                d_vcm: inv,
+                d_vcm: if i == 1 && light_path {
+                    inv * f.pt
+                } else {
+                    inv
+                },
                 d_vc: inv * (prev.d_vc * rev + prev.d_vcm + f.vm * merge),
                 d_vm: inv * (prev.d_vm * rev + prev.d_vcm * f.vc + merge),
             }
@@ -265,7 +288,8 @@ pub fn weight_emission(
     let e = &z[j];
     let p_rev = f.m(e.pdf_light_origin(scene));
     let p_rev_prev = f.m(e.pdf_light(scene, &z[j - 1]));
-    1.0 / (1.0 + p_rev * (mis[j].d_vcm + p_rev_prev * mis[j].d_vc))
+    // `dVCM_j`: next-event estimation; `dVC_j`: light-subpath techniques.
+    1.0 / (1.0 + p_rev * (mis[j].d_vcm + p_rev_prev * mis[j].d_vc / f.pt))
 }
 
 /// Contribution of the technique whose camera subpath `z[..=j]` found an
@@ -297,7 +321,8 @@ pub fn weight_direct(
         f.m(pt.pdf(scene, Some(&z[j - 1]), lv, TransportMode::Radiance)) / f.m(lv.pdf_fwd)
     };
     let p_fwd = f.m(lv.pdf_light(scene, pt));
-    let w_camera = camera_side_weight(scene, f, z, mis, j, lv, p_fwd);
+    // The camera side holds light-subpath techniques only.
+    let w_camera = camera_side_weight(scene, f, z, mis, j, lv, p_fwd) / f.pt;
     1.0 / (w_light + 1.0 + w_camera)
 }
 
@@ -403,6 +428,30 @@ pub fn connection(
     l * (g * weight_connection(scene, f, y, z, mis, j))
 }
 
+/// Connections of every light vertex in `light` (one subpath's) to camera
+/// vertex `z[j]` (connectible) within the depth limit, added to `l`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn connections_at(
+    scene: &Scene,
+    f: &MisFactors,
+    light: &[LightVertex],
+    z: &[Vertex],
+    mis: &[PartialMis],
+    j: usize,
+    max_depth: usize,
+    l: &mut Rgb,
+    tally: &mut Tally,
+) {
+    for y in light {
+        if y.depth as usize + j < max_depth {
+            let c = connection(scene, f, y, z, mis, j);
+            if !c.is_black() && tally.take(Technique::Connection, c) {
+                *l += c;
+            }
+        }
+    }
+}
+
 /// Light tracing: connects light vertex `y` to the camera (a lens point
 /// from `source` for a thin lens); the raster position and the weighted
 /// contribution (a splat normalised by light subpaths per pixel).
@@ -479,6 +528,61 @@ pub fn weight_merge_at(
     weight_merge(f, y, &mis[j], to_camera_prev, pdf_dir, pdf_rev)
 }
 
+/// A camera vertex prepared for merging: its BSDF, shading frame and the
+/// density conversion towards the previous camera vertex, computed once
+/// for all the light vertices merged there.
+pub struct MergePoint<'a> {
+    bsdf: BsdfAt<'a>,
+    frame: Frame,
+    /// `wo` in the shading frame.
+    wo: Vec3,
+    ng: Vec3,
+    ns: Vec3,
+    to_camera_prev: f32,
+}
+
+impl<'a> MergePoint<'a> {
+    /// Camera vertex `z[j]` (`j ≥ 1`) of a camera subpath.
+    pub fn new(scene: &'a Scene, z: &[Vertex], j: usize) -> Self {
+        let zj = &z[j];
+        let frame = Frame::from_normal(zj.sp.ns);
+        MergePoint {
+            bsdf: scene.bsdf_at(&zj.sp),
+            frame,
+            wo: frame.to_local(zj.wo),
+            ng: zj.sp.ng,
+            ns: zj.sp.ns,
+            to_camera_prev: zj.convert_density(1.0, &z[j - 1]),
+        }
+    }
+
+    /// Light vertex `y` merged here, MIS-weighted (weight one for `ppm`),
+    /// without the camera throughput and the kernel normalisation
+    /// `1/(π r² N)`; `mis` is this camera vertex's.
+    pub fn merge(&self, f: &MisFactors, y: &LightVertex, mis: &PartialMis, ppm: bool) -> Rgb {
+        let wi_world = y.v.wo;
+        let cos_g = self.ng.dot(wi_world).abs();
+        if !(cos_g > 0.0) {
+            return Rgb::BLACK;
+        }
+        let wi = self.frame.to_local(wi_world);
+        let (fz, pdf_dir) = self.bsdf.eval_pdf(self.wo, wi, TransportMode::Radiance);
+        if fz.is_black() {
+            return Rgb::BLACK;
+        }
+        let w = if ppm {
+            1.0
+        } else {
+            let pdf_rev = self.bsdf.pdf(wi, self.wo, TransportMode::Importance);
+            weight_merge(f, y, mis, self.to_camera_prev, pdf_dir, pdf_rev)
+        };
+        // The photon estimates flux per geometric area; the shading
+        // cosine's ratio makes the estimate the same integral as a
+        // connection's (Veach's adjoint BSDF).
+        fz * y.v.beta * (w * self.ns.dot(wi_world).abs() / cos_g)
+    }
+}
+
 /// Where a technique's energy is counted in the statistics.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Technique {
@@ -500,15 +604,15 @@ pub const TECHNIQUE_NAMES: [&str; 5] = ["emission", "direct", "light_trace", "co
 /// Per-unit counters: luminance summed per technique, dropped non-finite
 /// contributions, stored light vertices.
 #[derive(Clone, Debug, Default)]
-struct Tally {
-    energy: [f64; 5],
-    nonfinite: u64,
-    light_vertices: u64,
+pub(crate) struct Tally {
+    pub(crate) energy: [f64; 5],
+    pub(crate) nonfinite: u64,
+    pub(crate) light_vertices: u64,
 }
 
 impl Tally {
     /// Counts `l` for `t`; false (and counted as dropped) when not finite.
-    fn take(&mut self, t: Technique, l: Rgb) -> bool {
+    pub(crate) fn take(&mut self, t: Technique, l: Rgb) -> bool {
         if !l.is_finite() {
             self.nonfinite += 1;
             return false;
@@ -517,7 +621,7 @@ impl Tally {
         true
     }
 
-    fn add(&mut self, o: &Tally) {
+    pub(crate) fn add(&mut self, o: &Tally) {
         for (a, b) in self.energy.iter_mut().zip(&o.energy) {
             *a += b;
         }
@@ -629,19 +733,13 @@ impl Vcm {
         tally: &mut Tally,
     ) -> Rgb {
         let max_depth = self.max_depth as usize;
-        let n = generate_camera_subpath(
+        let f = &it.factors;
+        let n = self.trace_camera_subpath(
             scene,
+            f,
             raster,
             source,
-            max_depth.saturating_add(1),
-            Some(self.rr_depth),
             &mut buffers.paths.camera,
-        );
-        let f = &it.factors;
-        partial_mis(
-            scene,
-            &buffers.paths.camera[..n],
-            f,
             &mut buffers.camera_mis,
         );
         let (z, mis) = (&buffers.paths.camera[..n], &buffers.camera_mis[..]);
@@ -657,39 +755,12 @@ impl Vcm {
         let mut specular = true;
         for j in 1..n {
             let zj = &z[j];
-            // Light-sample numbers at every surface vertex below the depth
-            // limit, used or not (a fixed count per vertex).
-            let nee = (self.mode.connects() && zj.kind == VertexKind::Surface && j < max_depth)
-                .then(|| (source.next_1d(), source.next_2d()));
-            if zj.is_light() && (!ppm || specular) {
-                let c = if ppm {
-                    zj.le(scene, &z[j - 1]) * zj.beta
-                } else {
-                    emission(scene, f, z, mis, j)
-                };
-                if tally.take(Technique::Emission, c) {
-                    l += c;
-                }
-            }
-            if zj.kind != VertexKind::Surface {
+            if !self.path_tracing_at(scene, f, z, mis, j, specular, source, &mut l, tally) {
                 break;
             }
             if zj.is_connectible(scene) {
-                if let Some((u_sel, u_pos)) = nee
-                    && let Some(c) = direct(scene, f, z, mis, j, u_sel, u_pos)
-                    && tally.take(Technique::Direct, c)
-                {
-                    l += c;
-                }
                 if self.mode.connects() {
-                    for y in light {
-                        if y.depth as usize + j < max_depth {
-                            let c = connection(scene, f, y, z, mis, j);
-                            if !c.is_black() && tally.take(Technique::Connection, c) {
-                                l += c;
-                            }
-                        }
-                    }
+                    connections_at(scene, f, light, z, mis, j, max_depth, &mut l, tally);
                 }
                 if self.mode.merges() && (!ppm || specular) {
                     let c = self.merge(scene, it, z, &mis[j], j);
@@ -706,6 +777,76 @@ impl Vcm {
         l
     }
 
+    /// Traces one camera subpath through `raster` into `path` and its MIS
+    /// quantities into `mis`; returns its vertex count.
+    pub fn trace_camera_subpath(
+        &self,
+        scene: &Scene,
+        f: &MisFactors,
+        raster: Vec2,
+        source: &mut dyn RandomSource,
+        path: &mut Vec<Vertex>,
+        mis: &mut Vec<PartialMis>,
+    ) -> usize {
+        let n = generate_camera_subpath(
+            scene,
+            raster,
+            source,
+            (self.max_depth as usize).saturating_add(1),
+            Some(self.rr_depth),
+            path,
+        );
+        partial_mis(scene, &path[..n], f, mis);
+        n
+    }
+
+    /// The path-tracing techniques at camera vertex `z[j]`, added to `l`:
+    /// the emitter found there and next-event estimation with a fresh light
+    /// sample (its numbers drawn at every surface vertex below the depth
+    /// limit, used or not: a fixed count per vertex). `specular`: every
+    /// camera vertex before `z[j]` scattered specularly (`ppm` mode).
+    /// False when the subpath ends at `z[j]` (not a surface).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn path_tracing_at(
+        &self,
+        scene: &Scene,
+        f: &MisFactors,
+        z: &[Vertex],
+        mis: &[PartialMis],
+        j: usize,
+        specular: bool,
+        source: &mut dyn RandomSource,
+        l: &mut Rgb,
+        tally: &mut Tally,
+    ) -> bool {
+        let zj = &z[j];
+        let ppm = self.mode == VcmMode::Ppm;
+        let nee =
+            (self.mode.connects() && zj.kind == VertexKind::Surface && j < self.max_depth as usize)
+                .then(|| (source.next_1d(), source.next_2d()));
+        if zj.is_light() && (!ppm || specular) {
+            let c = if ppm {
+                zj.le(scene, &z[j - 1]) * zj.beta
+            } else {
+                emission(scene, f, z, mis, j)
+            };
+            if tally.take(Technique::Emission, c) {
+                *l += c;
+            }
+        }
+        if zj.kind != VertexKind::Surface {
+            return false;
+        }
+        if zj.is_connectible(scene)
+            && let Some((u_sel, u_pos)) = nee
+            && let Some(c) = direct(scene, f, z, mis, j, u_sel, u_pos)
+            && tally.take(Technique::Direct, c)
+        {
+            *l += c;
+        }
+        true
+    }
+
     /// Merging at camera vertex `z[j]` with every stored light vertex
     /// within the radius.
     fn merge(
@@ -716,40 +857,16 @@ impl Vcm {
         mis: &PartialMis,
         j: usize,
     ) -> Rgb {
-        let zj = &z[j];
-        let bsdf = scene.bsdf_at(&zj.sp);
-        let frame = Frame::from_normal(zj.sp.ns);
-        let wo = frame.to_local(zj.wo);
-        let to_camera_prev = zj.convert_density(1.0, &z[j - 1]);
+        let at = MergePoint::new(scene, z, j);
         let ppm = self.mode == VcmMode::Ppm;
         let mut sum = Rgb::BLACK;
-        it.grid.query(zj.p(), |index, _| {
+        it.grid.query(z[j].p(), |index, _| {
             let y = &it.vertices[index as usize];
-            if y.depth as usize + j > self.max_depth as usize {
-                return;
+            if y.depth as usize + j <= self.max_depth as usize {
+                sum += at.merge(&it.factors, y, mis, ppm);
             }
-            let wi_world = y.v.wo;
-            let cos_g = zj.sp.ng.dot(wi_world).abs();
-            if !(cos_g > 0.0) {
-                return;
-            }
-            let wi = frame.to_local(wi_world);
-            let (fz, pdf_dir) = bsdf.eval_pdf(wo, wi, TransportMode::Radiance);
-            if fz.is_black() {
-                return;
-            }
-            let w = if ppm {
-                1.0
-            } else {
-                let pdf_rev = bsdf.pdf(wi, wo, TransportMode::Importance);
-                weight_merge(&it.factors, y, mis, to_camera_prev, pdf_dir, pdf_rev)
-            };
-            // The photon estimates flux per geometric area; the shading
-            // cosine's ratio makes the estimate the same integral as a
-            // connection's (Veach's adjoint BSDF).
-            sum += fz * y.v.beta * (w * zj.sp.ns.dot(wi_world).abs() / cos_g);
         });
-        zj.beta * sum * it.merge_norm
+        z[j].beta * sum * it.merge_norm
     }
 
     /// Renders to `run`'s budget: whole iterations, one camera sample per

@@ -48,8 +48,8 @@ pub mod family;
 pub mod independent;
 pub mod lens_perturbation;
 pub mod lens_subpath;
-pub mod multi_chain_perturbation;
 pub mod manifold_perturbation;
+pub mod multi_chain_perturbation;
 pub mod state;
 pub mod walk;
 

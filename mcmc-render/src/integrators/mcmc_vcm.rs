@@ -1,0 +1,1296 @@
+//! MCMC over the light subpaths of vertex connection and merging (Šik's
+//! thesis, chapter 6, "Robust light transport simulation via Metropolised
+//! bidirectional estimators"; spec `seed000-ch5-6.md` §6.2–6.5, App. 6.B).
+//!
+//! # One iteration (Fig. 6.8)
+//! 1. **Camera pass.** One stratified camera subpath per pixel (the
+//!    `N` pixels in [`TILE`]² tiles), every vertex kept with its MIS
+//!    quantities ([`CameraSet`]); at each vertex the path-tracing techniques
+//!    (emitter found, next-event estimation with a fresh light sample) are
+//!    evaluated at once, independent of the light subpaths
+//!    ([`Vcm::path_tracing_at`], `vcm`'s code). A hash grid over the
+//!    connectible camera vertices serves the merges.
+//! 2. **Restart.** `candidates` independent light subpaths (uniform
+//!    primary-sample points, each with a uniformly chosen camera subpath)
+//!    are evaluated; each chain pair starts by importance resampling from
+//!    them: the contribution chain ∝ `lum C^Ω`, the visibility chain
+//!    uniformly among those with `C^Ω > 0` (§6.3.2).
+//! 3. **Chains.** `units` independent pairs, each running its share of
+//!    the `N` light subpaths of the iteration, alternating the two chains
+//!    (Fig. 6.10). Each step: a camera subpath chosen uniformly for the
+//!    connections; one Metropolis–Hastings step of `mcmc-core`
+//!    ([`MetropolisHastings`] with Hachisuka & Jensen's adaptive small step
+//!    [`AdaptiveTorusStep`], target acceptance 0.234, and in the visibility
+//!    chain only a large step with probability `large_step`); expected-value
+//!    splats of the current state and the proposal; one replica-exchange
+//!    attempt between the two chains (`mcmc-core`'s
+//!    [`swap_log_acceptance`] and [`accept`], Eq. 4.11).
+//!
+//! # The light-subpath contribution (Eq. 6.1)
+//! [`light_contribution`]: the light subpath traced from a primary-sample
+//! point ([`Vcm::trace_light_subpath`], which also connects each vertex to
+//! the camera), its connections to the one chosen camera subpath, and its
+//! merges with every stored camera vertex within the radius — `vcm`'s
+//! techniques with `vcm`'s MIS weights, so that `N` independent subpaths
+//! give `vcm`'s light-side image exactly. Its parts keep where they land
+//! (a camera sample or a raster splat); the same value is the chains'
+//! target (its luminance) and what is splatted.
+//!
+//! The camera subpath chosen for the connections is not part of the
+//! state: each step draws a fresh one and the current state keeps the value
+//! it was evaluated with. This is Metropolis–Hastings on the joint space
+//! (point, camera subpath) with an independent uniform proposal of the
+//! camera subpath (a pseudo-marginal move), so both targets are exact
+//! densities there: `π_con = lum C^Ω(u, k)` (Eq. 6.2) and
+//! `π_vis = 1[lum C^Ω(u, k) > 0]` (Eq. 6.3).
+//!
+//! # Estimator
+//! With `n_c` steps of chain `c` in the iteration and the normalisations
+//! `b_c = ∫ π_c` (Eq. 6.4: running means over every independent light
+//! subpath of the render — the restart candidates and the large-step
+//! proposals — frozen at the start of each iteration), a state `u` with
+//! acceptance weight `w` (α for the proposal, 1 − α for the current state)
+//! adds `w · N · C^Ω(u) / (n_vis π_vis(u)/b_vis + n_con π_con(u)/b_con)`:
+//! the balance heuristic over the two chains (Eq. 6.5, Fig. 6.10 line 20,
+//! which has `n_c = N/2`). Parts that land on camera sample `k` are added to
+//! its estimate (as `vcm` adds connections and merges), raster parts are
+//! splats.
+//!
+//! # MIS between path tracing and the chains (§6.3.4)
+//! The visibility chain draws light subpaths with density `p/b_vis`, the
+//! contribution chain with (approximately, as PSSMLT assumes) `p`: their
+//! mixture has `k = (n_vis/b_vis + n_con)/N` times the tracing density.
+//! With `vis_pdf = true` every light-subpath technique's density in the
+//! VCM weights is multiplied by `k` ([`MisFactors::with_light_density_scale`]),
+//! in the path-tracing weights as in `C^Ω`, so the weights still sum to one
+//! over all techniques. `b_vis` for `k` is estimated once, before the first
+//! iteration, from its own `candidates` light subpaths, and `k` then stays
+//! fixed, so that every `C^Ω` of the render — and the running `b_con` — use
+//! the same weights.
+//!
+//! Determinism: every random number comes from a stream keyed by the seed,
+//! the iteration and the unit (tile, candidate block, chain pair), and
+//! results are joined in unit order: one seed gives the same image on any
+//! thread count.
+
+use super::bdpt::SubpathBuffers;
+use super::path_vertex::{Vertex, VertexKind};
+use super::registry::IntegratorSettings;
+use super::vcm::{
+    LightVertex, MergePoint, MisFactors, PartialMis, TECHNIQUE_NAMES, Tally, Technique, Vcm,
+    VcmMode, VcmSettings, connections_at,
+};
+use super::{RenderError, Rendered, RunSettings};
+use crate::color::Rgb;
+use crate::film::{Film, Filter};
+use crate::hash_grid::HashGrid;
+use crate::observer::Observer;
+use crate::pss::PssSource;
+use crate::render::unit_source;
+use crate::sampling::RandomSource;
+use crate::scene::Scene;
+use glam::Vec2;
+use mcmc_core::chain::{Chain, Transition};
+use mcmc_core::kernel::{AdaptiveTorusStep, Independent, Kernel, Mixture};
+use mcmc_core::mh::{MetropolisHastings, accept};
+use mcmc_core::replica::swap_log_acceptance;
+use mcmc_core::rng::{ChainRng, child_rng, stream_rng, uniform};
+use mcmc_core::sample::Sample;
+use mcmc_core::space::{PrimarySampleSpace, TorusPoint};
+use mcmc_core::target::{Evaluation, Target};
+use rayon::prelude::*;
+use std::cell::RefCell;
+use std::f32::consts::PI;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+/// Tile edge of the camera pass, in pixels.
+const TILE: u32 = 32;
+/// Blocks the restart candidates are traced in (fixed: the image must not
+/// depend on the thread count).
+const CANDIDATE_BLOCKS: usize = 16;
+/// Light subpaths between two checks of the stop flag.
+const STOP_CHECK: usize = 256;
+/// Stream tags of the random streams (mixed with iteration and unit).
+const STREAM_CANDIDATES: u64 = 1 << 40;
+const STREAM_CHAINS: u64 = 2 << 40;
+const STREAM_STEPS: u64 = 3 << 40;
+const STREAM_PILOT: u64 = 4 << 40;
+
+/// Where one part of a light subpath's contribution lands.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Landing {
+    /// Added to the estimate of camera sample (subpath) `k` of the
+    /// iteration: connections and merges.
+    Camera(u32),
+    /// Splatted at a raster position: light tracing.
+    Raster(Vec2),
+}
+
+/// One technique's contribution of a light subpath.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Part {
+    /// Where it lands.
+    pub at: Landing,
+    /// RGB, MIS-weighted, normalised as `vcm` adds it.
+    pub l: Rgb,
+    /// The technique.
+    pub technique: Technique,
+}
+
+/// `C^Ω` of one light subpath (Eq. 6.1): its parts and their total luminance.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LightContribution {
+    /// Every technique's contribution with where it lands.
+    pub parts: Vec<Part>,
+    /// `lum C^Ω`: the luminance of the sum (no pixel filter).
+    pub luminance: f64,
+    /// False when a part was NaN or infinite (the target is then invalid).
+    pub finite: bool,
+}
+
+/// The camera subpaths of one iteration, every vertex kept.
+#[derive(Debug, Default)]
+pub struct CameraSet {
+    vertices: Vec<Vertex>,
+    mis: Vec<PartialMis>,
+    /// Subpath `k` holds `vertices[starts[k]..starts[k + 1]]`.
+    starts: Vec<u32>,
+    /// (subpath, vertex index) of every connectible camera vertex, in the
+    /// order of the grid's indices.
+    merge_points: Vec<(u32, u32)>,
+    grid: HashGrid,
+}
+
+impl CameraSet {
+    /// Number of camera subpaths.
+    pub fn len(&self) -> usize {
+        self.starts.len().saturating_sub(1)
+    }
+
+    /// True when it holds no subpath.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Subpath `k`: its vertices and their MIS quantities.
+    pub fn subpath(&self, k: usize) -> (&[Vertex], &[PartialMis]) {
+        let r = self.starts[k] as usize..self.starts[k + 1] as usize;
+        (&self.vertices[r.clone()], &self.mis[r])
+    }
+
+    /// Clears it for a new iteration.
+    fn clear(&mut self) {
+        self.vertices.clear();
+        self.mis.clear();
+        self.starts.clear();
+        self.starts.push(0);
+        self.merge_points.clear();
+    }
+
+    /// Appends a subpath.
+    fn push(&mut self, z: &[Vertex], mis: &[PartialMis]) {
+        self.vertices.extend_from_slice(z);
+        self.mis.extend_from_slice(mis);
+        self.starts.push(self.vertices.len() as u32);
+    }
+
+    /// Builds the merge grid over the connectible surface vertices (those
+    /// `vcm` merges at), for radius `radius`.
+    fn build_grid(&mut self, scene: &Scene, radius: f32) {
+        let mut merge_points = std::mem::take(&mut self.merge_points);
+        merge_points.clear();
+        for k in 0..self.len() {
+            let (z, _) = self.subpath(k);
+            for (j, v) in z.iter().enumerate().skip(1) {
+                if v.kind != VertexKind::Surface {
+                    break;
+                }
+                if v.is_connectible(scene) {
+                    merge_points.push((k as u32, j as u32));
+                }
+            }
+        }
+        self.merge_points = merge_points;
+        let points: Vec<glam::Vec3> = self
+            .merge_points
+            .iter()
+            .map(|&(k, j)| self.subpath(k as usize).0[j as usize].p())
+            .collect();
+        self.grid.build(points.into_iter(), radius);
+    }
+}
+
+/// One iteration's camera pass.
+#[derive(Debug, Default)]
+pub struct CameraPass {
+    /// The camera subpaths (subpath `k` is camera sample `k`).
+    pub cameras: CameraSet,
+    /// Raster position of each camera sample.
+    pub rasters: Vec<Vec2>,
+    /// Path-tracing estimate of each camera sample.
+    pub estimates: Vec<Rgb>,
+    tally: Tally,
+}
+
+/// What the light-subpath contribution of one iteration reads.
+pub struct Iteration<'a> {
+    /// The VCM integrator (depth, mode, heuristic).
+    pub vcm: &'a Vcm,
+    /// The MIS constants of the iteration.
+    pub factors: MisFactors,
+    /// `1/(π r² N)`: the merge kernel normalised by the light subpaths.
+    pub merge_norm: f32,
+    /// The stored camera subpaths.
+    pub cameras: &'a CameraSet,
+}
+
+impl<'a> Iteration<'a> {
+    /// The iteration of `vcm` with merge radius `radius` over `cameras`
+    /// (`N` = their number light subpaths), light-subpath densities scaled
+    /// by `light_scale` in the MIS weights.
+    pub fn new(vcm: &'a Vcm, cameras: &'a CameraSet, radius: f32, light_scale: f32) -> Self {
+        let n = cameras.len();
+        Iteration {
+            vcm,
+            factors: MisFactors::new(vcm.mode, vcm.heuristic, radius, n as f64)
+                .with_light_density_scale(light_scale),
+            merge_norm: 1.0 / (PI * radius * radius * n as f32),
+            cameras,
+        }
+    }
+}
+
+/// Per-thread storage of [`light_contribution`].
+#[derive(Default)]
+struct Scratch {
+    paths: SubpathBuffers,
+    light_mis: Vec<PartialMis>,
+    store: Vec<LightVertex>,
+}
+
+thread_local! {
+    static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
+}
+
+/// `C^Ω` (Eq. 6.1) of the light subpath traced from `source`: its light
+/// tracing, its connections to camera subpath `camera` and its merges with
+/// every stored camera vertex within the radius, into `out`. The one
+/// function behind both the chains' targets and the image.
+pub fn light_contribution(
+    scene: &Scene,
+    it: &Iteration,
+    source: &mut dyn RandomSource,
+    camera: usize,
+    out: &mut LightContribution,
+) {
+    out.parts.clear();
+    let vcm = it.vcm;
+    let f = &it.factors;
+    let max_depth = vcm.max_depth as usize;
+    let mut tally = Tally::default();
+    SCRATCH.with_borrow_mut(|s| {
+        s.store.clear();
+        vcm.trace_light_subpath(
+            scene,
+            f,
+            source,
+            &mut s.paths,
+            &mut s.light_mis,
+            &mut s.store,
+            |technique, raster, l| {
+                out.parts.push(Part {
+                    at: Landing::Raster(raster),
+                    l,
+                    technique,
+                })
+            },
+        );
+        if s.store.is_empty() {
+            return;
+        }
+        if vcm.mode.connects() && camera < it.cameras.len() {
+            let (z, mis) = it.cameras.subpath(camera);
+            let mut l = Rgb::BLACK;
+            for j in 1..z.len() {
+                if z[j].kind != VertexKind::Surface {
+                    break;
+                }
+                if z[j].is_connectible(scene) {
+                    connections_at(scene, f, &s.store, z, mis, j, max_depth, &mut l, &mut tally);
+                }
+            }
+            if !l.is_black() {
+                out.parts.push(Part {
+                    at: Landing::Camera(camera as u32),
+                    l,
+                    technique: Technique::Connection,
+                });
+            }
+        }
+        if vcm.mode.merges() {
+            for y in &s.store {
+                it.cameras.grid.query(y.v.p(), |index, _| {
+                    let (k, j) = it.cameras.merge_points[index as usize];
+                    let j = j as usize;
+                    if y.depth as usize + j > max_depth {
+                        return;
+                    }
+                    let (z, mis) = it.cameras.subpath(k as usize);
+                    let c = MergePoint::new(scene, z, j).merge(f, y, &mis[j], false);
+                    if !c.is_black() {
+                        out.parts.push(Part {
+                            at: Landing::Camera(k),
+                            l: z[j].beta * c * it.merge_norm,
+                            technique: Technique::Merge,
+                        });
+                    }
+                });
+            }
+        }
+    });
+    out.finite = tally.nonfinite == 0 && out.parts.iter().all(|p| p.l.is_finite());
+    out.luminance = out.parts.iter().map(|p| f64::from(p.l.luminance())).sum();
+}
+
+/// The two chains' targets.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ChainKind {
+    /// `π_con = lum C^Ω` (Eq. 6.2).
+    Contribution = 0,
+    /// `π_vis = 1[lum C^Ω > 0]` (Eq. 6.3).
+    Visibility = 1,
+}
+
+impl ChainKind {
+    /// `ln π` of a contribution: NaN when it is invalid, `−∞` when black.
+    pub fn log_density(self, c: &LightContribution) -> f64 {
+        if !c.finite || !c.luminance.is_finite() {
+            f64::NAN
+        } else if !(c.luminance > 0.0) {
+            f64::NEG_INFINITY
+        } else {
+            match self {
+                ChainKind::Contribution => c.luminance.ln(),
+                ChainKind::Visibility => 0.0,
+            }
+        }
+    }
+}
+
+/// One chain's target for one step: the light subpath of a primary-sample
+/// point with camera subpath `camera` for the connections.
+pub struct LightTarget<'a> {
+    /// The scene.
+    pub scene: &'a Scene,
+    /// The iteration.
+    pub it: &'a Iteration<'a>,
+    /// The camera subpath for the connections.
+    pub camera: usize,
+    /// Which target.
+    pub kind: ChainKind,
+}
+
+impl Target<TorusPoint> for LightTarget<'_> {
+    type Payload = LightContribution;
+
+    fn evaluate(&self, point: &TorusPoint) -> Evaluation<LightContribution> {
+        let mut c = LightContribution::default();
+        light_contribution(
+            self.scene,
+            self.it,
+            &mut PssSource::new(point, 1),
+            self.camera,
+            &mut c,
+        );
+        Evaluation::new(self.kind.log_density(&c), c)
+    }
+}
+
+/// A kernel component of a light-subpath chain.
+type LightKernel = Box<dyn Kernel<TorusPoint, LightContribution> + Send>;
+
+/// A light-subpath chain's algorithm: `mcmc-core`'s Metropolis–Hastings
+/// with a mixture of the adaptive small step and (optionally) a large step.
+pub type LightAlgorithm =
+    MetropolisHastings<Mixture<TorusPoint, LightContribution>, TorusPoint, LightContribution>;
+
+/// A chain over light subpaths.
+pub type LightChain = Chain<TorusPoint, LightContribution, LightAlgorithm>;
+
+/// A restart candidate: an independent light subpath (its point is the
+/// fresh primary-sample point of `rng`, re-made when it is chosen).
+struct Candidate {
+    rng: ChainRng,
+    camera: usize,
+    luminance: f64,
+}
+
+/// Running sums of the normalisations (Eq. 6.4) with per-iteration
+/// batches for their standard errors.
+#[derive(Clone, Debug, Default)]
+struct Normalisation {
+    count: f64,
+    vis: f64,
+    con: f64,
+    /// (count, Σ π_vis, Σ π_con) per iteration.
+    batches: Vec<[f64; 3]>,
+}
+
+impl Normalisation {
+    fn add(&mut self, luminance: f64) {
+        self.count += 1.0;
+        if luminance > 0.0 {
+            self.vis += 1.0;
+            self.con += luminance;
+        }
+    }
+
+    fn merge(&mut self, o: &Normalisation) {
+        self.count += o.count;
+        self.vis += o.vis;
+        self.con += o.con;
+    }
+
+    /// `(b_vis, b_con)` so far (zeros before any sample).
+    fn estimates(&self) -> (f64, f64) {
+        if self.count > 0.0 {
+            (self.vis / self.count, self.con / self.count)
+        } else {
+            (0.0, 0.0)
+        }
+    }
+
+    /// Standard errors of `(b_vis, b_con)` from the iteration batches
+    /// (ratio estimator; the samples of one iteration share its camera
+    /// subpaths, so they are not independent); NaN below two batches.
+    fn standard_errors(&self) -> (f64, f64) {
+        let k = self.batches.len();
+        if k < 2 {
+            return (f64::NAN, f64::NAN);
+        }
+        let (bv, bc) = self.estimates();
+        let (mut sv, mut sc) = (0.0, 0.0);
+        for [n, v, c] in &self.batches {
+            sv += (v - bv * n).powi(2);
+            sc += (c - bc * n).powi(2);
+        }
+        let scale = k as f64 / (k as f64 - 1.0) / (self.count * self.count);
+        ((sv * scale).sqrt(), (sc * scale).sqrt())
+    }
+}
+
+/// One pair of chains with what it accumulates in an iteration.
+struct Unit {
+    chains: [Option<LightChain>; 2],
+    /// Per camera sample: the light-side estimate of this unit.
+    camera: Vec<Rgb>,
+    /// Light-tracing splats.
+    splats: Film,
+    norm: Normalisation,
+    tally: Tally,
+    swaps: u64,
+    swaps_accepted: u64,
+    swap_alpha: f64,
+    invalid: u64,
+}
+
+/// Statistics of a run.
+#[derive(Default)]
+struct Totals {
+    tally: Tally,
+    swaps: u64,
+    swaps_accepted: u64,
+    swap_alpha: f64,
+    invalid: u64,
+    skipped_iterations: u64,
+}
+
+/// Adds `factor · C^Ω` to the camera-sample estimates `camera` and the
+/// splat film, counting each part's energy in `tally`.
+fn deposit(
+    camera: &mut [Rgb],
+    splats: &mut Film,
+    tally: &mut Tally,
+    c: &LightContribution,
+    factor: f32,
+) {
+    for part in &c.parts {
+        let l = part.l * factor;
+        if !tally.take(part.technique, l) {
+            continue;
+        }
+        match part.at {
+            Landing::Camera(k) => camera[k as usize] += l,
+            Landing::Raster(r) => splats.splat(r, l),
+        }
+    }
+}
+
+/// The integrator.
+pub struct McmcVcm {
+    /// VCM (techniques, radius, MIS, depth).
+    pub vcm: Vcm,
+    /// Which chains run.
+    pub chains: LightChains,
+    /// Large-step probability of the chain that explores globally.
+    pub large_step: f64,
+    /// Target acceptance of the adaptive small step.
+    pub target_acceptance: f64,
+    /// Restart candidates per iteration.
+    pub candidates: usize,
+    /// Chain pairs.
+    pub units: usize,
+    /// Over which light subpaths `b_vis`, `b_con` are averaged.
+    pub normalisation: NormalisationScope,
+    /// Scale the light-subpath techniques' MIS densities by the chains'
+    /// mixture density (§6.3.4).
+    pub vis_pdf: bool,
+}
+
+impl McmcVcm {
+    /// The kernel of a chain: the adaptive small step, with a large step
+    /// of probability `large_step` when `large`.
+    pub fn algorithm(&self, large: bool) -> LightAlgorithm {
+        let small: LightKernel = Box::new(
+            AdaptiveTorusStep::new(0.5, self.target_acceptance).expect("checked settings"),
+        );
+        let mut parts = vec![(1.0 - if large { self.large_step } else { 0.0 }, small)];
+        if large && self.large_step > 0.0 {
+            let big: LightKernel = Box::new(Independent::new(PrimarySampleSpace));
+            parts.push((self.large_step, big));
+        }
+        MetropolisHastings::new(Mixture::new(parts).expect("valid weights"))
+    }
+
+    /// The chain kinds that run and whether each takes large steps.
+    fn kinds(&self) -> &'static [(ChainKind, bool)] {
+        match self.chains {
+            LightChains::Both => &[
+                (ChainKind::Contribution, false),
+                (ChainKind::Visibility, true),
+            ],
+            LightChains::Contribution => &[(ChainKind::Contribution, true)],
+            LightChains::Independent => &[],
+        }
+    }
+
+    /// `count` independent light subpaths of iteration `it` in fixed
+    /// blocks, each with a uniformly chosen camera subpath.
+    fn trace_candidates(
+        &self,
+        scene: &Scene,
+        it: &Iteration,
+        seed: u64,
+        stream: u64,
+        count: usize,
+        abort: &(dyn Fn() -> bool + Sync),
+    ) -> Vec<Candidate> {
+        let n = it.cameras.len();
+        let blocks: Vec<Vec<Candidate>> = (0..CANDIDATE_BLOCKS)
+            .into_par_iter()
+            .map(|b| {
+                let mut rng = stream_rng(seed, stream + b as u64);
+                let range = count * b / CANDIDATE_BLOCKS..count * (b + 1) / CANDIDATE_BLOCKS;
+                let mut out = Vec::with_capacity(range.len());
+                let mut c = LightContribution::default();
+                for i in range {
+                    if i % STOP_CHECK == 0 && abort() {
+                        break;
+                    }
+                    let point_rng = child_rng(&mut rng);
+                    let point = TorusPoint::fresh(point_rng.clone());
+                    let camera = ((uniform(&mut rng) * n as f64) as usize).min(n - 1);
+                    light_contribution(scene, it, &mut PssSource::new(&point, 1), camera, &mut c);
+                    // An invalid candidate counts as black and is never chosen.
+                    let luminance = if c.finite { c.luminance } else { 0.0 };
+                    out.push(Candidate {
+                        rng: point_rng,
+                        camera,
+                        luminance,
+                    });
+                }
+                out
+            })
+            .collect();
+        blocks.into_iter().flatten().collect()
+    }
+
+    /// Renders to `run`'s budget in whole iterations (one camera subpath
+    /// and one light subpath per pixel each); stopping discards the
+    /// iteration in flight.
+    pub fn render(
+        &self,
+        scene: &Scene,
+        run: &RunSettings,
+        stop: &AtomicBool,
+        observer: &dyn Observer,
+    ) -> Rendered {
+        let vcm = &self.vcm;
+        let (width, height) = (scene.film.width, scene.film.height);
+        let pixels = width as usize * height as usize;
+        let filter = Arc::new(Filter::new(scene.film.filter, width, height));
+        let mut film = Film::new(width, height, filter.clone());
+        let start = Instant::now();
+        let deadline = run.time_budget.map(|b| start + b);
+        let target = match (run.spp, run.time_budget) {
+            (Some(n), _) => Some(u64::from(n)),
+            (None, Some(_)) => None,
+            (None, None) => Some(u64::from(scene.sample_count)),
+        };
+        let out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
+        let aborted = AtomicBool::new(false);
+        let abort = || {
+            if stop.load(Ordering::Relaxed) || out_of_time() {
+                aborted.store(true, Ordering::Relaxed);
+            }
+            aborted.load(Ordering::Relaxed)
+        };
+        let mut units: Vec<Unit> = (0..self.units)
+            .map(|_| Unit {
+                chains: [None, None],
+                camera: vec![Rgb::BLACK; pixels],
+                splats: Film::new_splat_only(width, height, filter.clone()),
+                norm: Normalisation::default(),
+                tally: Tally::default(),
+                swaps: 0,
+                swaps_accepted: 0,
+                swap_alpha: 0.0,
+                invalid: 0,
+            })
+            .collect();
+        let mut pass = CameraPass::default();
+        let mut norm = Normalisation::default();
+        let mut totals = Totals::default();
+        let mut light_scale = 1.0f32;
+        let mut pilot_done = false;
+        let mut iterations = 0u64;
+        let mut interrupted = false;
+        while target.is_none_or(|t| iterations < t) && vcm.max_depth > 0 && pixels > 0 {
+            if abort() {
+                interrupted = true;
+                break;
+            }
+            let radius = vcm.radius_at(iterations);
+
+            self.camera_pass(scene, radius, light_scale, run.seed, iterations, &mut pass);
+            if abort() {
+                interrupted = true;
+                break;
+            }
+            let cameras = &pass.cameras;
+
+            // The MIS scale k, fixed for the render by a pilot set of
+            // light subpaths before the first iteration (module docs).
+            if !pilot_done && self.vis_pdf && self.chains == LightChains::Both {
+                pilot_done = true;
+                let pilot = Iteration::new(vcm, cameras, radius, 1.0);
+                let c = self.trace_candidates(
+                    scene,
+                    &pilot,
+                    run.seed,
+                    STREAM_PILOT,
+                    self.candidates,
+                    &abort,
+                );
+                let visible = c.iter().filter(|c| c.luminance > 0.0).count();
+                if visible > 0 {
+                    let b_vis = visible as f64 / c.len() as f64;
+                    let (n_con, n_vis) = self.steps_per_kind(pixels);
+                    light_scale = ((n_vis as f64 / b_vis + n_con as f64) / pixels as f64) as f32;
+                }
+                if light_scale != 1.0 {
+                    // The path-tracing estimates of this iteration were
+                    // weighted with k = 1: redo the camera pass.
+                    continue;
+                }
+            }
+            totals.tally.add(&pass.tally);
+            observer.progress(pixels as u64);
+            let it = Iteration::new(vcm, cameras, radius, light_scale);
+
+            // Restart candidates; they join the running normalisation.
+            let independent = self.chains == LightChains::Independent;
+            let pool = self.trace_candidates(
+                scene,
+                &it,
+                run.seed,
+                STREAM_CANDIDATES ^ (iterations << 24),
+                if independent { 0 } else { self.candidates },
+                &abort,
+            );
+            if abort() {
+                interrupted = true;
+                break;
+            }
+            let mut batch = Normalisation::default();
+            for c in &pool {
+                batch.add(c.luminance);
+            }
+            norm.merge(&batch);
+            let b = match self.normalisation {
+                NormalisationScope::Render => norm.estimates(),
+                NormalisationScope::Iteration => batch.estimates(),
+            };
+            // The chains need a visible candidate to restart from.
+            if batch.vis > 0.0 || independent {
+                units.par_iter_mut().enumerate().for_each(|(p, unit)| {
+                    self.run_unit(scene, &it, &pool, b, unit, p, run.seed, iterations, &abort);
+                });
+            } else {
+                totals.skipped_iterations += 1;
+            }
+            if aborted.load(Ordering::Relaxed) {
+                interrupted = true;
+                break;
+            }
+            let mut light = vec![Rgb::BLACK; pixels];
+            for unit in &mut units {
+                for (a, c) in light.iter_mut().zip(&mut unit.camera) {
+                    *a += *c;
+                    *c = Rgb::BLACK;
+                }
+                film.add_film(&unit.splats);
+                unit.splats.clear();
+                // Large steps of this iteration join the running sums.
+                norm.merge(&unit.norm);
+                batch.merge(&unit.norm);
+                unit.norm = Normalisation::default();
+            }
+            norm.batches.push([batch.count, batch.vis, batch.con]);
+            for ((&raster, &pt), &l) in pass.rasters.iter().zip(&pass.estimates).zip(&light) {
+                film.add_sample(raster, pt + l);
+            }
+            iterations += 1;
+            observer.snapshot(
+                &|| film.develop(iterations as f64),
+                iterations * pixels as u64,
+            );
+        }
+        for unit in &units {
+            totals.tally.add(&unit.tally);
+            totals.swaps += unit.swaps;
+            totals.swaps_accepted += unit.swaps_accepted;
+            totals.swap_alpha += unit.swap_alpha;
+            totals.invalid += unit.invalid;
+        }
+        let seconds = start.elapsed().as_secs_f64();
+        self.report(
+            &film,
+            &units,
+            &norm,
+            &totals,
+            light_scale,
+            iterations,
+            seconds,
+            interrupted,
+            pixels,
+        )
+    }
+
+    /// `(n_con, n_vis)`: steps of each chain per iteration over all units.
+    fn steps_per_kind(&self, pixels: usize) -> (u64, u64) {
+        let (mut n_con, mut n_vis) = (0, 0);
+        for p in 0..self.units {
+            let steps = (pixels * (p + 1) / self.units - pixels * p / self.units) as u64;
+            match self.chains {
+                LightChains::Both => {
+                    n_con += steps.div_ceil(2);
+                    n_vis += steps / 2;
+                }
+                LightChains::Contribution => n_con += steps,
+                LightChains::Independent => {}
+            }
+        }
+        (n_con, n_vis)
+    }
+
+    /// The camera pass of iteration `iteration` (from 0) into `out`: one
+    /// stratified camera subpath per pixel, in tiles, joined in tile order,
+    /// with the path-tracing techniques weighted for light-subpath density
+    /// scale `light_scale`, and the merge grid of radius `radius`.
+    pub fn camera_pass(
+        &self,
+        scene: &Scene,
+        radius: f32,
+        light_scale: f32,
+        seed: u64,
+        iteration: u64,
+        out: &mut CameraPass,
+    ) {
+        let (width, height) = (scene.film.width, scene.film.height);
+        let pixels = width as usize * height as usize;
+        let f = MisFactors::new(self.vcm.mode, self.vcm.heuristic, radius, pixels as f64)
+            .with_light_density_scale(light_scale);
+        let tiles: Vec<(u32, u32, u32, u32)> = (0..height.div_ceil(TILE))
+            .flat_map(|ty| {
+                (0..width.div_ceil(TILE)).map(move |tx| {
+                    let (x0, y0) = (tx * TILE, ty * TILE);
+                    (x0, y0, (x0 + TILE).min(width), (y0 + TILE).min(height))
+                })
+            })
+            .collect();
+        let results: Vec<_> = tiles
+            .par_iter()
+            .enumerate()
+            .map(|(t, &tile)| self.camera_tile(scene, &f, tile, seed, iteration, t))
+            .collect();
+        out.cameras.clear();
+        out.rasters.clear();
+        out.estimates.clear();
+        out.tally = Tally::default();
+        for (set, rasters, estimates, tally) in &results {
+            for k in 0..set.len() {
+                let (z, mis) = set.subpath(k);
+                out.cameras.push(z, mis);
+            }
+            out.rasters.extend_from_slice(rasters);
+            out.estimates.extend_from_slice(estimates);
+            out.tally.add(tally);
+        }
+        if self.vcm.mode.merges() {
+            out.cameras.build_grid(scene, radius);
+        }
+    }
+
+    /// One tile of camera subpaths: the subpaths, their raster positions
+    /// and path-tracing estimates, and the technique tally.
+    fn camera_tile(
+        &self,
+        scene: &Scene,
+        f: &MisFactors,
+        (x0, y0, x1, y1): (u32, u32, u32, u32),
+        seed: u64,
+        iteration: u64,
+        tile: usize,
+    ) -> (CameraSet, Vec<Vec2>, Vec<Rgb>, Tally) {
+        let mut set = CameraSet::default();
+        set.clear();
+        let mut rasters = Vec::new();
+        let mut estimates = Vec::new();
+        let mut tally = Tally::default();
+        let mut src = unit_source(seed, 2 * iteration, tile as u64);
+        let (mut z, mut mis) = (Vec::new(), Vec::new());
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let u = src.next_2d();
+                let raster = Vec2::new(x as f32 + u.0, y as f32 + u.1);
+                let n = self
+                    .vcm
+                    .trace_camera_subpath(scene, f, raster, &mut src, &mut z, &mut mis);
+                let mut l = Rgb::BLACK;
+                for j in 1..n {
+                    if !self.vcm.path_tracing_at(
+                        scene,
+                        f,
+                        &z[..n],
+                        &mis,
+                        j,
+                        false,
+                        &mut src,
+                        &mut l,
+                        &mut tally,
+                    ) {
+                        break;
+                    }
+                }
+                set.push(&z[..n], &mis[..n]);
+                rasters.push(raster);
+                estimates.push(l);
+            }
+        }
+        (set, rasters, estimates, tally)
+    }
+
+    /// The chain pair `p` for one iteration: restart from `pool`, then its
+    /// share of the iteration's light subpaths.
+    #[allow(clippy::too_many_arguments)]
+    fn run_unit(
+        &self,
+        scene: &Scene,
+        it: &Iteration,
+        pool: &[Candidate],
+        (b_vis, b_con): (f64, f64),
+        unit: &mut Unit,
+        p: usize,
+        seed: u64,
+        iteration: u64,
+        abort: &(dyn Fn() -> bool + Sync),
+    ) {
+        let pixels = it.cameras.len();
+        let kinds = self.kinds();
+        let mut rng = stream_rng(seed, STREAM_STEPS ^ (iteration << 24) ^ p as u64);
+        let steps = pixels * (p + 1) / self.units - pixels * p / self.units;
+        if self.chains == LightChains::Independent {
+            // Independent light subpaths, weight one each: VCM's estimator.
+            let mut c = LightContribution::default();
+            for s in 0..steps {
+                if s % STOP_CHECK == 0 && abort() {
+                    return;
+                }
+                let point = TorusPoint::fresh(child_rng(&mut rng));
+                let camera = ((uniform(&mut rng) * pixels as f64) as usize).min(pixels - 1);
+                light_contribution(scene, it, &mut PssSource::new(&point, 1), camera, &mut c);
+                if !c.finite {
+                    unit.invalid += 1;
+                    unit.norm.add(0.0);
+                    continue;
+                }
+                unit.norm.add(c.luminance);
+                deposit(&mut unit.camera, &mut unit.splats, &mut unit.tally, &c, 1.0);
+            }
+            return;
+        }
+        // Restart by importance resampling (the contribution chain ∝ lum,
+        // the visibility chain uniform among the visible candidates).
+        let mut cumulative: Vec<f64> = Vec::with_capacity(pool.len());
+        for &(kind, large) in kinds {
+            cumulative.clear();
+            let mut total = 0.0;
+            for c in pool {
+                total += match kind {
+                    ChainKind::Contribution => c.luminance,
+                    ChainKind::Visibility => f64::from(u8::from(c.luminance > 0.0)),
+                };
+                cumulative.push(total);
+            }
+            let x = uniform(&mut rng) * total;
+            let i = cumulative.partition_point(|&c| c <= x).min(pool.len() - 1);
+            let target = LightTarget {
+                scene,
+                it,
+                camera: pool[i].camera,
+                kind,
+            };
+            let point = TorusPoint::fresh(pool[i].rng.clone());
+            let sample = Sample::evaluate(&target, point);
+            let slot = &mut unit.chains[kind as usize];
+            match slot {
+                Some(chain) => chain.parts_mut().current = sample,
+                None => {
+                    let chain_rng = stream_rng(seed, STREAM_CHAINS + 2 * p as u64 + kind as u64);
+                    *slot = Some(
+                        Chain::from_sample(sample, self.algorithm(large), chain_rng)
+                            .expect("a resampled candidate has a finite density"),
+                    );
+                }
+            }
+        }
+        let (n_con, n_vis) = self.steps_per_kind(pixels);
+        // The balance heuristic's denominator over the two chains (×1/N).
+        let scale = pixels as f64;
+        let mix = |c: &LightContribution| {
+            let vis = if c.luminance > 0.0 { 1.0 } else { 0.0 };
+            n_vis as f64 * vis / b_vis + n_con as f64 * c.luminance / b_con
+        };
+        let Unit {
+            chains,
+            camera: acc,
+            splats,
+            norm,
+            tally,
+            swaps,
+            swaps_accepted,
+            swap_alpha,
+            invalid,
+        } = unit;
+        for s in 0..steps {
+            if s % STOP_CHECK == 0 && abort() {
+                return;
+            }
+            let kind = kinds[s % kinds.len()].0;
+            let camera = ((uniform(&mut rng) * pixels as f64) as usize).min(pixels - 1);
+            let target = LightTarget {
+                scene,
+                it,
+                camera,
+                kind,
+            };
+            let chain = chains[kind as usize].as_mut().expect("started");
+            let large_component = 1;
+            let info = chain.step_with(
+                &target,
+                |t: &Transition<'_, TorusPoint, LightContribution>| {
+                    let mut splat = |c: &LightContribution, w: f64| {
+                        if w > 0.0 && c.luminance > 0.0 && c.finite {
+                            deposit(acc, splats, tally, c, (w * scale / mix(c)) as f32);
+                        }
+                    };
+                    splat(&t.current.payload, 1.0 - t.alpha);
+                    if let Some(y) = t.proposal {
+                        splat(&y.payload, t.alpha);
+                        if t.component == large_component {
+                            norm.add(if y.payload.finite {
+                                y.payload.luminance
+                            } else {
+                                0.0
+                            });
+                        }
+                    }
+                },
+            );
+            if info.outcome == mcmc_core::stats::Outcome::InvalidDensity {
+                *invalid += 1;
+            }
+            if kinds.len() == 2 {
+                let [con, vis] = chains;
+                let (con, vis) = (
+                    con.as_mut().expect("started"),
+                    vis.as_mut().expect("started"),
+                );
+                let (x_con, x_vis) = (&con.current().payload, &vis.current().payload);
+                let log_alpha = swap_log_acceptance(
+                    con.current().log_density,
+                    vis.current().log_density,
+                    ChainKind::Contribution.log_density(x_vis),
+                    ChainKind::Visibility.log_density(x_con),
+                );
+                *swaps += 1;
+                *swap_alpha += log_alpha.exp();
+                if accept(log_alpha, &mut rng) {
+                    *swaps_accepted += 1;
+                    std::mem::swap(&mut con.parts_mut().current, &mut vis.parts_mut().current);
+                    for (chain, kind) in
+                        [(con, ChainKind::Contribution), (vis, ChainKind::Visibility)]
+                    {
+                        let current = &mut chain.parts_mut().current;
+                        current.log_density = kind.log_density(&current.payload);
+                    }
+                }
+            }
+        }
+    }
+
+    /// The registry's result with the JSON statistics.
+    #[allow(clippy::too_many_arguments)]
+    fn report(
+        &self,
+        film: &Film,
+        units: &[Unit],
+        norm: &Normalisation,
+        totals: &Totals,
+        light_scale: f32,
+        iterations: u64,
+        seconds: f64,
+        interrupted: bool,
+        pixels: usize,
+    ) -> Rendered {
+        let samples = iterations * pixels as u64;
+        let per_second = |n: f64| if seconds > 0.0 { n / seconds } else { 0.0 };
+        let total: f64 = totals.tally.energy.iter().sum();
+        let shares: serde_json::Map<String, serde_json::Value> = TECHNIQUE_NAMES
+            .iter()
+            .zip(&totals.tally.energy)
+            .map(|(name, e)| {
+                let share = if total > 0.0 { e / total } else { 0.0 };
+                (name.to_string(), share.into())
+            })
+            .collect();
+        let mut chains = serde_json::Map::new();
+        for &(kind, _) in self.kinds() {
+            let mut stats: Option<mcmc_core::stats::ChainStatistics> = None;
+            for unit in units {
+                if let Some(chain) = &unit.chains[kind as usize] {
+                    match &mut stats {
+                        Some(s) => s.merge(chain.stats()),
+                        None => stats = Some(chain.stats().clone()),
+                    }
+                }
+            }
+            let name = match kind {
+                ChainKind::Contribution => "contribution",
+                ChainKind::Visibility => "visibility",
+            };
+            if let Some(s) = stats {
+                let components: serde_json::Map<String, serde_json::Value> = s
+                    .components
+                    .iter()
+                    .map(|c| {
+                        (
+                            c.name.clone(),
+                            serde_json::json!({
+                                "proposed": c.proposed,
+                                "acceptance": c.acceptance_rate(),
+                            }),
+                        )
+                    })
+                    .collect();
+                chains.insert(
+                    name.into(),
+                    serde_json::json!({
+                        "steps": s.steps,
+                        "acceptance": s.acceptance_rate(),
+                        "outside_support": s.outside_support,
+                        "invalid_density": s.invalid_density,
+                        "components": components,
+                    }),
+                );
+            }
+        }
+        let (b_vis, b_con) = norm.estimates();
+        let (se_vis, se_con) = norm.standard_errors();
+        let finite_or_null = |x: f64| {
+            if x.is_finite() {
+                serde_json::json!(x)
+            } else {
+                serde_json::Value::Null
+            }
+        };
+        let last_radius = self.vcm.radius_at(iterations.saturating_sub(1));
+        let exchange_rate = if totals.swaps > 0 {
+            totals.swaps_accepted as f64 / totals.swaps as f64
+        } else {
+            0.0
+        };
+        let statistics = serde_json::json!({
+            "iterations": iterations,
+            "spp": iterations,
+            "iterations_per_second": per_second(iterations as f64),
+            "samples_per_second": per_second(samples as f64),
+            "mode": self.vcm.mode.name(),
+            "light_chains": self.chains.name(),
+            "radius_initial": self.vcm.radius,
+            "radius_final": last_radius,
+            "alpha": self.vcm.alpha,
+            "exchange_attempts": totals.swaps,
+            "exchange_rate": exchange_rate,
+            "exchange_mean_alpha": if totals.swaps > 0 { totals.swap_alpha / totals.swaps as f64 } else { 0.0 },
+            "chains": chains,
+            "b_vis": b_vis,
+            "b_vis_standard_error": finite_or_null(se_vis),
+            "b_con": b_con,
+            "b_con_standard_error": finite_or_null(se_con),
+            "normalisation_samples": norm.count,
+            "light_density_scale": light_scale,
+            "candidates": self.candidates,
+            "units": self.units,
+            "skipped_iterations": totals.skipped_iterations,
+            "energy_shares": shares,
+            "nonfinite_samples": totals.tally.nonfinite,
+            "invalid_proposals": totals.invalid,
+        });
+        Rendered {
+            image: film.develop(iterations as f64),
+            seconds,
+            samples,
+            interrupted,
+            statistics: match statistics {
+                serde_json::Value::Object(m) => m,
+                _ => serde_json::Map::new(),
+            },
+            nonfinite_dump: None,
+            layers: Vec::new(),
+            summary: format!(
+                "{iterations} iterations in {seconds:.2} s ({:.2} it/s), exchange rate {:.1}%, b_vis {b_vis:.3e}, b_con {b_con:.3e}{}",
+                per_second(iterations as f64),
+                100.0 * exchange_rate,
+                if interrupted { ", stopped early" } else { "" }
+            ),
+        }
+    }
+}
+
+crate::choice! {
+    /// Which light-subpath chains run.
+    pub enum LightChains {
+        /// The contribution and the visibility chain, coupled by replica exchange (the thesis's method).
+        Both = "both",
+        /// The contribution chain alone, with the large steps (ablation).
+        Contribution = "contribution",
+        /// No chains: independent light subpaths, each once (VCM's estimator with merging at the camera vertices; ablation).
+        Independent = "independent",
+    }
+}
+
+crate::choice! {
+    /// Which light subpaths the normalisations `b_vis`, `b_con` average.
+    pub enum NormalisationScope {
+        /// Every independent light subpath of the render so far (Eq. 6.4: restart candidates and large-step proposals).
+        Render = "render",
+        /// The restart candidates of the iteration alone (the targets change with each iteration's camera subpaths).
+        Iteration = "iteration",
+    }
+}
+
+/// `target_acceptance` lies in (0, 1).
+fn check_acceptance(v: &f64) -> Result<(), String> {
+    if *v > 0.0 && *v < 1.0 {
+        Ok(())
+    } else {
+        Err("must lie in (0, 1)".into())
+    }
+}
+
+crate::settings! {
+    /// MCMC over VCM's light subpaths, as the registry fills it.
+    pub struct McmcVcmSettings {
+        /// Light subpaths: both (contribution and visibility chains, replica exchange), contribution (that chain alone, with the large steps) or independent (no MCMC).
+        pub light_chains: LightChains = LightChains::Both;
+        /// Large-step probability of the visibility chain (of the contribution chain when it runs alone).
+        pub large_step: f64 = 0.3, check crate::settings::check::probability;
+        /// Target acceptance of the adaptive small step (Hachisuka & Jensen 2011).
+        pub target_acceptance: f64 = 0.234, check check_acceptance;
+        /// Independent light subpaths per iteration the chains restart from (importance resampling).
+        pub candidates: usize = 10_000, check crate::settings::check::count;
+        /// Chain pairs, each running its share of an iteration's light subpaths.
+        pub units: usize = 8, check crate::settings::check::count;
+        /// Normalisations b_vis, b_con: running means over the render (render, Eq. 6.4) or the iteration's restart candidates (iteration).
+        pub normalisation: NormalisationScope = NormalisationScope::Render;
+        /// Scale the light-subpath techniques' densities in the MIS weights by the chains' mixture density (the visibility chain's exact p/b_vis).
+        pub vis_pdf: bool = true;
+        flatten {
+            /// VCM: mode, radius, reduction (alpha: 1 here, a fixed radius as the thesis runs), heuristic, depth.
+            pub vcm: VcmSettings = VcmSettings {
+                alpha: 1.0,
+                ..VcmSettings::default()
+            };
+        }
+    }
+}
+
+impl McmcVcmSettings {
+    /// The integrator these settings describe for `scene`.
+    pub fn integrator(&self, scene: &Scene) -> McmcVcm {
+        McmcVcm {
+            vcm: self.vcm.integrator(scene),
+            chains: self.light_chains,
+            large_step: self.large_step,
+            target_acceptance: self.target_acceptance,
+            candidates: self.candidates,
+            units: self.units,
+            normalisation: self.normalisation,
+            vis_pdf: self.vis_pdf,
+        }
+    }
+}
+
+impl IntegratorSettings for McmcVcmSettings {
+    const NAME: &'static str = "mcmc-vcm";
+    const DESCRIPTION: &'static str = "MCMC over VCM's light subpaths (Šik, ch. 6): contribution and visibility chains with replica exchange, stratified camera subpaths.";
+
+    fn validate(&self) -> Result<(), String> {
+        if self.vcm.mode == VcmMode::Ppm {
+            return Err("`mode` must be vcm or bpt for mcmc-vcm".into());
+        }
+        if self.normalisation == NormalisationScope::Render && self.vcm.alpha < 1.0 {
+            return Err(
+                "`normalisation = render` needs a fixed radius (`alpha = 1`): with radius reduction the targets change with each iteration; use `normalisation = iteration`".into(),
+            );
+        }
+        if self.light_chains == LightChains::Contribution && !(self.large_step > 0.0) {
+            return Err("the contribution chain alone needs `large_step` > 0".into());
+        }
+        Ok(())
+    }
+
+    fn render(
+        &self,
+        scene: &Scene,
+        run: &RunSettings,
+        stop: &AtomicBool,
+        observer: &dyn Observer,
+    ) -> Result<Rendered, RenderError> {
+        Ok(self.integrator(scene).render(scene, run, stop, observer))
+    }
+}

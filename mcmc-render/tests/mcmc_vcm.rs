@@ -1,0 +1,360 @@
+//! MCMC over VCM's light subpaths (`mcmc-vcm`) against `vcm`, its targets,
+//! and its determinism.
+//!
+//! # Agreement tolerances
+//!
+//! As in `vcm.rs` and `agree_mlt.rs`: each estimator runs as `K` = 24
+//! independent replicates (fixed seeds); the standard error of an image
+//! mean is sd(replicate means)/√K (Student's t, 23 degrees of freedom), `σ`
+//! that of the difference of the two means. A channel passes when the
+//! difference lies within 4σ (false-alarm rate ≈ 5e-4 per channel) and
+//! within 1%, and the budget must make 5σ < 1%; the control (the same
+//! estimates ×1.01) must fail.
+//!
+//! # Scene
+//!
+//! The repo's Cornell box at 64×64 (16 iterations; 48 for `mcmc-vcm`), `max_depth` 5, camera
+//! tilted so that the emitter is out of view (`common::repo_scene_tilted`),
+//! both integrators with a fixed radius 0.1 (α = 1, the thesis's setting;
+//! merging carries about 3% of the energy).
+//!
+//! Why a fixed radius: the running normalisation of Eq. 6.4 averages
+//! `b_c` over the whole render, but with radius reduction the targets
+//! change from iteration to iteration (η = π r² N moves energy between the
+//! path-tracing and the light-subpath techniques, so `b_con` drifts), and
+//! the render-wide mean then biases every iteration: measured +0.6% to +1%
+//! at α = 0.75 (ignored test `running_normalisation_needs_a_fixed_radius`),
+//! while `normalisation = iteration` agrees there. `validate` refuses
+//! `normalisation = render` with α < 1.
+
+mod common;
+
+use common::{MeanAgreement, image_mean, repo_scene_tilted};
+use mcmc_core::chain::Chain;
+use mcmc_core::rng::{child_rng, stream_rng};
+use mcmc_core::sample::Sample;
+use mcmc_core::space::TorusPoint;
+use mcmc_render::color::Rgb;
+use mcmc_render::integrators::mcmc_vcm::{
+    CameraPass, ChainKind, Iteration, LightChains, LightContribution, LightTarget, McmcVcmSettings,
+    NormalisationScope, light_contribution,
+};
+use mcmc_render::integrators::vcm::{VcmMode, VcmSettings};
+use mcmc_render::integrators::{Rendered, RunSettings};
+use mcmc_render::observer::NoObserver;
+use mcmc_render::pss::PssSource;
+use mcmc_render::scene::Scene;
+use std::sync::OnceLock;
+use std::sync::atomic::AtomicBool;
+
+const RES: u32 = 64;
+const DEPTH: u32 = 5;
+const REPS: u64 = 24;
+const ITERATIONS: u32 = 16;
+/// Iterations of the `mcmc-vcm` replicates: its image mean is about twice
+/// as noisy per iteration as `vcm`'s (correlated light subpaths), so it
+/// runs three times as long for 5σ < 1%.
+const MCMC_ITERATIONS: u32 = 48;
+
+fn cornell() -> &'static Scene {
+    static SCENE: OnceLock<Scene> = OnceLock::new();
+    SCENE.get_or_init(|| repo_scene_tilted("cornell-box.xml", RES, DEPTH))
+}
+
+/// The 16×16 Cornell box (256 camera subpaths per iteration).
+fn cornell_16() -> &'static Scene {
+    static SCENE: OnceLock<Scene> = OnceLock::new();
+    SCENE.get_or_init(|| repo_scene_tilted("cornell-box.xml", 16, DEPTH))
+}
+
+/// VCM settings with the scene's depth, radius 0.1 and α = 1 (a fixed
+/// radius, as the thesis runs).
+fn vcm_settings(scene: &Scene) -> VcmSettings {
+    let mut s = VcmSettings {
+        mode: VcmMode::Vcm,
+        radius: Some(0.1),
+        alpha: 1.0,
+        ..VcmSettings::default()
+    };
+    s.depth.max_depth = i64::from(scene.integrator.max_depth);
+    s.depth.rr_depth = scene.integrator.rr_depth;
+    s
+}
+
+/// `mcmc-vcm` with `vcm_settings`, `chains`, 1024 restart candidates
+/// (four per light subpath of an iteration at 16×16) and 4 chain pairs.
+fn settings(scene: &Scene, chains: LightChains) -> McmcVcmSettings {
+    McmcVcmSettings {
+        light_chains: chains,
+        candidates: 1024,
+        units: 4,
+        vcm: vcm_settings(scene),
+        ..McmcVcmSettings::default()
+    }
+}
+
+/// One run of `iterations` iterations.
+fn run(scene: &Scene, s: &McmcVcmSettings, iterations: u32, seed: u64) -> Rendered {
+    let run = RunSettings {
+        spp: Some(iterations),
+        seed,
+        ..RunSettings::default()
+    };
+    let out = s
+        .integrator(scene)
+        .render(scene, &run, &AtomicBool::new(false), &NoObserver);
+    assert_eq!(out.statistics["iterations"], u64::from(iterations));
+    assert_eq!(out.statistics["nonfinite_samples"], 0);
+    out
+}
+
+/// Image means of `REPS` runs of `iterations`.
+fn reps(scene: &Scene, s: &McmcVcmSettings, iterations: u32, seed0: u64) -> Vec<[f64; 3]> {
+    (0..REPS)
+        .map(|k| {
+            let out = run(scene, s, iterations, seed0 + k);
+            if k == 0 {
+                eprintln!("{}", serde_json::Value::Object(out.statistics.clone()));
+            }
+            image_mean(&out.image)
+        })
+        .collect()
+}
+
+/// `vcm` replicates of `scene` (`iterations` each).
+fn vcm_reps(scene: &Scene, iterations: u32, seed0: u64) -> Vec<[f64; 3]> {
+    let s = vcm_settings(scene);
+    (0..REPS)
+        .map(|k| {
+            let run = RunSettings {
+                spp: Some(iterations),
+                seed: seed0 + k,
+                ..RunSettings::default()
+            };
+            let out = s
+                .integrator(scene)
+                .render(scene, &run, &AtomicBool::new(false), &NoObserver);
+            image_mean(&out.image)
+        })
+        .collect()
+}
+
+fn cornell_vcm() -> &'static [[f64; 3]] {
+    static R: OnceLock<Vec<[f64; 3]>> = OnceLock::new();
+    R.get_or_init(|| vcm_reps(cornell(), ITERATIONS, 100))
+}
+
+fn cornell_mcmc_vcm() -> &'static [[f64; 3]] {
+    static R: OnceLock<Vec<[f64; 3]>> = OnceLock::new();
+    R.get_or_init(|| {
+        reps(
+            cornell(),
+            &settings(cornell(), LightChains::Both),
+            MCMC_ITERATIONS,
+            200,
+        )
+    })
+}
+
+/// Asserts agreement within 4σ and 1%, with 5σ < 1%.
+fn check(what: &str, reference: &[[f64; 3]], test: &[[f64; 3]]) {
+    let a = MeanAgreement::new(reference, test);
+    eprintln!("{what}: rel {:?}\n  {a:?}", a.rel());
+    assert!(
+        a.failures(4.0, 0.01).is_empty(),
+        "{what} disagrees with vcm: {a:?}"
+    );
+    assert!(
+        a.resolves(5.0, 0.01),
+        "{what}: noise too large for 1%: {a:?}"
+    );
+}
+
+/// `mcmc-vcm` (both chains, replica exchange) agrees with `vcm`.
+#[test]
+fn mcmc_vcm_agrees_with_vcm_on_the_cornell_box() {
+    check("mcmc-vcm", cornell_vcm(), cornell_mcmc_vcm());
+}
+
+/// The control: the same estimates biased by +1% must fail.
+#[test]
+fn a_one_percent_bias_is_detected() {
+    let biased: Vec<[f64; 3]> = cornell_mcmc_vcm()
+        .iter()
+        .map(|m| m.map(|v| v * 1.01))
+        .collect();
+    let a = MeanAgreement::new(cornell_vcm(), &biased);
+    assert!(
+        !a.failures(4.0, 0.01).is_empty(),
+        "1% bias not detected: {a:?}"
+    );
+}
+
+/// The light-subpath contribution `C^Ω` pinned: `N` independent light
+/// subpaths per iteration, each adding its `C^Ω` once (no chains), give
+/// `vcm`'s image — so `E[C^Ω]` summed over `N` subpaths is `vcm`'s
+/// light-side contribution (the path-tracing side is `vcm`'s own code).
+#[test]
+fn independent_light_subpaths_reproduce_vcm() {
+    let out = reps(
+        cornell(),
+        &settings(cornell(), LightChains::Independent),
+        ITERATIONS,
+        300,
+    );
+    check("mcmc-vcm light_chains=independent", cornell_vcm(), &out);
+}
+
+/// The running normalisation with radius reduction (module docs),
+/// measured: at 16×16, 128 iterations, α = 0.75 for both integrators,
+/// `normalisation = render` lies more than 4σ above `vcm` while
+/// `normalisation = iteration` agrees. About 2 minutes:
+/// `cargo test -p mcmc-render --test mcmc_vcm -- --ignored`.
+#[test]
+#[ignore]
+fn running_normalisation_needs_a_fixed_radius() {
+    let scene = cornell_16();
+    let mut s = settings(scene, LightChains::Both);
+    s.vcm.alpha = 0.75;
+    let reference: Vec<[f64; 3]> = (0..REPS)
+        .map(|k| {
+            let run = RunSettings {
+                spp: Some(128),
+                seed: 400 + k,
+                ..RunSettings::default()
+            };
+            let out =
+                s.vcm
+                    .integrator(scene)
+                    .render(scene, &run, &AtomicBool::new(false), &NoObserver);
+            image_mean(&out.image)
+        })
+        .collect();
+    let render = MeanAgreement::new(&reference, &reps(scene, &s, 128, 500));
+    eprintln!("render: rel {:?} {render:?}", render.rel());
+    assert!(!render.failures(4.0, 0.01).is_empty());
+    s.normalisation = NormalisationScope::Iteration;
+    check(
+        "normalisation=iteration at 16×16",
+        &reference,
+        &reps(scene, &s, 128, 600),
+    );
+}
+
+/// The targets (Eqs. 6.2, 6.3) on random light subpaths of one
+/// iteration: the visibility target is exactly 0 or −∞ in log (1 or 0),
+/// the contribution target `ln lum C^Ω`; and a contribution chain run by
+/// `mcmc-core`'s Metropolis–Hastings never accepts (nor holds) a state of
+/// zero contribution, while such proposals do occur (so the check is not
+/// vacuous).
+#[test]
+fn targets_are_exact_and_the_contribution_chain_never_accepts_black() {
+    let scene = cornell_16();
+    let integrator = settings(scene, LightChains::Both).integrator(scene);
+    let mut pass = CameraPass::default();
+    integrator.camera_pass(scene, 0.1, 1.0, 7, 0, &mut pass);
+    let it = Iteration::new(&integrator.vcm, &pass.cameras, 0.1, 1.0);
+    let n = pass.cameras.len();
+    let mut rng = stream_rng(11, 0);
+    let (mut black, mut visible) = (0, 0);
+    let mut c = LightContribution::default();
+    let mut start = None;
+    for i in 0..4000 {
+        let point = TorusPoint::fresh(child_rng(&mut rng));
+        let camera = i % n;
+        light_contribution(scene, &it, &mut PssSource::new(&point, 1), camera, &mut c);
+        let vis = LightTarget {
+            scene,
+            it: &it,
+            camera,
+            kind: ChainKind::Visibility,
+        };
+        let con = LightTarget {
+            scene,
+            it: &it,
+            camera,
+            kind: ChainKind::Contribution,
+        };
+        let (lv, lc) = (
+            mcmc_core::target::Target::evaluate(&vis, &point),
+            mcmc_core::target::Target::evaluate(&con, &point),
+        );
+        assert!(c.finite);
+        if c.luminance > 0.0 {
+            visible += 1;
+            assert_eq!(lv.log_density, 0.0);
+            assert_eq!(lc.log_density, c.luminance.ln());
+            start.get_or_insert((point, camera));
+        } else {
+            black += 1;
+            assert_eq!(lv.log_density, f64::NEG_INFINITY);
+            assert_eq!(lc.log_density, f64::NEG_INFINITY);
+        }
+    }
+    assert!(
+        visible > 100 && black > 100,
+        "visible {visible}, black {black}"
+    );
+    let (point, camera) = start.unwrap();
+    let first = LightTarget {
+        scene,
+        it: &it,
+        camera,
+        kind: ChainKind::Contribution,
+    };
+    let sample = Sample::evaluate(&first, point);
+    let mut chain =
+        Chain::from_sample(sample, integrator.algorithm(true), stream_rng(12, 0)).unwrap();
+    let (mut zero_proposals, mut accepted) = (0, 0);
+    for i in 0..4000 {
+        let target = LightTarget {
+            scene,
+            it: &it,
+            camera: (i * 7) % n,
+            kind: ChainKind::Contribution,
+        };
+        chain.step_with(&target, |t| {
+            assert!(
+                t.current.payload.luminance > 0.0,
+                "the chain holds a black state"
+            );
+            if let Some(y) = t.proposal
+                && y.payload.luminance <= 0.0
+            {
+                zero_proposals += 1;
+                assert_eq!(t.alpha, 0.0);
+                assert!(!t.accepted, "a black proposal was accepted");
+            }
+            accepted += t.accepted as u32;
+        });
+        assert!(chain.current().payload.luminance > 0.0);
+    }
+    assert!(
+        zero_proposals > 100,
+        "only {zero_proposals} black proposals"
+    );
+    assert!(accepted > 100, "only {accepted} acceptances");
+}
+
+/// One seed gives the same bits on 1 and 2 threads.
+#[test]
+fn images_do_not_depend_on_the_thread_count() {
+    let scene = cornell_16();
+    let s = settings(scene, LightChains::Both);
+    let render = |threads: usize| -> Vec<Rgb> {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| run(scene, &s, 3, 9).image)
+    };
+    let (a, b) = (render(1), render(2));
+    assert!(a.iter().any(|p| p.r > 0.0));
+    for (i, (p, q)) in a.iter().zip(&b).enumerate() {
+        assert_eq!(
+            (p.r.to_bits(), p.g.to_bits(), p.b.to_bits()),
+            (q.r.to_bits(), q.g.to_bits(), q.b.to_bits()),
+            "pixel {i}"
+        );
+    }
+}
