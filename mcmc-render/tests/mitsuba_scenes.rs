@@ -315,3 +315,33 @@ fn textured_roughness_and_scene_level_textures_match_mitsuba() {
         "a constant floor roughness passed: {pixels:?}"
     );
 }
+
+/// The pixel check alone (no means: at 64×64 with the light in view, 1% of
+/// the mean takes more samples than the default suite affords) on the
+/// 64×64 feature boxes, whose variance images are 8 × 64-spp Mitsuba runs.
+/// **Known to fail on `textured.xml`** (relMSE observed/predicted 1.30,
+/// excess 3.9 standard errors, in the tiles at the ceiling light's edges;
+/// its means agree within 0.02%), so it is ignored; see the issue 12
+/// status in docs/rendering.md.
+/// `cargo test -p mcmc-render --test mitsuba_scenes -- --ignored --nocapture`
+#[test]
+#[ignore]
+fn pixels_of_the_64_pixel_boxes_match_mitsuba() {
+    let mut failed = Vec::new();
+    for (name, spp) in [
+        ("cornell-plastic", 32),
+        ("cornell-roughplastic", 32),
+        ("cornell-thindielectric", 32),
+        ("textured", 32),
+    ] {
+        let c = RelMseCheck::new(name, &ours(name, spp));
+        eprintln!(
+            "{name}: relMSE observed/predicted {:.3}, {c:?}",
+            c.observed / c.predicted
+        );
+        if !c.passes() {
+            failed.push(name);
+        }
+    }
+    assert!(failed.is_empty(), "relMSE beyond the noise: {failed:?}");
+}
