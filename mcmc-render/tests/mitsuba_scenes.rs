@@ -321,8 +321,9 @@ fn textured_roughness_and_scene_level_textures_match_mitsuba() {
 /// 64×64 feature boxes, whose variance images are 8 × 64-spp Mitsuba runs.
 /// **Known to fail on `textured.xml`** (relMSE observed/predicted 1.30,
 /// excess 3.9 standard errors, in the tiles at the ceiling light's edges;
-/// its means agree within 0.02%), so it is ignored; see the issue 12
-/// status in docs/rendering.md.
+/// its means agree within 0.02%), so it is ignored: Mitsuba's film
+/// weights samples with its discretized filter table, ours with the exact
+/// Gaussian (see the issue 12 status in docs/rendering.md).
 /// `cargo test -p mcmc-render --test mitsuba_scenes -- --ignored --nocapture`
 #[test]
 #[ignore]
