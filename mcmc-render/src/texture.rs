@@ -323,6 +323,40 @@ impl Texture {
         }
     }
 
+    /// The scalar value at `uv`, as Mitsuba 3.9's `eval_1` computes it for
+    /// a float parameter (roughness `alpha`, `opacity`): a constant gives
+    /// the mean of its channels, a bitmap the luminance of its (linear)
+    /// value, and a checkerboard its *other* colour's `eval_1`: Mitsuba
+    /// 3.9.1's `checkerboard` picks `color1` in `eval_1` where its `eval`
+    /// picks `color0` and vice versa (measured on a grid of UVs with
+    /// Mitsuba 3.9.1, `scalar_rgb`; `texture_loader.rs` pins it).
+    pub fn eval_1(&self, uv: Vec2) -> f32 {
+        match self {
+            Texture::Constant(c) => (c.r + c.g + c.b) / 3.0,
+            Texture::Bitmap(b) => b.eval(uv).luminance(),
+            Texture::Checkerboard(c) => {
+                let t = c.to_uv.transform_point2(uv);
+                let high = |x: f32| x - x.floor() > 0.5;
+                if high(t.x) == high(t.y) {
+                    c.color1.eval_1(uv)
+                } else {
+                    c.color0.eval_1(uv)
+                }
+            }
+        }
+    }
+
+    /// The mean of [`Texture::eval_1`] over the unit UV square (as
+    /// [`Texture::mean`]: exact for constants and bitmaps, the mean of the
+    /// two colours for checkerboards).
+    pub fn mean_1(&self) -> f32 {
+        match self {
+            Texture::Constant(_) => self.eval_1(Vec2::ZERO),
+            Texture::Bitmap(b) => b.mean().luminance(),
+            Texture::Checkerboard(c) => 0.5 * (c.color0.mean_1() + c.color1.mean_1()),
+        }
+    }
+
     /// The mean value over the unit UV square (exact for constants and
     /// bitmaps; checkerboards: the mean of their two colours' means, as
     /// Mitsuba's `mean()`).
@@ -548,5 +582,41 @@ mod tests {
         let mut p = Mat4::IDENTITY;
         p.x_axis.w = 1.0;
         assert!(uv_transform(&p).is_err());
+    }
+
+    /// `eval_1` against values Mitsuba 3.9.1 (`scalar_rgb`) printed for
+    /// `checkerboard` (color0 0.1, color1 0.9, and color0 the RGB
+    /// (0.2, 0.5, 0.8)) at these UVs, with `eval` beside them: the scalar
+    /// lookup takes the other colour than `eval`, and an RGB constant's
+    /// scalar value is its channel mean (0.5), not its luminance (0.458).
+    #[test]
+    fn scalar_lookups_match_mitsuba() {
+        let grey = |v: f32| Texture::Constant(Rgb::splat(v));
+        let board = |color0: Texture| {
+            Texture::Checkerboard(Box::new(Checkerboard {
+                color0,
+                color1: grey(0.9),
+                to_uv: Affine2::IDENTITY,
+            }))
+        };
+        let plain = board(grey(0.1));
+        let rgb = board(Texture::Constant(Rgb::new(0.2, 0.5, 0.8)));
+        // (u, v, Mitsuba's eval, eval_1 of `plain`, eval_1 of `rgb`)
+        let measured = [
+            (0.1, 0.1, 0.1, 0.9, 0.9),
+            (0.4, 0.6, 0.9, 0.1, 0.5),
+            (0.6, 0.9, 0.1, 0.9, 0.9),
+            (0.9, 0.4, 0.9, 0.1, 0.5),
+            (1.2, 0.9, 0.9, 0.1, 0.5),
+            (-0.3, 0.1, 0.9, 0.1, 0.5),
+            (-0.3, 0.6, 0.1, 0.9, 0.9),
+        ];
+        for (u, v, eval, one, one_rgb) in measured {
+            let uv = Vec2::new(u, v);
+            assert_eq!(plain.eval(uv).r, eval, "eval at {uv}");
+            assert!((plain.eval_1(uv) - one).abs() < 1e-6, "eval_1 at {uv}");
+            assert!((rgb.eval_1(uv) - one_rgb).abs() < 1e-6, "eval_1 at {uv}");
+        }
+        assert!((plain.mean_1() - 0.5).abs() < 1e-6);
     }
 }

@@ -215,6 +215,32 @@ fn rough_plastic_cases() -> Vec<Case> {
     v
 }
 
+/// Roughness textures, at two UVs (`bsdf_common::textured_roughness_models`):
+/// the BSDF a hit gets, from above and (glass, two-sided) below, in both
+/// modes.
+fn textured_roughness_cases() -> Vec<Case> {
+    let mut v = Vec::new();
+    for (name, bsdf) in textured_roughness_models() {
+        let one_sided = matches!(bsdf, Bsdf::RoughConductor(_));
+        for (t, mode) in [
+            (40.0f32, TransportMode::Radiance),
+            (75.0, TransportMode::Importance),
+            (140.0, TransportMode::Radiance),
+        ] {
+            if one_sided && t > 90.0 {
+                continue;
+            }
+            v.push(Case {
+                name: format!("{name} θo={t} {mode:?}"),
+                bsdf,
+                wo: sph(t.to_radians(), 0.7),
+                mode,
+            });
+        }
+    }
+    v
+}
+
 /// Total number of goodness-of-fit tests in this file (for Bonferroni).
 fn total_cases() -> usize {
     plastic_cases().len()
@@ -224,6 +250,7 @@ fn total_cases() -> usize {
         + rough_dielectric_cases().len()
         + inverted_dielectric_cases().len()
         + twosided_cases().len()
+        + textured_roughness_cases().len()
 }
 
 fn cell_of(w: Vec3) -> usize {
@@ -520,4 +547,9 @@ fn rough_plastic_sampling_matches_pdf() {
 #[test]
 fn twosided_sampling_matches_pdf() {
     check_all(twosided_cases(), 4000);
+}
+
+#[test]
+fn textured_roughness_sampling_matches_pdf() {
+    check_all(textured_roughness_cases(), 8000);
 }

@@ -86,6 +86,7 @@ fn models() -> Vec<(String, Bsdf)> {
             ));
         }
     }
+    v.extend(textured_roughness_models());
     v
 }
 

@@ -505,6 +505,8 @@ fn reflection_models_are_reciprocal() {
             ));
         }
     }
+    // The BSDFs at two points of surfaces with roughness textures.
+    models.extend(textured_roughness_models());
     let dirs = random_dirs(400, 21);
     for (name, b) in &models {
         let (mut nonzero, mut tight) = (0, 0);

@@ -81,9 +81,24 @@ fn refusals_name_the_line() {
         ),
         (
             shape(
-                r#"<bsdf type="roughconductor"><texture type="checkerboard" name="alpha"/></bsdf>"#,
+                r#"<bsdf type="roughplastic"><texture type="checkerboard" name="alpha"/></bsdf>"#,
             ),
-            &["t.xml:3", "'alpha'", "cannot be a texture"][..],
+            &["t.xml:3", "'alpha' must be a number here", "roughplastic"][..],
+        ),
+        (
+            shape(
+                r#"<bsdf type="roughconductor"><float name="alpha" value="0.2"/><texture type="checkerboard" name="alpha"/></bsdf>"#,
+            ),
+            &["t.xml:3", "'alpha' is given twice"][..],
+        ),
+        (
+            shape(
+                r#"<bsdf type="roughdielectric"><texture type="checkerboard" name="alpha_u"/></bsdf>"#,
+            ),
+            &[
+                "t.xml:3",
+                "give either 'alpha' or both 'alpha_u' and 'alpha_v'",
+            ][..],
         ),
         (
             shape(r#"<bsdf type="diffuse"><texture type="checkerboard"/></bsdf>"#),
@@ -261,6 +276,209 @@ fn mask_refusals_name_the_line() {
                 "<bsdf type=\"mask\"><bsdf type=\"diffuse\"/><texture type=\"bitmap\" name=\"opacity\">\n<string name=\"filename\" value=\"leaf-missing.png\"/></texture></bsdf>",
             ),
             &["t.xml:4", "cannot load texture", "leaf-missing.png"][..],
+        ),
+    ] {
+        let e = load(&body).err().expect("refused");
+        assert!(!e.contains('\n'), "not one line: {e}");
+        for n in needles {
+            assert!(e.contains(n), "'{n}' missing from: {e}");
+        }
+    }
+}
+
+/// The microfacet roughness of the model at the unit rectangle's object
+/// point (x, y), and the `mask` opacity there (1 without a mask).
+fn alpha_at(s: &Scene, x: f32, y: f32) -> ((f32, f32), f32) {
+    use mcmc_render::bsdf::textured::BsdfAt;
+    let hit = s
+        .intersect(&Ray::new(Vec3::new(x, y, 1.0), Vec3::NEG_Z))
+        .expect("hit");
+    let at = s.bsdf_at(&hit.sp);
+    let opacity = match at {
+        BsdfAt::Wrapped(_, w) => w.opacity,
+        _ => 1.0,
+    };
+    let alpha = match at.model() {
+        Bsdf::RoughConductor(c) | Bsdf::TwoSided(OneSided::RoughConductor(c)) => {
+            c.distribution.alpha()
+        }
+        Bsdf::RoughDielectric(d) => d.distribution.alpha(),
+        b => panic!("{b:?}"),
+    };
+    (alpha, opacity)
+}
+
+/// Roughness textures (`alpha`, `alpha_u`, `alpha_v`) of the models
+/// Mitsuba 3 takes them for, as every integrator sees them through
+/// `Scene::bsdf_at` (inside `twosided`, under `bumpmap` and `mask` too).
+/// The checkerboard's scalar lookup is Mitsuba 3.9.1's: `color1` where its
+/// colour lookup gives `color0` (uv = ((x+1)/2, (y+1)/2); at (−0.5, −0.5)
+/// the colour lookup is color0). A roughness of 0 is clamped to 1e-4.
+#[test]
+fn textured_roughness_at_a_hit() {
+    let board = r#"<texture type="checkerboard" name="NAME"><float name="color0" value="0.05"/><float name="color1" value="0.5"/></texture>"#;
+    let tex = |name: &str| board.replace("NAME", name);
+    let cases = [
+        format!(r#"<bsdf type="roughconductor">{}</bsdf>"#, tex("alpha")),
+        format!(
+            r#"<bsdf type="twosided"><bsdf type="roughconductor"><string name="distribution" value="ggx"/>{}</bsdf></bsdf>"#,
+            tex("alpha")
+        ),
+        format!(r#"<bsdf type="roughdielectric">{}</bsdf>"#, tex("alpha")),
+        format!(
+            r#"<bsdf type="bumpmap"><texture type="bitmap"><string name="filename" value="../scenes/textures/bumps.png"/></texture><bsdf type="roughconductor">{}</bsdf></bsdf>"#,
+            tex("alpha")
+        ),
+        format!(
+            r#"<bsdf type="mask"><float name="opacity" value="0.7"/><bsdf type="roughdielectric">{}</bsdf></bsdf>"#,
+            tex("alpha")
+        ),
+    ];
+    for bsdf in &cases {
+        let s = load_in_crate(&format!("<shape type=\"rectangle\">{bsdf}</shape>")).unwrap();
+        assert_eq!(alpha_at(&s, -0.5, -0.5).0, (0.5, 0.5), "{bsdf}");
+        assert_eq!(alpha_at(&s, 0.5, -0.5).0, (0.05, 0.05), "{bsdf}");
+    }
+    // Anisotropic: alpha_u textured, alpha_v a number; then both textured,
+    // alpha_v by a black board (clamped to 1e-4, as Mitsuba clamps).
+    let s = load(&format!(
+        r#"<shape type="rectangle"><bsdf type="roughdielectric">{}<float name="alpha_v" value="0.3"/></bsdf></shape>"#,
+        tex("alpha_u")
+    ))
+    .unwrap();
+    assert_eq!(alpha_at(&s, -0.5, -0.5).0, (0.5, 0.3));
+    assert_eq!(alpha_at(&s, 0.5, -0.5).0, (0.05, 0.3));
+    let s = load(&format!(
+        r#"<shape type="rectangle"><bsdf type="roughconductor">{}<texture type="checkerboard" name="alpha_v"><float name="color0" value="0"/><float name="color1" value="0"/></texture></bsdf></shape>"#,
+        tex("alpha_u")
+    ))
+    .unwrap();
+    assert_eq!(alpha_at(&s, 0.5, -0.5).0, (0.05, 1e-4));
+    // The description holds the texture's mean (what `info` prints).
+    let Bsdf::RoughConductor(c) = s.bsdfs[0] else {
+        panic!("{:?}", s.bsdfs[0]);
+    };
+    let (au, av) = c.distribution.alpha();
+    assert!((au - 0.275).abs() < 1e-6 && av == 1e-4, "{au} {av}");
+}
+
+/// Loads with relative paths resolved against the crate directory.
+fn load_in_crate(body: &str) -> Result<Scene, String> {
+    let text = format!("<scene version=\"3.0.0\"><sensor type=\"perspective\"/>\n{body}\n</scene>");
+    Scene::load_str(
+        &text,
+        Path::new("t.xml"),
+        Path::new(env!("CARGO_MANIFEST_DIR")),
+    )
+    .map_err(|e| e.to_string())
+}
+
+/// Scene-level `<texture id=…>` referenced with `<ref id=… name=…>` as a
+/// colour, a roughness, a mask's opacity, a checkerboard's colour and a
+/// normal map, as Mitsuba 3 resolves them; the values at a hit are the
+/// ones the inline textures give.
+#[test]
+fn scene_level_textures_by_reference() {
+    let s = load(
+        r#"<texture type="checkerboard" id="board"><float name="color0" value="0.05"/><float name="color1" value="0.5"/></texture>
+<texture type="checkerboard" id="outer"><ref id="board" name="color0"/><rgb name="color1" value="0.9, 0.1, 0.1"/></texture>
+<bsdf type="roughconductor" id="metal"><ref id="board" name="alpha"/></bsdf>
+<shape type="rectangle"><ref id="metal"/></shape>"#,
+    )
+    .unwrap();
+    assert_eq!(alpha_at(&s, -0.5, -0.5).0, (0.5, 0.5));
+    assert_eq!(alpha_at(&s, 0.5, -0.5).0, (0.05, 0.05));
+    let s = load(
+        r#"<texture type="checkerboard" id="board"><float name="color0" value="0.05"/><float name="color1" value="0.5"/></texture>
+<texture type="checkerboard" id="outer"><ref id="board" name="color0"/><rgb name="color1" value="0.9, 0.1, 0.1"/><transform name="to_uv"><scale value="0.5"/></transform></texture>
+<shape type="rectangle"><bsdf type="diffuse"><ref id="outer" name="reflectance"/></bsdf></shape>"#,
+    )
+    .unwrap();
+    let refl = |x, y| match bsdf_at(&s, x, y) {
+        Bsdf::Diffuse(d) => d.reflectance,
+        b => panic!("{b:?}"),
+    };
+    // The outer board (cells of 2 in uv) is color0 everywhere on [0,1]²:
+    // the inner board by reference.
+    assert_eq!(refl(-0.5, -0.5), Rgb::splat(0.05));
+    assert_eq!(refl(0.5, -0.5), Rgb::splat(0.5));
+    // Opacity by reference: the scalar lookup (0.5 where the colour
+    // lookup gives 0.05), as Mitsuba's mask reads it.
+    let s = load(
+        r#"<texture type="checkerboard" id="board"><float name="color0" value="0.05"/><float name="color1" value="0.5"/></texture>
+<shape type="rectangle"><bsdf type="mask"><ref id="board" name="opacity"/><bsdf type="roughconductor"/></bsdf></shape>"#,
+    )
+    .unwrap();
+    assert_eq!(alpha_at(&s, -0.5, -0.5).1, 0.5);
+    assert_eq!(alpha_at(&s, 0.5, -0.5).1, 0.05);
+    // A normal map by reference equals the same map inline.
+    let nm = r#"<texture type="checkerboard" name="normalmap" id="nm"><rgb name="color0" value="0.8, 0.5, 0.8"/><rgb name="color1" value="0.5, 0.5, 1"/></texture>"#;
+    let by_ref = load(&format!(
+        r#"{nm}<shape type="rectangle"><bsdf type="normalmap"><ref id="nm" name="normalmap"/><bsdf type="diffuse"/></bsdf></shape>"#
+    ))
+    .unwrap();
+    let inline = load(&format!(
+        r#"<shape type="rectangle"><bsdf type="normalmap">{}<bsdf type="diffuse"/></bsdf></shape>"#,
+        nm.replace(r#" id="nm""#, "")
+    ))
+    .unwrap();
+    for (x, y) in [(-0.5f32, -0.5f32), (0.5, -0.5)] {
+        let n = |s: &Scene| {
+            let hit = s
+                .intersect(&Ray::new(Vec3::new(x, y, 1.0), Vec3::NEG_Z))
+                .expect("hit");
+            s.bsdf_at(&hit.sp).perturbed().map(|p| format!("{p:?}"))
+        };
+        assert!(n(&by_ref).is_some());
+        assert_eq!(n(&by_ref), n(&inline));
+    }
+}
+
+/// Mistyped, unknown, unnamed and duplicate references: one line with
+/// the file and line, as Mitsuba 3 refuses them.
+#[test]
+fn reference_errors_name_the_line() {
+    let board = r#"<texture type="checkerboard" id="board"/>"#;
+    for (body, needles) in [
+        (
+            format!("{board}\n<shape type=\"rectangle\"><bsdf type=\"diffuse\">\n<ref id=\"bord\" name=\"reflectance\"/></bsdf></shape>"),
+            &["t.xml:4", "no <texture id=\"bord\">"][..],
+        ),
+        (
+            "<bsdf type=\"diffuse\" id=\"white\"/>\n<shape type=\"rectangle\"><bsdf type=\"diffuse\">\n<ref id=\"white\" name=\"reflectance\"/></bsdf></shape>".to_string(),
+            &["t.xml:4", "\"white\" is a <bsdf>, but a <texture> is expected"][..],
+        ),
+        (
+            format!("{board}\n<shape type=\"rectangle\">\n<ref id=\"board\"/></shape>"),
+            &["t.xml:4", "\"board\" is a <texture>, but a <bsdf> is expected"][..],
+        ),
+        (
+            format!("{board}\n<shape type=\"rectangle\"><bsdf type=\"mask\">\n<ref id=\"board\"/></bsdf></shape>"),
+            &["t.xml:4", "\"board\" is a <texture>, but a <bsdf> is expected"][..],
+        ),
+        (
+            format!("{board}\n<shape type=\"rectangle\"><bsdf type=\"diffuse\">\n<ref id=\"board\"/></bsdf></shape>"),
+            &["t.xml:4", "needs a 'name'"][..],
+        ),
+        (
+            format!("{board}\n<shape type=\"rectangle\"><bsdf type=\"dielectric\">\n<ref id=\"board\" name=\"int_ior\"/></bsdf></shape>"),
+            &["t.xml:4", "parameter 'int_ior'", "cannot be a texture"][..],
+        ),
+        (
+            format!("{board}\n<shape type=\"rectangle\"><bsdf type=\"roughplastic\">\n<ref id=\"board\" name=\"alpha\"/></bsdf></shape>"),
+            &["t.xml:4", "'alpha' must be a number here"][..],
+        ),
+        (
+            format!("{board}\n<bsdf type=\"diffuse\" id=\"board\"/>"),
+            &["t.xml:3", "duplicate id \"board\"", "t.xml:2"][..],
+        ),
+        (
+            "<texture type=\"checkerboard\"/>".to_string(),
+            &["t.xml:2", "scene-level <texture> needs an 'id'"][..],
+        ),
+        (
+            "<texture type=\"bitmap\" id=\"t\">\n<string name=\"filename\" value=\"missing.png\"/></texture>".to_string(),
+            &["t.xml:3", "cannot load texture", "missing.png"][..],
         ),
     ] {
         let e = load(&body).err().expect("refused");

@@ -7,7 +7,8 @@ our renderer's means are compared against (docs/mitsuba-comparison.md).
 
 Usage:
     python3 scenes/tools/mitsuba_reference.py SCENE.xml --spp N --seeds K --output OUT.exr \
-        [-D name=value ...] [--variant scalar_rgb] [--threads T] [--json OUT.json]
+        [-D name=value ...] [--variant scalar_rgb] [--threads T] [--json OUT.json] \
+        [--variance VAR.exr]
 
 Prints one JSON object on stdout:
     mean[c]        mean over seeds of the per-seed image mean of channel c (R, G, B)
@@ -21,6 +22,13 @@ variant, thread count, render seconds).
 
 OUT.exr is the average of the K renders (i.e. K*spp samples per pixel), written as
 float32 linear RGB. The seeds used are 0..K-1 (Mitsuba's `mi.render(..., seed=k)`).
+
+VAR.exr (optional) is the per-pixel, per-channel variance of ONE sample: the sample
+variance over the K seeds' images (ddof=1) times spp. The variance of a pixel of an
+N-sample render is VAR/N, so a variance image made with fewer spp (or seeds) than the
+reference describes the reference's noise too: divide by the reference's total_spp.
+`mcmc-render/tests/mitsuba_scenes.rs` uses it to predict the relMSE between the
+reference and our render.
 """
 
 from __future__ import annotations
@@ -54,6 +62,7 @@ def main() -> int:
     ap.add_argument("--variant", default="scalar_rgb")
     ap.add_argument("--threads", type=int, default=0, help="thread count (0 = Dr.Jit's default, all cores)")
     ap.add_argument("--json", help="also write the JSON report to this file")
+    ap.add_argument("--variance", help="also write the per-sample pixel variance to this EXR")
     args = ap.parse_args()
 
     if args.spp <= 0:
@@ -81,6 +90,7 @@ def main() -> int:
     lum_means = []
     nonfinite = 0
     acc = None
+    acc2 = None
     render_seconds = 0.0
     w709 = np.array([0.2126, 0.7152, 0.0722])
     for seed in range(args.seeds):
@@ -96,6 +106,7 @@ def main() -> int:
         seed_means.append(m.tolist())
         lum_means.append(float(m @ w709))
         acc = img if acc is None else acc + img
+        acc2 = img * img if acc2 is None else acc2 + img * img
         print(f"seed {seed}: mean {m.tolist()}", file=sys.stderr, flush=True)
 
     sm = np.array(seed_means)
@@ -109,6 +120,10 @@ def main() -> int:
     avg = (acc / k).astype(np.float32)
     os.makedirs(os.path.dirname(os.path.abspath(args.output)), exist_ok=True)
     mi.Bitmap(avg, pixel_format=mi.Bitmap.PixelFormat.RGB).write(args.output)
+    if args.variance:
+        seed_var = np.maximum(acc2 - acc * acc / k, 0.0) / (k - 1)
+        var1 = (seed_var * args.spp).astype(np.float32)
+        mi.Bitmap(var1, pixel_format=mi.Bitmap.PixelFormat.RGB).write(args.variance)
 
     report = {
         "scene": args.scene,
@@ -132,6 +147,7 @@ def main() -> int:
         "seed_means": seed_means,
         "nonfinite": nonfinite,
         "output": args.output,
+        "variance": args.variance,
     }
     text = json.dumps(report, indent=2)
     print(text)

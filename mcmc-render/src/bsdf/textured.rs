@@ -7,6 +7,7 @@
 //! (a small `Copy` value) and writes the texture values at the point's UV
 //! into it: no allocation, and untextured BSDFs are lent as they are.
 
+use super::microfacet::Microfacet;
 use super::perturb::Perturbed;
 use super::wrapped::Wrap;
 use super::{Bsdf, BsdfSample, OneSided, TransportMode};
@@ -14,7 +15,9 @@ use crate::color::Rgb;
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 
-/// A colour parameter of a BSDF that may be textured.
+/// A parameter of a BSDF that may be textured: a colour, or a microfacet
+/// roughness (a scalar, read with [`Texture::eval_1`] as Mitsuba 3 reads a
+/// float texture).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum TexturedParam {
     /// `reflectance` of `diffuse` (also inside `twosided`).
@@ -28,6 +31,14 @@ pub enum TexturedParam {
     /// `twosided`). Their lobe-selection weight stays the one computed from
     /// the texture's mean, as Mitsuba 3 computes it.
     DiffuseReflectance,
+    /// Isotropic roughness `alpha` of `roughconductor` (also inside
+    /// `twosided`) and `roughdielectric`: Mitsuba 3 takes a texture there
+    /// (not for `roughplastic`, whose coating tables depend on it).
+    Alpha,
+    /// `alpha_u` (roughness along the tangent) of the same models.
+    AlphaU,
+    /// `alpha_v` (roughness along the bitangent) of the same models.
+    AlphaV,
 }
 
 impl TexturedParam {
@@ -38,6 +49,52 @@ impl TexturedParam {
             TexturedParam::SpecularReflectance => "specular_reflectance",
             TexturedParam::SpecularTransmittance => "specular_transmittance",
             TexturedParam::DiffuseReflectance => "diffuse_reflectance",
+            TexturedParam::Alpha => "alpha",
+            TexturedParam::AlphaU => "alpha_u",
+            TexturedParam::AlphaV => "alpha_v",
+        }
+    }
+
+    /// Writes the value of `texture` at `uv` into `bsdf`; false when the
+    /// model has no such parameter. A roughness goes through
+    /// [`Microfacet::new`], which clamps it below at `MIN_ALPHA` as
+    /// Mitsuba 3's distribution does.
+    #[inline]
+    fn set(self, bsdf: &mut Bsdf, texture: &Texture, uv: Vec2) -> bool {
+        use TexturedParam::*;
+        match self {
+            Alpha | AlphaU | AlphaV => {
+                let Some(m) = Self::microfacet(bsdf) else {
+                    return false;
+                };
+                let a = texture.eval_1(uv);
+                let (au, av) = m.alpha();
+                let (au, av) = match self {
+                    Alpha => (a, a),
+                    AlphaU => (a, av),
+                    _ => (au, a),
+                };
+                *m = Microfacet::new(m.kind(), au, av);
+                true
+            }
+            _ => match self.field(bsdf) {
+                Some(field) => {
+                    *field = texture.eval(uv);
+                    true
+                }
+                None => false,
+            },
+        }
+    }
+
+    /// The distribution of the models whose roughness may be textured.
+    fn microfacet(bsdf: &mut Bsdf) -> Option<&mut Microfacet> {
+        match bsdf {
+            Bsdf::RoughConductor(b) | Bsdf::TwoSided(OneSided::RoughConductor(b)) => {
+                Some(&mut b.distribution)
+            }
+            Bsdf::RoughDielectric(b) => Some(&mut b.distribution),
+            _ => None,
         }
     }
 
@@ -85,8 +142,8 @@ impl BsdfTextures {
     /// the first it lacks).
     pub fn check(&self, bsdf: &Bsdf) -> Result<(), String> {
         let mut b = *bsdf;
-        for (param, _) in &self.0 {
-            if param.field(&mut b).is_none() {
+        for (param, texture) in &self.0 {
+            if !param.set(&mut b, texture, Vec2::ZERO) {
                 return Err(format!(
                     "a texture for '{}' does not apply to this BSDF",
                     param.name()
@@ -101,9 +158,7 @@ impl BsdfTextures {
     pub fn apply(&self, bsdf: &Bsdf, uv: Vec2) -> Bsdf {
         let mut b = *bsdf;
         for (param, texture) in &self.0 {
-            if let Some(field) = param.field(&mut b) {
-                *field = texture.eval(uv);
-            }
+            param.set(&mut b, texture, uv);
         }
         b
     }
@@ -275,5 +330,58 @@ mod tests {
         let diffuse = Bsdf::diffuse(Rgb::splat(0.5));
         let t = BsdfTextures(vec![(TexturedParam::SpecularTransmittance, board())]);
         assert!(t.check(&diffuse).is_err());
+    }
+
+    /// A roughness texture writes its scalar value at the UV into the
+    /// copy's distribution, which then equals the model built with that
+    /// constant roughness (so eval, sample, pdf, invert and the adjoint
+    /// all see it); `regularized` raises the textured value, not the
+    /// template's; `roughplastic` and diffuse have no textured roughness.
+    #[test]
+    fn textured_roughness() {
+        use crate::bsdf::MicrofacetKind;
+        let desc = |a: f32| BsdfDesc::RoughDielectric {
+            distribution: MicrofacetKind::Ggx,
+            alpha_u: a,
+            alpha_v: 0.3,
+            int_ior: 1.5,
+            ext_ior: 1.0,
+            specular_reflectance: Rgb::WHITE,
+            specular_transmittance: Rgb::WHITE,
+        };
+        let template = Bsdf::from_desc(&desc(0.2)).unwrap();
+        let t = BsdfTextures(vec![(TexturedParam::AlphaU, board())]);
+        t.check(&template).unwrap();
+        // board(): color0 (0.9, 0.1, 0.1), color1 (0.1, 0.1, 0.9); the
+        // scalar lookup is the other colour's channel mean (Mitsuba 3.9.1).
+        for (uv, a) in [
+            (Vec2::new(0.25, 0.25), (0.1f32 + 0.1 + 0.9) / 3.0),
+            (Vec2::new(0.75, 0.25), (0.9f32 + 0.1 + 0.1) / 3.0),
+        ] {
+            let b = t.apply(&template, uv);
+            assert_eq!(b, Bsdf::from_desc(&desc(a)).unwrap());
+            match b.regularized(0.5) {
+                Bsdf::RoughDielectric(d) => assert_eq!(d.distribution.alpha(), (0.5, 0.5)),
+                other => panic!("{other:?}"),
+            }
+            match b.regularized(0.35) {
+                Bsdf::RoughDielectric(d) => assert_eq!(d.distribution.alpha(), (a.max(0.35), 0.35)),
+                other => panic!("{other:?}"),
+            }
+        }
+        let plastic = Bsdf::from_desc(&BsdfDesc::RoughPlastic {
+            distribution: MicrofacetKind::Beckmann,
+            alpha: 0.1,
+            sample_visible: true,
+            diffuse_reflectance: Rgb::splat(0.5),
+            specular_reflectance: Rgb::WHITE,
+            int_ior: 1.49,
+            ext_ior: 1.0,
+            nonlinear: false,
+        })
+        .unwrap();
+        let alpha = BsdfTextures(vec![(TexturedParam::Alpha, board())]);
+        assert!(alpha.check(&plastic).is_err());
+        assert!(alpha.check(&Bsdf::diffuse(Rgb::splat(0.5))).is_err());
     }
 }

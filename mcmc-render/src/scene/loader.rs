@@ -10,6 +10,7 @@ use super::{
     CameraDesc, FilmDesc, FilterKind, FovAxis, InfiniteLightDesc, IntegratorDesc,
     IntegratorElement, PointLightDesc, SceneDesc, SceneError, ShapeDesc, ShapeGeometry,
 };
+use crate::bsdf::microfacet::MIN_ALPHA;
 use crate::bsdf::perturb::{PerturbKind, Perturbation};
 use crate::bsdf::textured::{BsdfTextures, TexturedParam};
 use crate::bsdf::wrapped::Wrappers;
@@ -209,6 +210,10 @@ pub struct Loader {
     base_dir: PathBuf,
     desc: SceneDesc,
     named_bsdfs: HashMap<String, usize>,
+    /// Scene-level `<texture id=…>`s, for `<ref id=… name=…>`.
+    named_textures: HashMap<String, Texture>,
+    /// Where each `id` was declared (Mitsuba refuses a duplicate).
+    ids: HashMap<String, Loc>,
     saw_sensor: bool,
     saw_integrator: bool,
 }
@@ -223,6 +228,8 @@ impl Loader {
                 ..SceneDesc::default()
             },
             named_bsdfs: HashMap::new(),
+            named_textures: HashMap::new(),
+            ids: HashMap::new(),
             saw_sensor: false,
             saw_integrator: false,
         }
@@ -251,8 +258,21 @@ impl Loader {
                 let desc = self.bsdf(p)?;
                 let index = self.push_bsdf(desc);
                 if let Some(id) = &p.id {
+                    self.declare(id, &p.loc)?;
                     self.named_bsdfs.insert(id.clone(), index);
                 }
+                Ok(())
+            }
+            "texture" => {
+                let id = p.id.as_ref().ok_or_else(|| {
+                    err(
+                        &p.loc,
+                        "a scene-level <texture> needs an 'id' (to be referenced with <ref id=\"…\" name=\"…\"/>)",
+                    )
+                })?;
+                let texture = self.texture(p)?;
+                self.declare(id, &p.loc)?;
+                self.named_textures.insert(id.clone(), texture);
                 Ok(())
             }
             "emitter" => match p.kind.as_str() {
@@ -286,6 +306,19 @@ impl Loader {
                 format!("<{other}> is not allowed at scene level"),
             )),
         }
+    }
+
+    /// Records that `id` is declared at `loc`; a second declaration of
+    /// the same id is refused, as Mitsuba 3 refuses it.
+    fn declare(&mut self, id: &str, loc: &Loc) -> Result<(), SceneError> {
+        if let Some(first) = self.ids.get(id) {
+            return Err(err(
+                loc,
+                format!("duplicate id \"{id}\" (first declared at {first})"),
+            ));
+        }
+        self.ids.insert(id.to_string(), loc.clone());
+        Ok(())
     }
 
     fn push_bsdf(&mut self, (desc, textures, wrappers): LoadedBsdf) -> usize {
@@ -737,7 +770,8 @@ impl Loader {
                         }
                     }
                 } else {
-                    let (distribution, alpha_u, alpha_v) = microfacet(&mut props, &p.loc)?;
+                    let (distribution, alpha_u, alpha_v) =
+                        self.microfacet(&mut props, &mut tex, &mut textures, &p.loc)?;
                     BsdfDesc::RoughConductor {
                         distribution,
                         alpha_u,
@@ -769,7 +803,8 @@ impl Loader {
                         specular_transmittance,
                     }
                 } else {
-                    let (distribution, alpha_u, alpha_v) = microfacet(&mut props, &p.loc)?;
+                    let (distribution, alpha_u, alpha_v) =
+                        self.microfacet(&mut props, &mut tex, &mut textures, &p.loc)?;
                     BsdfDesc::RoughDielectric {
                         distribution,
                         alpha_u,
@@ -812,7 +847,7 @@ impl Loader {
                     }
                 } else {
                     let (distribution, alpha_u, alpha_v, sample_visible) =
-                        microfacet_params(&mut props, &p.loc)?;
+                        self.roughness(&mut props, &mut tex, None, &p.loc)?;
                     if alpha_u != alpha_v {
                         return Err(err(
                             &p.loc,
@@ -849,7 +884,7 @@ impl Loader {
                 for child in &p.children {
                     let d = match child {
                         Child::Plugin(c) if c.tag == "bsdf" => self.bsdf(c)?,
-                        Child::Ref { id, loc } => self.bsdf_by_id(id, loc)?,
+                        Child::Ref { id, loc, .. } => self.bsdf_by_id(id, loc)?,
                         Child::Plugin(c) => {
                             return Err(err(
                                 &c.loc,
@@ -921,9 +956,9 @@ impl Loader {
         let opacity = match tex.take("opacity") {
             Some(child) => {
                 if props.opt_rgb("opacity")?.is_some() {
-                    return Err(err(&child.loc, "'opacity' is given twice"));
+                    return Err(err(child.loc(), "'opacity' is given twice"));
                 }
-                self.texture(child)?
+                self.texture_of(child)?
             }
             None => Texture::Constant(props.rgb("opacity", Rgb::splat(0.5))?),
         };
@@ -931,7 +966,8 @@ impl Loader {
         for child in &p.children {
             let d = match child {
                 Child::Plugin(c) if c.tag == "bsdf" => self.bsdf(c)?,
-                Child::Ref { id, loc } => self.bsdf_by_id(id, loc)?,
+                Child::Ref { name, .. } if name.as_deref() == Some("opacity") => continue,
+                Child::Ref { id, loc, .. } => self.bsdf_by_id(id, loc)?,
                 Child::Plugin(c) if c.tag == "texture" && c.name.as_deref() == Some("opacity") => {
                     continue;
                 }
@@ -975,24 +1011,34 @@ impl Loader {
         let mut inner = None;
         let mut map = None;
         for child in &p.children {
+            // The map: a <texture> or a <ref> to a scene-level texture.
+            let map_src = match child {
+                Child::Plugin(c) if c.tag == "texture" => {
+                    Some((TexSource::Inline(c), c.name.as_deref(), &c.loc))
+                }
+                Child::Ref { id, name, loc } if self.named_textures.contains_key(id) => {
+                    Some((TexSource::Ref { id, loc }, name.as_deref(), loc))
+                }
+                _ => None,
+            };
+            if let Some((src, name, loc)) = map_src {
+                let named = name == Some("normalmap");
+                if map.is_some() || (what == "normalmap" && !named) {
+                    return Err(err(
+                        loc,
+                        if what == "normalmap" {
+                            "normalmap takes one <texture name=\"normalmap\">".to_string()
+                        } else {
+                            "bumpmap takes one <texture>".to_string()
+                        },
+                    ));
+                }
+                map = Some((self.texture_of(src)?, loc.clone()));
+                continue;
+            }
             let d = match child {
                 Child::Plugin(c) if c.tag == "bsdf" => self.bsdf(c)?,
-                Child::Ref { id, loc } => self.bsdf_by_id(id, loc)?,
-                Child::Plugin(c) if c.tag == "texture" => {
-                    let named = c.name.as_deref() == Some("normalmap");
-                    if map.is_some() || (what == "normalmap" && !named) {
-                        return Err(err(
-                            &c.loc,
-                            if what == "normalmap" {
-                                "normalmap takes one <texture name=\"normalmap\">".to_string()
-                            } else {
-                                "bumpmap takes one <texture>".to_string()
-                            },
-                        ));
-                    }
-                    map = Some((self.texture(c)?, c.loc.clone()));
-                    continue;
-                }
+                Child::Ref { id, loc, .. } => self.bsdf_by_id(id, loc)?,
                 Child::Plugin(c) => {
                     return Err(err(&c.loc, format!("<{}> is not allowed in {what}", c.tag)));
                 }
@@ -1063,18 +1109,48 @@ impl Loader {
         Ok((desc, textures, wrappers))
     }
 
-    fn bsdf_by_id(&self, id: &str, loc: &Loc) -> Result<LoadedBsdf, SceneError> {
-        let index = self.named_bsdfs.get(id).ok_or_else(|| {
-            err(
+    /// The index of the BSDF a `<ref id=…>` names (one line when the id
+    /// is unknown or names a texture).
+    fn bsdf_index(&self, id: &str, loc: &Loc) -> Result<usize, SceneError> {
+        match self.named_bsdfs.get(id) {
+            Some(index) => Ok(*index),
+            None if self.named_textures.contains_key(id) => Err(err(
+                loc,
+                format!("\"{id}\" is a <texture>, but a <bsdf> is expected here"),
+            )),
+            None => Err(err(
                 loc,
                 format!("no <bsdf id=\"{id}\"> defined before this reference"),
-            )
-        })?;
+            )),
+        }
+    }
+
+    fn bsdf_by_id(&self, id: &str, loc: &Loc) -> Result<LoadedBsdf, SceneError> {
+        let index = self.bsdf_index(id, loc)?;
         Ok((
-            self.desc.bsdfs[*index].clone(),
-            self.desc.bsdf_textures[*index].clone(),
-            self.desc.bsdf_wrappers[*index].clone(),
+            self.desc.bsdfs[index].clone(),
+            self.desc.bsdf_textures[index].clone(),
+            self.desc.bsdf_wrappers[index].clone(),
         ))
+    }
+
+    /// The texture a `<texture>` child or a `<ref id=… name=…>` gives
+    /// (one line when the id is unknown or names a BSDF).
+    fn texture_of(&mut self, src: TexSource) -> Result<Texture, SceneError> {
+        match src {
+            TexSource::Inline(p) => self.texture(p),
+            TexSource::Ref { id, loc } => match self.named_textures.get(id) {
+                Some(t) => Ok(t.clone()),
+                None if self.named_bsdfs.contains_key(id) => Err(err(
+                    loc,
+                    format!("\"{id}\" is a <bsdf>, but a <texture> is expected here"),
+                )),
+                None => Err(err(
+                    loc,
+                    format!("no <texture id=\"{id}\"> defined before this reference"),
+                )),
+            },
+        }
     }
 
     /// A colour parameter that may be a texture: the constant (`<rgb>`,
@@ -1094,14 +1170,110 @@ impl Loader {
             return Ok(constant.unwrap_or(default));
         };
         if constant.is_some() {
-            return Err(err(&child.loc, format!("'{name}' is given twice")));
+            return Err(err(child.loc(), format!("'{name}' is given twice")));
         }
-        let t = self.texture(child)?;
+        let t = self.texture_of(child)?;
         let mean = t.mean();
         if !matches!(t, Texture::Constant(_)) {
             textures.0.push((param, t));
         }
         Ok(mean)
+    }
+
+    /// `distribution`, roughness and `sample_visible` of a microfacet
+    /// model whose sampling is visible-normal only (refuses
+    /// `sample_visible=false`) and whose roughness may be textured
+    /// (`roughconductor`, `roughdielectric`; see [`Loader::roughness`]).
+    fn microfacet(
+        &mut self,
+        props: &mut Props,
+        tex: &mut TextureChildren,
+        textures: &mut BsdfTextures,
+        loc: &Loc,
+    ) -> Result<(MicrofacetKind, f32, f32), SceneError> {
+        let (distribution, alpha_u, alpha_v, sample_visible) =
+            self.roughness(props, tex, Some(textures), loc)?;
+        if !sample_visible {
+            return Err(err(
+                loc,
+                "sample_visible=false is not supported (visible-normal sampling only)",
+            ));
+        }
+        Ok((distribution, alpha_u, alpha_v))
+    }
+
+    /// `distribution` (beckmann), `alpha` (0.1) or `alpha_u`+`alpha_v`,
+    /// and `sample_visible` (true), as Mitsuba 3's microfacet models read
+    /// them. With `textures` (the models where Mitsuba 3 takes a texture
+    /// for the roughness) each roughness may be a `<texture>` or a `<ref
+    /// name=…>`, recorded there and read per hit with `Texture::eval_1`
+    /// (the description holds its mean); without (`roughplastic`) a
+    /// texture is refused, as Mitsuba 3 refuses it.
+    fn roughness(
+        &mut self,
+        props: &mut Props,
+        tex: &mut TextureChildren,
+        mut textures: Option<&mut BsdfTextures>,
+        loc: &Loc,
+    ) -> Result<(MicrofacetKind, f32, f32, bool), SceneError> {
+        let distribution = match props.opt_string("distribution")? {
+            None => MicrofacetKind::Beckmann,
+            Some((s, l)) => match s.as_str() {
+                "beckmann" => MicrofacetKind::Beckmann,
+                "ggx" => MicrofacetKind::Ggx,
+                _ => {
+                    return Err(err(
+                        &l,
+                        format!("unknown distribution \"{s}\" (beckmann|ggx)"),
+                    ));
+                }
+            },
+        };
+        let mut alpha_param = |loader: &mut Self, param: TexturedParam| {
+            let name = param.name();
+            let constant = props.opt_float(name)?;
+            let Some(src) = tex.take(name) else {
+                if constant.is_some_and(|a| !(a > 0.0)) {
+                    return Err(err(loc, "alpha must be positive"));
+                }
+                return Ok(constant);
+            };
+            let Some(textures) = textures.as_deref_mut() else {
+                return Err(err(
+                    src.loc(),
+                    format!(
+                        "'{name}' must be a number here, not a texture (as in Mitsuba 3: roughplastic's coating tables depend on it)"
+                    ),
+                ));
+            };
+            if constant.is_some() {
+                return Err(err(src.loc(), format!("'{name}' is given twice")));
+            }
+            let t = loader.texture_of(src)?;
+            // The description's placeholder; per hit the texture's value
+            // is used (clamped below at MIN_ALPHA, as Mitsuba does).
+            let mean = t.mean_1().max(MIN_ALPHA);
+            if !matches!(t, Texture::Constant(_)) {
+                textures.0.push((param, t));
+            }
+            Ok(Some(mean))
+        };
+        let alpha = alpha_param(self, TexturedParam::Alpha)?;
+        let au = alpha_param(self, TexturedParam::AlphaU)?;
+        let av = alpha_param(self, TexturedParam::AlphaV)?;
+        let (alpha_u, alpha_v) = match (alpha, au, av) {
+            (Some(a), None, None) => (a, a),
+            (None, Some(u), Some(v)) => (u, v),
+            (None, None, None) => (0.1, 0.1),
+            _ => {
+                return Err(err(
+                    loc,
+                    "give either 'alpha' or both 'alpha_u' and 'alpha_v'",
+                ));
+            }
+        };
+        let sample_visible = props.boolean("sample_visible", true)?;
+        Ok((distribution, alpha_u, alpha_v, sample_visible))
     }
 
     /// A colour that may be a texture inside a texture (`checkerboard`'s
@@ -1116,8 +1288,8 @@ impl Loader {
         let constant = props.opt_rgb(name)?;
         match tex.take(name) {
             None => Ok(Texture::Constant(constant.unwrap_or(Rgb::splat(default)))),
-            Some(child) if constant.is_none() => self.texture(child),
-            Some(child) => Err(err(&child.loc, format!("'{name}' is given twice"))),
+            Some(child) if constant.is_none() => self.texture_of(child),
+            Some(child) => Err(err(child.loc(), format!("'{name}' is given twice"))),
         }
     }
 
@@ -1301,16 +1473,11 @@ impl Loader {
         let mut emission = None;
         for child in &p.children {
             match child {
-                Child::Ref { id, loc } => {
+                Child::Ref { id, loc, .. } => {
                     if bsdf.is_some() {
                         return Err(err(loc, "a shape takes one BSDF"));
                     }
-                    bsdf = Some(*self.named_bsdfs.get(id).ok_or_else(|| {
-                        err(
-                            loc,
-                            format!("no <bsdf id=\"{id}\"> defined before this reference"),
-                        )
-                    })?);
+                    bsdf = Some(self.bsdf_index(id, loc)?);
                 }
                 Child::Plugin(c) if c.tag == "bsdf" => {
                     if bsdf.is_some() {
@@ -1319,6 +1486,7 @@ impl Loader {
                     let d = self.bsdf(c)?;
                     let index = self.push_bsdf(d);
                     if let Some(id) = &c.id {
+                        self.declare(id, &c.loc)?;
                         self.named_bsdfs.insert(id.clone(), index);
                     }
                     bsdf = Some(index);
@@ -1402,63 +1570,27 @@ fn conductor_ior(props: &mut Props) -> Result<(Rgb, Rgb), SceneError> {
     }
 }
 
-/// `distribution`, `alpha` / `alpha_u` / `alpha_v` and `sample_visible`.
-/// `distribution`, roughness and `sample_visible` of a microfacet model
-/// whose sampling is visible-normal only (refuses `sample_visible=false`).
-fn microfacet(props: &mut Props, loc: &Loc) -> Result<(MicrofacetKind, f32, f32), SceneError> {
-    let (distribution, alpha_u, alpha_v, sample_visible) = microfacet_params(props, loc)?;
-    if !sample_visible {
-        return Err(err(
-            loc,
-            "sample_visible=false is not supported (visible-normal sampling only)",
-        ));
-    }
-    Ok((distribution, alpha_u, alpha_v))
+/// Where a textured parameter's texture comes from: a nested
+/// `<texture name=…>` or a `<ref id=… name=…>` to a scene-level one.
+#[derive(Clone, Copy)]
+enum TexSource<'a> {
+    Inline(&'a Plugin),
+    Ref { id: &'a str, loc: &'a Loc },
 }
 
-/// `distribution` (beckmann), `alpha` (0.1) or `alpha_u`+`alpha_v`, and
-/// `sample_visible` (true), as Mitsuba 3's microfacet distributions read them.
-fn microfacet_params(
-    props: &mut Props,
-    loc: &Loc,
-) -> Result<(MicrofacetKind, f32, f32, bool), SceneError> {
-    let distribution = match props.opt_string("distribution")? {
-        None => MicrofacetKind::Beckmann,
-        Some((s, l)) => match s.as_str() {
-            "beckmann" => MicrofacetKind::Beckmann,
-            "ggx" => MicrofacetKind::Ggx,
-            _ => {
-                return Err(err(
-                    &l,
-                    format!("unknown distribution \"{s}\" (beckmann|ggx)"),
-                ));
-            }
-        },
-    };
-    let alpha = props.opt_float("alpha")?;
-    let au = props.opt_float("alpha_u")?;
-    let av = props.opt_float("alpha_v")?;
-    let (alpha_u, alpha_v) = match (alpha, au, av) {
-        (Some(a), None, None) => (a, a),
-        (None, Some(u), Some(v)) => (u, v),
-        (None, None, None) => (0.1, 0.1),
-        _ => {
-            return Err(err(
-                loc,
-                "give either 'alpha' or both 'alpha_u' and 'alpha_v'",
-            ));
+impl TexSource<'_> {
+    fn loc(&self) -> &Loc {
+        match self {
+            TexSource::Inline(p) => &p.loc,
+            TexSource::Ref { loc, .. } => loc,
         }
-    };
-    if !(alpha_u > 0.0 && alpha_v > 0.0) {
-        return Err(err(loc, "alpha must be positive"));
     }
-    let sample_visible = props.boolean("sample_visible", true)?;
-    Ok((distribution, alpha_u, alpha_v, sample_visible))
 }
 
-/// The nested `<texture name=…>` elements of a plugin, each to be taken
-/// once by the parameter it names; [`TextureChildren::finish`] refuses
-/// any other child and any texture nobody took.
+/// The nested `<texture name=…>` and `<ref id=… name=…>` elements of a
+/// plugin, each to be taken once by the parameter it names;
+/// [`TextureChildren::finish`] refuses any other child and any texture
+/// nobody took.
 struct TextureChildren<'a> {
     plugin: &'a Plugin,
     taken: Vec<bool>,
@@ -1472,8 +1604,8 @@ impl<'a> TextureChildren<'a> {
         }
     }
 
-    /// The texture child named `name`, if any.
-    fn take(&mut self, name: &str) -> Option<&'a Plugin> {
+    /// The texture child or reference named `name`, if any.
+    fn take(&mut self, name: &str) -> Option<TexSource<'a>> {
         let plugin = self.plugin;
         plugin
             .children
@@ -1482,7 +1614,15 @@ impl<'a> TextureChildren<'a> {
             .find_map(|(i, c)| match c {
                 Child::Plugin(t) if t.tag == "texture" && t.name.as_deref() == Some(name) => {
                     self.taken[i] = true;
-                    Some(t)
+                    Some(TexSource::Inline(t))
+                }
+                Child::Ref {
+                    id,
+                    name: Some(n),
+                    loc,
+                } if n == name => {
+                    self.taken[i] = true;
+                    Some(TexSource::Ref { id, loc })
                 }
                 _ => None,
             })
@@ -1508,10 +1648,20 @@ impl<'a> TextureChildren<'a> {
                         format!("<{}> is not allowed inside {what}", t.tag),
                     ));
                 }
+                Child::Ref {
+                    name: Some(n), loc, ..
+                } => {
+                    return Err(err(
+                        loc,
+                        format!("parameter '{n}' of {what} cannot be a texture"),
+                    ));
+                }
                 Child::Ref { loc, .. } => {
                     return Err(err(
                         loc,
-                        format!("<ref> is not allowed inside {what} (write textures inline)"),
+                        format!(
+                            "a <ref> inside {what} needs a 'name' (the parameter it sets, e.g. name=\"reflectance\")"
+                        ),
                     ));
                 }
             }

@@ -493,7 +493,7 @@ impl Scene {
         let opacity = w
             .opacity
             .as_ref()
-            .map_or(1.0, |t| t.eval(sp.uv).luminance().clamp(0.0, 1.0));
+            .map_or(1.0, |t| t.eval_1(sp.uv).clamp(0.0, 1.0));
         Wrap { perturbed, opacity }
     }
 
@@ -533,7 +533,7 @@ impl Scene {
         while let Some(its) = self.intersect(&ray) {
             let i = self.shapes[its.sp.shape as usize].bsdf as usize;
             let opacity = self.wrappers.get(i).and_then(|w| w.opacity.as_ref())?;
-            t *= 1.0 - opacity.eval(its.sp.uv).luminance().clamp(0.0, 1.0);
+            t *= 1.0 - opacity.eval_1(its.sp.uv).clamp(0.0, 1.0);
             crossings += 1;
             if !(t > 0.0) {
                 return None;

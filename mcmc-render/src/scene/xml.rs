@@ -106,10 +106,13 @@ pub struct Plugin {
 pub enum Child {
     /// An inline plugin.
     Plugin(Plugin),
-    /// `<ref id="…"/>`.
+    /// `<ref id="…"/>`, optionally with `name="…"` (the parameter it
+    /// sets, e.g. a scene-level texture as `reflectance`).
     Ref {
         /// The referenced id.
         id: String,
+        /// The `name` attribute (upgraded like a parameter name), if any.
+        name: Option<String>,
         /// Where it was written.
         loc: Loc,
     },
@@ -374,8 +377,12 @@ impl Parser {
             match ctag {
                 "ref" => {
                     check_attrs(child, &["id", "name"], &loc)?;
+                    let name = self
+                        .opt_attr(child, "name", &loc)?
+                        .map(|n| self.param_name(&plugin, &n));
                     plugin.children.push(Child::Ref {
                         id: self.attr(child, "id", &loc)?,
+                        name,
                         loc,
                     });
                 }

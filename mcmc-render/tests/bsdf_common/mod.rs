@@ -74,3 +74,60 @@ pub fn build(desc: &BsdfDesc) -> Bsdf {
 pub fn rel_diff(a: f32, b: f32, floor: f32) -> f32 {
     (a - b).abs() / a.abs().max(b.abs()).max(floor)
 }
+
+/// The BSDFs a surface with roughness textures has at two UVs, as
+/// `Scene::bsdf_at` makes them (`BsdfTextures::apply`): a Beckmann rough
+/// gold with `alpha` from a checkerboard (0.05 / 0.5), a GGX rough glass
+/// with `alpha_u` and `alpha_v` from two boards (anisotropic: 0.05 / 0.4
+/// and 0.3 / 0.1), and the glass board inside `twosided` on a conductor.
+/// Each is checked to carry the texture's value (Mitsuba 3.9.1's scalar
+/// checkerboard lookup: `color1` where the colour lookup gives `color0`),
+/// so the suites that run over these exercise the textured path.
+pub fn textured_roughness_models() -> Vec<(String, Bsdf)> {
+    use glam::{Affine2, Vec2};
+    use mcmc_render::bsdf::OneSided;
+    use mcmc_render::bsdf::textured::{BsdfTextures, TexturedParam};
+    use mcmc_render::texture::{Checkerboard, Texture};
+    let board = |a: f32, b: f32| {
+        Texture::Checkerboard(Box::new(Checkerboard {
+            color0: Texture::Constant(Rgb::splat(a)),
+            color1: Texture::Constant(Rgb::splat(b)),
+            to_uv: Affine2::IDENTITY,
+        }))
+    };
+    let iso = BsdfTextures(vec![(TexturedParam::Alpha, board(0.05, 0.5))]);
+    let aniso = BsdfTextures(vec![
+        (TexturedParam::AlphaU, board(0.05, 0.4)),
+        (TexturedParam::AlphaV, board(0.3, 0.1)),
+    ]);
+    let gold = build(&rough_conductor(MicrofacetKind::Beckmann, (0.2, 0.2)));
+    let glass = build(&rough_dielectric(MicrofacetKind::Ggx, (0.2, 0.2), 1.5));
+    let two = build(&BsdfDesc::TwoSided {
+        inner: Box::new(rough_conductor(MicrofacetKind::Ggx, (0.2, 0.2))),
+    });
+    let mut v = Vec::new();
+    // uv (0.25, 0.25): the colour lookup is color0, the scalar one color1.
+    for (uv, iso_alpha, aniso_alpha) in [
+        (Vec2::new(0.25, 0.25), (0.5, 0.5), (0.4, 0.1)),
+        (Vec2::new(0.75, 0.25), (0.05, 0.05), (0.05, 0.3)),
+    ] {
+        for (name, template, textures, want) in [
+            ("roughconductor", gold, &iso, iso_alpha),
+            ("roughdielectric", glass, &aniso, aniso_alpha),
+            ("twosided roughconductor", two, &aniso, aniso_alpha),
+        ] {
+            textures.check(&template).expect("applies");
+            let b = textures.apply(&template, uv);
+            let alpha = match b {
+                Bsdf::RoughConductor(c) | Bsdf::TwoSided(OneSided::RoughConductor(c)) => {
+                    c.distribution.alpha()
+                }
+                Bsdf::RoughDielectric(d) => d.distribution.alpha(),
+                other => panic!("{other:?}"),
+            };
+            assert_eq!(alpha, want, "{name} at {uv}");
+            v.push((format!("textured-α {name} at uv {uv} (α {alpha:?})"), b));
+        }
+    }
+    v
+}
