@@ -59,51 +59,10 @@ use mcmc_core::kernel::{Kernel, Proposal};
 use mcmc_core::rng::ChainRng;
 use mcmc_core::sample::Sample;
 
-/// Why a multi-chain perturbation could not be made (its component offset
-/// after the mutation's own component 0).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Invalid {
-    /// The path does not match the pattern.
-    Pattern = 1,
-    /// The perturbed raster position is off the image.
-    OffImage = 2,
-    /// The re-traced walk escaped or was absorbed.
-    WalkEnded = 3,
-    /// The re-traced walk changed the pattern.
-    PatternChanged = 4,
-    /// The reconnection to the light side is occluded.
-    Occluded = 5,
-    /// The proposal carries nothing (zero BSDF, clipped).
-    ZeroContribution = 6,
-    /// A re-traced vertex's density evaluated to zero (rounding).
-    ZeroDensity = 7,
-}
-
-impl Invalid {
-    /// Every reason, in component order.
-    pub const ALL: [Invalid; 7] = [
-        Invalid::Pattern,
-        Invalid::OffImage,
-        Invalid::WalkEnded,
-        Invalid::PatternChanged,
-        Invalid::Occluded,
-        Invalid::ZeroContribution,
-        Invalid::ZeroDensity,
-    ];
-
-    /// The reason's name in the statistics.
-    pub fn name(self) -> &'static str {
-        match self {
-            Invalid::Pattern => "pattern mismatch",
-            Invalid::OffImage => "off the image",
-            Invalid::WalkEnded => "walk ended",
-            Invalid::PatternChanged => "pattern changed",
-            Invalid::Occluded => "occluded",
-            Invalid::ZeroContribution => "zero contribution",
-            Invalid::ZeroDensity => "zero proposal density",
-        }
-    }
-}
+/// Why a multi-chain perturbation could not be made: the lens
+/// perturbation's reasons (same components, same names), since the move
+/// re-traces the camera side as the lens perturbation does.
+pub use super::lens_perturbation::Invalid;
 
 /// Mitsuba 0.6's angle kernel of the multi-chain perturbation: `θ₁ =
 /// 10⁻⁴°`, `θ₂ = 0.1°`.
