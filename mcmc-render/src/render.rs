@@ -309,11 +309,7 @@ pub fn run_per_pixel(
     stop: &AtomicBool,
     observer: &dyn Observer,
 ) -> Rendered {
-    let spp = match (run.spp, run.time_budget) {
-        (Some(n), _) => Some(n),
-        (None, Some(_)) => None,
-        (None, None) => Some(scene.sample_count),
-    };
+    let spp = run.samples_per_pixel(scene.sample_count);
     let settings = RenderSettings {
         spp,
         time_budget: run.time_budget,

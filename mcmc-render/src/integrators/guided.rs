@@ -339,11 +339,7 @@ impl IntegratorSettings for GuidedSettings {
             .unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
         let mut tree = SdTree::new(bounds, self.initial_depth);
         let tracer = self.tracer();
-        let budget_spp: Option<u64> = match (run.spp, run.time_budget) {
-            (Some(n), _) => Some(u64::from(n)),
-            (None, Some(_)) => None,
-            (None, None) => Some(u64::from(scene.sample_count)),
-        };
+        let budget_spp = run.samples_per_pixel(scene.sample_count).map(u64::from);
         let deadline = run.time_budget.map(|b| start + b);
         let out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
         let tiles = image_tiles(width, height);

@@ -634,11 +634,7 @@ impl McmcVcm {
         let mut film = Film::new(width, height, filter.clone());
         let start = Instant::now();
         let deadline = run.time_budget.map(|b| start + b);
-        let target = match (run.spp, run.time_budget) {
-            (Some(n), _) => Some(u64::from(n)),
-            (None, Some(_)) => None,
-            (None, None) => Some(u64::from(scene.sample_count)),
-        };
+        let target = run.samples_per_pixel(scene.sample_count).map(u64::from);
         let out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
         let aborted = AtomicBool::new(false);
         let abort = || {

@@ -97,6 +97,17 @@ pub struct RunSettings {
 impl RunSettings {
     /// The default time between snapshots (previews).
     pub const DEFAULT_SNAPSHOT_EVERY: Duration = Duration::from_secs(5);
+
+    /// Samples per pixel the run asks for: `spp` when given; `None` when
+    /// only the time budget ends the run; otherwise the scene's
+    /// `sample_count` (passed in as `scene_sample_count`).
+    pub fn samples_per_pixel(&self, scene_sample_count: u32) -> Option<u32> {
+        match (self.spp, self.time_budget) {
+            (Some(n), _) => Some(n),
+            (None, Some(_)) => None,
+            (None, None) => Some(scene_sample_count),
+        }
+    }
 }
 
 impl Default for RunSettings {

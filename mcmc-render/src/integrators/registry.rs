@@ -46,11 +46,8 @@ pub trait IntegratorSettings:
     /// `sample_count`) per pixel.
     fn planned_samples(&self, scene: &Scene, run: &RunSettings) -> Option<u64> {
         let pixels = u64::from(scene.film.width) * u64::from(scene.film.height);
-        match (run.spp, run.time_budget) {
-            (Some(n), _) => Some(u64::from(n) * pixels),
-            (None, Some(_)) => None,
-            (None, None) => Some(u64::from(scene.sample_count) * pixels),
-        }
+        run.samples_per_pixel(scene.sample_count)
+            .map(|n| u64::from(n) * pixels)
     }
 }
 
