@@ -24,8 +24,9 @@
 
 use crate::color::Rgb;
 use crate::integrators::bdpt::{
-    Bdpt, Connection, SubpathBuffers, connect, generate_camera_subpath, generate_light_subpath,
+    Bdpt, Connection, SubpathBuffers, connect_in, generate_camera_subpath, generate_light_subpath,
 };
+use crate::integrators::path_vertex::{ConnectionBsdfs, SceneBsdfs};
 use crate::integrators::pt::PathTracer;
 use crate::markov::{CANDIDATE_STREAM, ChainFamily, ChainSettings, MltError};
 use crate::sampling::{RandomSource, Stream, to_unit_f32};
@@ -234,6 +235,27 @@ impl MmltDepth {
         source: &mut PssSource<'_>,
         buffers: &mut SubpathBuffers,
     ) -> Option<(Connection, Splat)> {
+        let mut out = [None];
+        let (n, raster) =
+            self.sample_technique_in(scene, &SceneBsdfs, source, buffers, &mut out)?;
+        let c = out[0]?;
+        Some((c, technique_splat(&c, n, raster)))
+    }
+
+    /// [`MmltDepth::sample_technique`] under every level of `bsdfs` at
+    /// once (tempered MMLT): the technique, the subpaths and the
+    /// connection's samples and visibility are shared, `out[k]` gets the
+    /// connection with level `k`'s BSDFs at the connected vertices
+    /// ([`connect_in`]). Returns the number of techniques and the camera
+    /// subpath's raster position, or `None` when a subpath falls short.
+    pub fn sample_technique_in<B: ConnectionBsdfs>(
+        &self,
+        scene: &Scene,
+        bsdfs: &B,
+        source: &mut PssSource<'_>,
+        buffers: &mut SubpathBuffers,
+        out: &mut [Option<Connection>],
+    ) -> Option<(usize, Vec2)> {
         let techniques = self.techniques();
         if techniques.is_empty() {
             return None;
@@ -254,21 +276,29 @@ impl MmltDepth {
             return None;
         }
         source.set_stream(Stream::Connection);
-        let c = connect(
+        connect_in(
             scene,
+            bsdfs,
             &buffers.camera,
             &buffers.light,
             s,
             t,
             source,
             self.bdpt.heuristic,
-        )?;
-        let splat = Splat {
-            p: if c.splat { c.raster } else { raster },
-            l: c.l * n as f32,
-            class: 0,
-        };
-        Some((c, splat))
+            out,
+        );
+        Some((n, raster))
+    }
+}
+
+/// The splat of an MMLT connection `c` among `techniques` techniques of its
+/// depth (the contribution times their number), at the camera subpath's
+/// `raster` unless the connection lands elsewhere (`t = 1`).
+pub fn technique_splat(c: &Connection, techniques: usize, raster: Vec2) -> Splat {
+    Splat {
+        p: if c.splat { c.raster } else { raster },
+        l: c.l * techniques as f32,
+        class: 0,
     }
 }
 

@@ -32,7 +32,10 @@ use crate::color::Rgb;
 use crate::geometry::SurfacePoint;
 use crate::integrators::bdpt::{Bdpt, MAX_CONNECTION_LEVELS, SubpathBuffers};
 use crate::integrators::path_vertex::ConnectionBsdfs;
-use crate::pss::{PATH_CLASSES, PathSample, PssPathSampler, PssSource, Splat, raster_of};
+use crate::pss::{
+    MmltDepth, PATH_CLASSES, PathSample, PssPathSampler, PssSource, Splat, raster_of,
+    technique_splat,
+};
 use crate::sampling::{RandomSource, Stream};
 use crate::scene::Scene;
 use glam::Vec2;
@@ -301,6 +304,57 @@ impl PssPathSampler for TemperedBdpt {
             }
         }
         depth
+    }
+}
+
+/// One MMLT depth whose technique is evaluated under every level of a
+/// tempered ladder (the MMLT variant's path sampler): the technique, its
+/// subpaths, samples and visibility are shared; level 0 gives the splat,
+/// every level its density record (`π_k`: the luminance of the technique's
+/// splat with level `k`'s BSDFs at the connected vertices).
+#[derive(Clone, Debug)]
+pub struct TemperedMmltDepth {
+    /// The depth's MMLT sampler.
+    pub depth: MmltDepth,
+    /// The roughened BSDFs of every level.
+    pub bsdfs: TemperedBsdfs,
+}
+
+impl PssPathSampler for TemperedMmltDepth {
+    fn streams(&self) -> usize {
+        Stream::COUNT
+    }
+
+    fn trace(&self, scene: &Scene, source: &mut PssSource<'_>, out: &mut Vec<Splat>) -> u32 {
+        let levels = self.bsdfs.levels();
+        let mut pi = [0.0f64; MAX_LEVELS];
+        let mut finite = [true; MAX_LEVELS];
+        BUFFERS.with_borrow_mut(|buffers| {
+            let mut cs = [None; MAX_LEVELS];
+            let cs = &mut cs[..levels];
+            let Some((n, raster)) =
+                self.depth
+                    .sample_technique_in(scene, &self.bsdfs, source, buffers, cs)
+            else {
+                return;
+            };
+            for (k, c) in cs.iter().enumerate() {
+                let Some(c) = c else { continue };
+                let splat = technique_splat(c, n, raster);
+                finite[k] = splat.l.is_finite();
+                pi[k] = f64::from(splat.l.luminance());
+                if k == 0 {
+                    out.push(splat);
+                }
+            }
+        });
+        if levels > 1 {
+            for k in 0..levels {
+                let p = if finite[k] { pi[k] } else { f64::NAN };
+                out.push(level_record(k, p));
+            }
+        }
+        self.depth.depth as u32
     }
 }
 

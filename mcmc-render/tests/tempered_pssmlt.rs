@@ -227,71 +227,17 @@ proptest! {
 #[test]
 fn the_regularisation_schedules_are_selectable() {
     let mut t = TemperedPssmlt::default();
-    assert_eq!(t.schedule().floor(10), 0.0);
-    t.regularization = ScheduleKind::Power;
-    t.gamma = 0.5;
-    t.rho0 = 0.01;
-    assert!((t.schedule().floor(3) - 0.005).abs() < 1e-15);
+    assert_eq!(t.ladder.schedule().floor(10), 0.0);
+    t.ladder.regularization = ScheduleKind::Power;
+    t.ladder.gamma = 0.5;
+    t.ladder.rho0 = 0.01;
+    assert!((t.ladder.schedule().floor(3) - 0.005).abs() < 1e-15);
     let r = Regularization {
         kind: ScheduleKind::Geometric,
         rho0: 0.01,
         gamma: 0.5,
     };
     assert!((r.floor(3) - 0.00125).abs() < 1e-15);
-}
-
-/// The tempered family with the `b` of Eq. 5.13's denominator dropped
-/// (every level's density taken as normalised): the control, which must
-/// fail the agreement test.
-struct UnnormalisedMis<'a>(TemperedFamily<'a>);
-
-impl<'a> ChainFamily for UnnormalisedMis<'a> {
-    type State = TorusPoint;
-    type Target = LevelTarget<'a>;
-    type Mutation = Mutation;
-    type Kernel = Mixture<TorusPoint, PathSample>;
-    fn members(&self) -> usize {
-        self.0.members()
-    }
-    fn target(&self, member: usize) -> &LevelTarget<'a> {
-        self.0.target(member)
-    }
-    fn kernel(&self, m: &Mutation, member: usize) -> Result<Self::Kernel, MltError> {
-        self.0.kernel(m, member)
-    }
-    fn independent_probability(&self, m: &Mutation) -> f64 {
-        self.0.independent_probability(m)
-    }
-    fn is_independent(&self, c: usize) -> bool {
-        self.0.is_independent(c)
-    }
-    fn candidate(&self, seed: u64, index: u64) -> TorusPoint {
-        self.0.candidate(seed, index)
-    }
-    fn reference_log_density(&self, s: &TorusPoint) -> f64 {
-        self.0.reference_log_density(s)
-    }
-    fn coordinates(&self, s: &TorusPoint) -> Option<Vec<f64>> {
-        self.0.coordinates(s)
-    }
-    fn exchange_move(&self) -> Option<Box<dyn ExchangeMove<TorusPoint, PathSample>>> {
-        self.0.exchange_move()
-    }
-    fn member_log_density(&self, member: usize, p: &PathSample) -> Option<f64> {
-        self.0.member_log_density(member, p)
-    }
-    fn class_weights(
-        &self,
-        member: usize,
-        p: &PathSample,
-        b_hat: &[f64],
-    ) -> Option<[f64; PATH_CLASSES]> {
-        let ones = vec![1.0; b_hat.len()];
-        let mut w = self.0.class_weights(member, p, &ones)?;
-        // The factor 1/(b_m Σ π_j) with b_m kept.
-        w[0] /= b_hat[member];
-        Some(w)
-    }
 }
 
 /// Image means of `k` tempered runs on the tilted box (4 levels, T up to
@@ -313,7 +259,7 @@ fn tempered_reps(scene: &Scene, control: bool, k: u64, seed0: u64) -> Vec<[f64; 
             let r = if control {
                 markov::run(
                     scene,
-                    &UnnormalisedMis(family),
+                    &common::tempered::UnnormalisedMis(family),
                     &settings,
                     &stop,
                     &NoObserver,

@@ -38,15 +38,20 @@ crate::settings! {
 impl Mmlt {
     /// One target per path depth `1..=max_depth`.
     pub fn depths(&self) -> Vec<MmltDepth> {
-        let bdpt = Bdpt {
-            max_depth: self.depth.limit(),
-            rr_depth: self.depth.rr_depth,
-            heuristic: MisHeuristic::Power,
-        };
-        (1..=self.depth.limit() as usize)
-            .map(|depth| MmltDepth { bdpt, depth })
-            .collect()
+        depths(&self.depth)
     }
+}
+
+/// MMLT's targets, one per path depth `1..=max_depth` of `depth`.
+pub fn depths(depth: &DepthParams) -> Vec<MmltDepth> {
+    let bdpt = Bdpt {
+        max_depth: depth.limit(),
+        rr_depth: depth.rr_depth,
+        heuristic: MisHeuristic::Power,
+    };
+    (1..=depth.limit() as usize)
+        .map(|depth| MmltDepth { bdpt, depth })
+        .collect()
 }
 
 impl IntegratorSettings for Mmlt {

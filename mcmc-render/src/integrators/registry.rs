@@ -153,6 +153,7 @@ pub static REGISTRY: &[Registration] = &[
     register::<super::relt::Relt>(),
     register::<super::vcm::VcmSettings>(),
     register::<super::tempered_pssmlt::TemperedPssmlt>(),
+    register::<super::tempered_mmlt::TemperedMmlt>(),
     register::<super::mept::Mept>(),
     register::<super::erpt::Erpt>(),
     register::<super::fused::Fused>(),

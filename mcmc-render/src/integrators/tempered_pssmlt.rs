@@ -30,7 +30,9 @@ use super::{DepthParams, RenderError, Rendered, RunSettings};
 use crate::integrators::bdpt::{Bdpt, MisHeuristic};
 use crate::markov::{self, ChainFamily, ChainParams, MltResult};
 use crate::observer::Observer;
-use crate::pss::{Mutation, MutationParams, PATH_CLASSES, PathSample, PssFamily, PssTarget};
+use crate::pss::{
+    Mutation, MutationParams, PATH_CLASSES, PathSample, PssFamily, PssPathSampler, PssTarget,
+};
 use crate::pss_dump::DumpSampler;
 use crate::scene::Scene;
 use crate::settings::check;
@@ -70,8 +72,10 @@ fn level_count(v: &usize) -> Result<(), String> {
 }
 
 crate::settings! {
-    /// Tempered PSSMLT settings (defaults from spec seed000 §5.4, §5.5).
-    pub struct TemperedPssmlt {
+    /// The temperature ladder, exchanges and regularisation of a tempered
+    /// integrator (defaults from spec seed000 §5.4, §5.5), shared by
+    /// `tempered-pssmlt` and `tempered-mmlt`.
+    pub struct TemperedLadder {
         /// Number of levels (replicas), temperatures log-spaced from 1 to t_max.
         pub levels: usize = 8, check level_count;
         /// Hottest temperature T_max (roughness scale √T at the hottest level).
@@ -86,7 +90,15 @@ crate::settings! {
         pub gamma: f64 = 1e-5, check check::non_negative;
         /// Sample index n at which the schedule is evaluated (held for the run).
         pub regularization_n: usize = 0;
+    }
+}
+
+crate::settings! {
+    /// Tempered PSSMLT settings.
+    pub struct TemperedPssmlt {
         flatten {
+            /// Levels, exchanges and regularisation.
+            pub ladder: TemperedLadder = TemperedLadder::default();
             /// Path depth.
             pub depth: DepthParams = DepthParams::default();
             /// The mutation (Kelemen small step, large step 0.3).
@@ -97,7 +109,7 @@ crate::settings! {
     }
 }
 
-impl TemperedPssmlt {
+impl TemperedLadder {
     /// The regularisation schedule of these settings.
     pub fn schedule(&self) -> Regularization {
         Regularization {
@@ -108,12 +120,52 @@ impl TemperedPssmlt {
     }
 
     /// The ladder's roughened BSDFs on `scene`.
-    pub fn ladder(&self, scene: &Scene) -> TemperedBsdfs {
+    pub fn bsdfs(&self, scene: &Scene) -> TemperedBsdfs {
         TemperedBsdfs::new(
             scene,
             &temperatures(self.levels, self.t_max),
             self.schedule().floor(self.regularization_n as u64),
         )
+    }
+
+    /// The checks a tempered integrator's settings need beyond each
+    /// field's own (`kelemen_mis`: whether the driver's Kelemen MIS is on).
+    pub fn validate(&self, name: &str, kelemen_mis: bool) -> Result<(), String> {
+        if self.levels > 1 && kelemen_mis {
+            return Err(format!(
+                "{name} combines its levels by its own MIS; kelemen_mis needs levels=1"
+            ));
+        }
+        if self.regularization != ScheduleKind::Off && !(self.rho0 > 0.0) {
+            return Err("regularization needs rho0 > 0".into());
+        }
+        Ok(())
+    }
+}
+
+impl TemperedExchange {
+    /// The exchange move between the `levels` levels of one replica set
+    /// (`None`: no exchanges).
+    pub fn exchange_move<S: 'static, P: Clone + 'static>(
+        self,
+        levels: usize,
+    ) -> Option<Box<dyn ExchangeMove<S, P>>> {
+        match self {
+            TemperedExchange::IsPermutation => Some(Box::new(
+                IsPermutation::new(levels).expect("IS permutations of at most 16 levels"),
+            )),
+            TemperedExchange::Neighbour => Some(Box::new(NeighbourSwap::new())),
+            TemperedExchange::EvenOdd => Some(Box::new(EvenOdd::new())),
+            TemperedExchange::IsSwap => Some(Box::new(IsSwap::new())),
+            TemperedExchange::None => None,
+        }
+    }
+}
+
+impl TemperedPssmlt {
+    /// The ladder's roughened BSDFs on `scene`.
+    pub fn ladder(&self, scene: &Scene) -> TemperedBsdfs {
+        self.ladder.bsdfs(scene)
     }
 
     /// The BDPT under the chains.
@@ -126,13 +178,24 @@ impl TemperedPssmlt {
     }
 }
 
-/// One level's target: `ln π_k` of the tempered BDPT sample.
-pub struct LevelTarget<'a> {
-    pss: PssTarget<'a, TemperedBdpt>,
+/// One level's target: `ln π_k` of a tempered sample (of BDPT, or of one
+/// MMLT depth).
+pub struct LevelTarget<'a, S = TemperedBdpt> {
+    pss: PssTarget<'a, S>,
     level: usize,
 }
 
-impl Target<TorusPoint> for LevelTarget<'_> {
+impl<'a, S> LevelTarget<'a, S> {
+    /// Level `level` of `sampler`'s tempered samples on `scene`.
+    pub fn new(scene: &'a Scene, sampler: S, level: usize) -> Self {
+        LevelTarget {
+            pss: PssTarget { scene, sampler },
+            level,
+        }
+    }
+}
+
+impl<S: PssPathSampler> Target<TorusPoint> for LevelTarget<'_, S> {
     type Payload = PathSample;
 
     fn evaluate(&self, state: &TorusPoint) -> Evaluation<PathSample> {
@@ -154,13 +217,7 @@ impl<'a> TemperedFamily<'a> {
         let levels = sampler.bsdfs.temperatures().len();
         TemperedFamily {
             targets: (0..levels)
-                .map(|level| LevelTarget {
-                    pss: PssTarget {
-                        scene,
-                        sampler: sampler.clone(),
-                    },
-                    level,
-                })
+                .map(|level| LevelTarget::new(scene, sampler.clone(), level))
                 .collect(),
             exchange,
         }
@@ -191,16 +248,7 @@ impl<'a> ChainFamily for TemperedFamily<'a> {
     }
     crate::primary_sample_space_family!();
     fn exchange_move(&self) -> Option<Box<dyn ExchangeMove<TorusPoint, PathSample>>> {
-        let m = self.members();
-        match self.exchange {
-            TemperedExchange::IsPermutation => Some(Box::new(
-                IsPermutation::new(m).expect("IS permutations of at most 16 levels"),
-            )),
-            TemperedExchange::Neighbour => Some(Box::new(NeighbourSwap::new())),
-            TemperedExchange::EvenOdd => Some(Box::new(EvenOdd::new())),
-            TemperedExchange::IsSwap => Some(Box::new(IsSwap::new())),
-            TemperedExchange::None => None,
-        }
+        self.exchange.exchange_move(self.members())
     }
     fn member_log_density(&self, member: usize, payload: &PathSample) -> Option<f64> {
         Some(log_of(level_density(payload, member).unwrap_or(f64::NAN)))
@@ -221,16 +269,7 @@ impl IntegratorSettings for TemperedPssmlt {
 
     fn validate(&self) -> Result<(), String> {
         self.mutation.mutation()?;
-        if self.levels > 1 && self.chain.kelemen_mis {
-            return Err(
-                "tempered-pssmlt combines its levels by its own MIS; kelemen_mis needs levels=1"
-                    .into(),
-            );
-        }
-        if self.regularization != ScheduleKind::Off && !(self.rho0 > 0.0) {
-            return Err("regularization needs rho0 > 0".into());
-        }
-        Ok(())
+        self.ladder.validate(Self::NAME, self.chain.kelemen_mis)
     }
 
     fn planned_samples(&self, scene: &Scene, run: &RunSettings) -> Option<u64> {
@@ -252,27 +291,40 @@ impl IntegratorSettings for TemperedPssmlt {
             bdpt: self.bdpt(),
             bsdfs: self.ladder(scene),
         };
-        let result = if self.levels == 1 {
+        let result = if self.ladder.levels == 1 {
             let family = PssFamily::new(scene, vec![sampler.clone()]);
             markov::run(scene, &family, &settings, stop, observer)?
         } else {
-            let family = TemperedFamily::new(scene, &sampler, self.exchange);
+            let family = TemperedFamily::new(scene, &sampler, self.ladder.exchange);
             markov::run(scene, &family, &settings, stop, observer)?
         };
-        Ok(report(&result, self, &sampler))
+        let rendered =
+            markov::report::rendered(&result, DumpSampler::Bdpt, self.depth.limit(), false);
+        Ok(report(
+            rendered,
+            &result,
+            &self.ladder,
+            &sampler.bsdfs,
+            |k| format!("level-{k}"),
+        ))
     }
 }
 
 /// The registry's report of a tempered run: the driver's statistics (per
-/// level: `families[k]` acceptance, image share; `exchange`: pairs, round
-/// trips) plus the ladder, the swap acceptance matrix and round trips per
-/// hour.
-fn report(result: &MltResult, settings: &TemperedPssmlt, sampler: &TemperedBdpt) -> Rendered {
-    let max_depth = settings.depth.limit();
-    let mut rendered = markov::report::rendered(result, DumpSampler::Bdpt, max_depth, false);
+/// member: `families[k]` acceptance, image share; `exchange`: pairs, round
+/// trips) plus the ladder, the swap acceptance matrix (summed over replica
+/// sets) and round trips per hour, and each member's image as a layer
+/// named by `layer`.
+pub fn report(
+    mut rendered: Rendered,
+    result: &MltResult,
+    settings: &TemperedLadder,
+    bsdfs: &TemperedBsdfs,
+    layer: impl Fn(usize) -> String,
+) -> Rendered {
     let schedule = settings.schedule();
     let n = settings.regularization_n as u64;
-    let mut ladder = ladder_json(&sampler.bsdfs, &schedule, n);
+    let mut ladder = ladder_json(bsdfs, &schedule, n);
     if let Some(ex) = &result.exchange {
         let m = settings.levels;
         let mut matrix = vec![vec![f64::NAN; m]; m];
@@ -303,7 +355,7 @@ fn report(result: &MltResult, settings: &TemperedPssmlt, sampler: &TemperedBdpt)
         .families
         .iter()
         .enumerate()
-        .map(|(k, f)| (format!("level-{k}"), f.image()))
+        .map(|(k, f)| (layer(k), f.image()))
         .collect();
     rendered
 }

@@ -75,6 +75,7 @@ use startup::{
     RESAMPLE_STREAM, allocate_chains, candidate_log_weights, index_bootstrap,
     shared_candidate_log_weights,
 };
+use std::ops::Range;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -231,6 +232,18 @@ pub trait ChainFamily: Sync {
     fn exchange_move(&self) -> Option<Box<dyn ExchangeMove<Self::State, PathSample>>> {
         None
     }
+    /// The replica groups of a family with an exchange move: contiguous,
+    /// disjoint ranges of members covering them all, each one ladder
+    /// (tempered MMLT: the levels of one path depth). A replica set holds
+    /// one chain per member of its group and exchanges stay within it;
+    /// with [`ChainFamily::member_log_density`], one evaluation of a
+    /// group's first member serves the whole group (not other groups).
+    /// Replica sets go to groups in proportion to the bootstrap `b̂` of
+    /// each group's first member (as chains go to MMLT's depths). Default:
+    /// one group of all members.
+    fn replica_groups(&self) -> Vec<Range<usize>> {
+        std::iter::once(0..self.members()).collect()
+    }
     /// The weight of member `member`'s image in the final image: 1 (the
     /// default) for members whose targets split the image (the depths of
     /// MMLT); 0 for members that only help the others mix (the hot levels
@@ -325,7 +338,7 @@ fn anneal_members<F: ChainFamily>(
         })
         .collect();
     Ok(anneal(
-        &Members(family),
+        &Members::all(family),
         initial,
         |k| MetropolisHastings::new(family.kernel(mutation, k).expect("checked above")),
         settings.sweeps,
@@ -523,21 +536,36 @@ struct Startup {
 /// same `count` candidates for every member, each traced once.
 fn start_up<F: ChainFamily>(family: &F, count: usize, seed: u64) -> Result<Startup, MltError> {
     let members = family.members();
-    if let Some(log_w) = shared_candidate_log_weights(family, count, seed) {
-        let boots: Vec<Bootstrap<usize, ()>> = log_w
-            .iter()
-            .map(|w| index_bootstrap(w, 0))
-            .collect::<Result<_, _>>()?;
-        let running = log_w
-            .iter()
-            .map(|w| {
+    let groups = if family.exchange_move().is_some() {
+        family.replica_groups()
+    } else {
+        std::iter::once(0..members).collect()
+    };
+    let shared: Option<Vec<(usize, Vec<Vec<f64>>)>> = groups
+        .iter()
+        .map(|g| {
+            // Group `g`'s candidates are those its first member would get
+            // unshared (indices `g.start·count ..`).
+            let offset = g.start * count;
+            shared_candidate_log_weights(family, g.clone(), count, seed, offset)
+                .map(|w| (offset, w))
+        })
+        .collect();
+    if let Some(per_group) = shared {
+        let mut boots: Vec<Bootstrap<usize, ()>> = Vec::with_capacity(members);
+        let mut running = Vec::with_capacity(members);
+        let mut invalid = 0;
+        for (offset, log_w) in &per_group {
+            let first = boots.len();
+            for w in log_w {
+                boots.push(index_bootstrap(w, *offset)?);
                 let mut r = RunningNormalization::new();
                 w.iter().for_each(|&lw| r.add(lw));
-                r
-            })
-            .collect();
-        // A NaN path is invalid for every member: count it once.
-        let invalid = boots[0].invalid_candidates();
+                running.push(r);
+            }
+            // A NaN path is invalid for every member of its group: count it once.
+            invalid += boots[first].invalid_candidates();
+        }
         return Ok(Startup {
             shared: true,
             boots,
@@ -638,8 +666,19 @@ pub fn run<F: ChainFamily>(
     let mut bootstrap_b: Vec<(f64, f64)> =
         boots.iter().map(|b| (b.b(), b.standard_error())).collect();
     let exchange = family.exchange_move().is_some();
-    if exchange && let Some(member) = bootstrap_b.iter().position(|b| b.0 <= 0.0) {
-        return Err(MltError::EmptyMember { member });
+    let groups = if exchange {
+        checked_groups(family.replica_groups(), members)?
+    } else {
+        Vec::new()
+    };
+    // A group whose first member sees no light is left out (a path depth
+    // that carries nothing); in any other group every member needs light.
+    for g in &groups {
+        if (groups.len() == 1 || bootstrap_b[g.start].0 > 0.0)
+            && let Some(member) = g.clone().find(|&m| bootstrap_b[m].0 <= 0.0)
+        {
+            return Err(MltError::EmptyMember { member });
+        }
     }
     // Population annealing, if the family asks for it, replaces the
     // members' `b̂` and start states.
@@ -672,10 +711,23 @@ pub fn run<F: ChainFamily>(
         .iter()
         .map(|&(b, _)| if b > 0.0 { b.powf(gamma) } else { 0.0 })
         .collect();
-    // With an exchange move every set holds one chain per member.
-    let sets = (settings.chains / members).max(1);
+    // With an exchange move every set holds one chain per member of its
+    // group; the sets go to the groups by their first members' shares.
+    let sets_of_group = match groups.len() {
+        0 => Vec::new(),
+        1 => vec![(settings.chains / members).max(1)],
+        n => {
+            let sets = (settings.chains / members.div_ceil(n)).max(1);
+            let group_shares: Vec<f64> = groups.iter().map(|g| shares[g.start]).collect();
+            allocate_chains(sets, &group_shares)
+        }
+    };
     let chains_of = if exchange {
-        vec![sets; members]
+        let mut n = vec![0; members];
+        for (g, &sets) in groups.iter().zip(&sets_of_group) {
+            n[g.clone()].fill(sets);
+        }
+        n
     } else {
         allocate_chains(settings.chains, &shares)
     };
@@ -704,7 +756,15 @@ pub fn run<F: ChainFamily>(
     let filter = Arc::new(Filter::new(scene.film.filter, width, height));
     let new_film = || Film::new(width, height, filter.clone());
     let mut tasks = if exchange {
-        replica_tasks(family, settings, &starts, sets, total, &new_film)?
+        replica_tasks(
+            family,
+            settings,
+            &starts,
+            &groups,
+            &sets_of_group,
+            total,
+            &new_film,
+        )?
     } else {
         chain_tasks(family, settings, &starts, total, &new_film)?
     };
@@ -904,53 +964,93 @@ fn chain_tasks<'f, F: ChainFamily>(
 /// `l` then draws from `stream_rng(set seed, l)`).
 const REPLICA_SET_STREAM: u64 = 1 << 42;
 
-/// `sets` replica sets (set `k` starts level `l` from `starts[l][k]`) in
-/// about `settings.tasks` tasks of contiguous sets; the mutations are
-/// shared out as sweeps of one mutation per member.
+/// The replica groups of a family, checked: non-empty, contiguous and
+/// covering the `members` in order.
+fn checked_groups(
+    groups: Vec<Range<usize>>,
+    members: usize,
+) -> Result<Vec<Range<usize>>, MltError> {
+    let mut next = 0;
+    for g in &groups {
+        if g.start != next || g.is_empty() {
+            return Err(MltError::Setting(format!(
+                "replica groups must be non-empty contiguous ranges covering the {members} members in order, got {groups:?}"
+            )));
+        }
+        next = g.end;
+    }
+    if next != members {
+        return Err(MltError::Setting(format!(
+            "replica groups must cover the {members} members, got {groups:?}"
+        )));
+    }
+    Ok(groups)
+}
+
+/// `sets_of_group[g]` replica sets for every group `g` (set `k` of a group
+/// starts its level `l`, member `m = g.start + l`, from `starts[m][k]`),
+/// numbered group after group, in about `settings.tasks` tasks of
+/// contiguous sets of one group each (tasks in proportion to the group's
+/// sets); the mutations are shared out as sweeps of one mutation per
+/// member of a set.
 fn replica_tasks<'f, F: ChainFamily>(
     family: &'f F,
     settings: &ChainSettings<F::Mutation>,
     starts: &[Vec<F::State>],
-    sets: usize,
+    groups: &[Range<usize>],
+    sets_of_group: &[usize],
     total: Option<u64>,
     new_film: &dyn Fn() -> Film,
 ) -> Result<Vec<Task<'f, F>>, MltError> {
     let seed = settings.seed;
-    let members = family.members();
-    let sweeps = total.map(|t| t.div_ceil(members as u64));
-    let k = settings.tasks.clamp(1, sets);
-    let mut tasks: Vec<Task<F>> = (0..k)
-        .map(|_| {
-            Task::new(
-                (0..members).collect(),
+    let all_sets: usize = sets_of_group.iter().sum();
+    let set_size = family.members().div_ceil(groups.len());
+    let sweeps = total.map(|t| t.div_ceil(set_size as u64));
+    let mut tasks: Vec<Task<F>> = Vec::new();
+    let mut set = 0;
+    for (g, &sets) in groups.iter().zip(sets_of_group) {
+        if sets == 0 {
+            continue;
+        }
+        let k = ((settings.tasks * sets + all_sets / 2) / all_sets).clamp(1, sets);
+        let first_task = tasks.len();
+        for _ in 0..k {
+            tasks.push(Task::new(
+                g.clone().collect(),
                 family,
                 new_film,
                 Units::Replicas(Vec::new()),
-            )
-        })
-        .collect();
-    for set in 0..sets {
-        let initial = (0..members).map(|l| starts[l][set].clone()).collect();
-        let algorithms = (0..members)
-            .map(|l| {
-                Ok(MetropolisHastings::new(
-                    family.kernel(&settings.mutation, l)?,
-                ))
-            })
-            .collect::<Result<_, MltError>>()?;
-        let exchange = family
-            .exchange_move()
-            .ok_or_else(|| MltError::Setting("the family's exchange move vanished".into()))?;
-        let set_seed = splitmix64(seed ^ splitmix64(REPLICA_SET_STREAM + set as u64));
-        let ensemble =
-            ReplicaExchange::new(Members(family), initial, algorithms, exchange, set_seed)?;
-        let Units::Replicas(slots) = &mut tasks[set * k / sets].units else {
-            unreachable!("replica tasks hold replica sets");
-        };
-        slots.push(ReplicaSlot {
-            set: ensemble,
-            remaining: sweeps.map(|t| share(t, sets, set)),
-        });
+            ));
+        }
+        for i in 0..sets {
+            let initial = g.clone().map(|m| starts[m][i].clone()).collect();
+            let algorithms = g
+                .clone()
+                .map(|m| {
+                    Ok(MetropolisHastings::new(
+                        family.kernel(&settings.mutation, m)?,
+                    ))
+                })
+                .collect::<Result<_, MltError>>()?;
+            let exchange = family
+                .exchange_move()
+                .ok_or_else(|| MltError::Setting("the family's exchange move vanished".into()))?;
+            let set_seed = splitmix64(seed ^ splitmix64(REPLICA_SET_STREAM + set as u64));
+            let ladder = Members {
+                family,
+                first: g.start,
+                levels: g.len(),
+            };
+            let ensemble = ReplicaExchange::new(ladder, initial, algorithms, exchange, set_seed)?;
+            let Units::Replicas(slots) = &mut tasks[first_task + i * k / sets].units else {
+                unreachable!("replica tasks hold replica sets");
+            };
+            slots.push(ReplicaSlot {
+                set: ensemble,
+                remaining: sweeps.map(|t| share(t, all_sets, set)),
+            });
+            set += 1;
+        }
     }
     Ok(tasks)
 }

@@ -7,6 +7,7 @@ use mcmc_core::rng::stream_rng;
 use mcmc_core::startup::Bootstrap;
 use mcmc_core::target::Target;
 use rayon::prelude::*;
+use std::ops::Range;
 
 /// Stream offset of the resampling of chain starts (apart from the chains'
 /// own streams and [`super::CANDIDATE_STREAM`]).
@@ -28,29 +29,35 @@ pub(crate) fn candidate_log_weights<F: ChainFamily>(
 
 /// For a family whose members share one evaluation
 /// ([`ChainFamily::member_log_density`]): `ln q_d(x_i) − ln p₀(x_i)` of the
-/// same `count` candidates for every member `d` (outer index), each traced
-/// once with member 0's target. `None` when the family does not share.
+/// same `count` candidates (indices `offset..offset + count`) for every
+/// member `d` of `group` (outer index), each traced once with the group's
+/// first member's target. `None` when the family does not share.
 pub(crate) fn shared_candidate_log_weights<F: ChainFamily>(
     family: &F,
+    group: Range<usize>,
     count: usize,
     seed: u64,
+    offset: usize,
 ) -> Option<Vec<Vec<f64>>> {
-    let members = family.members();
-    let probe = family.target(0).evaluate(&family.candidate(seed, 0));
-    family.member_log_density(0, &probe.payload)?;
+    let first = group.start;
+    let probe = family
+        .target(first)
+        .evaluate(&family.candidate(seed, offset as u64));
+    family.member_log_density(first, &probe.payload)?;
     let per_candidate: Vec<Vec<f64>> = (0..count)
         .into_par_iter()
         .map(|i| {
-            let x = family.candidate(seed, i as u64);
-            let e = family.target(0).evaluate(&x);
+            let x = family.candidate(seed, (offset + i) as u64);
+            let e = family.target(first).evaluate(&x);
             let reference = family.reference_log_density(&x);
-            (0..members)
+            group
+                .clone()
                 .map(|d| family.member_log_density(d, &e.payload).unwrap_or(f64::NAN) - reference)
                 .collect()
         })
         .collect();
     Some(
-        (0..members)
+        (0..group.len())
             .map(|d| per_candidate.iter().map(|w| w[d]).collect())
             .collect(),
     )

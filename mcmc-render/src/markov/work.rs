@@ -24,28 +24,49 @@ const ROUND: u64 = 256;
 pub(crate) type FamilyAlgorithm<F> =
     MetropolisHastings<<F as ChainFamily>::Kernel, <F as ChainFamily>::State, PathSample>;
 
-/// A family's members seen as the levels of an `mcmc-core` replica family.
-pub(crate) struct Members<'f, F>(pub &'f F);
+/// A replica group of a family's members (see
+/// [`ChainFamily::replica_groups`]) seen as the levels of an `mcmc-core`
+/// replica family: level `l` is member `first + l`.
+pub(crate) struct Members<'f, F> {
+    pub family: &'f F,
+    pub first: usize,
+    pub levels: usize,
+}
+
+impl<'f, F: ChainFamily> Members<'f, F> {
+    /// All of `family`'s members as one ladder.
+    pub fn all(family: &'f F) -> Self {
+        Members {
+            family,
+            first: 0,
+            levels: family.members(),
+        }
+    }
+}
 
 impl<F: ChainFamily> ReplicaFamily<F::State> for Members<'_, F> {
     type Payload = PathSample;
 
     fn levels(&self) -> usize {
-        self.0.members()
+        self.levels
     }
 
     fn evaluate(&self, level: usize, state: &F::State) -> Evaluation<PathSample> {
-        self.0.target(level).evaluate(state)
+        self.family.target(self.first + level).evaluate(state)
     }
 
     fn log_density_of(&self, level: usize, sample: &Sample<F::State, PathSample>) -> f64 {
-        self.0
-            .member_log_density(level, &sample.payload)
+        self.family
+            .member_log_density(self.first + level, &sample.payload)
             .unwrap_or_else(|| self.evaluate(level, &sample.state).log_density)
     }
 
     fn retarget(&self, level: usize, sample: &mut Sample<F::State, PathSample>, log_density: f64) {
-        if self.0.member_log_density(level, &sample.payload).is_some() {
+        if self
+            .family
+            .member_log_density(self.first + level, &sample.payload)
+            .is_some()
+        {
             // The payload serves every member (the hook's promise).
             sample.log_density = log_density;
         } else {
@@ -80,7 +101,7 @@ pub(crate) struct ReplicaSlot<'f, F: ChainFamily> {
 pub(crate) enum Units<'f, F: ChainFamily> {
     /// Independent chains, all of the task's single member.
     Chains(Vec<ChainSlot<F>>),
-    /// Replica sets over all members.
+    /// Replica sets over the task's members (one replica group).
     Replicas(Vec<ReplicaSlot<'f, F>>),
 }
 
@@ -196,8 +217,8 @@ impl<'f, F: ChainFamily> Task<'f, F> {
                                 running: &mut running[level],
                                 ratio: &mut ratios[level],
                             };
-                            observe(family, t, &weights[level], &mut sink, counts);
-                            share_independent_draw(family, level, t, running);
+                            observe(family, t, &weights[members[level]], &mut sink, counts);
+                            share_independent_draw(family, members, level, t, running);
                         };
                     for _ in 0..n {
                         slot.set.sweep_observed_levels(&mut observe_level);
@@ -230,7 +251,8 @@ impl<'f, F: ChainFamily> Task<'f, F> {
                 .for_each(|c| add(self.members[0], c.chain.stats())),
             Units::Replicas(sets) => {
                 for slot in sets {
-                    (0..slot.set.levels()).for_each(|l| add(l, slot.set.chain_statistics(l)));
+                    (0..slot.set.levels())
+                        .for_each(|l| add(self.members[l], slot.set.chain_statistics(l)));
                     exchange
                         .get_or_insert_with(|| {
                             ExchangeSummary::new(slot.set.statistics().move_name.clone())
@@ -242,11 +264,13 @@ impl<'f, F: ChainFamily> Task<'f, F> {
     }
 }
 
-/// An independent proposal of member `level` is a draw from the reference
-/// measure for every member: where the family computes the other members'
+/// An independent proposal of level `level` of a replica set (member
+/// `members[level]`) is a draw from the reference measure for every
+/// member of the set: where the family computes the other members'
 /// densities from the payload, it updates their running normalisation too.
 fn share_independent_draw<F: ChainFamily>(
     family: &F,
+    members: &[usize],
     level: usize,
     t: &Transition<'_, F::State, PathSample>,
     running: &mut [RunningNormalization],
@@ -256,9 +280,9 @@ fn share_independent_draw<F: ChainFamily>(
         return;
     }
     let reference = family.reference_log_density(&y.state);
-    for (member, r) in running.iter_mut().enumerate() {
-        if member != level
-            && let Some(ln_q) = family.member_log_density(member, &y.payload)
+    for (slot, r) in running.iter_mut().enumerate() {
+        if slot != level
+            && let Some(ln_q) = family.member_log_density(members[slot], &y.payload)
         {
             r.add(ln_q - reference);
         }

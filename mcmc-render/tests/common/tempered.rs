@@ -9,7 +9,7 @@ use mcmc_core::space::TorusPoint;
 use mcmc_core::target::{Evaluation, Target};
 use mcmc_render::integrators::pt::PathTracer;
 use mcmc_render::markov::{ChainFamily, MltError};
-use mcmc_render::pss::{Mutation, PathSample, PssTarget};
+use mcmc_render::pss::{Mutation, PATH_CLASSES, PathSample, PssTarget};
 use mcmc_render::scene::Scene;
 
 /// `β · ln I(u)`; `−∞` and NaN pass through (`0·(−∞) = −∞`).
@@ -100,5 +100,62 @@ impl<'a> ChainFamily for TemperedPss<'a> {
     }
     fn image_weight(&self, member: usize) -> f64 {
         if member == 0 { 1.0 } else { 0.0 }
+    }
+}
+
+/// A tempered family with the `b` of Eq. 5.13's denominator dropped
+/// (every level's density taken as normalised): the control of the
+/// tempered integrators' agreement tests, which must fail them.
+pub struct UnnormalisedMis<F>(pub F);
+
+impl<F: ChainFamily> ChainFamily for UnnormalisedMis<F> {
+    type State = F::State;
+    type Target = F::Target;
+    type Mutation = F::Mutation;
+    type Kernel = F::Kernel;
+    fn members(&self) -> usize {
+        self.0.members()
+    }
+    fn target(&self, member: usize) -> &F::Target {
+        self.0.target(member)
+    }
+    fn kernel(&self, m: &F::Mutation, member: usize) -> Result<F::Kernel, MltError> {
+        self.0.kernel(m, member)
+    }
+    fn independent_probability(&self, m: &F::Mutation) -> f64 {
+        self.0.independent_probability(m)
+    }
+    fn is_independent(&self, c: usize) -> bool {
+        self.0.is_independent(c)
+    }
+    fn candidate(&self, seed: u64, index: u64) -> F::State {
+        self.0.candidate(seed, index)
+    }
+    fn reference_log_density(&self, s: &F::State) -> f64 {
+        self.0.reference_log_density(s)
+    }
+    fn coordinates(&self, s: &F::State) -> Option<Vec<f64>> {
+        self.0.coordinates(s)
+    }
+    fn exchange_move(&self) -> Option<Box<dyn ExchangeMove<F::State, PathSample>>> {
+        self.0.exchange_move()
+    }
+    fn replica_groups(&self) -> Vec<std::ops::Range<usize>> {
+        self.0.replica_groups()
+    }
+    fn member_log_density(&self, member: usize, p: &PathSample) -> Option<f64> {
+        self.0.member_log_density(member, p)
+    }
+    fn class_weights(
+        &self,
+        member: usize,
+        p: &PathSample,
+        b_hat: &[f64],
+    ) -> Option<[f64; PATH_CLASSES]> {
+        let ones = vec![1.0; b_hat.len()];
+        let mut w = self.0.class_weights(member, p, &ones)?;
+        // The factor 1/(b_m Σ π_j) with b_m kept.
+        w[0] /= b_hat[member];
+        Some(w)
     }
 }
