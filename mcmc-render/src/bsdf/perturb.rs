@@ -35,6 +35,7 @@
 //! select the frame they were drawn from; its density is ½ of the
 //! nested one (exactly what [`Perturbed::pdf`] reports).
 
+use super::invert::SampleInverse;
 use super::{Bsdf, BsdfSample, TransportMode};
 use crate::color::Rgb;
 use crate::frame::Frame;
@@ -145,6 +146,16 @@ impl Perturbed {
         }
     }
 
+    /// True when importance sampling draws from two frames (½ each): with
+    /// `flip_invalid_normals`, unless the mirror image is `n′` itself (an
+    /// untilted normal, e.g. a flat region of a bump map on an
+    /// axis-aligned plane), where both halves would draw from one frame
+    /// and every direction would be kept twice.
+    #[inline]
+    fn splits(&self) -> bool {
+        self.flip && self.flipped() != self.n
+    }
+
     /// The mirrored normal `(−x, −y, z)`.
     #[inline]
     fn flipped(&self) -> Vec3 {
@@ -199,7 +210,7 @@ impl Perturbed {
         let cos = frame.to_local(w_light).z.abs() / w_light.z.abs();
         let pdf = match mode {
             TransportMode::Radiance => pdf,
-            TransportMode::Importance if self.flip => 0.5 * pdf,
+            TransportMode::Importance if self.splits() => 0.5 * pdf,
             TransportMode::Importance => pdf,
         };
         (f * (k * cos), pdf)
@@ -230,7 +241,7 @@ impl Perturbed {
     ) -> Option<BsdfSample> {
         let (n, u_lobe, choice) = match mode {
             TransportMode::Radiance => (self.normal_for(wo), u_lobe, 1.0),
-            TransportMode::Importance if self.flip => {
+            TransportMode::Importance if self.splits() => {
                 if u_lobe < 0.5 {
                     (self.n, 2.0 * u_lobe, 0.5)
                 } else {
@@ -276,6 +287,45 @@ impl Perturbed {
         bs.wi = wi;
         bs.weight.is_finite().then_some(bs)
     }
+
+    /// The numbers with which [`Perturbed::sample`] returns `wi` from `wo`
+    /// in `mode` (see [`Bsdf::invert`]), or `None` when it cannot: the
+    /// nested BSDF's inverse in the frame the sampler draws from. That
+    /// frame is a function of the directions (of `wo` in radiance mode; in
+    /// importance mode with `flip_invalid_normals`, of `wi`, which must
+    /// select the frame it was drawn from), so the inverse of the frame
+    /// choice is deterministic: the half `[0, ½)` (unflipped) or `[½, 1)`
+    /// (flipped) of `u_lobe`, scaled onto the nested interval.
+    pub fn invert(
+        &self,
+        nested: &Bsdf,
+        wo: Vec3,
+        wi: Vec3,
+        u_choice: f32,
+        mode: TransportMode,
+    ) -> Option<SampleInverse> {
+        let (n, half) = match mode {
+            TransportMode::Radiance => (self.normal_for(wo), None),
+            TransportMode::Importance if self.splits() => {
+                let n = self.normal_for(wi);
+                (n, Some(n != self.n))
+            }
+            TransportMode::Importance => (self.n, None),
+        };
+        // The sampler rejects directions on the wrong side of the light
+        // side's planes, and directions in the shading plane.
+        let (_, w_light) = Self::sides(wo, wi, mode);
+        if wi.z == 0.0 || self.light_side(w_light, n) == 0.0 {
+            return None;
+        }
+        let frame = Frame::from_normal(n);
+        let mut inv = nested.invert(frame.to_local(wo), frame.to_local(wi), u_choice)?;
+        if let Some(flipped) = half {
+            let o = if flipped { 0.5 } else { 0.0 };
+            inv.u_lobe = (o + 0.5 * inv.u_lobe.0, o + 0.5 * inv.u_lobe.1);
+        }
+        Some(inv)
+    }
 }
 
 #[cfg(test)]
@@ -309,7 +359,10 @@ mod tests {
     }
 
     /// With the perturbed normal equal to the shading normal and no
-    /// shadowing term, the wrapper is the nested BSDF.
+    /// shadowing term, the wrapper is the nested BSDF, in both modes: its
+    /// mirror image is itself, so importance sampling does not split
+    /// between two frames (it did, and kept every direction twice: the
+    /// mean importance weight was twice the albedo).
     #[test]
     fn identity_perturbation_is_the_nested_bsdf() {
         let p = Perturbed {
@@ -323,12 +376,21 @@ mod tests {
             let (f, pdf) = p.eval_pdf(&b, wo, wi, mode);
             let (g, q) = b.eval_pdf(wo, wi, mode);
             assert!(diff(f, g) < 1e-6, "{mode:?}");
-            let q = if mode == TransportMode::Importance {
-                0.5 * q
-            } else {
-                q
-            };
             assert!((pdf - q).abs() < 1e-6);
+            // Mean sample weight over a grid of numbers: the albedo
+            // (0.5 for the green channel), as the nested BSDF's.
+            let n = 64;
+            let mut sum = [0.0f32; 2];
+            for i in 0..n * n {
+                let u = (
+                    ((i % n) as f32 + 0.5) / n as f32,
+                    ((i / n) as f32 + 0.5) / n as f32,
+                );
+                let ul = ((i * 7919) % (n * n)) as f32 / (n * n) as f32;
+                sum[0] += p.sample(&b, wo, ul, u, mode).map_or(0.0, |s| s.weight.g);
+                sum[1] += b.sample(wo, ul, u, mode).map_or(0.0, |s| s.weight.g);
+            }
+            assert!((sum[0] - sum[1]).abs() < 1e-3 * sum[1], "{mode:?} {sum:?}");
         }
     }
 

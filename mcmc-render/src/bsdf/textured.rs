@@ -255,20 +255,36 @@ impl BsdfAt<'_> {
         }
     }
 
-    /// [`Bsdf::invert`] at the point: the numbers that make
-    /// [`BsdfAt::sample`] return `wi`. Not implemented under wrappers
-    /// (`normalmap`, `bumpmap`, `mask`): `None` there, which
-    /// inverse-sampling callers treat as "no such sample".
+    /// [`BsdfAt::invert_in`] in radiance mode. The numbers are the same
+    /// in both modes except under `normalmap`/`bumpmap`, whose importance
+    /// sampler chooses between two frames: callers inverting light
+    /// subpaths use [`BsdfAt::invert_in`].
     pub fn invert(
         &self,
         wo: Vec3,
         wi: Vec3,
         u_choice: f32,
     ) -> Option<crate::bsdf::invert::SampleInverse> {
+        self.invert_in(wo, wi, u_choice, TransportMode::Radiance)
+    }
+
+    /// [`Bsdf::invert`] at the point: the numbers that make
+    /// [`BsdfAt::sample`] in `mode` return `wi`, under `normalmap`,
+    /// `bumpmap` and `mask` too ([`Wrap::invert`]: the mask's null lobe
+    /// is the interval `[α, 1)` of `u_lobe`, the nested lobes are scaled
+    /// into `[0, α)`, and a perturbed frame is inverted in the frame the
+    /// sampler draws from).
+    pub fn invert_in(
+        &self,
+        wo: Vec3,
+        wi: Vec3,
+        u_choice: f32,
+        mode: TransportMode,
+    ) -> Option<crate::bsdf::invert::SampleInverse> {
         match self {
             BsdfAt::Shared(b) => b.invert(wo, wi, u_choice),
             BsdfAt::Textured(b) => b.invert(wo, wi, u_choice),
-            BsdfAt::Wrapped(..) => None,
+            BsdfAt::Wrapped(b, w) => w.invert(b, wo, wi, u_choice, mode),
         }
     }
 

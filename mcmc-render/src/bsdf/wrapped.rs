@@ -15,6 +15,7 @@
 //! by a masked surface whatever its opacity, as Mitsuba 3's `ray_test`
 //! blocks them: the light through a cut-out arrives through the null lobe.
 
+use super::invert::SampleInverse;
 use super::perturb::{Perturbation, Perturbed};
 use super::{Bsdf, BsdfSample, TransportMode};
 use crate::color::Rgb;
@@ -92,6 +93,42 @@ impl Wrap {
         }?;
         s.pdf *= a;
         Some(s)
+    }
+
+    /// The numbers with which [`Wrap::sample`] returns `wi` from `wo` in
+    /// `mode` (see [`Bsdf::invert`]), or `None` when it cannot. The null
+    /// lobe is taken when `wi` is `−wo` to within 1e-5 (the nested BSDF
+    /// reaches that direction with probability zero unless it is a delta
+    /// transmission at normal incidence): its interval `[α, 1)` of `u_lobe`
+    /// is many-to-one, and a caller draws the fresh uniform in it, as for
+    /// the dielectric's lobe choice. Otherwise the nested inverse (through
+    /// the perturbation, in the frame the sampler draws from), its
+    /// `u_lobe` interval scaled by `α`.
+    pub fn invert(
+        &self,
+        b: &Bsdf,
+        wo: Vec3,
+        wi: Vec3,
+        u_choice: f32,
+        mode: TransportMode,
+    ) -> Option<SampleInverse> {
+        let a = self.opacity;
+        if (wi + wo).length_squared() < 1e-10 {
+            return (a < 1.0).then_some(SampleInverse {
+                u_lobe: (a.max(0.0), 1.0),
+                u: (0.5, 0.5),
+                u_used: false,
+            });
+        }
+        if !(a > 0.0) {
+            return None;
+        }
+        let mut inv = match &self.perturbed {
+            Some(p) => p.invert(b, wo, wi, u_choice, mode),
+            None => b.invert(wo, wi, u_choice),
+        }?;
+        inv.u_lobe = (a * inv.u_lobe.0, a * inv.u_lobe.1);
+        (inv.u_lobe.1 > inv.u_lobe.0).then_some(inv)
     }
 
     /// True when every lobe is a Dirac delta: a fully transparent point,

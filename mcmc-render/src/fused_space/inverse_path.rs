@@ -15,7 +15,7 @@
 //! | connection 0 | technique bin `⌊u·n⌋` | uniform in the bin |
 //! | camera 0–1 | raster position (`t ≥ 2`) | raster of the first camera ray |
 //! | camera 2–3 | lens point (thin lens, `t ≥ 2`) | [`crate::camera::Camera::invert`] |
-//! | camera, 4 per surface vertex `x_{k−j}`, `1 ≤ j ≤ t − 2` | lobe, direction, roulette | `BsdfAt::invert`: lobe uniform in its interval, direction numbers (fresh for Dirac lobes); roulette fresh (off) |
+//! | camera, 4 per surface vertex `x_{k−j}`, `1 ≤ j ≤ t − 2` | lobe, direction, roulette | `BsdfAt::invert_in` (importance mode on the light side): lobe uniform in its interval, direction numbers (fresh for Dirac lobes); roulette fresh (off) |
 //! | light 0 | emitter choice (`s ≥ 2`) | uniform in the emitter's interval |
 //! | light 1–2 | position (`s ≥ 2`) | area inverse (fresh for point lights) |
 //! | light 3–4 | direction (`s ≥ 2`) | cosine / sphere / spot inverse |
@@ -27,6 +27,7 @@
 //! `t = 1`, the light stream when `s ≤ 1`, and the unread tail), which is
 //! the reversible-jump fill of spec seed001 §4.
 
+use crate::bsdf::TransportMode;
 use crate::frame::Frame;
 use crate::fused_space::FusedState;
 use crate::integrators::bdpt::SubpathBuffers;
@@ -51,9 +52,8 @@ pub enum InverseFailure {
     /// The path's length or technique does not belong to this depth, or it
     /// starts on an emitter at infinity.
     Technique,
-    /// A BSDF along the path cannot be inverted (normal/bump maps, masks:
-    /// `BsdfAt::invert` returns `None`), or the sampled direction is not
-    /// one the BSDF samples.
+    /// The sampled direction is not one the BSDF along the path samples
+    /// (`BsdfAt::invert_in` returns `None`).
     Bsdf,
     /// The emitter's choice, point or direction cannot be inverted (a
     /// sphere light's cone sampling for `s = 1`, a point off the emitter).
@@ -170,9 +170,20 @@ fn invert_scattering(
         return Err(InverseFailure::Bsdf);
     };
     let frame = Frame::from_normal(v.sp.ns);
+    // Light subpaths scatter in importance mode (normal and bump maps
+    // sample them differently).
+    let mode = match stream {
+        Stream::Light => TransportMode::Importance,
+        _ => TransportMode::Radiance,
+    };
     let inv = scene
         .bsdf_at(&v.sp)
-        .invert(frame.to_local(wo), frame.to_local(wi), uniform(rng) as f32)
+        .invert_in(
+            frame.to_local(wo),
+            frame.to_local(wi),
+            uniform(rng) as f32,
+            mode,
+        )
         .ok_or(InverseFailure::Bsdf)?;
     if inv.u_lobe != (0.0, 1.0) {
         let u =
