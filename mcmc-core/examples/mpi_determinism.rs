@@ -18,6 +18,8 @@
 //!
 //! `--corrupt-rank R` gives rank `R` a different hottest temperature (a
 //! mismatched input); the run must then stop with one error on rank 0.
+//! `--die-rank R` makes rank `R` exit after the multi-chain part; `mpirun`
+//! must then stop the whole job with a non-zero status instead of hanging.
 
 use mcmc_core::distributed::mpi::topology::Communicator;
 use mcmc_core::distributed::{
@@ -186,6 +188,7 @@ fn main() -> ExitCode {
     };
     let sweeps = flag("--sweeps").unwrap_or(400);
     let corrupt = flag("--corrupt-rank");
+    let die = flag("--die-rank");
     let Some(universe) = mpi::initialize() else {
         eprintln!("mpi_determinism: MPI was already initialised");
         return ExitCode::from(2);
@@ -209,6 +212,13 @@ fn main() -> ExitCode {
             }
         }
         Ok((None, _)) => {}
+    }
+
+    // A rank that dies mid-run (the others wait in the next collective):
+    // mpirun must stop the job with a non-zero status.
+    if die == Some(rank) {
+        eprintln!("mpi_determinism: rank {rank} exits on purpose (--die-rank)");
+        std::process::exit(3);
     }
 
     // (2) Replica exchange, both schedules.
