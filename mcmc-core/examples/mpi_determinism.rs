@@ -268,7 +268,8 @@ fn main() -> ExitCode {
     }
     if mismatches.is_empty() {
         println!(
-            "mpi_determinism: {size} rank(s): multi-chain and replica exchange (even-odd, neighbour; {LEVELS} levels, {sweeps} sweeps) bit-identical to one process"
+            "mpi_determinism: {size} rank(s) x {} thread(s): multi-chain and replica exchange (even-odd, neighbour; {LEVELS} levels, {sweeps} sweeps) bit-identical to one process",
+            rayon::current_num_threads()
         );
         ExitCode::SUCCESS
     } else {
