@@ -42,6 +42,8 @@ pub mod chain;
 pub mod cmdstan;
 pub mod delayed_rejection;
 pub mod diagnostics;
+#[cfg(feature = "mpi")]
+pub mod distributed;
 pub mod error;
 pub mod exact;
 pub mod expected;

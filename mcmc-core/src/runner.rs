@@ -22,7 +22,18 @@ pub fn run_chains<R: Send>(
     seed: u64,
     work: impl Fn(usize, ChainRng) -> R + Sync + Send,
 ) -> Vec<R> {
-    (0..chains)
+    run_chain_range(0..chains, seed, work)
+}
+
+/// Runs `work(c, rng_c)` for the chains `c` in `range` only (one process's
+/// share of a distributed run), in parallel, with the same streams as
+/// [`run_chains`], and returns the results in chain order.
+pub fn run_chain_range<R: Send>(
+    range: std::ops::Range<usize>,
+    seed: u64,
+    work: impl Fn(usize, ChainRng) -> R + Sync + Send,
+) -> Vec<R> {
+    range
         .into_par_iter()
         .map(|c| work(c, stream_rng(seed, c as u64)))
         .collect()

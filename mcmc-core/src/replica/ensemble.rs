@@ -23,7 +23,7 @@ pub type LevelObserver<'a, S, P> = dyn FnMut(usize, &Transition<'_, S, P>) + Sen
 type JumpRecord = Option<(usize, f64, bool)>;
 
 /// Stream index of the exchange moves' generator (levels use `0..M`).
-const EXCHANGE_STREAM: u64 = 0xE7C4_A4E0_0000_0000;
+pub(crate) const EXCHANGE_STREAM: u64 = 0xE7C4_A4E0_0000_0000;
 
 /// Replica exchange over a [`ReplicaFamily`]: level `l` is a chain with its
 /// own mutation algorithm `A` (e.g. [`crate::mh::MetropolisHastings`] with a
@@ -87,52 +87,8 @@ where
         seed: u64,
     ) -> Result<Self> {
         let m = family.levels();
-        if m == 0 {
-            return Err(invalid(
-                "family",
-                "a replica family needs at least one level",
-            ));
-        }
-        if algorithms.len() != m {
-            return Err(invalid(
-                "algorithms",
-                format!(
-                    "need one mutation algorithm per level ({m}), got {}",
-                    algorithms.len()
-                ),
-            ));
-        }
-        if initial.len() != m && initial.len() != 1 {
-            return Err(invalid(
-                "initial",
-                format!(
-                    "need one initial state per level ({m}) or a single one, got {}",
-                    initial.len()
-                ),
-            ));
-        }
+        let chains = level_chains(&family, &initial, &algorithms, seed, 0..m)?;
         exchange.check_levels(m)?;
-        let mut chains = Vec::with_capacity(m);
-        for (level, algorithm) in algorithms.iter().enumerate() {
-            let state = initial[if initial.len() == 1 { 0 } else { level }].clone();
-            let e = family.evaluate(level, &state);
-            if DensityClass::of(e.log_density) != DensityClass::Finite {
-                return Err(CoreError::NonFiniteInitialState {
-                    log_density: e.log_density,
-                });
-            }
-            let mut stats = ChainStatistics::new(algorithm.component_names());
-            stats.evaluations = 1;
-            chains.push(ChainState {
-                current: Sample {
-                    state,
-                    log_density: e.log_density,
-                    payload: e.payload,
-                },
-                rng: stream_rng(seed, level as u64),
-                stats,
-            });
-        }
         let name = exchange.name();
         Ok(ReplicaExchange {
             family,
@@ -370,6 +326,71 @@ where
                 (!self.family.cross_densities_are_cheap()) as u64 + accepted as u64;
         }
     }
+}
+
+/// The chains of levels `levels` (a sub-range of the family's levels when
+/// the ensemble is spread over processes), after checking `initial` (one
+/// state per level or a single one) and `algorithms` (one per level):
+/// level `l` starts at its initial state with `stream_rng(seed, l)`.
+pub(crate) fn level_chains<S, F, A>(
+    family: &F,
+    initial: &[S],
+    algorithms: &[A],
+    seed: u64,
+    levels: std::ops::Range<usize>,
+) -> Result<Vec<ChainState<S, F::Payload>>>
+where
+    S: Clone,
+    F: ReplicaFamily<S>,
+    A: Algorithm<S, F::Payload>,
+{
+    let m = family.levels();
+    if m == 0 {
+        return Err(invalid(
+            "family",
+            "a replica family needs at least one level",
+        ));
+    }
+    if algorithms.len() != m {
+        return Err(invalid(
+            "algorithms",
+            format!(
+                "need one mutation algorithm per level ({m}), got {}",
+                algorithms.len()
+            ),
+        ));
+    }
+    if initial.len() != m && initial.len() != 1 {
+        return Err(invalid(
+            "initial",
+            format!(
+                "need one initial state per level ({m}) or a single one, got {}",
+                initial.len()
+            ),
+        ));
+    }
+    let mut chains = Vec::with_capacity(levels.len());
+    for level in levels {
+        let state = initial[if initial.len() == 1 { 0 } else { level }].clone();
+        let e = family.evaluate(level, &state);
+        if DensityClass::of(e.log_density) != DensityClass::Finite {
+            return Err(CoreError::NonFiniteInitialState {
+                log_density: e.log_density,
+            });
+        }
+        let mut stats = ChainStatistics::new(algorithms[level].component_names());
+        stats.evaluations = 1;
+        chains.push(ChainState {
+            current: Sample {
+                state,
+                log_density: e.log_density,
+                payload: e.payload,
+            },
+            rng: stream_rng(seed, level as u64),
+            stats,
+        });
+    }
+    Ok(chains)
 }
 
 /// Mutates one level, or lets the move's jump replace the mutation.

@@ -36,7 +36,7 @@
 mod adaptive_equi_energy;
 pub mod combination;
 mod context;
-mod ensemble;
+pub(crate) mod ensemble;
 mod equi_energy;
 mod equi_energy_sampler;
 mod even_odd;

@@ -1,0 +1,573 @@
+//! Replica exchange with the levels spread over ranks.
+
+use super::DistributedError;
+use super::comm::{
+    FNV_OFFSET, Traffic, agree, all_gather_u64, exchange_bytes, exchange_pair, fnv1a, gather_bytes,
+    receive_bytes, send_bytes, share, tag,
+};
+use super::wire::{Wire, decode, encode};
+use crate::chain::{Algorithm, ChainState, Transition};
+use crate::mh::accept;
+use crate::replica::ensemble::{EXCHANGE_STREAM, Observer, level_chains};
+use crate::replica::{
+    EvenOdd, LevelTarget, PairStatistics, ReplicaFamily, ReplicaStatistics, swap_log_acceptance,
+};
+use crate::rng::{ChainRng, stream_rng};
+use crate::sample::Sample;
+use mpi::topology::{Communicator, SimpleCommunicator};
+use rand::Rng;
+use rayon::prelude::*;
+use std::ops::Range;
+
+/// The exchange schedules that can be spread over ranks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DistributedSchedule {
+    /// Deterministic even–odd swaps after all levels mutated
+    /// ([`crate::replica::EvenOdd`]): the levels of all ranks mutate in
+    /// parallel.
+    EvenOdd,
+    /// The neighbour sweep ([`crate::replica::NeighbourSwap`]): from the
+    /// hottest level down, mutate, then try the swap with the level below.
+    /// Inherently sequential: ranks take turns (the ensemble is spread for
+    /// memory, not for speed).
+    Neighbour,
+}
+
+/// Whether [`accept`] draws a uniform for `ln α` (it does when
+/// `−∞ < ln α < 0`, or for NaN).
+fn draws_uniform(log_alpha: f64) -> bool {
+    log_alpha.is_nan() || (log_alpha < 0.0 && log_alpha > f64::NEG_INFINITY)
+}
+
+/// A level's sample and the replica (travelling identity) it carries.
+type Parcel<S, P> = (Sample<S, P>, usize);
+
+/// Replica exchange whose levels live on several MPI ranks: rank `r` owns
+/// the contiguous block [`super::share`]`(M, K, r)` of levels, with their
+/// chains (sample, stream, statistics) and mutation algorithms.
+///
+/// Bit-identical to [`crate::replica::ReplicaExchange`] with
+/// [`crate::replica::EvenOdd`] / [`crate::replica::NeighbourSwap`] for the
+/// same family, initial states, algorithms and seed, for any number of
+/// ranks and threads: level `l` mutates with `stream_rng(seed, l)`, and the
+/// swap uniforms are drawn from the single-process exchange stream at the
+/// positions the single-process run would use.
+pub struct DistributedReplicaExchange<S, F: ReplicaFamily<S>, A> {
+    comm: SimpleCommunicator,
+    rank: usize,
+    size: usize,
+    family: F,
+    /// Levels of this rank.
+    owned: Range<usize>,
+    /// Chains of the owned levels.
+    chains: Vec<ChainState<S, F::Payload>>,
+    algorithms: Vec<A>,
+    /// Replica at each owned level.
+    replicas: Vec<usize>,
+    schedule: DistributedSchedule,
+    /// This rank's copy of the exchange stream, at position `drawn`.
+    rng: ChainRng,
+    drawn: u64,
+    sweeps: u64,
+    /// Pairs whose swap this rank decided.
+    stats: ReplicaStatistics,
+    traffic: Traffic,
+}
+
+impl<S, F, A> DistributedReplicaExchange<S, F, A>
+where
+    S: Clone + Send + Wire,
+    F: ReplicaFamily<S> + Sync,
+    F::Payload: Send + Sync + Wire,
+    A: Algorithm<S, F::Payload> + Send,
+{
+    /// Spreads an ensemble over the ranks of `comm` (a duplicate of it is
+    /// used, so the run's messages never mix with the caller's). Every rank
+    /// calls this with the same arguments: `initial` and `algorithms` as in
+    /// [`crate::replica::ReplicaExchange::new`] (each rank keeps its own
+    /// levels' algorithms). Collective: every rank returns the same error
+    /// when one rank's set-up fails or its inputs differ (levels, seed,
+    /// schedule, the initial states' densities at every level, executable,
+    /// and `fingerprint`: any number describing inputs the densities at the
+    /// start may not reveal, e.g. a hash of the temperatures and data; 0 if
+    /// none).
+    pub fn new<C: Communicator>(
+        comm: &C,
+        family: F,
+        initial: Vec<S>,
+        algorithms: Vec<A>,
+        schedule: DistributedSchedule,
+        seed: u64,
+        fingerprint: u64,
+    ) -> Result<Self, DistributedError> {
+        let comm = comm.duplicate();
+        let (rank, size) = (comm.rank() as usize, comm.size() as usize);
+        let mut traffic = Traffic::default();
+        let m = family.levels();
+        let owned = share(m, size, rank);
+        let local = (|| {
+            let chains = level_chains(&family, &initial, &algorithms, seed, owned.clone())?;
+            // Fingerprint of the inputs every rank must share: a different
+            // target, schedule, seed or start shows in these densities.
+            let mut fp = FNV_OFFSET;
+            for v in [
+                m as u64,
+                seed,
+                schedule as u64,
+                initial.len() as u64,
+                fingerprint,
+            ] {
+                fp = fnv1a(&v.to_le_bytes(), fp);
+            }
+            for level in 0..m {
+                let state = &initial[if initial.len() == 1 { 0 } else { level }];
+                let ld = family.evaluate(level, state).log_density;
+                fp = fnv1a(&ld.to_bits().to_le_bytes(), fp);
+            }
+            Ok((chains, fp))
+        })();
+        let chains = agree(
+            &comm,
+            &mut traffic,
+            "replica set-up (levels, seed, schedule, initial densities or input fingerprint)",
+            local,
+        )?;
+        let algorithms: Vec<A> = algorithms
+            .into_iter()
+            .enumerate()
+            .filter(|(l, _)| owned.contains(l))
+            .map(|(_, a)| a)
+            .collect();
+        let name = match schedule {
+            DistributedSchedule::EvenOdd => "even-odd",
+            DistributedSchedule::Neighbour => "neighbour",
+        };
+        Ok(DistributedReplicaExchange {
+            comm,
+            rank,
+            size,
+            family,
+            replicas: owned.clone().collect(),
+            owned,
+            chains,
+            algorithms,
+            schedule,
+            rng: stream_rng(seed, EXCHANGE_STREAM),
+            drawn: 0,
+            sweeps: 0,
+            stats: ReplicaStatistics::new(m, name),
+            traffic,
+        })
+    }
+
+    /// This rank.
+    pub fn rank(&self) -> usize {
+        self.rank
+    }
+
+    /// Number of ranks.
+    pub fn ranks(&self) -> usize {
+        self.size
+    }
+
+    /// Number of levels `M` (over all ranks).
+    pub fn levels(&self) -> usize {
+        self.family.levels()
+    }
+
+    /// The levels this rank holds.
+    pub fn owned_levels(&self) -> Range<usize> {
+        self.owned.clone()
+    }
+
+    /// The sample at `level`, if this rank holds it.
+    pub fn current(&self, level: usize) -> Option<&Sample<S, F::Payload>> {
+        self.local(level).map(|l| &self.chains[l].current)
+    }
+
+    /// The bytes and messages this rank has sent so far.
+    pub fn traffic(&self) -> Traffic {
+        self.traffic
+    }
+
+    /// Sweeps done.
+    pub fn sweeps(&self) -> u64 {
+        self.sweeps
+    }
+
+    fn local(&self, level: usize) -> Option<usize> {
+        self.owned
+            .contains(&level)
+            .then(|| level - self.owned.start)
+    }
+
+    /// End of burn-in: freezes the kernels' adaptation.
+    pub fn freeze(&mut self) {
+        for a in &mut self.algorithms {
+            a.freeze();
+        }
+    }
+
+    /// One sweep (collective: every rank calls it).
+    pub fn sweep(&mut self) {
+        self.sweep_observed(&mut |_| {});
+    }
+
+    /// One sweep, reporting level 0's mutation transition to `observer` on
+    /// the rank that holds level 0 (rank 0).
+    pub fn sweep_observed(&mut self, observer: &mut Observer<'_, S, F::Payload>) {
+        match self.schedule {
+            DistributedSchedule::EvenOdd => self.sweep_even_odd(observer),
+            DistributedSchedule::Neighbour => self.sweep_neighbour(observer),
+        }
+        self.stats.end_sweep();
+        self.sweeps += 1;
+    }
+
+    fn mutate(&mut self, level: usize, observer: &mut Observer<'_, S, F::Payload>) {
+        let l = level - self.owned.start;
+        let mut ignore = |_: &Transition<'_, S, F::Payload>| {};
+        let observer: &mut Observer<'_, S, F::Payload> =
+            if level == 0 { observer } else { &mut ignore };
+        let target = LevelTarget {
+            family: &self.family,
+            level,
+        };
+        self.algorithms[l].step(&mut self.chains[l], &target, observer);
+    }
+
+    fn mutate_all(&mut self, observer: &mut Observer<'_, S, F::Payload>) {
+        if rayon::current_num_threads() <= 1 || self.chains.len() < 2 {
+            for level in self.owned.clone() {
+                self.mutate(level, observer);
+            }
+            return;
+        }
+        // Every level draws from its own stream: the order does not matter.
+        let start = self.owned.start;
+        let family = &self.family;
+        let (first_chain, other_chains) = self.chains.split_at_mut(1);
+        let (first_alg, other_algs) = self.algorithms.split_at_mut(1);
+        let mut ignore = |_: &Transition<'_, S, F::Payload>| {};
+        let first_observer: &mut Observer<'_, S, F::Payload> =
+            if start == 0 { observer } else { &mut ignore };
+        rayon::join(
+            || {
+                let target = LevelTarget {
+                    family,
+                    level: start,
+                };
+                first_alg[0].step(&mut first_chain[0], &target, first_observer);
+            },
+            || {
+                other_chains
+                    .par_iter_mut()
+                    .zip(other_algs.par_iter_mut())
+                    .enumerate()
+                    .for_each(|(i, (c, a))| {
+                        let target = LevelTarget {
+                            family,
+                            level: start + 1 + i,
+                        };
+                        a.step(c, &target, &mut |_| {});
+                    });
+            },
+        );
+    }
+
+    /// Moves this rank's copy of the exchange stream to `position`.
+    fn advance_to(&mut self, position: u64) {
+        debug_assert!(position >= self.drawn);
+        while self.drawn < position {
+            self.rng.next_u64();
+            self.drawn += 1;
+        }
+    }
+
+    /// [`accept`] on the exchange stream, keeping its position.
+    fn decide(&mut self, log_alpha: f64) -> bool {
+        self.drawn += draws_uniform(log_alpha) as u64;
+        accept(log_alpha, &mut self.rng)
+    }
+
+    /// `[ln π_own(x), ln π_partner(x)]` for the sample at `level`: what the
+    /// partner level's rank needs for the swap decision.
+    fn densities_for(&self, level: usize, partner: usize) -> [f64; 2] {
+        let s = &self.chains[level - self.owned.start].current;
+        [s.log_density, self.family.log_density_of(partner, s)]
+    }
+
+    /// Puts `parcel`, arriving from level `from`, at `level` with
+    /// `log_density = ln π_level(x)` as the partner computed it.
+    fn receive_at(&mut self, level: usize, parcel: Parcel<S, F::Payload>, log_density: f64) {
+        let l = level - self.owned.start;
+        let (mut sample, replica) = parcel;
+        self.family.retarget(level, &mut sample, log_density);
+        self.chains[l].current = sample;
+        self.replicas[l] = replica;
+        self.stats.touch(level);
+    }
+
+    fn parcel(&self, level: usize) -> Parcel<S, F::Payload> {
+        let l = level - self.owned.start;
+        (self.chains[l].current.clone(), self.replicas[l])
+    }
+
+    /// `(ln α, ln π_i(x_j), ln π_j(x_i))` of swapping levels `i` and `j`
+    /// held by this rank: the single-process
+    /// [`crate::replica::ExchangeContext::try_swap`] rule.
+    fn local_log_alpha(&self, i: usize, j: usize) -> (f64, f64, f64) {
+        let (ci, cj) = (
+            &self.chains[i - self.owned.start].current,
+            &self.chains[j - self.owned.start].current,
+        );
+        let ld_ij = self.family.log_density_of(i, cj);
+        let ld_ji = self.family.log_density_of(j, ci);
+        let log_alpha = swap_log_acceptance(ci.log_density, cj.log_density, ld_ij, ld_ji);
+        (log_alpha, ld_ij, ld_ji)
+    }
+
+    /// Decides and, if accepted, applies the swap of levels `i` and `j`
+    /// held by this rank (arguments from [`Self::local_log_alpha`]).
+    fn local_swap(
+        &mut self,
+        i: usize,
+        j: usize,
+        (log_alpha, ld_ij, ld_ji): (f64, f64, f64),
+    ) -> bool {
+        let accepted = self.decide(log_alpha);
+        self.stats.record_pair(i, j, log_alpha.exp(), accepted);
+        if accepted {
+            let (li, lj) = (i - self.owned.start, j - self.owned.start);
+            let (a, b) = (li.min(lj), li.max(lj));
+            let (lo, hi) = self.chains.split_at_mut(b);
+            std::mem::swap(&mut lo[a].current, &mut hi[0].current);
+            self.family.retarget(i, &mut self.chains[li].current, ld_ij);
+            self.family.retarget(j, &mut self.chains[lj].current, ld_ji);
+            self.replicas.swap(li, lj);
+            self.stats.touch(i);
+            self.stats.touch(j);
+        }
+        accepted
+    }
+
+    fn sweep_even_odd(&mut self, observer: &mut Observer<'_, S, F::Payload>) {
+        let m = self.levels();
+        self.mutate_all(observer);
+        let (lo, hi) = (self.owned.start, self.owned.end);
+        let first = (self.sweeps % 2) as usize;
+        let active = |i: usize| i + 1 < m && i >= first && (i - first).is_multiple_of(2);
+        debug_assert!(EvenOdd::pairs(self.sweeps, m).all(|(i, _)| active(i)));
+        // Boundary pairs: (lo−1, lo) with the rank below, (hi−1, hi) with
+        // the rank above. Densities first, lower boundary first on every
+        // rank, so that the pairwise exchanges chain without deadlock.
+        let lower = (lo > 0 && lo < hi && active(lo - 1)).then(|| {
+            let own = self.densities_for(lo, lo - 1);
+            let other = exchange_pair(&self.comm, &mut self.traffic, self.rank - 1, own);
+            // Pair (i, j) = (lo−1, lo): `own` = [ln π_j(x_j), ln π_i(x_j)],
+            // `other` = [ln π_i(x_i), ln π_j(x_i)].
+            (
+                swap_log_acceptance(other[0], own[0], own[1], other[1]),
+                other[1],
+            )
+        });
+        let upper = (hi < m && lo < hi && active(hi - 1)).then(|| {
+            let own = self.densities_for(hi - 1, hi);
+            let other = exchange_pair(&self.comm, &mut self.traffic, self.rank + 1, own);
+            // Pair (i, j) = (hi−1, hi): `own` = [ln π_i(x_i), ln π_j(x_i)],
+            // `other` = [ln π_j(x_j), ln π_i(x_j)].
+            (
+                swap_log_acceptance(own[0], other[0], other[1], own[1]),
+                other[1],
+            )
+        });
+        // Uniforms used by the pairs this rank decides (lower level here).
+        let decided: Vec<(usize, (f64, f64, f64))> = (lo..hi.min(m - 1))
+            .filter(|&i| active(i))
+            .map(|i| {
+                if i + 1 < hi {
+                    (i, self.local_log_alpha(i, i + 1))
+                } else {
+                    let (log_alpha, ld) = upper.expect("upper boundary pair");
+                    (i, (log_alpha, ld, f64::NAN))
+                }
+            })
+            .collect();
+        let used = decided.iter().filter(|(_, a)| draws_uniform(a.0)).count() as u64;
+        let counts = if self.size > 1 {
+            all_gather_u64(&self.comm, &mut self.traffic, used)
+        } else {
+            vec![used]
+        };
+        let start = self.drawn;
+        let before: u64 = counts[..self.rank].iter().sum();
+        let total: u64 = counts.iter().sum();
+        // The lower boundary pair is the rank below's last pair: its
+        // uniform, if any, is the one just before this rank's.
+        let lower_accepted = lower.map(|(log_alpha, _)| {
+            if draws_uniform(log_alpha) {
+                self.advance_to(start + before - 1);
+            }
+            self.decide(log_alpha)
+        });
+        self.advance_to(start + before);
+        let mut upper_accepted = false;
+        for (i, swap) in decided {
+            if i + 1 < hi {
+                self.local_swap(i, i + 1, swap);
+            } else {
+                upper_accepted = self.decide(swap.0);
+                self.stats
+                    .record_pair(i, i + 1, swap.0.exp(), upper_accepted);
+            }
+        }
+        self.advance_to(start + total);
+        // States cross only for accepted boundary swaps, lower first.
+        if let (Some((_, ld)), Some(true)) = (lower, lower_accepted) {
+            self.swap_across(lo, self.rank - 1, ld);
+        }
+        if let Some((_, ld)) = upper
+            && upper_accepted
+        {
+            self.swap_across(hi - 1, self.rank + 1, ld);
+        }
+    }
+
+    /// Exchanges the sample at `level` with the partner rank's boundary
+    /// sample; `log_density` is the partner's sample's density at `level`.
+    fn swap_across(&mut self, level: usize, partner: usize, log_density: f64) {
+        let mine = encode(&self.parcel(level));
+        let theirs = exchange_bytes(&self.comm, &mut self.traffic, partner, tag::STATE, &mine);
+        let parcel = decode(&theirs).expect("state from the partner rank");
+        self.receive_at(level, parcel, log_density);
+    }
+
+    fn sweep_neighbour(&mut self, observer: &mut Observer<'_, S, F::Payload>) {
+        let (lo, hi) = (self.owned.start, self.owned.end);
+        let top = self.size - 1;
+        if lo == hi {
+            return;
+        }
+        // The stream position reaches the top rank from rank 0, which
+        // ended the previous sweep.
+        if self.rank == top && self.size > 1 && self.sweeps > 0 {
+            let p: u64 = decode(&receive_bytes(&self.comm, 0, tag::POSITION))
+                .expect("stream position from rank 0");
+            self.advance_to(p);
+        }
+        if self.rank < top {
+            // Pair (hi, hi−1) is decided above: its deciding rank needs
+            // this rank's boundary densities, which do not change before.
+            let own = self.densities_for(hi - 1, hi);
+            send_bytes(
+                &self.comm,
+                &mut self.traffic,
+                self.rank + 1,
+                tag::DENSITIES,
+                &encode(&own.to_vec()),
+            );
+            let msg = receive_bytes(&self.comm, self.rank + 1, tag::DECISION);
+            let (position, (accepted, ld)): (u64, (bool, f64)) =
+                decode(&msg).expect("decision from the rank above");
+            if accepted {
+                let mine = encode(&self.parcel(hi - 1));
+                send_bytes(
+                    &self.comm,
+                    &mut self.traffic,
+                    self.rank + 1,
+                    tag::STATE,
+                    &mine,
+                );
+                let parcel = decode(&receive_bytes(&self.comm, self.rank + 1, tag::STATE))
+                    .expect("state from the rank above");
+                self.receive_at(hi - 1, parcel, ld);
+            }
+            self.advance_to(position);
+        }
+        for level in (lo..hi).rev() {
+            self.mutate(level, observer);
+            if level > lo {
+                let swap = self.local_log_alpha(level, level - 1);
+                self.local_swap(level, level - 1, swap);
+            } else if level > 0 {
+                // Pair (i, j) = (lo, lo−1), decided here.
+                let other: Vec<f64> =
+                    decode(&receive_bytes(&self.comm, self.rank - 1, tag::DENSITIES))
+                        .expect("densities from the rank below");
+                let own = self.densities_for(lo, lo - 1);
+                let log_alpha = swap_log_acceptance(own[0], other[0], other[1], own[1]);
+                let accepted = self.decide(log_alpha);
+                self.stats
+                    .record_pair(lo, lo - 1, log_alpha.exp(), accepted);
+                send_bytes(
+                    &self.comm,
+                    &mut self.traffic,
+                    self.rank - 1,
+                    tag::DECISION,
+                    &encode(&(self.drawn, (accepted, own[1]))),
+                );
+                if accepted {
+                    let parcel = decode(&receive_bytes(&self.comm, self.rank - 1, tag::STATE))
+                        .expect("state from the rank below");
+                    let mine = encode(&self.parcel(lo));
+                    send_bytes(
+                        &self.comm,
+                        &mut self.traffic,
+                        self.rank - 1,
+                        tag::STATE,
+                        &mine,
+                    );
+                    self.receive_at(lo, parcel, other[1]);
+                }
+            }
+        }
+        if self.rank == 0 && self.size > 1 {
+            send_bytes(
+                &self.comm,
+                &mut self.traffic,
+                top,
+                tag::POSITION,
+                &encode(&self.drawn),
+            );
+        }
+    }
+
+    /// Every level's sample and replica, in level order, on rank 0
+    /// (collective; `None` on the other ranks).
+    pub fn gather_levels(&mut self) -> Option<Vec<Parcel<S, F::Payload>>> {
+        let local: Vec<Parcel<S, F::Payload>> =
+            self.owned.clone().map(|l| self.parcel(l)).collect();
+        let blocks = gather_bytes(&self.comm, &mut self.traffic, &encode(&local))?;
+        let mut out = Vec::with_capacity(self.levels());
+        for b in blocks {
+            out.extend(decode::<Vec<Parcel<S, F::Payload>>>(&b).expect("levels from a rank"));
+        }
+        Some(out)
+    }
+
+    /// The neighbour pairs' swap statistics `(i, i+1)`, pooled over ranks,
+    /// on rank 0 (collective; `None` elsewhere). Each pair is decided, and
+    /// counted, by exactly one rank.
+    pub fn gather_pair_statistics(&mut self) -> Option<Vec<PairStatistics>> {
+        let m = self.levels();
+        let local: Vec<(u64, (u64, f64))> = (0..m.saturating_sub(1))
+            .map(|i| {
+                let p = self.stats.pair(i, i + 1);
+                (p.attempted, (p.accepted, p.sum_alpha))
+            })
+            .collect();
+        let blocks = gather_bytes(&self.comm, &mut self.traffic, &encode(&local))?;
+        let mut out = vec![PairStatistics::default(); m.saturating_sub(1)];
+        for b in blocks {
+            let v: Vec<(u64, (u64, f64))> = decode(&b).expect("statistics from a rank");
+            for (o, (att, (acc, sum))) in out.iter_mut().zip(v) {
+                if att > 0 {
+                    o.attempted += att;
+                    o.accepted += acc;
+                    o.sum_alpha += sum;
+                }
+            }
+        }
+        Some(out)
+    }
+}
