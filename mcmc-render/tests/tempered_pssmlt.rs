@@ -16,19 +16,15 @@
 mod common;
 
 use common::{MeanAgreement, bdpt_of, image_mean, mc_reps, pt_of, repo_scene_tilted};
-use mcmc_core::kernel::Mixture;
-use mcmc_core::replica::ExchangeMove;
 use mcmc_core::rng::stream_rng;
 use mcmc_core::runner::with_threads;
 use mcmc_core::space::TorusPoint;
 use mcmc_render::integrators::RunSettings;
 use mcmc_render::integrators::registry;
-use mcmc_render::integrators::tempered_pssmlt::{
-    LevelTarget, TemperedExchange, TemperedFamily, TemperedPssmlt,
-};
-use mcmc_render::markov::{self, ChainFamily, MltError, Normalization};
+use mcmc_render::integrators::tempered_pssmlt::{TemperedExchange, TemperedFamily, TemperedPssmlt};
+use mcmc_render::markov::{self, Normalization};
 use mcmc_render::observer::NoObserver;
-use mcmc_render::pss::{Mutation, PATH_CLASSES, PathSample, PssTarget, PssmltSettings};
+use mcmc_render::pss::{PssTarget, PssmltSettings};
 use mcmc_render::scene::Scene;
 use mcmc_render::tempered::{
     Regularization, RegularizationSchedule, ScheduleKind, TemperedBdpt, TemperedBsdfs,
