@@ -52,10 +52,9 @@ use crate::color::Rgb;
 use crate::film::{Film, Filter};
 use crate::integrators::bdpt::generate_camera_subpath;
 use crate::integrators::path_vertex::{Vertex, VertexKind};
-use crate::light::Light;
 use crate::observer::Observer;
 use crate::path_space::walk::{ChainSource, light_walk};
-use crate::path_space::{Path, PathMutations, PathTarget};
+use crate::path_space::{Path, PathMutations, PathTarget, emitters_at_infinity_refusal};
 use crate::pss::PathSample;
 use crate::scene::Scene;
 use crate::settings::check;
@@ -216,15 +215,8 @@ impl IntegratorSettings for Erpt {
         observer: &dyn Observer,
     ) -> Result<Rendered, RenderError> {
         IntegratorSettings::validate(self).map_err(RenderError::Invalid)?;
-        if scene
-            .lights
-            .lights
-            .iter()
-            .any(|l| matches!(l, Light::Directional { .. } | Light::Environment(_)))
-        {
-            return Err(RenderError::Invalid(
-                "erpt does not support emitters at infinity (environment, directional) yet".into(),
-            ));
+        if scene.lights.has_emitter_at_infinity() {
+            return Err(RenderError::Invalid(emitters_at_infinity_refusal("erpt")));
         }
         let start = Instant::now();
         let (w, h) = (scene.film.width, scene.film.height);

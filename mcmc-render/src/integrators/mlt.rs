@@ -30,10 +30,9 @@
 use super::pt::PathTracer;
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
-use crate::light::Light;
 use crate::markov::{self, ChainParams, MltError, MltResult};
 use crate::observer::Observer;
-use crate::path_space::{PathFamily, PathMutations};
+use crate::path_space::{PathFamily, PathMutations, emitters_at_infinity_refusal};
 use crate::pss_dump::DumpSampler;
 use crate::scene::Scene;
 use crate::settings::check;
@@ -196,15 +195,8 @@ pub fn render_mlt(
     stop: &AtomicBool,
     observer: &dyn Observer,
 ) -> Result<MltResult, MltError> {
-    if scene
-        .lights
-        .lights
-        .iter()
-        .any(|l| matches!(l, Light::Directional { .. } | Light::Environment(_)))
-    {
-        return Err(MltError::Setting(
-            "mlt does not support emitters at infinity (environment, directional) yet".into(),
-        ));
+    if scene.lights.has_emitter_at_infinity() {
+        return Err(MltError::Setting(emitters_at_infinity_refusal("mlt")));
     }
     let family = PathFamily::between(scene, settings.min_segments(), settings.max_segments());
     markov::run(
