@@ -32,11 +32,13 @@ use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
 use crate::markov::{self, ChainParams, MltError, MltResult};
 use crate::observer::Observer;
+use crate::path_space::proposal_clock::{ProposalClock, mutation_types};
 use crate::path_space::{PathFamily, PathMutations, emitters_at_infinity_refusal};
 use crate::pss_dump::DumpSampler;
 use crate::scene::Scene;
 use crate::settings::check;
 use serde_json::json;
+use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
@@ -156,13 +158,27 @@ impl IntegratorSettings for Mlt {
             time_budget: run.time_budget.map(|t| t.saturating_sub(start.elapsed())),
             ..run.clone()
         };
-        let result = render_mlt(self, scene, &chains_run, stop, observer)?;
+        let clock = ProposalClock::new();
+        let result = render_mlt(self, scene, &chains_run, stop, observer, &clock)?;
         let mut out = markov::report::rendered(
             &result,
             // Path states have no primary-sample coordinates: no dump.
             DumpSampler::Bdpt,
             self.depth.limit(),
             false,
+        );
+        let components = result
+            .chain_stats
+            .components
+            .iter()
+            .map(|c| (c.name.clone(), c.proposed, c.accepted));
+        out.statistics.insert(
+            "mutation_types".into(),
+            mutation_types(
+                components,
+                &clock,
+                result.seconds - result.bootstrap_seconds,
+            ),
         );
         if let Some(direct) = direct {
             for (p, d) in out.image.iter_mut().zip(&direct.image) {
@@ -187,18 +203,21 @@ impl IntegratorSettings for Mlt {
     }
 }
 
-/// Renders `scene` with path-space MLT as `settings` say.
+/// Renders `scene` with path-space MLT as `settings` say, timing each
+/// mutation type's proposals into `clock`.
 pub fn render_mlt(
     settings: &Mlt,
     scene: &Scene,
     run: &RunSettings,
     stop: &AtomicBool,
     observer: &dyn Observer,
+    clock: &Arc<ProposalClock>,
 ) -> Result<MltResult, MltError> {
     if scene.lights.has_emitter_at_infinity() {
         return Err(MltError::Setting(emitters_at_infinity_refusal("mlt")));
     }
-    let family = PathFamily::between(scene, settings.min_segments(), settings.max_segments());
+    let family = PathFamily::between(scene, settings.min_segments(), settings.max_segments())
+        .timed(clock.clone());
     markov::run(
         scene,
         &family,

@@ -24,6 +24,7 @@ use super::lens_perturbation::LensPerturbation;
 use super::lens_subpath::LensSubpath;
 use super::manifold_perturbation::ManifoldPerturbation;
 use super::multi_chain_perturbation::MultiChainPerturbation;
+use super::proposal_clock::{ProposalClock, Timed};
 use super::state::{Path, PathTarget};
 use super::walk::{ChainSource, camera_walk, light_walk};
 use crate::light::Light;
@@ -33,6 +34,7 @@ use crate::scene::Scene;
 use mcmc_core::kernel::{Kernel, Mixture};
 use mcmc_core::math::log_sum_exp;
 use mcmc_core::rng::{ChainRng, stream_rng, uniform};
+use std::sync::Arc;
 
 /// The mutation mixture: one selection weight per mutation type
 /// (normalised over the types with non-zero weight). Mitsuba 0.6's `mlt`
@@ -140,14 +142,30 @@ impl PathMutations {
         min_segments: usize,
         max_segments: Option<usize>,
     ) -> Result<Mixture<Path<'s>, PathSample>, String> {
+        self.kernel_timed(min_segments, max_segments, None)
+    }
+
+    /// [`PathMutations::kernel_between`] with each mutation type's
+    /// proposals counted and sampled into `clock` when given
+    /// ([`ProposalClock`]; the chains' random numbers are unchanged).
+    pub fn kernel_timed<'s>(
+        &self,
+        min_segments: usize,
+        max_segments: Option<usize>,
+        clock: Option<&Arc<ProposalClock>>,
+    ) -> Result<Mixture<Path<'s>, PathSample>, String> {
         self.check_weights()?;
-        let bidirectional: Box<dyn Kernel<Path<'s>, PathSample> + Send> = Box::new(
+        let bidirectional = part(
             Bidirectional::new(min_segments, max_segments, self.fixed_length),
+            clock,
         );
-        let independent: Box<dyn Kernel<Path<'s>, PathSample> + Send> = Box::new(IndependentPath {
-            min_segments,
-            max_segments,
-        });
+        let independent = part(
+            IndependentPath {
+                min_segments,
+                max_segments,
+            },
+            clock,
+        );
         // The independent proposal stays at its component index even with
         // weight 0 (INDEPENDENT_COMPONENT); new mutations come after it.
         let mut parts = vec![
@@ -157,28 +175,28 @@ impl PathMutations {
         if self.lens_perturbation > 0.0 {
             parts.push((
                 self.lens_perturbation,
-                Box::new(LensPerturbation::default()),
+                part(LensPerturbation::default(), clock),
             ));
         }
         if self.caustic_perturbation > 0.0 {
             parts.push((
                 self.caustic_perturbation,
-                Box::new(CausticPerturbation::default()),
+                part(CausticPerturbation::default(), clock),
             ));
         }
         if self.multi_chain_perturbation > 0.0 {
             parts.push((
                 self.multi_chain_perturbation,
-                Box::new(MultiChainPerturbation::default()),
+                part(MultiChainPerturbation::default(), clock),
             ));
         }
         if self.lens_subpath > 0.0 {
-            parts.push((self.lens_subpath, Box::new(LensSubpath::default())));
+            parts.push((self.lens_subpath, part(LensSubpath::default(), clock)));
         }
         if self.manifold_perturbation > 0.0 {
             parts.push((
                 self.manifold_perturbation,
-                Box::new(ManifoldPerturbation::default()),
+                part(ManifoldPerturbation::default(), clock),
             ));
         }
         Mixture::new(parts).map_err(|e| e.to_string())
@@ -197,6 +215,24 @@ impl PathMutations {
     }
 }
 
+/// `kernel` boxed for a mixture, wrapped in [`Timed`] when `clock` is
+/// given.
+fn part<'s, K>(
+    kernel: K,
+    clock: Option<&Arc<ProposalClock>>,
+) -> Box<dyn Kernel<Path<'s>, PathSample> + Send>
+where
+    K: Kernel<Path<'s>, PathSample> + Send + 'static,
+{
+    match clock {
+        Some(c) => {
+            let name = kernel.component_names().swap_remove(0);
+            Box::new(Timed::new(kernel, name, c.clone()))
+        }
+        None => Box::new(kernel),
+    }
+}
+
 /// Path space over one scene as a [`ChainFamily`] with one member.
 pub struct PathFamily<'s> {
     /// The scene.
@@ -207,6 +243,7 @@ pub struct PathFamily<'s> {
     pub min_segments: usize,
     target: PathTarget,
     area_lights: bool,
+    clock: Option<Arc<ProposalClock>>,
 }
 
 impl<'s> PathFamily<'s> {
@@ -228,6 +265,16 @@ impl<'s> PathFamily<'s> {
                 .lights
                 .iter()
                 .any(|l| matches!(l, Light::Area { .. })),
+            clock: None,
+        }
+    }
+
+    /// The family with its chains' proposals timed into `clock` per
+    /// mutation type ([`ProposalClock`]).
+    pub fn timed(self, clock: Arc<ProposalClock>) -> Self {
+        PathFamily {
+            clock: Some(clock),
+            ..self
         }
     }
 
@@ -321,7 +368,7 @@ impl<'s> ChainFamily for PathFamily<'s> {
         // Long chains must be ergodic (check), unlike erpt's short ones.
         mutation.check().map_err(MltError::Setting)?;
         mutation
-            .kernel_between(self.min_segments, self.max_segments)
+            .kernel_timed(self.min_segments, self.max_segments, self.clock.as_ref())
             .map_err(MltError::Setting)
     }
     fn independent_probability(&self, mutation: &PathMutations) -> f64 {

@@ -16,6 +16,8 @@
 //! - [`multi_chain_perturbation`]: Veach's multi-chain perturbation.
 //! - [`lens_subpath`]: Veach's lens subpath mutation.
 //! - [`manifold_perturbation`]: Jakob & Marschner's manifold perturbation.
+//! - [`proposal_clock`]: per-mutation-type proposal counts and sampled
+//!   times for the sidecar's `mutation_types`.
 //! - [`retrace`]: what the re-tracing perturbations share (chain tracing,
 //!   the checks of a written proposal, density products, component names).
 //! - [`family`]: the driver's [`crate::markov::ChainFamily`] for path space
@@ -52,6 +54,7 @@ pub mod lens_perturbation;
 pub mod lens_subpath;
 pub mod manifold_perturbation;
 pub mod multi_chain_perturbation;
+pub mod proposal_clock;
 pub mod retrace;
 pub mod state;
 pub mod walk;
