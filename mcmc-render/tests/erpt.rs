@@ -192,7 +192,9 @@ fn erpt_refuses_unbuilt_mutations_and_zero_depth() {
 /// some proposals of each type were timed.
 fn check_mutation_types(stats: &serde_json::Map<String, serde_json::Value>) {
     let types = stats["mutation_types"].as_array().expect("mutation_types");
-    let components = stats["acceptance_per_component"].as_array().expect("components");
+    let components = stats["acceptance_per_component"]
+        .as_array()
+        .expect("components");
     let count = |v: &serde_json::Value, k: &str| v[k].as_u64().expect(k);
     let mut total = 0;
     for t in types {

@@ -134,7 +134,7 @@ impl<'s, K: Kernel<Path<'s>, PathSample>> Kernel<Path<'s>, PathSample> for Timed
         rng: &mut ChainRng,
     ) -> Proposal {
         self.own.proposals += 1;
-        if self.own.proposals % STRIDE != 0 {
+        if !self.own.proposals.is_multiple_of(STRIDE) {
             return self.inner.propose(current, proposal, rng);
         }
         let start = Instant::now();
@@ -185,7 +185,9 @@ pub fn mutation_types(
     run_seconds: f64,
 ) -> Value {
     let times = clock.totals();
-    let mut types: Vec<(String, u64, u64, Vec<(String, u64)>)> = Vec::new();
+    // (name, proposals, accepted, proposals per failure reason)
+    type Counts = (String, u64, u64, Vec<(String, u64)>);
+    let mut types: Vec<Counts> = Vec::new();
     for (name, proposed, accepted) in components {
         match name.split_once(": ") {
             Some((ty, reason)) => {
