@@ -66,12 +66,13 @@ mod common;
 use common::load_str;
 use glam::{DVec3, Vec2, Vec3};
 use mcmc_core::kernel::Kernel;
-use mcmc_core::rng::stream_rng;
+use mcmc_core::rng::{stream_rng, uniform};
 use mcmc_core::sample::Sample;
 use mcmc_render::color::Rgb;
 use mcmc_render::integrators::path_vertex::Vertex;
 use mcmc_render::markov::{ChainFamily, ChainSettings, Normalization};
 use mcmc_render::observer::NoObserver;
+use mcmc_render::path_space::bidirectional::Bidirectional;
 use mcmc_render::path_space::caustic_perturbation::{
     AngleKernel, CausticPerturbation, caustic_chain,
 };
@@ -1281,4 +1282,132 @@ fn lens_subpath_density_matches_its_proposals() {
         log_jacobian,
         1e-9,
     );
+}
+
+/// Suitability selection (Mitsuba 0.6): a mutation whose pattern the path
+/// does not match is never selected, and the bidirectional mutation's
+/// reported ratio is its own plus `ln p_b(y) − ln p_b(x)`, the selection
+/// probabilities renormalised over the applicable types at each end:
+/// checked exactly (to 1e-12) against the bare bidirectional mutation
+/// replayed with the same random numbers (the mixture draws one uniform
+/// for the selection, then the component draws its own). On the mirror
+/// box of ≤ 3 segments the applicable sets differ (`L D E`: all three;
+/// `L S E`: bidirectional only; `L D S E`: + lens; `L S D E`: + caustic),
+/// so the bidirectional mutation often moves between them. Control: the
+/// fixed-weight mixture's ratio lacks the factor and must miss it.
+#[test]
+fn suitability_selection_enters_the_ratio() {
+    let scene = mirror_box();
+    let weights = [1.0, 2.0, 3.0];
+    let mutations = PathMutations {
+        bidirectional: weights[0],
+        lens_perturbation: weights[1],
+        caustic_perturbation: weights[2],
+        suitability: true,
+        ..PathMutations::default()
+    };
+    let mut suitable = mutations.kernel(Some(3)).expect("mixture");
+    let mut fixed = PathMutations {
+        suitability: false,
+        ..mutations
+    }
+    .kernel(Some(3))
+    .expect("mixture");
+    let mut bare = Bidirectional::new(1, Some(3), false);
+    // ln p_b at x: the bidirectional weight over the applicable weights.
+    let log_p_bidirectional = |x: &Path| {
+        let lens = if lens_chain(x).is_some() {
+            weights[1]
+        } else {
+            0.0
+        };
+        let caustic = if caustic_chain(x).is_some() {
+            weights[2]
+        } else {
+            0.0
+        };
+        (weights[0] / (weights[0] + lens + caustic)).ln()
+    };
+    // Components: bidirectional 0–6, independent 7, lens 8–14, caustic 15–24.
+    let (lens_range, caustic_range) = (8..15, 15..25);
+    let family = PathFamily::new(scene, Some(3));
+    let mut rng = stream_rng(71, 0);
+    let (mut checked, mut moved_between_sets) = (0, 0);
+    let (mut control_cases, mut control_missed) = (0, 0);
+    let (mut lens_picked, mut caustic_picked) = (0, 0);
+    for i in 0..4000u64 {
+        let x = family.draw_candidate(&mut rng);
+        if x.luminance() <= 0.0 {
+            continue;
+        }
+        let current = sample_of(&x);
+        let numbers = stream_rng(1000 + i, 0);
+        let mut proposal = sample_of(&x);
+        let p = suitable.propose(&current, &mut proposal, &mut numbers.clone());
+        if lens_range.contains(&p.component) {
+            lens_picked += 1;
+            assert!(
+                lens_chain(&x).is_some(),
+                "lens selected where it cannot apply"
+            );
+        }
+        if caustic_range.contains(&p.component) {
+            caustic_picked += 1;
+            assert!(
+                caustic_chain(&x).is_some(),
+                "caustic selected where it cannot apply"
+            );
+        }
+        if p.failed || p.component != 0 {
+            continue;
+        }
+        let mut replay = numbers.clone();
+        let _selection = uniform(&mut replay);
+        let mut alone = sample_of(&x);
+        let q = bare.propose(&current, &mut alone, &mut replay);
+        assert!(!q.failed && q.component == 0, "replay differs");
+        let y = &proposal.state;
+        assert_eq!(y.raster, alone.state.raster, "replay made another path");
+        assert_eq!(y.len(), alone.state.len());
+        let factor = log_p_bidirectional(y) - log_p_bidirectional(&x);
+        if q.log_q_ratio == f64::NEG_INFINITY {
+            // No reverse move: rejected with or without the selection.
+            assert_eq!(p.log_q_ratio, f64::NEG_INFINITY);
+            continue;
+        }
+        let expected = q.log_q_ratio + factor;
+        assert!(
+            (p.log_q_ratio - expected).abs() <= 1e-12 * (1.0 + expected.abs()),
+            "ratio {} vs bidirectional {} + selection {factor}",
+            p.log_q_ratio,
+            q.log_q_ratio
+        );
+        checked += 1;
+        if factor.abs() > 1e-3 {
+            moved_between_sets += 1;
+            // The control: the same move through the fixed mixture (same
+            // numbers, same selection here as the bidirectional weight is
+            // chosen first) reports the bare ratio, off by the factor.
+            let mut control = sample_of(&x);
+            let c = fixed.propose(&current, &mut control, &mut numbers.clone());
+            if c.component == 0 && !c.failed {
+                control_cases += 1;
+                control_missed += usize::from((c.log_q_ratio - expected).abs() > 1e-3);
+            }
+        }
+    }
+    eprintln!(
+        "{checked} bidirectional proposals checked, {moved_between_sets} between applicable sets (control missed {control_missed} of {control_cases}); lens picked {lens_picked}, caustic {caustic_picked}"
+    );
+    assert!(checked >= 200, "too few checked: {checked}");
+    assert!(
+        moved_between_sets >= 20,
+        "too few set changes: {moved_between_sets}"
+    );
+    assert!(control_cases >= 5, "too few control cases: {control_cases}");
+    assert_eq!(
+        control_missed, control_cases,
+        "the control passed somewhere"
+    );
+    assert!(lens_picked > 0 && caustic_picked > 0);
 }

@@ -61,6 +61,8 @@ crate::settings! {
         pub manifold_perturbation: f64 = 0.0, check check::non_negative;
         /// Selection weight of Veach's lens subpath mutation (not in Mitsuba; 0 by default).
         pub lens_subpath_mutation: f64 = 0.0, check check::non_negative;
+        /// Mitsuba 0.6's suitability selection: mutations whose pattern the path does not match are not selected, the others' weights renormalised (the selection ratio enters the acceptance); false: fixed weights.
+        pub suitability: bool = false;
         /// Samples per pixel of the direct-lighting pass (path tracing of paths up to two segments; the chains take the rest); -1: off, the chains do everything (Mitsuba's default is 16).
         pub direct_samples: i64 = -1, check direct_samples;
         flatten {
@@ -84,6 +86,7 @@ impl Mlt {
             manifold_perturbation: self.manifold_perturbation,
             lens_subpath: self.lens_subpath_mutation,
             independent: self.independent_mutation,
+            suitability: self.suitability,
         }
     }
 

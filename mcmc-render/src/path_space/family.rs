@@ -18,12 +18,12 @@
 //! candidates in proportion to the weights.
 
 use super::bidirectional::Bidirectional;
-use super::caustic_perturbation::CausticPerturbation;
+use super::caustic_perturbation::{CausticPerturbation, caustic_chain};
 use super::independent::IndependentPath;
-use super::lens_perturbation::LensPerturbation;
+use super::lens_perturbation::{LensPerturbation, lens_chain};
 use super::lens_subpath::LensSubpath;
-use super::manifold_perturbation::ManifoldPerturbation;
-use super::multi_chain_perturbation::MultiChainPerturbation;
+use super::manifold_perturbation::{ManifoldPerturbation, selections as manifold_selections};
+use super::multi_chain_perturbation::{MultiChainPerturbation, multi_chain};
 use super::proposal_clock::{ProposalClock, Timed};
 use super::state::{Path, PathTarget};
 use super::walk::{ChainSource, camera_walk, light_walk};
@@ -62,6 +62,13 @@ pub struct PathMutations {
     /// Weight of the independent proposal ([`IndependentPath`]: a fresh
     /// start-up candidate; not in Mitsuba).
     pub independent: f64,
+    /// Mitsuba 0.6's suitability selection: a mutation whose pattern the
+    /// current path does not match is not selected, the weights are
+    /// renormalised over the applicable ones, and since the selection
+    /// then depends on the path, `ln p_k(y) − ln p_k(x)` enters the
+    /// proposal ratio ([`Mixture::state_dependent`]). Off: fixed
+    /// probabilities, an inapplicable mutation fails as a pattern mismatch.
+    pub suitability: bool,
 }
 
 /// Kernel component of the independent proposal: the mixture always holds
@@ -82,6 +89,7 @@ impl Default for PathMutations {
             manifold_perturbation: 0.0,
             lens_subpath: 0.0,
             independent: 0.0,
+            suitability: false,
         }
     }
 }
@@ -168,38 +176,58 @@ impl PathMutations {
         );
         // The independent proposal stays at its component index even with
         // weight 0 (INDEPENDENT_COMPONENT); new mutations come after it.
+        let always: Applies = |_| true;
         let mut parts = vec![
-            (self.bidirectional, bidirectional),
-            (self.independent, independent),
+            (self.bidirectional, always, bidirectional),
+            (self.independent, always, independent),
         ];
         if self.lens_perturbation > 0.0 {
             parts.push((
                 self.lens_perturbation,
+                |x| lens_chain(x).is_some(),
                 part(LensPerturbation::default(), clock),
             ));
         }
         if self.caustic_perturbation > 0.0 {
             parts.push((
                 self.caustic_perturbation,
+                |x| caustic_chain(x).is_some(),
                 part(CausticPerturbation::default(), clock),
             ));
         }
         if self.multi_chain_perturbation > 0.0 {
             parts.push((
                 self.multi_chain_perturbation,
+                |x| multi_chain(x).is_some(),
                 part(MultiChainPerturbation::default(), clock),
             ));
         }
         if self.lens_subpath > 0.0 {
-            parts.push((self.lens_subpath, part(LensSubpath::default(), clock)));
+            parts.push((
+                self.lens_subpath,
+                |x| lens_chain(x).is_some(),
+                part(LensSubpath::default(), clock),
+            ));
         }
         if self.manifold_perturbation > 0.0 {
             parts.push((
                 self.manifold_perturbation,
+                |x| !manifold_selections(x).is_empty(),
                 part(ManifoldPerturbation::default(), clock),
             ));
         }
-        Mixture::new(parts).map_err(|e| e.to_string())
+        if !self.suitability {
+            let parts = parts.into_iter().map(|(w, _, k)| (w, k)).collect();
+            return Mixture::new(parts).map_err(|e| e.to_string());
+        }
+        let mut selection = Vec::with_capacity(parts.len());
+        let mut kernels = Vec::with_capacity(parts.len());
+        for (w, applies, k) in parts {
+            selection.push((w, applies));
+            kernels.push(k);
+        }
+        Mixture::state_dependent(kernels, move |x: &Path| suitable_weights(&selection, x))
+            .map_err(|e| e.to_string())
     }
 
     /// The probability that the mixture proposes independently.
@@ -213,6 +241,18 @@ impl PathMutations {
                 + self.lens_subpath
                 + self.manifold_perturbation)
     }
+}
+
+/// Whether a mutation type can move a path (its pattern test).
+type Applies = fn(&Path<'_>) -> bool;
+
+/// The suitability selection's weights at `x`: each type's weight where
+/// it applies, 0 elsewhere (the mixture normalises them).
+pub fn suitable_weights(selection: &[(f64, Applies)], x: &Path<'_>) -> Vec<f64> {
+    selection
+        .iter()
+        .map(|&(w, applies)| if w > 0.0 && applies(x) { w } else { 0.0 })
+        .collect()
 }
 
 /// `kernel` boxed for a mixture, wrapped in [`Timed`] when `clock` is
