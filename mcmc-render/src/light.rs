@@ -491,6 +491,14 @@ impl Lights {
         }
     }
 
+    /// True when an emitter lies at infinity (`envmap`, `constant`,
+    /// `directional`): the path-space integrators refuse such scenes.
+    pub fn has_emitter_at_infinity(&self) -> bool {
+        self.lights
+            .iter()
+            .any(|l| matches!(l, Light::Directional { .. } | Light::Environment(_)))
+    }
+
     /// True when the scene has no emitter.
     pub fn is_empty(&self) -> bool {
         self.lights.is_empty()

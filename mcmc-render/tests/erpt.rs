@@ -128,6 +128,7 @@ fn erpt_images_are_bit_identical_across_thread_counts() {
             ] {
                 assert!(out.statistics.contains_key(key), "{key} missing");
             }
+            check_mutation_types(&out.statistics);
             out.image
                 .iter()
                 .flat_map(|p| [p.r.to_bits(), p.g.to_bits(), p.b.to_bits()])
@@ -182,4 +183,40 @@ fn erpt_refuses_unbuilt_mutations_and_zero_depth() {
         assert!(err.is_err(), "{k} = {v} accepted");
     }
     assert!(registry::configure(None, Some("erpt"), &[]).is_ok());
+}
+
+/// The sidecar's `mutation_types` adds up: per type, its proposals are the
+/// sum of its components' in `acceptance_per_component` (the mutation and
+/// its failure reasons), its accepted those of its component 0, its
+/// invalid the failures; over types, the proposals are the mutations; and
+/// some proposals of each type were timed.
+fn check_mutation_types(stats: &serde_json::Map<String, serde_json::Value>) {
+    let types = stats["mutation_types"].as_array().expect("mutation_types");
+    let components = stats["acceptance_per_component"]
+        .as_array()
+        .expect("components");
+    let count = |v: &serde_json::Value, k: &str| v[k].as_u64().expect(k);
+    let mut total = 0;
+    for t in types {
+        let name = t["name"].as_str().expect("name");
+        let own: Vec<_> = components
+            .iter()
+            .filter(|c| {
+                let n = c["name"].as_str().expect("name");
+                n == name || n.starts_with(&format!("{name}: "))
+            })
+            .collect();
+        let proposed: u64 = own.iter().map(|c| count(c, "proposed")).sum();
+        assert_eq!(count(t, "proposals"), proposed, "{name}");
+        assert_eq!(count(t, "accepted"), count(own[0], "accepted"), "{name}");
+        assert_eq!(
+            count(t, "invalid"),
+            proposed - count(own[0], "proposed"),
+            "{name}"
+        );
+        assert!(count(t, "timed_proposals") > 0, "{name}: nothing timed");
+        assert!(t["proposals_per_second"].as_f64().expect("rate") > 0.0);
+        total += proposed;
+    }
+    assert_eq!(total, stats["mutations"].as_u64().expect("mutations"));
 }

@@ -52,10 +52,10 @@ use crate::color::Rgb;
 use crate::film::{Film, Filter};
 use crate::integrators::bdpt::generate_camera_subpath;
 use crate::integrators::path_vertex::{Vertex, VertexKind};
-use crate::light::Light;
 use crate::observer::Observer;
+use crate::path_space::proposal_clock::{ProposalClock, mutation_types};
 use crate::path_space::walk::{ChainSource, light_walk};
-use crate::path_space::{Path, PathMutations, PathTarget};
+use crate::path_space::{Path, PathMutations, PathTarget, emitters_at_infinity_refusal};
 use crate::pss::PathSample;
 use crate::scene::Scene;
 use crate::settings::check;
@@ -128,9 +128,12 @@ impl Erpt {
         }
     }
 
-    fn kernel<'s>(&self) -> Result<Mixture<Path<'s>, PathSample>, String> {
+    fn kernel<'s>(
+        &self,
+        clock: Option<&Arc<ProposalClock>>,
+    ) -> Result<Mixture<Path<'s>, PathSample>, String> {
         let max = (self.depth.max_depth >= 0).then_some(self.depth.max_depth as usize);
-        self.mutations().kernel_between(1, max)
+        self.mutations().kernel_timed(1, max, clock)
     }
 }
 
@@ -216,15 +219,8 @@ impl IntegratorSettings for Erpt {
         observer: &dyn Observer,
     ) -> Result<Rendered, RenderError> {
         IntegratorSettings::validate(self).map_err(RenderError::Invalid)?;
-        if scene
-            .lights
-            .lights
-            .iter()
-            .any(|l| matches!(l, Light::Directional { .. } | Light::Environment(_)))
-        {
-            return Err(RenderError::Invalid(
-                "erpt does not support emitters at infinity (environment, directional) yet".into(),
-            ));
+        if scene.lights.has_emitter_at_infinity() {
+            return Err(RenderError::Invalid(emitters_at_infinity_refusal("erpt")));
         }
         let start = Instant::now();
         let (w, h) = (scene.film.width, scene.film.height);
@@ -256,7 +252,8 @@ impl IntegratorSettings for Erpt {
         let e_d = mean_lum / (self.chain_length as f64 * self.num_chains);
         let filter = Arc::new(Filter::new(scene.film.filter, w, h));
         let mut film = Film::new_splat_only(w, h, filter.clone());
-        let kernel_names = self.kernel().map_err(RenderError::Invalid)?;
+        let kernel_names = self.kernel(None).map_err(RenderError::Invalid)?;
+        let clock = ProposalClock::new();
         let mut stats =
             ChainStatistics::new(mcmc_core::kernel::Kernel::component_names(&kernel_names));
         let (mut passes, mut seeds_total, mut chains_total) = (0u64, 0u64, 0u64);
@@ -278,7 +275,7 @@ impl IntegratorSettings for Erpt {
                     chains: 0,
                     stopped: false,
                 };
-                let Ok(kernel) = self.kernel() else {
+                let Ok(kernel) = self.kernel(Some(&clock)) else {
                     return out;
                 };
                 let mut mh = MetropolisHastings::new(kernel);
@@ -368,6 +365,11 @@ impl IntegratorSettings for Erpt {
             })).collect::<Vec<_>>(),
             "failed_proposals": stats.failed,
             "nonfinite_contributions": stats.invalid_density,
+            "mutation_types": mutation_types(
+                stats.components.iter().map(|c| (c.name.clone(), c.proposed, c.accepted)),
+                &clock,
+                seconds,
+            ),
         });
         let serde_json::Value::Object(statistics) = statistics else {
             unreachable!("json! of an object literal is an object")

@@ -30,14 +30,15 @@
 use super::pt::PathTracer;
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
-use crate::light::Light;
 use crate::markov::{self, ChainParams, MltError, MltResult};
 use crate::observer::Observer;
-use crate::path_space::{PathFamily, PathMutations};
+use crate::path_space::proposal_clock::{ProposalClock, mutation_types};
+use crate::path_space::{PathFamily, PathMutations, emitters_at_infinity_refusal};
 use crate::pss_dump::DumpSampler;
 use crate::scene::Scene;
 use crate::settings::check;
 use serde_json::json;
+use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
@@ -60,6 +61,8 @@ crate::settings! {
         pub manifold_perturbation: f64 = 0.0, check check::non_negative;
         /// Selection weight of Veach's lens subpath mutation (not in Mitsuba; 0 by default).
         pub lens_subpath_mutation: f64 = 0.0, check check::non_negative;
+        /// Mitsuba 0.6's suitability selection: mutations whose pattern the path does not match are not selected, the others' weights renormalised (the selection ratio enters the acceptance); false: fixed weights.
+        pub suitability: bool = false;
         /// Samples per pixel of the direct-lighting pass (path tracing of paths up to two segments; the chains take the rest); -1: off, the chains do everything (Mitsuba's default is 16).
         pub direct_samples: i64 = -1, check direct_samples;
         flatten {
@@ -83,6 +86,7 @@ impl Mlt {
             manifold_perturbation: self.manifold_perturbation,
             lens_subpath: self.lens_subpath_mutation,
             independent: self.independent_mutation,
+            suitability: self.suitability,
         }
     }
 
@@ -157,13 +161,27 @@ impl IntegratorSettings for Mlt {
             time_budget: run.time_budget.map(|t| t.saturating_sub(start.elapsed())),
             ..run.clone()
         };
-        let result = render_mlt(self, scene, &chains_run, stop, observer)?;
+        let clock = ProposalClock::new();
+        let result = render_mlt(self, scene, &chains_run, stop, observer, &clock)?;
         let mut out = markov::report::rendered(
             &result,
             // Path states have no primary-sample coordinates: no dump.
             DumpSampler::Bdpt,
             self.depth.limit(),
             false,
+        );
+        let components = result
+            .chain_stats
+            .components
+            .iter()
+            .map(|c| (c.name.clone(), c.proposed, c.accepted));
+        out.statistics.insert(
+            "mutation_types".into(),
+            mutation_types(
+                components,
+                &clock,
+                result.seconds - result.bootstrap_seconds,
+            ),
         );
         if let Some(direct) = direct {
             for (p, d) in out.image.iter_mut().zip(&direct.image) {
@@ -188,25 +206,21 @@ impl IntegratorSettings for Mlt {
     }
 }
 
-/// Renders `scene` with path-space MLT as `settings` say.
+/// Renders `scene` with path-space MLT as `settings` say, timing each
+/// mutation type's proposals into `clock`.
 pub fn render_mlt(
     settings: &Mlt,
     scene: &Scene,
     run: &RunSettings,
     stop: &AtomicBool,
     observer: &dyn Observer,
+    clock: &Arc<ProposalClock>,
 ) -> Result<MltResult, MltError> {
-    if scene
-        .lights
-        .lights
-        .iter()
-        .any(|l| matches!(l, Light::Directional { .. } | Light::Environment(_)))
-    {
-        return Err(MltError::Setting(
-            "mlt does not support emitters at infinity (environment, directional) yet".into(),
-        ));
+    if scene.lights.has_emitter_at_infinity() {
+        return Err(MltError::Setting(emitters_at_infinity_refusal("mlt")));
     }
-    let family = PathFamily::between(scene, settings.min_segments(), settings.max_segments());
+    let family = PathFamily::between(scene, settings.min_segments(), settings.max_segments())
+        .timed(clock.clone());
     markov::run(
         scene,
         &family,

@@ -49,6 +49,7 @@
 //! contribution (zero BSDF, off the image, a camera walk that missed the
 //! emitters).
 
+use super::retrace::component_names;
 use super::state::Path;
 use super::walk::{ChainSource, camera_walk, extend_walk, light_walk};
 use crate::bsdf::TransportMode;
@@ -534,12 +535,6 @@ impl<'s> Kernel<Path<'s>, PathSample> for Bidirectional {
     }
 
     fn component_names(&self) -> Vec<String> {
-        std::iter::once(self.name.clone())
-            .chain(
-                Invalid::ALL
-                    .iter()
-                    .map(|r| format!("{}: {}", self.name, r.name())),
-            )
-            .collect()
+        component_names(&self.name, Invalid::ALL.iter().map(|r| r.name()))
     }
 }

@@ -59,13 +59,13 @@
 //! moves it.
 
 use super::lens_perturbation::{OffsetKernel, film_pixels};
+use super::retrace::{
+    RetraceFailure, component_names, finish_proposal, log_density_product, trace_dirac_chain,
+};
 use super::state::Path;
-use super::walk::ChainSource;
 use crate::bsdf::TransportMode;
-use crate::color::Rgb;
 use crate::frame::Frame;
 use crate::geometry::Ray;
-use crate::integrators::bdpt::random_walk;
 use crate::integrators::path_vertex::{Vertex, VertexKind};
 use crate::pss::PathSample;
 use glam::{DVec3, Vec3};
@@ -304,51 +304,27 @@ impl CausticPerturbation {
             Ray::new(start.p(), dir)
         };
         let count = k - 1 - l;
-        self.walk.clear();
-        self.walk.push(*start);
-        let mut source = ChainSource::new(rng);
-        let made = random_walk(
-            scene,
-            ray,
-            &mut source,
-            TransportMode::Importance,
-            Rgb::WHITE,
-            1.0,
-            count,
-            None,
-            &mut self.walk,
-        );
-        if made != count || self.walk[1..].iter().any(|v| v.kind != VertexKind::Surface) {
-            return Err(Invalid::WalkEnded);
-        }
         // walk[i] = y_{l+i}: the chain y_{l+1} … y_{k−2} must stay Dirac.
-        if !self.walk[1..count].iter().all(|v| v.delta) {
-            return Err(Invalid::PatternChanged);
-        }
+        trace_dirac_chain(
+            scene,
+            start,
+            ray,
+            TransportMode::Importance,
+            count,
+            &mut self.walk,
+            rng,
+        )?;
         let cam = x.vertices[k];
         let vs = &mut y.vertices;
         vs.clear();
         vs.extend_from_slice(&x.vertices[..=l]);
         vs.extend_from_slice(&self.walk[1..]);
         vs.push(cam);
-        y.normalize_ends();
-        y.evaluate();
-        if caustic_chain(y) != Some(l) {
-            return Err(Invalid::PatternChanged);
-        }
-        if scene
-            .camera
-            .connect(cam.p(), y.vertices[k - 1].p())
-            .is_none()
-        {
-            return Err(Invalid::OffImage);
-        }
-        if !y.edge_visible(k - 1) {
-            return Err(Invalid::Occluded);
-        }
-        if y.contribution.is_black() {
-            return Err(Invalid::ZeroContribution);
-        }
+        let on_image = |y: &Path| match scene.camera.connect(cam.p(), y.vertices[k - 1].p()) {
+            Some(_) => Ok(()),
+            None => Err(Invalid::OffImage),
+        };
+        finish_proposal(y, |y| caustic_chain(y) == Some(l), on_image, k - 1)?;
         Ok(l)
     }
 }
@@ -357,15 +333,23 @@ impl CausticPerturbation {
 /// the solid angle at `y_l` to area at `y_{l+1}`, then the light walk's
 /// `Σ_{i=l+2}^{k−1} ln pdf_fwd(y_i)` (`−∞` when one is zero).
 fn log_chain_density(y: &Path, l: usize) -> f64 {
-    let k = y.segments();
-    let mut sum = (y.vertices[l].convert_density(1.0, &y.vertices[l + 1]) as f64).ln();
-    for v in &y.vertices[l + 2..k] {
-        if !(v.pdf_fwd > 0.0) {
-            return f64::NEG_INFINITY;
+    let vs = &y.vertices;
+    let solid_angle_to_area = vs[l].convert_density(1.0, &vs[l + 1]);
+    log_density_product(
+        std::iter::once(solid_angle_to_area)
+            .chain(vs[l + 2..y.segments()].iter().map(|v| v.pdf_fwd)),
+    )
+}
+
+impl From<RetraceFailure> for Invalid {
+    fn from(f: RetraceFailure) -> Self {
+        match f {
+            RetraceFailure::WalkEnded => Invalid::WalkEnded,
+            RetraceFailure::PatternChanged => Invalid::PatternChanged,
+            RetraceFailure::Occluded => Invalid::Occluded,
+            RetraceFailure::ZeroContribution => Invalid::ZeroContribution,
         }
-        sum += (v.pdf_fwd as f64).ln();
     }
-    if sum.is_nan() { f64::NEG_INFINITY } else { sum }
 }
 
 impl<'s> Kernel<Path<'s>, PathSample> for CausticPerturbation {
@@ -392,12 +376,6 @@ impl<'s> Kernel<Path<'s>, PathSample> for CausticPerturbation {
     }
 
     fn component_names(&self) -> Vec<String> {
-        std::iter::once(self.name.clone())
-            .chain(
-                Invalid::ALL
-                    .iter()
-                    .map(|r| format!("{}: {}", self.name, r.name())),
-            )
-            .collect()
+        component_names(&self.name, Invalid::ALL.iter().map(|r| r.name()))
     }
 }

@@ -18,12 +18,13 @@
 //! candidates in proportion to the weights.
 
 use super::bidirectional::Bidirectional;
-use super::caustic_perturbation::CausticPerturbation;
+use super::caustic_perturbation::{CausticPerturbation, caustic_chain};
 use super::independent::IndependentPath;
-use super::lens_perturbation::LensPerturbation;
+use super::lens_perturbation::{LensPerturbation, lens_chain};
 use super::lens_subpath::LensSubpath;
-use super::manifold_perturbation::ManifoldPerturbation;
-use super::multi_chain_perturbation::MultiChainPerturbation;
+use super::manifold_perturbation::{ManifoldPerturbation, selections as manifold_selections};
+use super::multi_chain_perturbation::{MultiChainPerturbation, multi_chain};
+use super::proposal_clock::{ProposalClock, Timed};
 use super::state::{Path, PathTarget};
 use super::walk::{ChainSource, camera_walk, light_walk};
 use crate::light::Light;
@@ -33,6 +34,7 @@ use crate::scene::Scene;
 use mcmc_core::kernel::{Kernel, Mixture};
 use mcmc_core::math::log_sum_exp;
 use mcmc_core::rng::{ChainRng, stream_rng, uniform};
+use std::sync::Arc;
 
 /// The mutation mixture: one selection weight per mutation type
 /// (normalised over the types with non-zero weight). Mitsuba 0.6's `mlt`
@@ -60,6 +62,13 @@ pub struct PathMutations {
     /// Weight of the independent proposal ([`IndependentPath`]: a fresh
     /// start-up candidate; not in Mitsuba).
     pub independent: f64,
+    /// Mitsuba 0.6's suitability selection: a mutation whose pattern the
+    /// current path does not match is not selected, the weights are
+    /// renormalised over the applicable ones, and since the selection
+    /// then depends on the path, `ln p_k(y) − ln p_k(x)` enters the
+    /// proposal ratio ([`Mixture::state_dependent`]). Off: fixed
+    /// probabilities, an inapplicable mutation fails as a pattern mismatch.
+    pub suitability: bool,
 }
 
 /// Kernel component of the independent proposal: the mixture always holds
@@ -80,6 +89,7 @@ impl Default for PathMutations {
             manifold_perturbation: 0.0,
             lens_subpath: 0.0,
             independent: 0.0,
+            suitability: false,
         }
     }
 }
@@ -140,48 +150,84 @@ impl PathMutations {
         min_segments: usize,
         max_segments: Option<usize>,
     ) -> Result<Mixture<Path<'s>, PathSample>, String> {
+        self.kernel_timed(min_segments, max_segments, None)
+    }
+
+    /// [`PathMutations::kernel_between`] with each mutation type's
+    /// proposals counted and sampled into `clock` when given
+    /// ([`ProposalClock`]; the chains' random numbers are unchanged).
+    pub fn kernel_timed<'s>(
+        &self,
+        min_segments: usize,
+        max_segments: Option<usize>,
+        clock: Option<&Arc<ProposalClock>>,
+    ) -> Result<Mixture<Path<'s>, PathSample>, String> {
         self.check_weights()?;
-        let bidirectional: Box<dyn Kernel<Path<'s>, PathSample> + Send> = Box::new(
+        let bidirectional = part(
             Bidirectional::new(min_segments, max_segments, self.fixed_length),
+            clock,
         );
-        let independent: Box<dyn Kernel<Path<'s>, PathSample> + Send> = Box::new(IndependentPath {
-            min_segments,
-            max_segments,
-        });
+        let independent = part(
+            IndependentPath {
+                min_segments,
+                max_segments,
+            },
+            clock,
+        );
         // The independent proposal stays at its component index even with
         // weight 0 (INDEPENDENT_COMPONENT); new mutations come after it.
+        let always: Applies = |_| true;
         let mut parts = vec![
-            (self.bidirectional, bidirectional),
-            (self.independent, independent),
+            (self.bidirectional, always, bidirectional),
+            (self.independent, always, independent),
         ];
         if self.lens_perturbation > 0.0 {
             parts.push((
                 self.lens_perturbation,
-                Box::new(LensPerturbation::default()),
+                |x| lens_chain(x).is_some(),
+                part(LensPerturbation::default(), clock),
             ));
         }
         if self.caustic_perturbation > 0.0 {
             parts.push((
                 self.caustic_perturbation,
-                Box::new(CausticPerturbation::default()),
+                |x| caustic_chain(x).is_some(),
+                part(CausticPerturbation::default(), clock),
             ));
         }
         if self.multi_chain_perturbation > 0.0 {
             parts.push((
                 self.multi_chain_perturbation,
-                Box::new(MultiChainPerturbation::default()),
+                |x| multi_chain(x).is_some(),
+                part(MultiChainPerturbation::default(), clock),
             ));
         }
         if self.lens_subpath > 0.0 {
-            parts.push((self.lens_subpath, Box::new(LensSubpath::default())));
+            parts.push((
+                self.lens_subpath,
+                |x| lens_chain(x).is_some(),
+                part(LensSubpath::default(), clock),
+            ));
         }
         if self.manifold_perturbation > 0.0 {
             parts.push((
                 self.manifold_perturbation,
-                Box::new(ManifoldPerturbation::default()),
+                |x| !manifold_selections(x).is_empty(),
+                part(ManifoldPerturbation::default(), clock),
             ));
         }
-        Mixture::new(parts).map_err(|e| e.to_string())
+        if !self.suitability {
+            let parts = parts.into_iter().map(|(w, _, k)| (w, k)).collect();
+            return Mixture::new(parts).map_err(|e| e.to_string());
+        }
+        let mut selection = Vec::with_capacity(parts.len());
+        let mut kernels = Vec::with_capacity(parts.len());
+        for (w, applies, k) in parts {
+            selection.push((w, applies));
+            kernels.push(k);
+        }
+        Mixture::state_dependent(kernels, move |x: &Path| suitable_weights(&selection, x))
+            .map_err(|e| e.to_string())
     }
 
     /// The probability that the mixture proposes independently.
@@ -197,6 +243,36 @@ impl PathMutations {
     }
 }
 
+/// Whether a mutation type can move a path (its pattern test).
+type Applies = fn(&Path<'_>) -> bool;
+
+/// The suitability selection's weights at `x`: each type's weight where
+/// it applies, 0 elsewhere (the mixture normalises them).
+pub fn suitable_weights(selection: &[(f64, Applies)], x: &Path<'_>) -> Vec<f64> {
+    selection
+        .iter()
+        .map(|&(w, applies)| if w > 0.0 && applies(x) { w } else { 0.0 })
+        .collect()
+}
+
+/// `kernel` boxed for a mixture, wrapped in [`Timed`] when `clock` is
+/// given.
+fn part<'s, K>(
+    kernel: K,
+    clock: Option<&Arc<ProposalClock>>,
+) -> Box<dyn Kernel<Path<'s>, PathSample> + Send>
+where
+    K: Kernel<Path<'s>, PathSample> + Send + 'static,
+{
+    match clock {
+        Some(c) => {
+            let name = kernel.component_names().swap_remove(0);
+            Box::new(Timed::new(kernel, name, c.clone()))
+        }
+        None => Box::new(kernel),
+    }
+}
+
 /// Path space over one scene as a [`ChainFamily`] with one member.
 pub struct PathFamily<'s> {
     /// The scene.
@@ -207,6 +283,7 @@ pub struct PathFamily<'s> {
     pub min_segments: usize,
     target: PathTarget,
     area_lights: bool,
+    clock: Option<Arc<ProposalClock>>,
 }
 
 impl<'s> PathFamily<'s> {
@@ -228,6 +305,16 @@ impl<'s> PathFamily<'s> {
                 .lights
                 .iter()
                 .any(|l| matches!(l, Light::Area { .. })),
+            clock: None,
+        }
+    }
+
+    /// The family with its chains' proposals timed into `clock` per
+    /// mutation type ([`ProposalClock`]).
+    pub fn timed(self, clock: Arc<ProposalClock>) -> Self {
+        PathFamily {
+            clock: Some(clock),
+            ..self
         }
     }
 
@@ -321,7 +408,7 @@ impl<'s> ChainFamily for PathFamily<'s> {
         // Long chains must be ergodic (check), unlike erpt's short ones.
         mutation.check().map_err(MltError::Setting)?;
         mutation
-            .kernel_between(self.min_segments, self.max_segments)
+            .kernel_timed(self.min_segments, self.max_segments, self.clock.as_ref())
             .map_err(MltError::Setting)
     }
     fn independent_probability(&self, mutation: &PathMutations) -> f64 {

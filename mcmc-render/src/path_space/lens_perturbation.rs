@@ -47,12 +47,12 @@
 //! 5% of the image): Mitsuba 0.6's `minJump` and `coveredArea`, the sizes
 //! Veach recommends.
 
+use super::retrace::{
+    RetraceFailure, component_names, finish_proposal, log_density_product, trace_dirac_chain,
+};
 use super::state::Path;
-use super::walk::ChainSource;
 use crate::bsdf::TransportMode;
-use crate::color::Rgb;
 use crate::geometry::Ray;
-use crate::integrators::bdpt::random_walk;
 use crate::integrators::path_vertex::{Vertex, VertexKind};
 use crate::pss::PathSample;
 use crate::scene::Scene;
@@ -247,44 +247,33 @@ impl LensPerturbation {
         let cam = &x.vertices[k];
         let ray = camera_ray(x, raster).ok_or(Invalid::Pattern)?;
         let count = k - j;
-        self.walk.clear();
-        self.walk.push(*cam);
-        let mut source = ChainSource::new(rng);
-        let made = random_walk(
-            scene,
-            ray,
-            &mut source,
-            TransportMode::Radiance,
-            Rgb::WHITE,
-            1.0,
-            count,
-            None,
-            &mut self.walk,
-        );
-        if made != count || self.walk[1..].iter().any(|v| v.kind != VertexKind::Surface) {
-            return Err(Invalid::WalkEnded);
-        }
         // walk[i] = y_{k−i}: the chain y_{k−1} … y_{j+1} must stay Dirac.
-        if !self.walk[1..count].iter().all(|v| v.delta) {
-            return Err(Invalid::PatternChanged);
-        }
+        trace_dirac_chain(
+            scene,
+            cam,
+            ray,
+            TransportMode::Radiance,
+            count,
+            &mut self.walk,
+            rng,
+        )?;
         let vs = &mut y.vertices;
         vs.clear();
         vs.extend_from_slice(&x.vertices[..j]);
         vs.extend(self.walk[1..].iter().rev());
         vs.push(*cam);
-        y.normalize_ends();
-        y.evaluate();
-        if lens_chain(y) != Some(j) {
-            return Err(Invalid::PatternChanged);
+        finish_proposal::<Invalid>(y, |y| lens_chain(y) == Some(j), |_| Ok(()), j - 1)
+    }
+}
+
+impl From<RetraceFailure> for Invalid {
+    fn from(f: RetraceFailure) -> Self {
+        match f {
+            RetraceFailure::WalkEnded => Invalid::WalkEnded,
+            RetraceFailure::PatternChanged => Invalid::PatternChanged,
+            RetraceFailure::Occluded => Invalid::Occluded,
+            RetraceFailure::ZeroContribution => Invalid::ZeroContribution,
         }
-        if !y.edge_visible(j - 1) {
-            return Err(Invalid::Occluded);
-        }
-        if y.contribution.is_black() {
-            return Err(Invalid::ZeroContribution);
-        }
-        Ok(())
     }
 }
 
@@ -318,15 +307,7 @@ pub fn film_pixels(scene: &Scene) -> f64 {
 /// `Σ_{i=j}^{k−1} ln pdf_rev(y_i)`: the camera walk's density of the
 /// re-traced vertices (`−∞` when one is zero).
 pub fn log_chain_density(y: &Path, j: usize) -> f64 {
-    let k = y.segments();
-    let mut sum = 0.0;
-    for v in &y.vertices[j..k] {
-        if !(v.pdf_rev > 0.0) {
-            return f64::NEG_INFINITY;
-        }
-        sum += (v.pdf_rev as f64).ln();
-    }
-    sum
+    log_density_product(y.vertices[j..y.segments()].iter().map(|v| v.pdf_rev))
 }
 
 impl<'s> Kernel<Path<'s>, PathSample> for LensPerturbation {
@@ -351,12 +332,6 @@ impl<'s> Kernel<Path<'s>, PathSample> for LensPerturbation {
     }
 
     fn component_names(&self) -> Vec<String> {
-        std::iter::once(self.name.clone())
-            .chain(
-                Invalid::ALL
-                    .iter()
-                    .map(|r| format!("{}: {}", self.name, r.name())),
-            )
-            .collect()
+        component_names(&self.name, Invalid::ALL.iter().map(|r| r.name()))
     }
 }

@@ -27,6 +27,7 @@
 //! Markov kernel.
 
 use super::lens_perturbation::{Invalid, LensPerturbation, lens_chain, log_chain_density};
+use super::retrace::component_names;
 use super::state::Path;
 use crate::pss::PathSample;
 use glam::Vec2;
@@ -97,12 +98,6 @@ impl<'s> Kernel<Path<'s>, PathSample> for LensSubpath {
     }
 
     fn component_names(&self) -> Vec<String> {
-        std::iter::once(self.name.clone())
-            .chain(
-                Invalid::ALL
-                    .iter()
-                    .map(|r| format!("{}: {}", self.name, r.name())),
-            )
-            .collect()
+        component_names(&self.name, Invalid::ALL.iter().map(|r| r.name()))
     }
 }

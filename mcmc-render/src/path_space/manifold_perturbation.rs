@@ -83,6 +83,7 @@
 //! unchanged): the ratio of the proposal densities in the state's measure.
 
 use super::lens_perturbation::{OffsetKernel, film_pixels};
+use super::retrace::component_names;
 use super::state::Path;
 use crate::bsdf::TransportMode;
 use crate::frame::Frame;
@@ -562,17 +563,15 @@ impl<'s> Kernel<Path<'s>, PathSample> for ManifoldPerturbation {
     }
 
     fn component_names(&self) -> Vec<String> {
-        std::iter::once(self.name.clone())
-            .chain(
-                Invalid::ALL
-                    .iter()
-                    .map(|r| format!("{}: {}", self.name, r.name())),
-            )
-            .chain(
-                WalkFailure::ALL
-                    .iter()
-                    .map(|w| format!("{}: walk {}", self.name, w.name())),
-            )
-            .collect()
+        let walk = WalkFailure::ALL
+            .iter()
+            .map(|w| format!("walk {}", w.name()));
+        component_names(
+            &self.name,
+            Invalid::ALL
+                .iter()
+                .map(|r| r.name().to_string())
+                .chain(walk),
+        )
     }
 }

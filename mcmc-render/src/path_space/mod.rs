@@ -16,6 +16,10 @@
 //! - [`multi_chain_perturbation`]: Veach's multi-chain perturbation.
 //! - [`lens_subpath`]: Veach's lens subpath mutation.
 //! - [`manifold_perturbation`]: Jakob & Marschner's manifold perturbation.
+//! - [`proposal_clock`]: per-mutation-type proposal counts and sampled
+//!   times for the sidecar's `mutation_types`.
+//! - [`retrace`]: what the re-tracing perturbations share (chain tracing,
+//!   the checks of a written proposal, density products, component names).
 //! - [`family`]: the driver's [`crate::markov::ChainFamily`] for path space
 //!   (start-up candidates by bidirectional techniques, the mutation
 //!   mixture).
@@ -50,8 +54,17 @@ pub mod lens_perturbation;
 pub mod lens_subpath;
 pub mod manifold_perturbation;
 pub mod multi_chain_perturbation;
+pub mod proposal_clock;
+pub mod retrace;
 pub mod state;
 pub mod walk;
+
+/// The one-line refusal of a path-space integrator `name` on a scene with
+/// an emitter at infinity ([`crate::light::Lights::has_emitter_at_infinity`]):
+/// no path-space mutation handles a vertex at infinity yet.
+pub fn emitters_at_infinity_refusal(name: &str) -> String {
+    format!("{name} does not support emitters at infinity (environment, directional) yet")
+}
 
 pub use bidirectional::Bidirectional;
 pub use family::{PathFamily, PathMutations};

@@ -46,6 +46,7 @@
 
 use super::caustic_perturbation::{AngleKernel, angle_between, spawn_direction};
 use super::lens_perturbation::{OffsetKernel, camera_ray, film_pixels, on_image};
+use super::retrace::{component_names, finish_proposal, log_density_product};
 use super::state::Path;
 use super::walk::ChainSource;
 use crate::bsdf::TransportMode;
@@ -227,17 +228,7 @@ impl MultiChainPerturbation {
         vs.extend_from_slice(&x.vertices[..j]);
         vs.extend(self.walk.iter().rev());
         vs.push(cam);
-        y.normalize_ends();
-        y.evaluate();
-        if !same_pattern(x, y, j) {
-            return Err(Invalid::PatternChanged);
-        }
-        if !y.edge_visible(j - 1) {
-            return Err(Invalid::Occluded);
-        }
-        if y.contribution.is_black() {
-            return Err(Invalid::ZeroContribution);
-        }
+        finish_proposal::<Invalid>(y, |y| same_pattern(x, y, j), |_| Ok(()), j - 1)?;
         Ok(j)
     }
 }
@@ -247,19 +238,13 @@ impl MultiChainPerturbation {
 /// `D` vertices (`−∞` when one is zero).
 fn log_chain_density(y: &Path, j: usize) -> f64 {
     let k = y.segments();
-    let mut sum = 0.0;
-    for i in j..k {
-        let g = if i + 1 < k && y.connectible(i + 1) {
+    log_density_product((j..k).map(|i| {
+        if i + 1 < k && y.connectible(i + 1) {
             y.vertices[i + 1].convert_density(1.0, &y.vertices[i])
         } else {
             y.vertices[i].pdf_rev
-        };
-        if !(g > 0.0) {
-            return f64::NEG_INFINITY;
         }
-        sum += (g as f64).ln();
-    }
-    sum
+    }))
 }
 
 impl<'s> Kernel<Path<'s>, PathSample> for MultiChainPerturbation {
@@ -284,12 +269,6 @@ impl<'s> Kernel<Path<'s>, PathSample> for MultiChainPerturbation {
     }
 
     fn component_names(&self) -> Vec<String> {
-        std::iter::once(self.name.clone())
-            .chain(
-                Invalid::ALL
-                    .iter()
-                    .map(|r| format!("{}: {}", self.name, r.name())),
-            )
-            .collect()
+        component_names(&self.name, Invalid::ALL.iter().map(|r| r.name()))
     }
 }
