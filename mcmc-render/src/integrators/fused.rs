@@ -180,6 +180,7 @@ pub fn statistics(family: &FusedFamily<'_>, result: &MltResult) -> serde_json::V
         "proposals": { "pss": pss[0], "technique_change": tech[0], "path_space": path[0] },
         "transitions_per_mutation": path[1] as f64 / mutations,
         "inversions": counters.inversions.load(Ordering::Relaxed),
+        "rejected_before_conversion": counters.rejected_before_conversion.load(Ordering::Relaxed),
         "round_trip_failures": failures,
         "conversion_seconds": conversion * 1e-9,
         "conversion_share_of_proposals": if propose > 0.0 { conversion / propose } else { f64::NAN },
