@@ -114,8 +114,8 @@ fn whole_paths_round_trip_on_the_cornell_variants() {
 
 /// The path-space evaluation of MMLT's target (the fused kernel's first
 /// acceptance stage) equals the traced one: on every MMLT path of depths
-/// 1–5 of the Cornell box, the glossy-glass box (Dirac vertices) and the
-/// point-light plane, `ln π̃` and `ln π` agree to 1e-3 (f32 rounding of
+/// 1–5 of the Cornell box, the glossy-glass box (Dirac vertices), the
+/// point-light plane and the sphere-lamp caustic scene, `ln π̃` and `ln π` agree to 1e-3 (f32 rounding of
 /// densities and of BDPT's MIS ratios; the few exceptions are grazing
 /// paths whose f32 densities lose digits, allowed at 1 in 1000). Control:
 /// evaluated with the balance heuristic instead of BDPT's power
@@ -131,6 +131,8 @@ fn the_path_space_target_is_mmlts_traced_target() {
             3000,
         ),
         ("oblique plane", plane, 6000),
+        // A sphere lamp: next-event estimation samples its cone (s = 1).
+        ("caustic-sds.xml", repo_scene("caustic-sds.xml", 16), 6000),
     ] {
         let (mut paths, mut off, mut worst, mut control_off, mut multi) = (0, 0, 0.0f64, 0, 0);
         for d in depths(5) {
