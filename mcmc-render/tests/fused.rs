@@ -112,6 +112,31 @@ fn whole_paths_round_trip_on_the_cornell_variants() {
     }
 }
 
+/// A sphere lamp seen from outside: next-event estimation (`s = 1`)
+/// samples the cone it subtends, and those paths now map back (the cone's
+/// inverse): no emitter failure among the MMLT paths of depths 1–5 of the
+/// caustic scene, of which the `s = 1` ones are a good part, and the
+/// re-traced paths stay put.
+#[test]
+fn sphere_lamp_paths_round_trip() {
+    let scene = repo_scene("caustic-sds.xml", 16);
+    let mut nee = 0usize;
+    for d in depths(5) {
+        for i in 0..3000 {
+            let x = FusedState::traced(&scene, &d, bootstrap_point(5 + d.depth as u64, i));
+            nee +=
+                usize::from(x.technique.is_some_and(|(s, _)| s == 1) && x.log_density.is_finite());
+        }
+    }
+    let r = round_trips(&scene, 5, 3000, 5);
+    eprintln!("caustic-sds: {r:?}, s = 1 paths {nee}");
+    assert!(nee > 1000, "too few next-event paths: {nee}");
+    assert_eq!(r.inverse[2], 0, "emitter inverses failed: {r:?}");
+    let failed = r.paths - r.ok;
+    assert!(failed as f64 <= 0.01 * r.paths as f64, "{r:?}");
+    assert!((r.moved as f64) <= 1e-3 * r.ok as f64, "{r:?}");
+}
+
 /// The path-space evaluation of MMLT's target (the fused kernel's first
 /// acceptance stage) equals the traced one: on every MMLT path of depths
 /// 1–5 of the Cornell box, the glossy-glass box (Dirac vertices), the
