@@ -22,6 +22,13 @@ pub struct Comparison {
     pub test_nonfinite: u64,
 }
 
+/// One pixel's relative squared error on luminance, `(t − r)² / (r² + 0.01)`
+/// (the term [`Comparison::rel_mse`] averages; per-pixel error maps).
+pub fn rel_sq_error(r: &Rgb, t: &Rgb) -> f64 {
+    let (rl, tl) = (r.luminance() as f64, t.luminance() as f64);
+    (tl - rl).powi(2) / (rl * rl + 0.01)
+}
+
 /// Compares two images of the same size (non-finite pixels are counted and
 /// left out of the other metrics).
 pub fn compare(reference: &[Rgb], test: &[Rgb]) -> Result<Comparison, String> {
@@ -47,8 +54,7 @@ pub fn compare(reference: &[Rgb], test: &[Rgb]) -> Result<Comparison, String> {
             continue;
         }
         n += 1;
-        let (rl, tl) = (r.luminance() as f64, t.luminance() as f64);
-        rel += (tl - rl).powi(2) / (rl * rl + 0.01);
+        rel += rel_sq_error(r, t);
         for (c, (rv, tv)) in r.to_array().iter().zip(t.to_array()).enumerate() {
             se += (tv as f64 - *rv as f64).powi(2);
             rm[c] += *rv as f64;

@@ -22,10 +22,9 @@
 //! [`crate::camera::Camera::invert`]; the spot light's cone is
 //! [`crate::light::SpotProfile::invert`]; the tabulated environment map's
 //! is [`crate::distribution::Distribution2d::invert`] (emitters at infinity
-//! are refused by the fused integrator, as by `mlt`). Not inverted: the
-//! cone sampling of sphere emitters seen from outside by next-event
-//! estimation (BDPT's `s = 1` technique); such paths are reported as
-//! non-invertible.
+//! are refused by the fused integrator, as by `mlt`); next-event
+//! estimation's cone sampling of sphere emitters seen from outside is
+//! [`crate::light::Lights::sphere_cone_to_square`].
 
 use crate::bsdf::diffuse::cosine_hemisphere_to_square;
 use crate::frame::Frame;
@@ -228,7 +227,8 @@ pub fn emission_direction_to_square(
 /// from `from`, BDPT's `s = 1` technique): the numbers `u_pos` that sample
 /// point `sp` of light `light`. Point lights ignore them (`Some(None)`:
 /// the caller draws fresh ones); sphere lights seen from outside are
-/// sampled in their cone, which is not inverted (`None`).
+/// sampled in their cone ([`Lights::sphere_cone_to_square`]), `None` when
+/// the point is not on the cap that sampling reaches.
 pub fn direct_point_to_square(
     scene: &Scene,
     light: u32,
@@ -240,7 +240,11 @@ pub fn direct_point_to_square(
         Light::Area {
             sphere: Some((center, radius)),
             ..
-        } if (from - *center).length_squared() > radius * radius * 1.0001 => None,
+        } => match Lights::sphere_cone_to_square(*center, *radius, from, sp.p) {
+            Some(cone) => cone.map(Some),
+            // From inside, next-event estimation samples by area.
+            None => area_point_to_square(scene, light, sp).map(Some),
+        },
         Light::Area { .. } => area_point_to_square(scene, light, sp).map(Some),
         Light::Directional { .. } | Light::Environment(_) => None,
     }

@@ -737,6 +737,48 @@ impl Lights {
         })
     }
 
+    /// Inverse of the cone sampling of [`Lights::sample_direct`] towards a
+    /// sphere light (centre, radius) from `p` (spec seed001 §2.3): the
+    /// numbers `u` that sample the sphere's point `lp`. `None` when `p` is
+    /// not clearly outside the sphere (next-event estimation samples by
+    /// area there); `Some(None)` when `lp` is not on the cap the cone
+    /// sampling reaches (the side facing `p`). The forward map is one to
+    /// one on that cap: `u₀` from the angle to the cone's axis (uniform in
+    /// `cos θ`, or in `sin² θ` for tiny cones, as the forward branches), `u₁`
+    /// from the azimuth of the point's normal in the forward's frame.
+    pub fn sphere_cone_to_square(
+        center: Vec3,
+        radius: f32,
+        p: Vec3,
+        lp: Vec3,
+    ) -> Option<Option<(f32, f32)>> {
+        let cone = Lights::sphere_cone_of(center, radius, p)?;
+        let d = (lp.as_dvec3() - p.as_dvec3()).normalize_or_zero();
+        let axis = cone.axis.as_dvec3();
+        let n = (lp - center) / radius;
+        // The far side is never sampled (and faces away from `p`).
+        if !(n.as_dvec3().dot(-d) > 0.0) {
+            return Some(None);
+        }
+        let cos_t = d.dot(axis);
+        // sin² θ from the cross product keeps its digits for small angles.
+        let sin2 = d.cross(axis).length_squared();
+        let (sin2_max, one_minus_cos) = (f64::from(cone.sin2_max), f64::from(cone.one_minus_cos));
+        let u0 = if cone.sin2_max < 1e-3 {
+            sin2 / sin2_max
+        } else {
+            // 1 − cos θ = sin² θ / (1 + cos θ), without cancellation.
+            sin2 / ((1.0 + cos_t) * one_minus_cos)
+        };
+        // The silhouette (u₀ → 1) comes back a rounding error beyond it.
+        if !(cos_t > 0.0 && u0 <= 1.0 + 1e-4) {
+            return Some(None);
+        }
+        let local = Frame::from_normal(-cone.axis).to_local(n);
+        let u1 = crate::inverse::angle_to_unit(f64::from(local.y).atan2(f64::from(local.x)));
+        Some(Some((crate::sampling::to_unit_f32(u0.clamp(0.0, 1.0)), u1)))
+    }
+
     /// Next-event estimation towards a sphere light by uniform sampling of
     /// the cone it subtends (pbrt-v4's method): `None` when `p` is inside
     /// (the caller then samples by area). The inner `Option` is the sample.

@@ -126,6 +126,73 @@ fn convergence_writes_csv_and_plot_for_four_integrators() {
     assert_eq!(png_size(&dir.join("c.png")), (800, 600));
 }
 
+/// `--images DIR`: each integrator's final image, its statistics and its
+/// per-pixel relative-error maps. The JSON's relMSE is the one `compare`
+/// computes on the written EXR against the reference (a separate command
+/// reading both files), and the error EXR's mean is that relMSE; a
+/// modifier's `+` and `=` become `_` in file names.
+#[test]
+fn convergence_writes_final_images_and_error_maps() {
+    use mcmc_render::image_io::read_exr;
+    let dir = scratch("convergence-images");
+    reference(&dir);
+    let scene = cornell();
+    run_ok(
+        &[
+            "convergence",
+            &scene,
+            "-D",
+            "res=16",
+            "--reference",
+            "ref.exr",
+            "--integrators",
+            "pt,mmlt+plarge=0.5",
+            "--time",
+            "1",
+            "--checkpoints",
+            "1",
+            "--bootstrap",
+            "1000",
+            "--chains",
+            "16",
+            "--threads",
+            "2",
+            "--out",
+            "c.csv",
+            "--images",
+            "final",
+        ],
+        &dir,
+    );
+    for stem in ["pt", "mmlt_plarge_0.5"] {
+        let f = dir.join("final");
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(f.join(format!("{stem}.json"))).unwrap())
+                .unwrap();
+        let rel = json["rel_mse"].as_f64().unwrap();
+        assert!(json["samples"].as_u64().unwrap() > 0, "{json}");
+        let out = run_ok(
+            &["compare", "ref.exr", &format!("final/{stem}.exr"), "--json"],
+            &dir,
+        );
+        let c: serde_json::Value = serde_json::from_str(&out).unwrap();
+        let rel_c = c["rel_mse"].as_f64().unwrap();
+        assert!(
+            (rel - rel_c).abs() <= 1e-12 * rel_c,
+            "{stem}: {rel} vs {rel_c}"
+        );
+        let (w, h, e) = read_exr(&f.join(format!("{stem}.relerr.exr"))).unwrap();
+        assert_eq!((w, h), (16, 16));
+        // The map holds the f32 terms of the f64 mean.
+        let mean = e.iter().map(|p| f64::from(p.r)).sum::<f64>() / e.len() as f64;
+        assert!(
+            (mean - rel).abs() <= 1e-6 * rel,
+            "{stem}: map mean {mean} vs {rel}"
+        );
+        assert_eq!(png_size(&f.join(format!("{stem}.relerr.png"))), (16, 16));
+    }
+}
+
 #[test]
 fn csv_round_trips_through_read_csv() {
     let dir = scratch("convergence-csv");

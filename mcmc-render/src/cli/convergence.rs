@@ -60,6 +60,12 @@ pub struct ConvergenceArgs {
     /// Override a `<default name=…>` value: -D name=value.
     #[arg(short = 'D', value_name = "NAME=VALUE")]
     define: Vec<String>,
+    /// Also write each integrator's final image (`DIR/NAME.exr`), its run
+    /// statistics (`DIR/NAME.json`) and its per-pixel relative error
+    /// against the reference (`DIR/NAME.relerr.exr`, and a log-scale map
+    /// `DIR/NAME.relerr.png`).
+    #[arg(long, value_name = "DIR")]
+    images: Option<PathBuf>,
     /// Parameters, applied to every integrator that has them.
     #[command(flatten)]
     params: ParamFlags,
@@ -109,6 +115,7 @@ pub(crate) fn command(args: ConvergenceArgs) -> Result<(), Failure> {
         checkpoints: args.checkpoints,
         seed: args.seed,
         assignments: args.params.assignments()?,
+        images: args.images.clone(),
     };
     stop_on_ctrl_c();
     let records = mcmc_core::runner::with_threads(threads, || run(&loaded, &r, &study, &STOP))?;
@@ -210,6 +217,9 @@ pub struct Study {
     /// Parameter assignments from the command line, applied to every
     /// integrator that has the parameter.
     pub assignments: Vec<(String, String)>,
+    /// Where to write each integrator's final image, statistics and error
+    /// maps ([`write_final`]); `None`: nowhere.
+    pub images: Option<PathBuf>,
 }
 
 /// The assignments a modifier of [`variant`] stands for.
@@ -307,6 +317,7 @@ pub fn run(
         checkpoints,
         seed,
         assignments,
+        images,
     } = study;
     let (seconds, checkpoints, seed) = (*seconds, *checkpoints, *seed);
     if !(seconds > 0.0 && seconds.is_finite()) {
@@ -364,6 +375,9 @@ pub fn run(
             .render(scene, &run, stop, &rec)
             .map_err(|e| e.to_string())?;
         rec.offer(r.samples, &|| r.image.clone(), true);
+        if let Some(dir) = images {
+            write_final(dir, name, scene, reference, &r)?;
+        }
         let (_, records) = rec.state.into_inner().unwrap_or_else(|p| p.into_inner());
         all.extend(records);
         // Ctrl-C ends the study: the integrators not started yet are skipped.
@@ -372,6 +386,70 @@ pub fn run(
         }
     }
     Ok(all)
+}
+
+/// Writes integrator `name`'s final image `r` into `dir` (created if
+/// needed): `NAME.exr`, `NAME.json` (seconds, samples, relMSE, the
+/// integrator's statistics), `NAME.relerr.exr` (per-pixel
+/// `(t − r)² / (r² + 0.01)` on luminance, the terms relMSE averages) and
+/// `NAME.relerr.png` (the same on a log scale, black at 1e-4 through red
+/// and yellow to white at 10, equal for every integrator). Characters of
+/// `name` other than letters, digits, `-` and `.` become `_`.
+pub fn write_final(
+    dir: &Path,
+    name: &str,
+    scene: &Scene,
+    reference: &[Rgb],
+    r: &crate::integrators::Rendered,
+) -> Result<(), String> {
+    use crate::compare::rel_sq_error;
+    use crate::image_io::{write_exr, write_png};
+    std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+    let stem: String = name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '.' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    let (w, h) = (scene.film.width, scene.film.height);
+    write_exr(&dir.join(format!("{stem}.exr")), w, h, &r.image)?;
+    let errors: Vec<f64> = reference
+        .iter()
+        .zip(&r.image)
+        .map(|(a, b)| rel_sq_error(a, b))
+        .collect();
+    let gray: Vec<Rgb> = errors.iter().map(|&e| Rgb::splat(e as f32)).collect();
+    write_exr(&dir.join(format!("{stem}.relerr.exr")), w, h, &gray)?;
+    let ramp: Vec<Rgb> = errors
+        .iter()
+        .map(|&e| {
+            // log10 e from −4 to 1 onto [0, 1]; NaN (a NaN pixel) is white.
+            let t = if e.is_nan() {
+                1.0
+            } else {
+                ((e.max(1e-30).log10() + 4.0) / 5.0).clamp(0.0, 1.0) as f32
+            };
+            let c = |x: f32| x.clamp(0.0, 1.0);
+            Rgb::new(c(3.0 * t), c(3.0 * t - 1.0), c(3.0 * t - 2.0))
+        })
+        .collect();
+    write_png(&dir.join(format!("{stem}.relerr.png")), w, h, &ramp)?;
+    let c = compare(reference, &r.image)?;
+    let json = serde_json::json!({
+        "integrator": name,
+        "seconds": r.seconds,
+        "samples": r.samples,
+        "rel_mse": c.rel_mse,
+        "rmse": c.rmse,
+        "statistics": r.statistics,
+    });
+    let text = serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?;
+    let path = dir.join(format!("{stem}.json"));
+    std::fs::write(&path, text).map_err(|e| format!("cannot write {}: {e}", path.display()))
 }
 
 /// Writes the records as CSV.

@@ -13,7 +13,29 @@
 //!   mapped back by the inverse path sampler (Eq. 24, see the module docs
 //!   of [`crate::fused_space`]).
 //!
-//! # The round trip and its bias
+//! # Deciding before converting (delayed acceptance)
+//!
+//! A path-space move is decided on the path before anything is mapped
+//! back to primary samples, as in the paper, where only accepted proposals
+//! are inverted (its conversions take 0.03% of the time). In two stages
+//! (Christen & Fox 2005's delayed acceptance):
+//!
+//! 1. with `π̃` MMLT's target evaluated on the path
+//!    ([`super::technique::log_target`], no ray traced), accept with
+//!    `α₁ = min(1, π̃(y) T_U(v→u) / (π̃(x) T_U(u→v)))`, the Eq. 24 ratio;
+//!    a stage-1 rejection ends the step (no inversion, no re-trace);
+//! 2. only then are the current path's and the proposal's round trips
+//!    done (below); if either fails the move is rejected; otherwise the
+//!    driver accepts the re-traced state `v` with
+//!    `α₂ = min(1, π(v) π̃(x) / (π(u) π̃(y)))` (the kernel reports
+//!    `ln π̃(x) − ln π̃(y)` as its ratio).
+//!
+//! `α₂` is 1 up to `f32` rounding (`π̃` is `π` computed another way); it
+//! keeps the chain exact for any positive `π̃` that is a function of the
+//! state (delayed acceptance's condition), so a slip in `π̃` costs
+//! efficiency, not correctness.
+//!
+//! # Rejecting after the accept draw, and the round trip's bias
 //!
 //! A path-space proposal `y` is inverted to `v` and `v` re-traced; the
 //! proposal is the re-traced state (its cache is exactly `P_t^{-1}(v)`),
@@ -22,17 +44,34 @@
 //! the chain prefer the set `A` of paths that survive the round trip: a
 //! move from `x ∉ A` to `y ∈ A` can be accepted but its reverse never is.
 //! Here a path-space move also fails when the *current* path does not
-//! survive it (checked once per state and cached), so path-space moves
-//! run only inside `A × A`, where they satisfy detailed balance; the
-//! primary-sample moves cover everything. What remains is `f32` rounding
-//! between `y` and its re-trace.
+//! survive it; that check is drawn once per state and kept with it (an
+//! accepted path-space proposal has just survived its own).
+//!
+//! Why rejecting *after* the stage-1 accept draw keeps the target: whether
+//! a path survives the round trip is a property `c(x) ∈ {0, 1}` of the
+//! state (drawn when needed, with probability `a(x)`, kept until the state
+//! changes; `a(x) ∈ {0, 1}` except for `f32` ties). Augment the state
+//! with `c`, target `π(u) · P(c | x)`: primary-sample moves leave `π`
+//! invariant and redraw `c` with the state, so they leave the augmented
+//! target invariant. For a path-space move the flux from `(x, 1)` to
+//! `(y, 1)` is `π(x) a(x) · T(x→y) α₁(x, y) α₂(x, y) · a(y)`, which is
+//! symmetric in `x` and `y` because `π(x) T(x→y) α₁ α₂` is (delayed
+//! acceptance's detailed balance); from `c = 0`, or to a proposal whose
+//! round trip fails, nothing moves. Testing `c` after the accept draw
+//! rather than before only changes which proposals pay for the
+//! conversion, not the flux. Path-space moves therefore run inside
+//! `A × A` and satisfy detailed balance there; the primary-sample moves
+//! cover everything. What remains is `f32` rounding between `y` and its
+//! re-trace.
 
 use super::inverse_path::{RoundTripFailure, round_trip, trace};
+use super::technique::{log_target, log_technique_density};
 use super::{FusedMutation, FusedState};
 use crate::path_space::Path;
 use crate::pss::{MmltDepth, PathSample};
 use crate::scene::Scene;
 use mcmc_core::kernel::{Kernel, Mixture, Proposal, StepObservation};
+use mcmc_core::mh::{accept, mh_log_acceptance};
 use mcmc_core::rng::{ChainRng, child_rng, uniform};
 use mcmc_core::sample::Sample;
 use mcmc_core::space::TorusPoint;
@@ -46,6 +85,9 @@ use std::time::Instant;
 pub struct FusedCounters {
     /// Path → primary sample inversions (each followed by a re-trace).
     pub inversions: AtomicU64,
+    /// Path-space proposals rejected by the first acceptance stage, before
+    /// any conversion.
+    pub rejected_before_conversion: AtomicU64,
     /// Nanoseconds spent inverting and re-tracing.
     pub conversion_nanos: AtomicU64,
     /// Nanoseconds spent in the kernel's proposals, conversions included.
@@ -58,11 +100,12 @@ pub fn pss_probability(m: &FusedMutation) -> f64 {
 }
 
 /// Failure reasons of path-space moves beyond the mutations' own.
-const PATH_FAILURES: [&str; 4] = [
+const PATH_FAILURES: [&str; 5] = [
     "path: technique cannot produce the proposal",
     "path: proposal not invertible",
     "path: round trip failed",
     "path: current path not invertible",
+    "path: current path has no target value",
 ];
 
 /// The fused kernel of one depth (one per chain).
@@ -85,6 +128,9 @@ pub struct FusedKernel<'s> {
     /// Whether the current state's path survives the round trip (`None`:
     /// not checked since the state last changed).
     current_invertible: Option<bool>,
+    /// What `current_invertible` becomes if the last proposal is accepted
+    /// (`Some(true)` after a path-space proposal's successful round trip).
+    proposal_invertible: Option<bool>,
 }
 
 impl<'s> FusedKernel<'s> {
@@ -117,6 +163,7 @@ impl<'s> FusedKernel<'s> {
             path_prop: None,
             scratch: None,
             current_invertible: None,
+            proposal_invertible: None,
         })
     }
 
@@ -200,7 +247,7 @@ impl<'s> FusedKernel<'s> {
         rng: &mut ChainRng,
     ) -> Proposal {
         let offset = self.n_pss + 1;
-        let fail = [0, 1, 2, 3].map(|i| self.failure(i));
+        let fail = [0, 1, 2, 3, 4].map(|i| self.failure(i));
         // The current path: cached, or traced once (a start-up state).
         let scene = self.scene;
         let depth = self.depth;
@@ -226,37 +273,57 @@ impl<'s> FusedKernel<'s> {
         if p.failed {
             return Proposal::failed(offset + p.component);
         }
-        let k = depth.depth;
         let y = &prop.state;
-        let log_p_y = y.log_regrowth_density(0, k, s);
-        let log_p_x = x.path.log_regrowth_density(0, k, s);
+        let log_p_y = log_technique_density(y, s);
+        let log_p_x = log_technique_density(&x.path, s);
         if !(log_p_y > f64::NEG_INFINITY) || !(log_p_x > f64::NEG_INFINITY) {
             return Proposal::failed(fail[0]);
         }
+        // Stage 1 (module docs): Eq. 24 on the paths, nothing converted.
+        let log_pi_x = log_target(&depth, &x.path, s);
+        if !log_pi_x.is_finite() {
+            return Proposal::failed(fail[4]);
+        }
+        let log_pi_y = log_target(&depth, y, s);
+        let jacobian = if self.drop_jacobian {
+            0.0
+        } else {
+            log_p_y - log_p_x
+        };
+        let (log_alpha1, _) = mh_log_acceptance(log_pi_x, log_pi_y, p.log_q_ratio + jacobian);
+        if !accept(log_alpha1, rng) {
+            self.counters
+                .rejected_before_conversion
+                .fetch_add(1, Ordering::Relaxed);
+            // Counted as a rejection of the mutation that proposed.
+            return Proposal::failed(offset + p.component);
+        }
+        // Stage 2: the current path's round trip (once per state), then the
+        // proposal's; either failing rejects the move (module docs).
         let start = Instant::now();
-        let out = self
-            .scratch
-            .get_or_insert_with(|| FusedState::untraced(scene, TorusPoint::fresh(child_rng(rng))));
-        let result = round_trip(scene, &depth, y, s, rng, out);
-        self.counters.inversions.fetch_add(1, Ordering::Relaxed);
-        let outcome = match result {
-            Err(RoundTripFailure::Inverse(_)) => Some(fail[1]),
-            Err(RoundTripFailure::Retrace) => Some(fail[2]),
-            Ok(()) => {
-                // The reverse move needs the current path's round trip.
-                let ok = match self.current_invertible {
-                    Some(ok) => ok,
-                    None => {
-                        let mut probe =
-                            FusedState::untraced(scene, TorusPoint::fresh(child_rng(rng)));
-                        let ok = round_trip(scene, &depth, &x.path, s, rng, &mut probe).is_ok();
-                        self.counters.inversions.fetch_add(1, Ordering::Relaxed);
-                        self.current_invertible = Some(ok);
-                        ok
-                    }
-                };
-                (!ok).then_some(fail[3])
+        let current_ok = match self.current_invertible {
+            Some(ok) => ok,
+            None => {
+                let mut probe = FusedState::untraced(scene, TorusPoint::fresh(child_rng(rng)));
+                let ok = round_trip(scene, &depth, &x.path, s, rng, &mut probe).is_ok();
+                self.counters.inversions.fetch_add(1, Ordering::Relaxed);
+                self.current_invertible = Some(ok);
+                ok
             }
+        };
+        let outcome = if current_ok {
+            let out = self.scratch.get_or_insert_with(|| {
+                FusedState::untraced(scene, TorusPoint::fresh(child_rng(rng)))
+            });
+            let result = round_trip(scene, &depth, y, s, rng, out);
+            self.counters.inversions.fetch_add(1, Ordering::Relaxed);
+            match result {
+                Err(RoundTripFailure::Inverse(_)) => Some(fail[1]),
+                Err(RoundTripFailure::Retrace) => Some(fail[2]),
+                Ok(()) => None,
+            }
+        } else {
+            Some(fail[3])
         };
         self.counters
             .conversion_nanos
@@ -264,17 +331,14 @@ impl<'s> FusedKernel<'s> {
         if let Some(component) = outcome {
             return Proposal::failed(component);
         }
-        let jacobian = if self.drop_jacobian {
-            0.0
-        } else {
-            log_p_y - log_p_x
-        };
         let out = self.scratch.as_mut().expect("set above");
         std::mem::swap(&mut proposal.state, out);
         proposal.log_density = proposal.state.log_density;
         proposal.payload.clone_from(&proposal.state.sample);
+        self.proposal_invertible = Some(true);
         Proposal {
-            log_q_ratio: p.log_q_ratio + jacobian,
+            // The driver's test is stage 2: ln α₂ = ln π(v) − ln π(u) + this.
+            log_q_ratio: log_pi_x - log_pi_y,
             component: offset + p.component,
             evaluated: true,
             failed: false,
@@ -290,6 +354,7 @@ impl<'s> Kernel<FusedState<'s>, PathSample> for FusedKernel<'s> {
         rng: &mut ChainRng,
     ) -> Proposal {
         let start = Instant::now();
+        self.proposal_invertible = None;
         let r = uniform(rng);
         let p = if r < self.p_pss {
             self.propose_pss(current, proposal, rng)
@@ -306,7 +371,7 @@ impl<'s> Kernel<FusedState<'s>, PathSample> for FusedKernel<'s> {
 
     fn observe(&mut self, obs: &StepObservation<'_, FusedState<'s>>) {
         if obs.accepted {
-            self.current_invertible = None;
+            self.current_invertible = self.proposal_invertible;
         }
         if obs.component < self.n_pss {
             self.pss.observe(&StepObservation {

@@ -10,6 +10,8 @@
 //!   path; `invert`, the inverse path sampler) and the round trip.
 //! - [`kernel`]: the mixed kernel and its acceptance ratio (Eq. 11 for
 //!   primary-sample moves, Eq. 24 for path-space moves).
+//! - [`technique`]: MMLT's target and technique density evaluated on a
+//!   path, so that a path-space proposal is decided before it is inverted.
 //!
 //! The target of depth `d` is MMLT's, `π(u, t) = lum(n · w_t · C_t(u))`
 //! over primary sample space ([`crate::pss::MmltDepth`]); the chain lives
@@ -27,6 +29,7 @@
 
 pub mod inverse_path;
 pub mod kernel;
+pub mod technique;
 
 use crate::markov::{ChainFamily, MltError};
 use crate::path_space::{Path, PathMutations};

@@ -12,10 +12,9 @@ use super::mmlt::Mmlt;
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
 use crate::fused_space::{FusedFamily, FusedMutation};
-use crate::light::Light;
 use crate::markov::{self, ChainParams, MltResult};
 use crate::observer::Observer;
-use crate::path_space::PathMutations;
+use crate::path_space::{PathMutations, emitters_at_infinity_refusal};
 use crate::pss::MutationParams;
 use crate::pss_dump::DumpSampler;
 use crate::scene::Scene;
@@ -109,15 +108,10 @@ impl IntegratorSettings for Fused {
         observer: &dyn Observer,
     ) -> Result<Rendered, RenderError> {
         IntegratorSettings::validate(self).map_err(RenderError::Invalid)?;
-        if scene
-            .lights
-            .lights
-            .iter()
-            .any(|l| matches!(l, Light::Directional { .. } | Light::Environment(_)))
-        {
-            return Err(RenderError::Invalid(
-                "fused does not support emitters at infinity (environment, directional): its path-space mutations do not".into(),
-            ));
+        if scene.lights.has_emitter_at_infinity() {
+            return Err(RenderError::Invalid(emitters_at_infinity_refusal(
+                Self::NAME,
+            )));
         }
         let mutation = self.fused_mutation().map_err(RenderError::Invalid)?;
         let family = FusedFamily::new(scene, self.mmlt().depths());
@@ -180,6 +174,7 @@ pub fn statistics(family: &FusedFamily<'_>, result: &MltResult) -> serde_json::V
         "proposals": { "pss": pss[0], "technique_change": tech[0], "path_space": path[0] },
         "transitions_per_mutation": path[1] as f64 / mutations,
         "inversions": counters.inversions.load(Ordering::Relaxed),
+        "rejected_before_conversion": counters.rejected_before_conversion.load(Ordering::Relaxed),
         "round_trip_failures": failures,
         "conversion_seconds": conversion * 1e-9,
         "conversion_share_of_proposals": if propose > 0.0 { conversion / propose } else { f64::NAN },
