@@ -249,8 +249,19 @@ impl<G: GradientTarget> Hmc<G> {
     /// One warm-up iteration with acceptance statistic `alpha` ending at
     /// `state`; returns true when the metric changed.
     pub(crate) fn adapt(&mut self, alpha: f64, state: &[f64]) -> bool {
+        self.adapt_with_gradient(alpha, state, None)
+    }
+
+    /// [`Self::adapt`] with the gradient of `ln π` at `state` (for
+    /// [`MetricAdaptation::DiagonalGradient`]).
+    pub(crate) fn adapt_with_gradient(
+        &mut self,
+        alpha: f64,
+        state: &[f64],
+        gradient: Option<&[f64]>,
+    ) -> bool {
         if let Some(w) = &mut self.warmup
-            && let Some(update) = w.observe(alpha, state)
+            && let Some(update) = w.observe_with_gradient(alpha, state, gradient)
         {
             self.step_size = update.step_size;
             if let Some(m) = update.metric {

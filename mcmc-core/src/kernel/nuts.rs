@@ -128,6 +128,8 @@ pub struct Nuts<G> {
     // Test control only: always take the newest sub-tree's sample (biased).
     take_newest: bool,
     work: Workspace,
+    // During warm-up: the last selected point and its gradient.
+    selected: (Vec<f64>, Vec<f64>),
 }
 
 impl<G: GradientTarget> Nuts<G> {
@@ -145,6 +147,7 @@ impl<G: GradientTarget> Nuts<G> {
             depth_saturated: 0,
             take_newest: false,
             work: Workspace::default(),
+            selected: (Vec::new(), Vec::new()),
         })
     }
 
@@ -595,6 +598,10 @@ impl<G: GradientTarget> Kernel<Vec<f64>, GradientPayload> for Nuts<G> {
         proposal.state.clone_from(&z.x);
         proposal.payload.gradient.clone_from(&z.grad);
         proposal.log_density = z.lp;
+        if self.hmc.is_adapting() {
+            self.selected.0.clone_from(&z.x);
+            self.selected.1.clone_from(&z.grad);
+        }
         self.work = w;
         // The transition already is a π-reversible move: always accept.
         Proposal {
@@ -606,7 +613,15 @@ impl<G: GradientTarget> Kernel<Vec<f64>, GradientPayload> for Nuts<G> {
     }
 
     fn observe(&mut self, observation: &StepObservation<'_, Vec<f64>>) {
-        if observation.own && self.hmc.adapt(self.last.accept_stat, observation.state) {
+        // The chain's state is the selected point (always accepted); its
+        // gradient is kept for the gradient-based metric.
+        let gradient = (self.hmc.is_adapting() && observation.state == &self.selected.0)
+            .then_some(&self.selected.1[..]);
+        if observation.own
+            && self
+                .hmc
+                .adapt_with_gradient(self.last.accept_stat, observation.state, gradient)
+        {
             // Stan re-runs its step-size heuristic after a metric update.
             self.init_step_pending = true;
         }
@@ -996,6 +1011,53 @@ mod tests {
         0x7eb6370018c847e9,
         0xd4cfff643434b906,
     ];
+
+    /// Independent Gaussian coordinates with variances `σ_i²`.
+    #[derive(Clone, Copy)]
+    struct Scaled;
+    const SCALES: [f64; 4] = [0.05, 0.7, 3.0, 40.0];
+    impl GradientTarget for Scaled {
+        fn dim(&self) -> usize {
+            4
+        }
+        fn log_density_gradient(&self, x: &[f64], g: &mut [f64]) -> f64 {
+            let mut lp = 0.0;
+            for i in 0..4 {
+                let s2 = SCALES[i] * SCALES[i];
+                g[i] = -x[i] / s2;
+                lp -= 0.5 * x[i] * x[i] / s2;
+            }
+            lp
+        }
+    }
+
+    /// The gradient-based metric through NUTS's warm-up: for independent
+    /// Gaussian coordinates `g_i = −x_i/σ_i²` at every draw, so the window's
+    /// `√(s²_x/s²_g)` is `σ_i²` exactly (to rounding) whatever the window
+    /// and its autocorrelation, provided each draw is paired with its own
+    /// gradient. A draw paired with another's gradient breaks the identity.
+    #[test]
+    fn gradient_metric_warmup_recovers_independent_variances() {
+        let t = Differentiable(Scaled);
+        let nuts = Nuts::new(Scaled, 0.1)
+            .unwrap()
+            .with_warmup(300, 0.8, MetricAdaptation::DiagonalGradient)
+            .unwrap();
+        let mut chain = Chain::new(
+            &t,
+            vec![0.01, 0.1, 0.5, 3.0],
+            MetropolisHastings::new(nuts),
+            stream_rng(8, 0),
+        )
+        .unwrap();
+        for _ in 0..300 {
+            chain.step(&t);
+        }
+        let m = chain.algorithm().kernel().metric().inverse_mass_diagonal();
+        for (mi, s) in m.iter().zip(SCALES) {
+            assert!((mi / (s * s) - 1.0).abs() < 1e-9, "{m:?}");
+        }
+    }
 
     #[test]
     fn control_biased_tree_selection_fails_the_invariance_test() {
