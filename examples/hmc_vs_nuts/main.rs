@@ -13,7 +13,13 @@
 //! ```
 //!
 //! `--nuts-term-buffer N` sets our NUTS's final step-size-only warm-up
-//! buffer (CmdStan's `term_buffer`, default 50).
+//! buffer (CmdStan's `term_buffer`; default that of
+//! `NutsSettings::default()`). `--samplers` also takes the warm-up
+//! variants `nuts-stan` (CmdStan's 75 / 25 / 50, diagonal metric from the
+//! draws), `nuts-tb150` (terminal buffer 150), `nuts-early` (10 / 10 /
+//! 150: metric windows from early on), `nuts-grad` and `nuts-grad-early`
+//! (the same with nuts-rs's metric from draws and gradients,
+//! `MetricAdaptation::DiagonalGradient`).
 //!
 //! Every sampler runs `chains` chains one after the other on one thread,
 //! each with `warmup` adaptation steps and `draws` kept draws, from a
@@ -38,6 +44,7 @@ mod targets;
 
 use mcmc_core::adaptation::{MetricAdaptation, WarmupSchedule};
 use mcmc_core::diagnostics::summarize;
+use mcmc_core::fit::NutsSettings;
 use mcmc_core::gradient::{Differentiable, GradientPayload, GradientTarget};
 use mcmc_core::kernel::{GradientKernelStatistics, H2mc, Hmc, Kernel, Mala, Nuts, Trajectory};
 use mcmc_core::prelude::{Chain, MetropolisHastings, stream_rng};
@@ -83,12 +90,29 @@ struct Options {
     hmc_time: Option<f64>,
     h2mc_tau: f64,
     mala_steps: usize,
-    nuts_term_buffer: usize,
+    nuts_term_buffer: Option<usize>,
     samplers: Vec<String>,
 }
 
 /// Every sampler the comparison knows.
 const SAMPLERS: [&str; 5] = ["nuts", "hmc", "mala", "h2mc", "nuts-rs"];
+
+/// Warm-up variants of our NUTS, selectable with `--samplers` beside the
+/// default `nuts` (`mcmc_core::fit::NutsSettings::default()`'s warm-up):
+/// name, metric, CmdStan's `init_buffer`, `window`, `term_buffer`.
+const NUTS_VARIANTS: [(&str, MetricAdaptation, usize, usize, usize); 5] = [
+    ("nuts-stan", MetricAdaptation::Diagonal, 75, 25, 50),
+    ("nuts-tb150", MetricAdaptation::Diagonal, 75, 25, 150),
+    ("nuts-early", MetricAdaptation::Diagonal, 10, 10, 150),
+    ("nuts-grad", MetricAdaptation::DiagonalGradient, 75, 25, 150),
+    (
+        "nuts-grad-early",
+        MetricAdaptation::DiagonalGradient,
+        10,
+        10,
+        150,
+    ),
+];
 
 fn parse() -> Result<Options, String> {
     let mut o = Options {
@@ -100,7 +124,7 @@ fn parse() -> Result<Options, String> {
         hmc_time: None,
         h2mc_tau: 1.0,
         mala_steps: 20,
-        nuts_term_buffer: 50,
+        nuts_term_buffer: None,
         samplers: SAMPLERS.map(String::from).to_vec(),
     };
     let mut args = std::env::args().skip(1);
@@ -137,17 +161,23 @@ fn parse() -> Result<Options, String> {
             }
             "--samplers" => {
                 o.samplers = value("--samplers")?.split(',').map(String::from).collect();
-                if let Some(bad) = o.samplers.iter().find(|s| !SAMPLERS.contains(&s.as_str())) {
+                let known =
+                    |s: &str| SAMPLERS.contains(&s) || NUTS_VARIANTS.iter().any(|v| v.0 == s);
+                if let Some(bad) = o.samplers.iter().find(|s| !known(s)) {
+                    let variants: Vec<&str> = NUTS_VARIANTS.iter().map(|v| v.0).collect();
                     return Err(format!(
-                        "--samplers: unknown sampler `{bad}` ({})",
-                        SAMPLERS.join(", ")
+                        "--samplers: unknown sampler `{bad}` ({}, {})",
+                        SAMPLERS.join(", "),
+                        variants.join(", ")
                     ));
                 }
             }
             "--nuts-term-buffer" => {
-                o.nuts_term_buffer = value("--nuts-term-buffer")?
-                    .parse()
-                    .map_err(|e| format!("--nuts-term-buffer: {e}"))?
+                o.nuts_term_buffer = Some(
+                    value("--nuts-term-buffer")?
+                        .parse()
+                        .map_err(|e| format!("--nuts-term-buffer: {e}"))?,
+                )
             }
             "--mala-steps" => {
                 o.mala_steps = value("--mala-steps")?
@@ -444,7 +474,7 @@ fn main() {
         samplers: o
             .samplers
             .iter()
-            .filter(|s| *s == "nuts" || *s == "nuts-rs")
+            .filter(|s| s.starts_with("nuts"))
             .cloned()
             .collect(),
         ..o.clone()
@@ -510,8 +540,16 @@ fn compare<G: GradientTarget + Clone>(name: &str, g: &G, time: f64, o: &Options)
     let on = |s: &str| o.samplers.iter().any(|x| x == s);
     let mut runs = Vec::new();
     if on("nuts") {
-        let tb = o.nuts_term_buffer;
-        runs.push(run_ours(name, "nuts", g, || nuts(g.clone(), w, tb), 1, o));
+        let s = NutsSettings::default();
+        let tb = o.nuts_term_buffer.unwrap_or(s.term_buffer);
+        let make = || nuts(g.clone(), w, s.metric, s.init_buffer, s.window, tb);
+        runs.push(run_ours(name, "nuts", g, make, 1, o));
+    }
+    for (variant, metric, init, window, term) in NUTS_VARIANTS {
+        if on(variant) {
+            let make = || nuts(g.clone(), w, metric, init, window, term);
+            runs.push(run_ours(name, variant, g, make, 1, o));
+        }
     }
     if on("hmc") {
         runs.push(run_ours(name, "hmc", g, || hmc(g.clone(), time, w), 1, o));
@@ -541,13 +579,20 @@ fn fail(e: &str) -> ! {
     std::process::exit(1);
 }
 
-/// Our NUTS with Stan's defaults: warm-up with the step-size heuristic,
-/// dual averaging to 0.8 and diagonal metric windows (75 / 25 /
-/// `term_buffer`); maximum depth 10.
-fn nuts<G: GradientTarget>(g: G, warmup: usize, term_buffer: usize) -> Nuts<G> {
+/// Our NUTS: warm-up with Stan's step-size heuristic, dual averaging to
+/// 0.8 and `metric` windows (`init` / first `window` / `term` buffer, as
+/// CmdStan's `init_buffer`, `window`, `term_buffer`); maximum depth 10.
+fn nuts<G: GradientTarget>(
+    g: G,
+    warmup: usize,
+    metric: MetricAdaptation,
+    init: usize,
+    window: usize,
+    term: usize,
+) -> Nuts<G> {
     Nuts::new(g, 1.0)
-        .and_then(|n| n.with_warmup(warmup, 0.8, MetricAdaptation::Diagonal))
-        .and_then(|n| n.with_warmup_schedule(WarmupSchedule::new(warmup, 75, 25, term_buffer)))
+        .and_then(|n| n.with_warmup(warmup, 0.8, metric))
+        .and_then(|n| n.with_warmup_schedule(WarmupSchedule::new(warmup, init, window, term)))
         .expect("valid settings")
 }
 

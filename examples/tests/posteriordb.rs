@@ -58,6 +58,8 @@ fn gradients_match_finite_differences() {
 fn nuts_agrees_with_posteriordb_references() {
     let settings = NutsSettings {
         seed: 2026,
+        // CmdStan's terminal buffer: the committed expectations were made with it.
+        term_buffer: 50,
         ..Default::default()
     };
     let mut failures = Vec::new();
@@ -118,6 +120,8 @@ fn dropped_jacobian_fails_the_reference_check() {
     };
     let settings = NutsSettings {
         seed: 2026,
+        // CmdStan's terminal buffer: the committed expectations were made with it.
+        term_buffer: 50,
         ..Default::default()
     };
     let (r, _) = run(&wrong, &settings).unwrap();

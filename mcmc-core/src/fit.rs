@@ -21,7 +21,9 @@ use std::time::Instant;
 /// Settings of a multi-chain NUTS run; [`Default`] is CmdStan's defaults
 /// (4 chains, 1000 warm-up iterations, 1000 draws, `adapt_delta` 0.8,
 /// diagonal metric, maximum depth 10, initial step size 1, initial points
-/// uniform in `[−2, 2]^d`, Stan's warm-up windows 75 / 25 / 50).
+/// uniform in `[−2, 2]^d`, Stan's warm-up windows 75 / 25) except a
+/// terminal buffer of 150 (CmdStan: 50), chosen by measurement on the four
+/// targets of `examples/hmc_vs_nuts` (`docs/performance.md`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct NutsSettings {
     /// Number of chains.
@@ -43,12 +45,19 @@ pub struct NutsSettings {
     /// Initial points are drawn uniformly in `[−r, r]^d` (Stan: 2).
     pub init_radius: f64,
     /// Warm-up iterations after the last metric update in which only the
-    /// step size adapts (CmdStan's `term_buffer`, 50). Longer buffers give a
-    /// better settled step size: on the 100-d Gaussian of
-    /// `examples/hmc_vs_nuts` 150 (nuts-rs's final step-size window, 15 %
-    /// of 1000) takes 22 % fewer gradients for the same ESS
-    /// (`docs/performance.md`).
+    /// step size adapts (CmdStan's `term_buffer` is 50; the default here is
+    /// 150, nuts-rs's final step-size window of 15 % of 1000). The longer
+    /// buffer gives a better settled step size: on the four targets of
+    /// `examples/hmc_vs_nuts` it had the best ESS per gradient of the
+    /// variants measured (`docs/performance.md`; 22 % fewer gradients on
+    /// the 100-d Gaussian). Set 50 to reproduce CmdStan's runs.
     pub term_buffer: usize,
+    /// Warm-up iterations before the first metric window, step size only
+    /// (CmdStan's `init_buffer`, 75).
+    pub init_buffer: usize,
+    /// Length of the first metric window; later windows double (CmdStan's
+    /// `window`, 25).
+    pub window: usize,
 }
 
 impl Default for NutsSettings {
@@ -63,7 +72,9 @@ impl Default for NutsSettings {
             max_depth: 10,
             initial_step_size: 1.0,
             init_radius: 2.0,
-            term_buffer: 50,
+            term_buffer: 150,
+            init_buffer: 75,
+            window: 25,
         }
     }
 }
@@ -199,8 +210,8 @@ where
             .with_warmup(settings.warmup, settings.target_accept, settings.metric)?
             .with_warmup_schedule(WarmupSchedule::new(
                 settings.warmup,
-                75,
-                25,
+                settings.init_buffer,
+                settings.window,
                 settings.term_buffer,
             ))?;
         let mut chain = Chain::new(&t, start, MetropolisHastings::new(nuts), rng)?;

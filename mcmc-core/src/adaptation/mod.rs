@@ -12,10 +12,12 @@
 //!   Markov chain.
 
 mod dual_averaging;
+mod gradient_metric;
 mod schedule;
 mod welford;
 
 pub use dual_averaging::DualAveraging;
+pub use gradient_metric::GradientMetricEstimator;
 pub use schedule::WarmupSchedule;
 pub use welford::MetricEstimator;
 
@@ -31,6 +33,19 @@ pub enum MetricAdaptation {
     Diagonal,
     /// Estimate a dense `M⁻¹` (the covariance).
     Dense,
+    /// Estimate a diagonal `M⁻¹_ii = √(var x_i / var ∂_i ln π)` from the
+    /// draws and their gradients (nuts-rs's default;
+    /// [`GradientMetricEstimator`]). Needs the kernel to pass the gradient
+    /// ([`Warmup::observe_with_gradient`]): NUTS does; with a kernel that
+    /// does not, the metric stays as given.
+    DiagonalGradient,
+}
+
+/// The estimator behind a [`MetricAdaptation`].
+#[derive(Clone, Debug)]
+enum Estimator {
+    Draws(MetricEstimator),
+    Gradient(GradientMetricEstimator),
 }
 
 /// What one warm-up iteration changed.
@@ -47,7 +62,7 @@ pub struct WarmupUpdate {
 pub struct Warmup {
     schedule: WarmupSchedule,
     step: DualAveraging,
-    estimator: Option<MetricEstimator>,
+    estimator: Option<Estimator>,
     iteration: usize,
     frozen: bool,
 }
@@ -71,8 +86,11 @@ impl Warmup {
         }
         let estimator = match metric {
             MetricAdaptation::None => None,
-            MetricAdaptation::Diagonal => Some(MetricEstimator::diagonal(dim)),
-            MetricAdaptation::Dense => Some(MetricEstimator::dense(dim)),
+            MetricAdaptation::Diagonal => Some(Estimator::Draws(MetricEstimator::diagonal(dim))),
+            MetricAdaptation::Dense => Some(Estimator::Draws(MetricEstimator::dense(dim))),
+            MetricAdaptation::DiagonalGradient => {
+                Some(Estimator::Gradient(GradientMetricEstimator::new(dim)))
+            }
         };
         Ok(Warmup {
             schedule: WarmupSchedule::stan(iterations),
@@ -123,6 +141,18 @@ impl Warmup {
     /// Records one iteration with acceptance probability `alpha` ending at
     /// `state`. `None` once frozen.
     pub fn observe(&mut self, alpha: f64, state: &[f64]) -> Option<WarmupUpdate> {
+        self.observe_with_gradient(alpha, state, None)
+    }
+
+    /// [`Self::observe`] with the gradient of `ln π` at `state`, which
+    /// [`MetricAdaptation::DiagonalGradient`] needs (without it the
+    /// iteration adds nothing to that estimator).
+    pub fn observe_with_gradient(
+        &mut self,
+        alpha: f64,
+        state: &[f64],
+        gradient: Option<&[f64]>,
+    ) -> Option<WarmupUpdate> {
         if self.frozen {
             return None;
         }
@@ -132,11 +162,23 @@ impl Warmup {
         let mut metric = None;
         if let Some(est) = &mut self.estimator {
             if self.schedule.in_slow_window(i) {
-                est.add(state);
+                match (&mut *est, gradient) {
+                    (Estimator::Draws(e), _) => e.add(state),
+                    (Estimator::Gradient(e), Some(g)) => e.add(state, g),
+                    (Estimator::Gradient(_), None) => {}
+                }
             }
             if self.schedule.is_window_end(i) {
-                metric = est.metric();
-                est.reset();
+                match est {
+                    Estimator::Draws(e) => {
+                        metric = e.metric();
+                        e.reset();
+                    }
+                    Estimator::Gradient(e) => {
+                        metric = e.metric();
+                        e.reset();
+                    }
+                }
                 // Stan restarts dual averaging around the current step size
                 // after every metric change.
                 self.step.restart(step_size);

@@ -67,6 +67,33 @@ impl MetricEstimator {
         }
     }
 
+    /// Dimension.
+    pub fn dim(&self) -> usize {
+        self.mean.len()
+    }
+
+    /// The unregularised sample variances `m2/(n − 1)` of a diagonal
+    /// estimator (the diagonal of the covariance for a dense one); `None`
+    /// with fewer than 3 draws.
+    pub fn variances(&self) -> Option<Vec<f64>> {
+        if self.n < 3 {
+            return None;
+        }
+        let (d, n) = (self.mean.len(), self.n as f64);
+        Some(
+            (0..d)
+                .map(|i| {
+                    let m2 = if self.dense {
+                        self.m2[i * d + i]
+                    } else {
+                        self.m2[i]
+                    };
+                    m2 / (n - 1.0)
+                })
+                .collect(),
+        )
+    }
+
     /// Forgets every draw.
     pub fn reset(&mut self) {
         self.n = 0;

@@ -33,6 +33,7 @@
 //! move is exact for any target on the torus; a target that is not periodic
 //! merely has larger energy errors across the seam.
 
+use super::phase_pool::PhasePoint;
 use super::{Kernel, Metric, Proposal, StepObservation};
 use crate::adaptation::{MetricAdaptation, Warmup, WarmupSchedule};
 use crate::error::{Result, invalid};
@@ -248,8 +249,19 @@ impl<G: GradientTarget> Hmc<G> {
     /// One warm-up iteration with acceptance statistic `alpha` ending at
     /// `state`; returns true when the metric changed.
     pub(crate) fn adapt(&mut self, alpha: f64, state: &[f64]) -> bool {
+        self.adapt_with_gradient(alpha, state, None)
+    }
+
+    /// [`Self::adapt`] with the gradient of `ln π` at `state` (for
+    /// [`MetricAdaptation::DiagonalGradient`]).
+    pub(crate) fn adapt_with_gradient(
+        &mut self,
+        alpha: f64,
+        state: &[f64],
+        gradient: Option<&[f64]>,
+    ) -> bool {
         if let Some(w) = &mut self.warmup
-            && let Some(update) = w.observe(alpha, state)
+            && let Some(update) = w.observe_with_gradient(alpha, state, gradient)
         {
             self.step_size = update.step_size;
             if let Some(m) = update.metric {
@@ -330,12 +342,7 @@ impl<G: GradientTarget> Hmc<G> {
                 *xi += eps * vi;
             }
             self.wrap(x);
-            lp = if x.iter().all(|v| v.is_finite()) {
-                evaluate_checked(&self.target, x, grad)
-            } else {
-                f64::NAN
-            };
-            self.stats.gradient_evaluations += 1;
+            lp = self.evaluate_at(x, grad);
             if !lp.is_finite() {
                 break;
             }
@@ -345,6 +352,58 @@ impl<G: GradientTarget> Hmc<G> {
         }
         self.velocity = v;
         (lp, taken)
+    }
+
+    /// `ln π(x)` and its gradient, counted; NaN for a non-finite `x`.
+    #[inline]
+    fn evaluate_at(&mut self, x: &[f64], grad: &mut [f64]) -> f64 {
+        self.stats.gradient_evaluations += 1;
+        if x.iter().all(|v| v.is_finite()) {
+            evaluate_checked(&self.target, x, grad)
+        } else {
+            f64::NAN
+        }
+    }
+
+    /// One leapfrog step of size `eps` from `from` into `to` (out of place:
+    /// NUTS keeps every point it may still select), the same arithmetic as
+    /// [`Self::leapfrog`] with one step. Sets `to.x`, `to.p`, `to.grad`,
+    /// `to.lp`, the velocity `to.v = M⁻¹ to.p` and `to.h = −ln π + ½ pᵀv`
+    /// (`+∞` when not finite); the second half kick is skipped, as there,
+    /// when `ln π` is not finite.
+    pub(crate) fn leapfrog_into(&mut self, eps: f64, from: &PhasePoint, to: &mut PhasePoint) {
+        let half = 0.5 * eps;
+        if let Some(m) = self.metric.diagonal_inverse_mass() {
+            // Kick, velocity and drift fused: `v = m p` element by element.
+            for i in 0..self.dim {
+                let p = from.p[i] + half * from.grad[i];
+                to.p[i] = p;
+                to.x[i] = from.x[i] + eps * (m[i] * p);
+            }
+        } else {
+            for i in 0..self.dim {
+                to.p[i] = from.p[i] + half * from.grad[i];
+            }
+            self.metric.velocity(&to.p, &mut to.v);
+            for i in 0..self.dim {
+                to.x[i] = from.x[i] + eps * to.v[i];
+            }
+        }
+        self.wrap(&mut to.x);
+        let lp = self.evaluate_at(&to.x, &mut to.grad);
+        if lp.is_finite() {
+            for (pi, gi) in to.p.iter_mut().zip(&to.grad) {
+                *pi += half * gi;
+            }
+        }
+        to.lp = lp;
+        let k = self.metric.kinetic(&to.p, &mut to.v);
+        let h = if lp.is_finite() {
+            -lp + k
+        } else {
+            f64::INFINITY
+        };
+        to.h = if h.is_nan() { f64::INFINITY } else { h };
     }
 
     /// Kinetic energy `½ pᵀ M⁻¹ p` under the current metric.

@@ -120,6 +120,15 @@ impl Metric {
         }
     }
 
+    /// `M⁻¹`'s diagonal when the metric is diagonal (for fused loops).
+    #[inline]
+    pub(crate) fn diagonal_inverse_mass(&self) -> Option<&[f64]> {
+        match &self.shape {
+            Shape::Diagonal { inv_mass, .. } => Some(inv_mass),
+            Shape::Dense { .. } => None,
+        }
+    }
+
     /// Draws `p ~ N(0, M)` into `p`.
     pub(crate) fn sample_momentum(&self, rng: &mut ChainRng, p: &mut [f64]) {
         match &self.shape {

@@ -17,6 +17,7 @@ pub mod mala;
 pub mod metric;
 mod mixture;
 pub mod nuts;
+mod phase_pool;
 mod torus_step;
 
 pub use adaptive_covariance::AdaptiveCovariance;

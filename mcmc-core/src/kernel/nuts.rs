@@ -31,6 +31,7 @@
 //! **divergence**; the draw is taken from the part built before it, and the
 //! divergence is counted. Nothing panics.
 
+use super::phase_pool::PointPool;
 use super::{Hmc, Kernel, Metric, Proposal, StepObservation};
 use crate::adaptation::{MetricAdaptation, WarmupSchedule};
 use crate::error::{Result, invalid};
@@ -58,60 +59,32 @@ pub struct NutsDrawStatistics {
     pub energy: f64,
 }
 
-/// A point of phase space with its density and gradient.
-#[derive(Clone, Debug, Default)]
-struct Point {
-    x: Vec<f64>,
-    p: Vec<f64>,
-    grad: Vec<f64>,
-    lp: f64,
-}
-
-impl Point {
-    fn copy_from(&mut self, other: &Point) {
-        self.x.clone_from(&other.x);
-        self.p.clone_from(&other.p);
-        self.grad.clone_from(&other.grad);
-        self.lp = other.lp;
-    }
-}
-
 /// The locals of one level of the tree recursion (reused across calls).
 #[derive(Clone, Debug, Default)]
 struct Frame {
-    p_init_end: Vec<f64>,
-    p_sharp_init_end: Vec<f64>,
     rho_init: Vec<f64>,
-    p_final_beg: Vec<f64>,
-    p_sharp_final_beg: Vec<f64>,
     rho_final: Vec<f64>,
-    propose_final: Point,
 }
 
 /// Buffers of one transition, kept between transitions so none allocates.
 #[derive(Clone, Debug, Default)]
 struct Workspace {
-    z: Point,
-    z_fwd: Point,
-    z_bck: Point,
-    z_sample: Point,
-    z_propose: Point,
-    // Momentum and velocity M⁻¹p at the four inner/outer ends of the
-    // backward and forward halves, named as Stan (`p_fwd_bck`: backward
-    // end of the forward half).
-    p_fwd_fwd: Vec<f64>,
-    p_sharp_fwd_fwd: Vec<f64>,
-    p_fwd_bck: Vec<f64>,
-    p_sharp_fwd_bck: Vec<f64>,
-    p_bck_fwd: Vec<f64>,
-    p_sharp_bck_fwd: Vec<f64>,
-    p_bck_bck: Vec<f64>,
-    p_sharp_bck_bck: Vec<f64>,
+    pool: PointPool,
     // Sums of momenta over the whole trajectory and its two halves.
     rho: Vec<f64>,
     rho_fwd: Vec<f64>,
     rho_bck: Vec<f64>,
     frames: Vec<Frame>,
+}
+
+/// A valid sub-tree: pool indices of its first and last points (in the
+/// direction it was built) and of its multinomial sample, each holding one
+/// reference.
+#[derive(Clone, Copy, Debug)]
+struct SubTree {
+    beg: usize,
+    end: usize,
+    propose: usize,
 }
 
 /// The generalised no-U-turn criterion for a trajectory whose summed
@@ -155,6 +128,8 @@ pub struct Nuts<G> {
     // Test control only: always take the newest sub-tree's sample (biased).
     take_newest: bool,
     work: Workspace,
+    // During warm-up: the last selected point and its gradient.
+    selected: (Vec<f64>, Vec<f64>),
 }
 
 impl<G: GradientTarget> Nuts<G> {
@@ -172,6 +147,7 @@ impl<G: GradientTarget> Nuts<G> {
             depth_saturated: 0,
             take_newest: false,
             work: Workspace::default(),
+            selected: (Vec::new(), Vec::new()),
         })
     }
 
@@ -281,18 +257,21 @@ impl<G: GradientTarget> Nuts<G> {
         if h.is_nan() { f64::INFINITY } else { h }
     }
 
-    /// Stan's heuristic: from `start`, double (or halve) `ε` while one
-    /// leapfrog step's acceptance stays above (below) 0.8.
-    fn initial_step_size(&mut self, start: &Point, rng: &mut ChainRng) -> f64 {
+    /// Stan's heuristic: from the pool's point `start`, double (or halve)
+    /// `ε` while one leapfrog step's acceptance stays above (below) 0.8.
+    fn initial_step_size(&mut self, pool: &mut PointPool, start: usize, rng: &mut ChainRng) -> f64 {
         let mut eps = self.hmc.step_size();
-        let mut z = start.clone();
+        let scratch = pool.alloc();
         let mut direction = 0.0;
         for _ in 0..100 {
-            z.copy_from(start);
-            self.hmc.metric().sample_momentum(rng, &mut z.p);
+            self.hmc
+                .metric()
+                .sample_momentum(rng, &mut pool.get_mut(start).p);
+            let z = pool.get(start);
             let h0 = self.hamiltonian(z.lp, &z.p);
-            let (lp, _) = self.hmc.leapfrog(eps, 1, &mut z.x, &mut z.p, &mut z.grad);
-            let delta = h0 - self.hamiltonian(lp, &z.p);
+            let (from, to) = pool.pair(start, scratch);
+            self.hmc.leapfrog_into(eps, from, to);
+            let delta = h0 - to.h;
             let up = delta > 0.8f64.ln();
             if direction == 0.0 {
                 direction = if up { 2.0 } else { 0.5 };
@@ -305,38 +284,36 @@ impl<G: GradientTarget> Nuts<G> {
             }
             eps = next;
         }
+        pool.release(scratch);
         eps
     }
 
-    /// One NUTS transition from `start` (whose momentum is drawn here);
-    /// leaves the selected point in `work.z_sample`.
-    fn transition(&mut self, w: &mut Workspace, rng: &mut ChainRng) -> NutsDrawStatistics {
+    /// One NUTS transition from the pool's point `start` (whose momentum is
+    /// drawn here); returns the pool index of the selected point.
+    fn transition(
+        &mut self,
+        w: &mut Workspace,
+        start: usize,
+        rng: &mut ChainRng,
+    ) -> (usize, NutsDrawStatistics) {
         let eps = self.hmc.step_size();
-        let d = w.z.x.len();
-        self.hmc.metric().sample_momentum(rng, &mut w.z.p);
-        for v in [
-            &mut w.p_fwd_fwd,
-            &mut w.p_fwd_bck,
-            &mut w.p_bck_fwd,
-            &mut w.p_bck_bck,
-            &mut w.rho,
-        ] {
-            v.clone_from(&w.z.p);
+        let pool = &mut w.pool;
+        let d = pool.get(start).x.len();
+        {
+            let z = pool.get_mut(start);
+            self.hmc.metric().sample_momentum(rng, &mut z.p);
+            self.hmc.metric().velocity(&z.p, &mut z.v);
         }
-        w.p_sharp_fwd_fwd.resize(d, 0.0);
-        self.hmc.metric().velocity(&w.z.p, &mut w.p_sharp_fwd_fwd);
-        for v in [
-            &mut w.p_sharp_fwd_bck,
-            &mut w.p_sharp_bck_fwd,
-            &mut w.p_sharp_bck_bck,
-        ] {
-            v.clone_from(&w.p_sharp_fwd_fwd);
-        }
-        w.z_fwd.copy_from(&w.z);
-        w.z_bck.copy_from(&w.z);
-        w.z_sample.copy_from(&w.z);
-        w.z_propose.copy_from(&w.z);
-        let h0 = self.hamiltonian(w.z.lp, &w.z.p);
+        let h0 = {
+            let z = pool.get(start);
+            self.hamiltonian(z.lp, &z.p)
+        };
+        pool.get_mut(start).h = h0;
+        w.rho.clone_from(&pool.get(start).p);
+        // The trajectory's two ends and its sample: all the start so far.
+        let (mut fwd, mut bck, mut sample) = (start, start, start);
+        pool.retain(start);
+        pool.retain(start);
         let mut builder = Builder {
             hmc: &mut self.hmc,
             rng,
@@ -347,6 +324,7 @@ impl<G: GradientTarget> Nuts<G> {
             sum_metro_prob: 0.0,
             divergent: false,
             frames: &mut w.frames,
+            pool,
         };
         let mut log_sum_weight = 0.0; // ln e^{H₀ − H₀}
         let mut depth = 0;
@@ -356,84 +334,64 @@ impl<G: GradientTarget> Nuts<G> {
             w.rho_bck.clear();
             w.rho_bck.resize(d, 0.0);
             let mut log_sum_weight_subtree = f64::NEG_INFINITY;
-            let valid = if uniform(builder.rng) > 0.5 {
-                // Extend forward: the old tree becomes the backward half.
-                w.z.copy_from(&w.z_fwd);
+            let forward = uniform(builder.rng) > 0.5;
+            // The old tree becomes the half opposite the extension; its end
+            // on the extension side is the inner end of that half.
+            let (old_end, rho_new) = if forward {
                 w.rho_bck.clone_from(&w.rho);
-                w.p_bck_fwd.clone_from(&w.p_fwd_fwd);
-                w.p_sharp_bck_fwd.clone_from(&w.p_sharp_fwd_fwd);
-                let valid = builder.build_tree(
-                    depth,
-                    &mut w.z,
-                    &mut w.z_propose,
-                    Ends {
-                        p_sharp_beg: &mut w.p_sharp_fwd_bck,
-                        p_sharp_end: &mut w.p_sharp_fwd_fwd,
-                        rho: &mut w.rho_fwd,
-                        p_beg: &mut w.p_fwd_bck,
-                        p_end: &mut w.p_fwd_fwd,
-                    },
-                    1.0,
-                    &mut log_sum_weight_subtree,
-                );
-                w.z_fwd.copy_from(&w.z);
-                valid
+                (fwd, &mut w.rho_fwd)
             } else {
-                // Extend backward: the old tree becomes the forward half.
-                w.z.copy_from(&w.z_bck);
                 w.rho_fwd.clone_from(&w.rho);
-                w.p_fwd_bck.clone_from(&w.p_bck_bck);
-                w.p_sharp_fwd_bck.clone_from(&w.p_sharp_bck_bck);
-                let valid = builder.build_tree(
-                    depth,
-                    &mut w.z,
-                    &mut w.z_propose,
-                    Ends {
-                        p_sharp_beg: &mut w.p_sharp_bck_fwd,
-                        p_sharp_end: &mut w.p_sharp_bck_bck,
-                        rho: &mut w.rho_bck,
-                        p_beg: &mut w.p_bck_fwd,
-                        p_end: &mut w.p_bck_bck,
-                    },
-                    -1.0,
-                    &mut log_sum_weight_subtree,
-                );
-                w.z_bck.copy_from(&w.z);
-                valid
+                (bck, &mut w.rho_bck)
             };
-            if !valid {
+            let sign = if forward { 1.0 } else { -1.0 };
+            let Some(sub) =
+                builder.build_tree(depth, old_end, sign, rho_new, &mut log_sum_weight_subtree)
+            else {
                 break;
-            }
+            };
             depth += 1;
             // Biased progressive sampling: favour the new sub-tree.
             if self.take_newest
                 || log_sum_weight_subtree > log_sum_weight
                 || uniform(builder.rng) < (log_sum_weight_subtree - log_sum_weight).exp()
             {
-                w.z_sample.copy_from(&w.z_propose);
+                builder.pool.release(sample);
+                sample = sub.propose;
+            } else {
+                builder.pool.release(sub.propose);
             }
             log_sum_weight = log_sum_exp2(log_sum_weight, log_sum_weight_subtree);
             for i in 0..d {
                 w.rho[i] = w.rho_bck[i] + w.rho_fwd[i];
             }
+            // Ends of the two halves: `(bck_bck, bck_fwd)` and
+            // `(fwd_bck, fwd_fwd)`.
+            let (bck_bck, bck_fwd, fwd_bck, fwd_fwd) = if forward {
+                (bck, fwd, sub.beg, sub.end)
+            } else {
+                (sub.end, sub.beg, bck, fwd)
+            };
+            let pool = &*builder.pool;
+            let (bb, bf, fb, ff) = (
+                pool.get(bck_bck),
+                pool.get(bck_fwd),
+                pool.get(fwd_bck),
+                pool.get(fwd_fwd),
+            );
             // The whole trajectory, then across the boundary of its halves
             // (each half extended by the neighbouring point of the other).
-            let persist = no_u_turn(
-                &w.p_sharp_bck_bck,
-                &w.p_sharp_fwd_fwd,
-                &w.rho_bck,
-                &w.rho_fwd,
-            ) && no_u_turn(
-                &w.p_sharp_bck_bck,
-                &w.p_sharp_fwd_bck,
-                &w.rho_bck,
-                &w.p_fwd_bck,
-            ) && no_u_turn(
-                &w.p_sharp_bck_fwd,
-                &w.p_sharp_fwd_fwd,
-                &w.rho_fwd,
-                &w.p_bck_fwd,
-            );
+            let persist = no_u_turn(&bb.v, &ff.v, &w.rho_bck, &w.rho_fwd)
+                && no_u_turn(&bb.v, &fb.v, &w.rho_bck, &fb.p)
+                && no_u_turn(&bf.v, &ff.v, &w.rho_fwd, &bf.p);
+            // The old end on the extension side is now inside the trajectory.
+            builder.pool.release(old_end);
+            builder.pool.release(sub.beg);
+            if forward {
+                fwd = sub.end;
+            } else {
+                bck = sub.end;
+            }
             if !persist {
                 break;
             }
@@ -443,7 +401,7 @@ impl<G: GradientTarget> Nuts<G> {
             builder.sum_metro_prob,
             builder.divergent,
         );
-        NutsDrawStatistics {
+        let stats = NutsDrawStatistics {
             accept_stat: if n_leapfrog > 0 {
                 sum_metro_prob / n_leapfrog as f64
             } else {
@@ -453,18 +411,10 @@ impl<G: GradientTarget> Nuts<G> {
             tree_depth: depth,
             n_leapfrog,
             divergent,
-            energy: self.hamiltonian(w.z_sample.lp, &w.z_sample.p),
-        }
+            energy: w.pool.get(sample).h,
+        };
+        (sample, stats)
     }
-}
-
-/// The outputs of a sub-tree at its two ends, named as Stan.
-struct Ends<'a> {
-    p_sharp_beg: &'a mut Vec<f64>,
-    p_sharp_end: &'a mut Vec<f64>,
-    rho: &'a mut Vec<f64>,
-    p_beg: &'a mut Vec<f64>,
-    p_end: &'a mut Vec<f64>,
 }
 
 /// Builds sub-trees of one transition.
@@ -478,152 +428,132 @@ struct Builder<'a, G> {
     sum_metro_prob: f64,
     divergent: bool,
     frames: &'a mut Vec<Frame>,
+    pool: &'a mut PointPool,
 }
 
 impl<G: GradientTarget> Builder<'_, G> {
     /// Builds a sub-tree of `2^depth` leapfrog steps in direction `sign`
-    /// from `z`, leaving `z` at its far end, its multinomial sample in
-    /// `z_propose`, its end momenta/velocities and summed momentum in
-    /// `ends`, and adding its log weight to `log_sum_weight`. False when it
-    /// diverged or U-turned inside (the sub-tree is then discarded).
-    #[allow(clippy::too_many_arguments)]
+    /// from the pool's point `from`, adding its summed momentum to `rho` and
+    /// its log weight to `log_sum_weight`. `None` when it diverged or
+    /// U-turned inside (the sub-tree is then discarded; its points may stay
+    /// referenced until the pool's next reset).
     fn build_tree(
         &mut self,
         depth: usize,
-        z: &mut Point,
-        z_propose: &mut Point,
-        ends: Ends<'_>,
+        from: usize,
         sign: f64,
+        rho: &mut [f64],
         log_sum_weight: &mut f64,
-    ) -> bool {
-        let d = z.x.len();
+    ) -> Option<SubTree> {
         if depth == 0 {
-            let (lp, _) = self
-                .hmc
-                .leapfrog(sign * self.eps, 1, &mut z.x, &mut z.p, &mut z.grad);
-            z.lp = lp;
+            let new = self.pool.alloc();
+            let (z0, z) = self.pool.pair(from, new);
+            self.hmc.leapfrog_into(sign * self.eps, z0, z);
             self.n_leapfrog += 1;
             {
                 let s = self.hmc.statistics_mut();
                 s.leapfrog_steps += 1;
-                if lp == f64::NEG_INFINITY {
+                if z.lp == f64::NEG_INFINITY {
                     s.outside_support += 1;
-                } else if !lp.is_finite() {
+                } else if !z.lp.is_finite() {
                     s.invalid += 1;
                 }
             }
-            let h = if lp.is_finite() {
-                let h = -lp + self.hmc.kinetic_energy(&z.p);
-                if h.is_nan() { f64::INFINITY } else { h }
-            } else {
-                f64::INFINITY
-            };
+            let h = z.h;
             if h - self.h0 > self.max_delta_h {
                 self.divergent = true;
             }
             let log_w = self.h0 - h;
             *log_sum_weight = log_sum_exp2(*log_sum_weight, log_w);
             self.sum_metro_prob += if log_w > 0.0 { 1.0 } else { log_w.exp() };
-            z_propose.copy_from(z);
-            ends.p_sharp_beg.resize(d, 0.0);
-            self.hmc.metric().velocity(&z.p, ends.p_sharp_beg);
-            ends.p_sharp_end.clone_from(ends.p_sharp_beg);
-            for (r, p) in ends.rho.iter_mut().zip(&z.p) {
+            for (r, p) in rho.iter_mut().zip(&z.p) {
                 *r += p;
             }
-            ends.p_beg.clone_from(&z.p);
-            ends.p_end.clone_from(&z.p);
-            return !self.divergent;
+            if self.divergent {
+                return None;
+            }
+            // The leaf is its sub-tree's first point, last point and sample.
+            self.pool.retain(new);
+            self.pool.retain(new);
+            return Some(SubTree {
+                beg: new,
+                end: new,
+                propose: new,
+            });
         }
         if self.frames.len() < depth {
             self.frames.resize_with(depth, Frame::default);
         }
         let mut f = std::mem::take(&mut self.frames[depth - 1]);
-        let valid = self.build_subtrees(depth, z, z_propose, ends, sign, log_sum_weight, &mut f);
+        let sub = self.build_subtrees(depth, from, sign, rho, log_sum_weight, &mut f);
         self.frames[depth - 1] = f;
-        valid
+        sub
     }
 
     /// The two halves of a sub-tree of depth `depth ≥ 1`, with `f` as locals.
-    #[allow(clippy::too_many_arguments)]
     fn build_subtrees(
         &mut self,
         depth: usize,
-        z: &mut Point,
-        z_propose: &mut Point,
-        ends: Ends<'_>,
+        from: usize,
         sign: f64,
+        rho: &mut [f64],
         log_sum_weight: &mut f64,
         f: &mut Frame,
-    ) -> bool {
-        let d = z.x.len();
+    ) -> Option<SubTree> {
+        let d = rho.len();
         for r in [&mut f.rho_init, &mut f.rho_final] {
             r.clear();
             r.resize(d, 0.0);
         }
         let mut log_sum_weight_init = f64::NEG_INFINITY;
-        if !self.build_tree(
+        let init = self.build_tree(
             depth - 1,
-            z,
-            z_propose,
-            Ends {
-                p_sharp_beg: ends.p_sharp_beg,
-                p_sharp_end: &mut f.p_sharp_init_end,
-                rho: &mut f.rho_init,
-                p_beg: ends.p_beg,
-                p_end: &mut f.p_init_end,
-            },
+            from,
             sign,
+            &mut f.rho_init,
             &mut log_sum_weight_init,
-        ) {
-            return false;
-        }
+        )?;
         let mut log_sum_weight_final = f64::NEG_INFINITY;
-        if !self.build_tree(
+        let fin = self.build_tree(
             depth - 1,
-            z,
-            &mut f.propose_final,
-            Ends {
-                p_sharp_beg: &mut f.p_sharp_final_beg,
-                p_sharp_end: ends.p_sharp_end,
-                rho: &mut f.rho_final,
-                p_beg: &mut f.p_final_beg,
-                p_end: ends.p_end,
-            },
+            init.end,
             sign,
+            &mut f.rho_final,
             &mut log_sum_weight_final,
-        ) {
-            return false;
-        }
+        )?;
         // Uniform progressive sampling between the two halves.
         let log_sum_weight_subtree = log_sum_exp2(log_sum_weight_init, log_sum_weight_final);
         *log_sum_weight = log_sum_exp2(*log_sum_weight, log_sum_weight_subtree);
-        if log_sum_weight_final > log_sum_weight_subtree
+        let propose = if log_sum_weight_final > log_sum_weight_subtree
             || uniform(self.rng) < (log_sum_weight_final - log_sum_weight_subtree).exp()
         {
-            z_propose.copy_from(&f.propose_final);
-        }
+            self.pool.release(init.propose);
+            fin.propose
+        } else {
+            self.pool.release(fin.propose);
+            init.propose
+        };
         for i in 0..d {
-            ends.rho[i] += f.rho_init[i] + f.rho_final[i];
+            rho[i] += f.rho_init[i] + f.rho_final[i];
         }
         // The merged sub-tree, then each half extended by the neighbouring
         // point of the other half (Stan's extra checks).
-        no_u_turn(
-            ends.p_sharp_beg,
-            ends.p_sharp_end,
-            &f.rho_init,
-            &f.rho_final,
-        ) && no_u_turn(
-            ends.p_sharp_beg,
-            &f.p_sharp_final_beg,
-            &f.rho_init,
-            &f.p_final_beg,
-        ) && no_u_turn(
-            &f.p_sharp_init_end,
-            ends.p_sharp_end,
-            &f.rho_final,
-            &f.p_init_end,
-        )
+        let (beg, init_end, final_beg, end) = (
+            self.pool.get(init.beg),
+            self.pool.get(init.end),
+            self.pool.get(fin.beg),
+            self.pool.get(fin.end),
+        );
+        let valid = no_u_turn(&beg.v, &end.v, &f.rho_init, &f.rho_final)
+            && no_u_turn(&beg.v, &final_beg.v, &f.rho_init, &final_beg.p)
+            && no_u_turn(&init_end.v, &end.v, &f.rho_final, &init_end.p);
+        self.pool.release(init.end);
+        self.pool.release(fin.beg);
+        valid.then_some(SubTree {
+            beg: init.beg,
+            end: fin.end,
+            propose,
+        })
     }
 }
 
@@ -642,18 +572,21 @@ impl<G: GradientTarget> Kernel<Vec<f64>, GradientPayload> for Nuts<G> {
             return Proposal::failed(0);
         }
         let mut w = std::mem::take(&mut self.work);
-        w.z.x.clone_from(&current.state);
-        w.z.grad.clone_from(&current.payload.gradient);
-        w.z.p.resize(d, 0.0);
-        w.z.lp = current.log_density;
+        w.pool.reset(d);
+        let start = w.pool.alloc();
+        {
+            let z = w.pool.get_mut(start);
+            z.x.clone_from(&current.state);
+            z.grad.clone_from(&current.payload.gradient);
+            z.lp = current.log_density;
+        }
         if self.init_step_pending && self.hmc.is_adapting() {
             self.init_step_pending = false;
-            let start = w.z.clone();
-            let eps = self.initial_step_size(&start, rng);
+            let eps = self.initial_step_size(&mut w.pool, start, rng);
             self.hmc.restart_step_size(eps);
         }
         self.hmc.statistics_mut().trajectories += 1;
-        let stats = self.transition(&mut w, rng);
+        let (sample, stats) = self.transition(&mut w, start, rng);
         if stats.divergent {
             self.hmc.statistics_mut().divergences += 1;
         }
@@ -661,9 +594,14 @@ impl<G: GradientTarget> Kernel<Vec<f64>, GradientPayload> for Nuts<G> {
             self.depth_saturated += 1;
         }
         self.last = stats;
-        proposal.state.clone_from(&w.z_sample.x);
-        proposal.payload.gradient.clone_from(&w.z_sample.grad);
-        proposal.log_density = w.z_sample.lp;
+        let z = w.pool.get(sample);
+        proposal.state.clone_from(&z.x);
+        proposal.payload.gradient.clone_from(&z.grad);
+        proposal.log_density = z.lp;
+        if self.hmc.is_adapting() {
+            self.selected.0.clone_from(&z.x);
+            self.selected.1.clone_from(&z.grad);
+        }
         self.work = w;
         // The transition already is a π-reversible move: always accept.
         Proposal {
@@ -675,7 +613,15 @@ impl<G: GradientTarget> Kernel<Vec<f64>, GradientPayload> for Nuts<G> {
     }
 
     fn observe(&mut self, observation: &StepObservation<'_, Vec<f64>>) {
-        if observation.own && self.hmc.adapt(self.last.accept_stat, observation.state) {
+        // The chain's state is the selected point (always accepted); its
+        // gradient is kept for the gradient-based metric.
+        let gradient = (self.hmc.is_adapting() && observation.state == &self.selected.0)
+            .then_some(&self.selected.1[..]);
+        if observation.own
+            && self
+                .hmc
+                .adapt_with_gradient(self.last.accept_stat, observation.state, gradient)
+        {
             // Stan re-runs its step-size heuristic after a metric update.
             self.init_step_pending = true;
         }
@@ -960,6 +906,157 @@ mod tests {
             5,
         );
         assert_invariant("banana diagonal metric", z);
+    }
+
+    /// 3-d standard normal whose density is NaN beyond `x₀ > 1.5` (invalid
+    /// points end trees as divergences).
+    #[derive(Clone, Copy)]
+    struct Holed;
+    impl GradientTarget for Holed {
+        fn dim(&self) -> usize {
+            3
+        }
+        fn log_density_gradient(&self, x: &[f64], g: &mut [f64]) -> f64 {
+            for i in 0..3 {
+                g[i] = -x[i];
+            }
+            if x[0] > 1.5 {
+                return f64::NAN;
+            }
+            -0.5 * (x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
+        }
+    }
+
+    /// FNV-1a over the bits of every draw, its `ln π` and its statistics
+    /// for `steps` transitions of `nuts` from `x0`.
+    fn fingerprint<G: GradientTarget + Copy>(
+        g: G,
+        nuts: Nuts<G>,
+        x0: Vec<f64>,
+        steps: usize,
+    ) -> u64 {
+        let t = Differentiable(g);
+        let mut chain =
+            Chain::new(&t, x0, MetropolisHastings::new(nuts), stream_rng(9, 0)).unwrap();
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        let mut eat = |v: u64| {
+            for b in v.to_le_bytes() {
+                h = (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3);
+            }
+        };
+        for _ in 0..steps {
+            chain.step(&t);
+            let c = chain.current();
+            for v in &c.state {
+                eat(v.to_bits());
+            }
+            eat(c.log_density.to_bits());
+            let s = chain.algorithm().kernel().last_draw();
+            eat(s.accept_stat.to_bits());
+            eat(s.step_size.to_bits());
+            eat(s.energy.to_bits());
+            eat(s.n_leapfrog as u64);
+            eat(s.tree_depth as u64);
+            eat(s.divergent as u64);
+        }
+        h
+    }
+
+    /// The draws and statistics of fixed seeds, recorded with the tree
+    /// builder of commit f7741c7 (before the point pool): any change to the
+    /// tree building must leave them bit-identical.
+    #[test]
+    fn draws_are_bit_identical_to_the_recorded_fingerprints() {
+        let cases = [
+            fingerprint(
+                Correlated,
+                Nuts::new(Correlated, 1.0)
+                    .unwrap()
+                    .with_warmup(150, 0.8, MetricAdaptation::Diagonal)
+                    .unwrap(),
+                vec![0.3, -0.2],
+                400,
+            ),
+            fingerprint(
+                Banana,
+                Nuts::new(Banana, 1.0)
+                    .unwrap()
+                    .with_metric(Metric::dense(&[vec![4.0, 0.5], vec![0.5, 9.0]]).unwrap())
+                    .unwrap()
+                    .with_warmup(100, 0.8, MetricAdaptation::Dense)
+                    .unwrap(),
+                vec![0.5, 0.5],
+                300,
+            ),
+            fingerprint(
+                Banana,
+                Nuts::new(Banana, 0.05).unwrap().with_max_depth(3).unwrap(),
+                vec![0.5, 0.5],
+                200,
+            ),
+            fingerprint(
+                Holed,
+                Nuts::new(Holed, 1.3).unwrap(),
+                vec![0.1, 0.2, 0.3],
+                300,
+            ),
+        ];
+        eprintln!("fingerprints: {cases:#x?}");
+        assert_eq!(cases, RECORDED_FINGERPRINTS);
+    }
+
+    const RECORDED_FINGERPRINTS: [u64; 4] = [
+        0xd2e499e167e39bb5,
+        0xd255f0bf18b28573,
+        0x7eb6370018c847e9,
+        0xd4cfff643434b906,
+    ];
+
+    /// Independent Gaussian coordinates with variances `σ_i²`.
+    #[derive(Clone, Copy)]
+    struct Scaled;
+    const SCALES: [f64; 4] = [0.05, 0.7, 3.0, 40.0];
+    impl GradientTarget for Scaled {
+        fn dim(&self) -> usize {
+            4
+        }
+        fn log_density_gradient(&self, x: &[f64], g: &mut [f64]) -> f64 {
+            let mut lp = 0.0;
+            for i in 0..4 {
+                let s2 = SCALES[i] * SCALES[i];
+                g[i] = -x[i] / s2;
+                lp -= 0.5 * x[i] * x[i] / s2;
+            }
+            lp
+        }
+    }
+
+    /// The gradient-based metric through NUTS's warm-up: for independent
+    /// Gaussian coordinates `g_i = −x_i/σ_i²` at every draw, so the window's
+    /// `√(s²_x/s²_g)` is `σ_i²` exactly (to rounding) whatever the window
+    /// and its autocorrelation, provided each draw is paired with its own
+    /// gradient. A draw paired with another's gradient breaks the identity.
+    #[test]
+    fn gradient_metric_warmup_recovers_independent_variances() {
+        let t = Differentiable(Scaled);
+        let nuts = Nuts::new(Scaled, 0.1)
+            .unwrap()
+            .with_warmup(300, 0.8, MetricAdaptation::DiagonalGradient)
+            .unwrap();
+        let mut chain = Chain::new(
+            &t,
+            vec![0.01, 0.1, 0.5, 3.0],
+            MetropolisHastings::new(nuts),
+            stream_rng(8, 0),
+        )
+        .unwrap();
+        for _ in 0..300 {
+            chain.step(&t);
+        }
+        let m = chain.algorithm().kernel().metric().inverse_mass_diagonal();
+        for (mi, s) in m.iter().zip(SCALES) {
+            assert!((mi / (s * s) - 1.0).abs() < 1e-9, "{m:?}");
+        }
     }
 
     #[test]
