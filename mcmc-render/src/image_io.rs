@@ -20,14 +20,35 @@ pub fn write_exr(path: &Path, width: u32, height: u32, pixels: &[Rgb]) -> Result
 /// Reads the first RGB(A) layer of an EXR file as linear RGB.
 pub fn read_exr(path: &Path) -> Result<(u32, u32, Vec<Rgb>), String> {
     crate::resources::regular_file(path)?;
-    let image = exr::prelude::read_first_rgba_layer_from_file(
-        path,
-        |res, _| (res.width(), vec![Rgb::BLACK; res.width() * res.height()]),
-        |(w, px): &mut (usize, Vec<Rgb>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-            px[pos.y() * *w + pos.x()] = Rgb::new(r, g, b);
-        },
-    )
-    .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let file =
+        std::fs::File::open(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    exr_from_reader(std::io::BufReader::new(file), path)
+}
+
+/// Reads an EXR image held in memory, as [`read_exr`] reads a file;
+/// `path` names it in messages.
+pub fn exr_from_bytes(bytes: &[u8], path: &Path) -> Result<(u32, u32, Vec<Rgb>), String> {
+    exr_from_reader(std::io::Cursor::new(bytes), path)
+}
+
+fn exr_from_reader(
+    input: impl std::io::Read + std::io::Seek + Send,
+    path: &Path,
+) -> Result<(u32, u32, Vec<Rgb>), String> {
+    use exr::prelude::{ReadChannels, ReadLayers};
+    let image = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .rgba_channels(
+            |res, _| (res.width(), vec![Rgb::BLACK; res.width() * res.height()]),
+            |(w, px): &mut (usize, Vec<Rgb>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+                px[pos.y() * *w + pos.x()] = Rgb::new(r, g, b);
+            },
+        )
+        .first_valid_layer()
+        .all_attributes()
+        .from_buffered(input)
+        .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
     let size = image.layer_data.size;
     let (_, pixels) = image.layer_data.channel_data.pixels;
     Ok((size.width() as u32, size.height() as u32, pixels))
