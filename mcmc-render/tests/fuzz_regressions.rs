@@ -196,3 +196,75 @@ fn mmlt_with_a_huge_max_depth_is_refused() {
         registry::configure(None, Some("mmlt"), &[("max_depth".into(), "1024".into())]).is_ok()
     );
 }
+
+/// EXR headers claiming gigapixel images (the `exr` target's findings in
+/// `tests/data/fuzz/exr-*.exr`, 0.9–7.6 KB files asking for 50–309 GB)
+/// made `read_exr` allocate the claimed image and abort. The header's
+/// sizes are now checked against the file's length and the memory
+/// available before anything is allocated.
+#[test]
+fn exr_headers_claiming_more_than_the_file_holds_are_refused() {
+    use mcmc_render::image_io::exr_from_bytes;
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "exr"))
+        .collect();
+    files.sort();
+    assert!(files.len() >= 4, "the committed findings are missing");
+    for path in files {
+        let bytes = std::fs::read(&path).unwrap();
+        let name = path.display().to_string();
+        let err = within(20, &name, move || {
+            exr_from_bytes(&bytes, Path::new("x.exr")).map(|_| ())
+        })
+        .err()
+        .unwrap_or_else(|| panic!("{name} was accepted"));
+        assert_clean_err(&err, "cannot read x.exr: ");
+    }
+    // A real image still reads.
+    let sky = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/textures/sky.exr");
+    let (w, h, px) = exr_from_bytes(&std::fs::read(&sky).unwrap(), &sky).unwrap();
+    assert_eq!(px.len(), w as usize * h as usize);
+}
+
+/// EXR findings whose memory grows inside the `exr` crate's decoding of a
+/// small claimed image (not the allocation of the claimed size): not fixed
+/// yet (see docs/fuzzing.md). Run under a memory limit:
+/// `ulimit -v 4000000; cargo test -p mcmc-render --test fuzz_regressions -- --ignored`.
+#[test]
+#[ignore = "open: memory grows inside the exr crate"]
+fn exr_open_findings() {
+    use mcmc_render::image_io::exr_from_bytes;
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz/unfixed");
+    for e in std::fs::read_dir(&dir).unwrap() {
+        let path = e.unwrap().path();
+        let bytes = std::fs::read(&path).unwrap();
+        let name = path.display().to_string();
+        let err = within(20, &name, move || {
+            exr_from_bytes(&bytes, Path::new("x.exr")).map(|_| ())
+        })
+        .err()
+        .unwrap_or_else(|| panic!("{name} was accepted"));
+        assert_clean_err(&err, "cannot read x.exr: ");
+    }
+}
+
+/// OBJ findings of the `obj` target (`tests/data/fuzz/unfixed/obj-*`): a
+/// face index near `usize::MAX` overflows `vt * 2` / `vn * 3` inside tobj
+/// 4.0.5 (`lib.rs:852`, `:860`): a panic where overflow checks are on
+/// (debug and test builds), a wrapped, wrong index in release. Open.
+#[test]
+#[ignore = "open: index overflow inside tobj 4.0.5"]
+fn obj_open_findings() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz/unfixed");
+    for e in std::fs::read_dir(&dir).unwrap() {
+        let path = e.unwrap().path();
+        if path.extension().is_some_and(|e| e == "obj") {
+            let bytes = std::fs::read(&path).unwrap();
+            let r = std::panic::catch_unwind(|| obj_from_bytes(&bytes).map(|_| ()));
+            assert!(matches!(r, Ok(Err(_))), "{}: {r:?}", path.display());
+        }
+    }
+}
