@@ -20,14 +20,61 @@ pub fn write_exr(path: &Path, width: u32, height: u32, pixels: &[Rgb]) -> Result
 /// Reads the first RGB(A) layer of an EXR file as linear RGB.
 pub fn read_exr(path: &Path) -> Result<(u32, u32, Vec<Rgb>), String> {
     crate::resources::regular_file(path)?;
-    let image = exr::prelude::read_first_rgba_layer_from_file(
-        path,
-        |res, _| (res.width(), vec![Rgb::BLACK; res.width() * res.height()]),
-        |(w, px): &mut (usize, Vec<Rgb>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-            px[pos.y() * *w + pos.x()] = Rgb::new(r, g, b);
-        },
-    )
-    .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let file =
+        std::fs::File::open(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    exr_from_reader(std::io::BufReader::new(file), path)
+}
+
+/// Reads an EXR image held in memory, as [`read_exr`] reads a file;
+/// `path` names it in messages.
+pub fn exr_from_bytes(bytes: &[u8], path: &Path) -> Result<(u32, u32, Vec<Rgb>), String> {
+    exr_from_reader(std::io::Cursor::new(bytes), path)
+}
+
+/// Decoded bytes an EXR may claim per byte of file: ZIP, its strongest
+/// compression, expands at most 1032:1 (DEFLATE), and `f16` samples
+/// double as the `f32` pixels kept; 4096 leaves room above both. A header
+/// claiming more is a lie (the fuzzer's 1.6 KB file claimed 309 GB).
+const EXR_MAX_INFLATION: u128 = 4096;
+
+fn exr_from_reader(
+    mut input: impl std::io::Read + std::io::Seek + Send,
+    path: &Path,
+) -> Result<(u32, u32, Vec<Rgb>), String> {
+    use exr::prelude::{ReadChannels, ReadLayers};
+    use std::io::SeekFrom;
+    let cannot = |e: &dyn std::fmt::Display| format!("cannot read {}: {e}", path.display());
+    // Nothing is allocated on the header's word: its sizes are checked
+    // against the file's length and the memory available first.
+    let file_bytes = input.seek(SeekFrom::End(0)).map_err(|e| cannot(&e))?;
+    input.seek(SeekFrom::Start(0)).map_err(|e| cannot(&e))?;
+    let meta =
+        exr::meta::MetaData::read_from_unbuffered(&mut input, false).map_err(|e| cannot(&e))?;
+    input.seek(SeekFrom::Start(0)).map_err(|e| cannot(&e))?;
+    for header in meta.headers.iter() {
+        let (w, h) = (header.layer_size.width(), header.layer_size.height());
+        let bytes = w as u128 * h as u128 * std::mem::size_of::<Rgb>() as u128;
+        if bytes > EXR_MAX_INFLATION * u128::from(file_bytes) {
+            return Err(format!(
+                "cannot read {}: the header claims {w}×{h} pixels ({bytes} bytes), more than a file of {file_bytes} bytes can hold",
+                path.display()
+            ));
+        }
+        crate::resources::check_memory(&format!("image {w}×{h}"), bytes).map_err(|e| cannot(&e))?;
+    }
+    let image = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .rgba_channels(
+            |res, _| (res.width(), vec![Rgb::BLACK; res.width() * res.height()]),
+            |(w, px): &mut (usize, Vec<Rgb>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+                px[pos.y() * *w + pos.x()] = Rgb::new(r, g, b);
+            },
+        )
+        .first_valid_layer()
+        .all_attributes()
+        .from_buffered(input)
+        .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
     let size = image.layer_data.size;
     let (_, pixels) = image.layer_data.channel_data.pixels;
     Ok((size.width() as u32, size.height() as u32, pixels))

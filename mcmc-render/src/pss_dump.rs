@@ -54,6 +54,12 @@ pub fn read_pss(path: &Path) -> Result<PssDump, String> {
     crate::resources::regular_file(path)?;
     let text = std::fs::read_to_string(path)
         .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    parse_pss(&text, path)
+}
+
+/// Parses the text of a dump, as [`read_pss`] reads it from a file;
+/// `path` names it in messages.
+pub fn parse_pss(text: &str, path: &Path) -> Result<PssDump, String> {
     let mut dump = PssDump {
         sampler: DumpSampler::Pt,
         max_depth: None,
@@ -153,6 +159,12 @@ pub fn replay(scene: &Scene, dump: &PssDump) -> Result<Replay, String> {
         DumpSampler::Mmlt => {
             if max_depth == u32::MAX || max_depth == 0 {
                 return Err("an mmlt dump needs a finite max_depth ≥ 1".into());
+            }
+            let most = crate::integrators::mmlt::MAX_DEPTH;
+            if max_depth > most {
+                return Err(format!(
+                    "an mmlt dump's max_depth must be at most {most} (mmlt's limit), got {max_depth}"
+                ));
             }
             (1..=max_depth as usize)
                 .map(|depth| {

@@ -469,6 +469,12 @@ pub fn read_csv(path: &Path) -> Result<Vec<Record>, String> {
     crate::resources::regular_file(path)?;
     let text = std::fs::read_to_string(path)
         .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    parse_csv(&text, path)
+}
+
+/// Parses the text of a study's CSV, as [`read_csv`] reads it from a file;
+/// `path` names it in messages.
+pub fn parse_csv(text: &str, path: &Path) -> Result<Vec<Record>, String> {
     let mut lines = text.lines().enumerate();
     match lines.next() {
         Some((_, h)) if h.trim() == "integrator,seconds,samples,rel_mse,rmse" => {}
@@ -489,13 +495,33 @@ pub fn read_csv(path: &Path) -> Result<Vec<Record>, String> {
         if f.len() != 5 || f[0].is_empty() {
             return Err(bad());
         }
-        out.push(Record {
+        let record = Record {
             integrator: f[0].to_string(),
             seconds: f[1].parse().map_err(|_| bad())?,
             samples: f[2].parse().map_err(|_| bad())?,
             rel_mse: f[3].parse().map_err(|_| bad())?,
             rmse: f[4].parse().map_err(|_| bad())?,
-        });
+        };
+        // What `write_csv` writes: finite non-negative times; errors
+        // non-negative (NaN or +inf for a non-finite image).
+        if !(record.seconds.is_finite() && record.seconds >= 0.0) {
+            return Err(format!(
+                "{}:{}: seconds must be finite and non-negative, got {}",
+                path.display(),
+                n + 1,
+                f[1]
+            ));
+        }
+        if record.rel_mse < 0.0 || record.rmse < 0.0 {
+            return Err(format!(
+                "{}:{}: rel_mse and rmse must be non-negative, got {} and {}",
+                path.display(),
+                n + 1,
+                f[3],
+                f[4]
+            ));
+        }
+        out.push(record);
     }
     Ok(out)
 }
@@ -569,6 +595,9 @@ fn log_tick(v: f64) -> String {
     }
 }
 
+/// Seconds and relMSE values a plot can show (a study's lie far inside).
+pub const PLOT_RANGE: std::ops::RangeInclusive<f64> = 1e-30..=1e30;
+
 /// Draws relMSE against seconds on log–log axes, one line per integrator
 /// (colours in [`COLOURS`] order), with `title`, axis labels, tick labels
 /// at the powers of ten and a legend naming the integrators.
@@ -592,6 +621,21 @@ pub fn write_plot(
         .collect();
     if pos.is_empty() {
         return Err("no positive records to plot".into());
+    }
+    // The axes span the data widened by at most a decade and a half; far
+    // from 1 their bounds (and tick loops) would leave the f64 range.
+    if let Some(r) = pos
+        .iter()
+        .find(|r| !(PLOT_RANGE.contains(&r.seconds) && PLOT_RANGE.contains(&r.rel_mse)))
+    {
+        return Err(format!(
+            "cannot plot {} at {} s with relMSE {}: the log axes span {:e} to {:e}",
+            r.integrator,
+            r.seconds,
+            r.rel_mse,
+            PLOT_RANGE.start(),
+            PLOT_RANGE.end()
+        ));
     }
     let (t0, t1) = pos.iter().fold((f64::MAX, 0.0f64), |(a, b), r| {
         (a.min(r.seconds), b.max(r.seconds))

@@ -35,6 +35,11 @@ crate::settings! {
     }
 }
 
+/// Longest `max_depth` MMLT takes: one family member (and one replay
+/// trace) per depth, so the depth sizes allocations (real scenes use
+/// depths below 100; 4294967294 asked for 240 GB, found by fuzzing).
+pub const MAX_DEPTH: u32 = 1024;
+
 impl Mmlt {
     /// One target per path depth `1..=max_depth`.
     pub fn depths(&self) -> Vec<MmltDepth> {
@@ -61,6 +66,12 @@ impl IntegratorSettings for Mmlt {
     fn validate(&self) -> Result<(), String> {
         if self.depth.max_depth < 1 {
             return Err("mmlt needs a finite max_depth ≥ 1 (give --max-depth)".into());
+        }
+        if self.depth.limit() > MAX_DEPTH {
+            return Err(format!(
+                "mmlt: max_depth must be at most {MAX_DEPTH} (one chain family member per depth), got {}",
+                self.depth.limit()
+            ));
         }
         self.mutation.mutation().map(|_| ())
     }

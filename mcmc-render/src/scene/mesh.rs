@@ -37,13 +37,27 @@ pub struct TriMesh {
 
 /// Reads a Wavefront OBJ file (all objects merged, polygons triangulated).
 pub fn load_obj(path: &Path) -> Result<RawMesh, String> {
+    let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
+    obj_from_reader(&mut std::io::BufReader::new(file))
+}
+
+/// Reads OBJ text held in memory, as [`load_obj`] reads a file.
+pub fn obj_from_bytes(bytes: &[u8]) -> Result<RawMesh, String> {
+    obj_from_reader(&mut &bytes[..])
+}
+
+fn obj_from_reader(reader: &mut impl std::io::BufRead) -> Result<RawMesh, String> {
     let opts = tobj::LoadOptions {
         triangulate: true,
         single_index: true,
         ignore_points: true,
         ignore_lines: true,
     };
-    let (models, _materials) = tobj::load_obj(path, &opts).map_err(|e| e.to_string())?;
+    // Materials are not used, so `mtllib` files are not opened (one naming
+    // a device such as /dev/zero would never end).
+    let (models, _materials) =
+        tobj::load_obj_buf(reader, &opts, |_| Err(tobj::LoadError::OpenFileFailed))
+            .map_err(|e| e.to_string())?;
     let mut out = RawMesh::default();
     let mut all_have_normals = true;
     let mut normals = Vec::new();
@@ -184,9 +198,18 @@ impl ply_rs_bw::ply::PropertyAccess for PlySkip {
 /// nx, ny, nz and optional UVs (u, v or s, t or texture_u, texture_v); `face` with `vertex_indices` (or `vertex_index`), polygons
 /// fan-triangulated.
 pub fn load_ply(path: &Path) -> Result<RawMesh, String> {
-    use ply_rs_bw::parser::{Parser, Reader};
     let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
-    let mut reader = Reader::new(std::io::BufReader::new(file));
+    ply_from_reader(std::io::BufReader::new(file))
+}
+
+/// Reads PLY data held in memory, as [`load_ply`] reads a file.
+pub fn ply_from_bytes(bytes: &[u8]) -> Result<RawMesh, String> {
+    ply_from_reader(bytes)
+}
+
+fn ply_from_reader(input: impl std::io::BufRead) -> Result<RawMesh, String> {
+    use ply_rs_bw::parser::{Parser, Reader};
+    let mut reader = Reader::new(input);
     fn perr(e: impl std::fmt::Display) -> String {
         format!("PLY parse error: {}", one_line(&e.to_string()))
     }

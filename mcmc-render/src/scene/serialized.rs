@@ -70,16 +70,32 @@ pub struct SerializedMesh {
 pub fn load_serialized(path: &Path, shape_index: u32) -> Result<SerializedMesh, String> {
     let mut file = File::open(path).map_err(|e| e.to_string())?;
     let size = file.metadata().map_err(|e| e.to_string())?.len();
-    let version = read_header(&mut file, size)?;
+    read_serialized(&mut file, size, shape_index)
+}
+
+/// Reads shape `shape_index` of a `.serialized` file held in memory, as
+/// [`load_serialized`] reads a file.
+pub fn serialized_from_bytes(bytes: &[u8], shape_index: u32) -> Result<SerializedMesh, String> {
+    let size = bytes.len() as u64;
+    read_serialized(&mut std::io::Cursor::new(bytes), size, shape_index)
+}
+
+/// Reads shape `shape_index` from `file`, `size` bytes long.
+fn read_serialized<R: Read + Seek>(
+    file: &mut R,
+    size: u64,
+    shape_index: u32,
+) -> Result<SerializedMesh, String> {
+    let version = read_header(file, size)?;
     let (start, end) = if shape_index == 0 {
         (0, size)
     } else {
-        shape_range(&mut file, size, version, shape_index)?
+        shape_range(file, size, version, shape_index)?
     };
     if start != 0 {
         file.seek(SeekFrom::Start(start))
             .map_err(|e| e.to_string())?;
-        let here = read_header(&mut file, size - start)?;
+        let here = read_header(file, size - start)?;
         if here != version {
             return Err(format!(
                 "shape {shape_index} (at byte {start}) has version {here}, the file's first shape {version}"
@@ -89,7 +105,7 @@ pub fn load_serialized(path: &Path, shape_index: u32) -> Result<SerializedMesh, 
     // The compressed bytes this shape can use: up to the next shape's
     // offset, or to the end of the file.
     let compressed = end.saturating_sub(start + 4);
-    let reader = BufReader::new((&mut file).take(compressed));
+    let reader = BufReader::new(file.take(compressed));
     let mut z = Inflated {
         inner: ZlibDecoder::new(reader),
     };
@@ -97,7 +113,7 @@ pub fn load_serialized(path: &Path, shape_index: u32) -> Result<SerializedMesh, 
 }
 
 /// Reads and checks the 4-byte header; returns the version.
-fn read_header(file: &mut File, left: u64) -> Result<u16, String> {
+fn read_header(file: &mut impl Read, left: u64) -> Result<u16, String> {
     if left < 4 {
         return Err(format!(
             "truncated: {left} bytes, shorter than the 4-byte header"
@@ -121,7 +137,12 @@ fn read_header(file: &mut File, left: u64) -> Result<u16, String> {
 }
 
 /// The byte range of shape `index` from the end-of-file dictionary.
-fn shape_range(file: &mut File, size: u64, version: u16, index: u32) -> Result<(u64, u64), String> {
+fn shape_range<R: Read + Seek>(
+    file: &mut R,
+    size: u64,
+    version: u16,
+    index: u32,
+) -> Result<(u64, u64), String> {
     let word: u64 = if version == 4 { 8 } else { 4 };
     if size < 8 {
         return Err(format!(
@@ -144,7 +165,7 @@ fn shape_range(file: &mut File, size: u64, version: u16, index: u32) -> Result<(
         ));
     }
     let table_start = size - table;
-    let offset_at = |file: &mut File, i: u64| -> Result<u64, String> {
+    let offset_at = |file: &mut R, i: u64| -> Result<u64, String> {
         file.seek(SeekFrom::Start(table_start + i * word))
             .map_err(|e| e.to_string())?;
         if version == 4 {

@@ -1,0 +1,270 @@
+//! Inputs found by the fuzz targets of `mcmc-render/fuzz/` (see
+//! docs/fuzzing.md), each fed to the same entry point the target calls:
+//! every one must give a clean `Err` naming the problem, never a panic, a
+//! hang or an allocation on the input's word. CI runs these, not the
+//! fuzzer. Also the in-memory entry points the targets use, checked
+//! against the file readers they share their code with.
+
+use mcmc_render::scene::mesh::{load_obj, load_ply, obj_from_bytes, ply_from_bytes};
+use mcmc_render::scene::serialized::{load_serialized, serialized_from_bytes};
+use std::path::{Path, PathBuf};
+use std::sync::mpsc;
+use std::time::Duration;
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/serialized")
+        .join(name)
+}
+
+fn seed(target: &str, name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("fuzz/seeds")
+        .join(target)
+        .join(name)
+}
+
+/// Runs `f` on a thread and fails if it does not return within `secs`
+/// (a regression to a hang then fails instead of stalling the suite).
+fn within<T: Send + 'static>(secs: u64, what: &str, f: impl FnOnce() -> T + Send + 'static) -> T {
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = tx.send(f());
+    });
+    rx.recv_timeout(Duration::from_secs(secs))
+        .unwrap_or_else(|_| panic!("{what}: no answer within {secs} s"))
+}
+
+/// `err` is one line and contains `needle`.
+fn assert_clean_err(err: &str, needle: &str) {
+    assert!(!err.contains('\n'), "error spans lines: {err:?}");
+    assert!(
+        err.contains(needle),
+        "error {err:?} does not name {needle:?}"
+    );
+}
+
+#[test]
+fn in_memory_readers_read_what_the_file_readers_read() {
+    let path = data("tetrahedron.obj");
+    let a = load_obj(&path).unwrap();
+    let b = obj_from_bytes(&std::fs::read(&path).unwrap()).unwrap();
+    assert_eq!((a.positions, a.indices), (b.positions, b.indices));
+    let path = seed("ply", "quad-binary_little_endian.ply");
+    let a = load_ply(&path).unwrap();
+    let b = ply_from_bytes(&std::fs::read(&path).unwrap()).unwrap();
+    assert_eq!(
+        (a.positions, a.indices, a.uvs),
+        (b.positions, b.indices, b.uvs)
+    );
+    let path = data("meshes-v4.serialized");
+    let bytes = std::fs::read(&path).unwrap();
+    for index in 0..2 {
+        let a = load_serialized(&path, index).unwrap().mesh;
+        let b = serialized_from_bytes(&bytes, index).unwrap().mesh;
+        assert_eq!((a.positions, a.indices), (b.positions, b.indices));
+    }
+}
+
+/// An OBJ's `mtllib` is not opened (materials are not used): one naming
+/// `/dev/zero` made the OBJ reader read an endless line until memory ran
+/// out (found while writing the OBJ target, which reads from memory).
+#[cfg(unix)]
+#[test]
+fn obj_mtllib_naming_a_device_is_not_followed() {
+    let dir = std::env::temp_dir().join(format!("mcmc-fuzz-mtllib-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("zero.obj");
+    std::fs::write(
+        &path,
+        "mtllib /dev/zero\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    )
+    .unwrap();
+    let mesh = within(20, "mtllib /dev/zero", move || load_obj(&path)).unwrap();
+    assert_eq!(mesh.indices.len(), 1);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A study CSV with an infinite time: `write_csv` never writes one, and
+/// plotting it looped over 2^31 decades of tick positions (a hang).
+#[test]
+fn convergence_csv_infinite_seconds_is_refused() {
+    use mcmc_render::cli::convergence::parse_csv;
+    let header = "integrator,seconds,samples,rel_mse,rmse\n";
+    for (row, needle) in [
+        (
+            "pt,inf,10,0.5,0.1\n",
+            "seconds must be finite and non-negative, got inf",
+        ),
+        (
+            "pt,-1,10,0.5,0.1\n",
+            "seconds must be finite and non-negative, got -1",
+        ),
+        (
+            "pt,NaN,10,0.5,0.1\n",
+            "seconds must be finite and non-negative, got NaN",
+        ),
+        (
+            "pt,1,10,-0.5,0.1\n",
+            "rel_mse and rmse must be non-negative",
+        ),
+    ] {
+        let err = parse_csv(&format!("{header}{row}"), Path::new("s.csv")).unwrap_err();
+        assert_clean_err(&err, needle);
+        assert_clean_err(&err, "s.csv:2:");
+    }
+    // What write_csv writes for a non-finite image still reads.
+    let ok = parse_csv(
+        &format!("{header}pt,1.0000,10,NaN,inf\n"),
+        Path::new("s.csv"),
+    )
+    .unwrap();
+    assert!(ok[0].rel_mse.is_nan());
+}
+
+/// Records whose values a log axis cannot span (a subnormal time, a huge
+/// error) are refused by the plot instead of looping over 2^31 decades.
+#[test]
+fn convergence_plot_of_extreme_values_is_refused() {
+    use mcmc_render::cli::convergence::{Record, write_plot};
+    let dir = std::env::temp_dir().join(format!("mcmc-fuzz-plot-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for (seconds, rel_mse) in [(1e-310, 0.5), (1.0, 1e300), (1e35, 0.5)] {
+        let records = vec![Record {
+            integrator: "pt".into(),
+            seconds,
+            samples: 1,
+            rel_mse,
+            rmse: 0.1,
+        }];
+        let png = dir.join("plot.png");
+        let err = within(20, "plot of extreme values", move || {
+            write_plot(&png, &records, &["pt".to_string()], "t")
+        })
+        .unwrap_err();
+        assert_clean_err(&err, "cannot plot pt at");
+        assert_clean_err(&err, "the log axes span 1e-30 to 1e30");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn cornell() -> mcmc_render::scene::Scene {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/cornell-box.xml");
+    mcmc_render::scene::Scene::load(&path, &Default::default()).unwrap()
+}
+
+/// An MMLT dump traces one path per depth `1..=max_depth`: a dump with
+/// `max_depth 4294967294` (found by the `pss_replay` target) asked for a
+/// 240 GB vector and aborted. MMLT's depth is now bounded, for the
+/// integrator and its dumps alike.
+#[test]
+fn pss_replay_mmlt_dump_with_a_huge_depth_is_refused() {
+    use mcmc_render::pss_dump::{parse_pss, replay};
+    let dump = parse_pss(
+        "# sampler mmlt\n# max_depth 4294967294\n0.5\n",
+        Path::new("d.pss"),
+    )
+    .unwrap();
+    let err = replay(&cornell(), &dump).err().expect("refused");
+    assert_clean_err(
+        &err,
+        "max_depth must be at most 1024 (mmlt's limit), got 4294967294",
+    );
+    // The limit itself still replays.
+    let dump = parse_pss(
+        "# sampler mmlt\n# max_depth 3\n0.5\n0.25\n",
+        Path::new("d.pss"),
+    )
+    .unwrap();
+    assert_eq!(replay(&cornell(), &dump).unwrap().traces.len(), 3);
+}
+
+/// The same bound on the integrator: `--max-depth 4294967294` with mmlt
+/// would build one chain family member per depth.
+#[test]
+fn mmlt_with_a_huge_max_depth_is_refused() {
+    use mcmc_render::integrators::registry;
+    let err = registry::configure(
+        None,
+        Some("mmlt"),
+        &[("max_depth".into(), "4294967294".into())],
+    )
+    .err()
+    .expect("refused");
+    assert_clean_err(&err, "max_depth must be at most 1024");
+    assert!(
+        registry::configure(None, Some("mmlt"), &[("max_depth".into(), "1024".into())]).is_ok()
+    );
+}
+
+/// EXR headers claiming gigapixel images (the `exr` target's findings in
+/// `tests/data/fuzz/exr-*.exr`, 0.9–7.6 KB files asking for 50–309 GB)
+/// made `read_exr` allocate the claimed image and abort. The header's
+/// sizes are now checked against the file's length and the memory
+/// available before anything is allocated.
+#[test]
+fn exr_headers_claiming_more_than_the_file_holds_are_refused() {
+    use mcmc_render::image_io::exr_from_bytes;
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "exr"))
+        .collect();
+    files.sort();
+    assert!(files.len() >= 4, "the committed findings are missing");
+    for path in files {
+        let bytes = std::fs::read(&path).unwrap();
+        let name = path.display().to_string();
+        let err = within(20, &name, move || {
+            exr_from_bytes(&bytes, Path::new("x.exr")).map(|_| ())
+        })
+        .err()
+        .unwrap_or_else(|| panic!("{name} was accepted"));
+        assert_clean_err(&err, "cannot read x.exr: ");
+    }
+    // A real image still reads.
+    let sky = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/textures/sky.exr");
+    let (w, h, px) = exr_from_bytes(&std::fs::read(&sky).unwrap(), &sky).unwrap();
+    assert_eq!(px.len(), w as usize * h as usize);
+}
+
+/// EXR findings whose memory grows inside the `exr` crate's decoding of a
+/// small claimed image (not the allocation of the claimed size): not fixed
+/// yet (see docs/fuzzing.md). Run under a memory limit:
+/// `ulimit -v 4000000; cargo test -p mcmc-render --test fuzz_regressions -- --ignored`.
+#[test]
+#[ignore = "open: memory grows inside the exr crate"]
+fn exr_open_findings() {
+    use mcmc_render::image_io::exr_from_bytes;
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz/unfixed");
+    for e in std::fs::read_dir(&dir).unwrap() {
+        let path = e.unwrap().path();
+        let bytes = std::fs::read(&path).unwrap();
+        let name = path.display().to_string();
+        let err = within(20, &name, move || {
+            exr_from_bytes(&bytes, Path::new("x.exr")).map(|_| ())
+        })
+        .err()
+        .unwrap_or_else(|| panic!("{name} was accepted"));
+        assert_clean_err(&err, "cannot read x.exr: ");
+    }
+}
+
+/// OBJ findings of the `obj` target (`tests/data/fuzz/unfixed/obj-*`): a
+/// face index near `usize::MAX` overflows `vt * 2` / `vn * 3` inside tobj
+/// 4.0.5 (`lib.rs:852`, `:860`): a panic where overflow checks are on
+/// (debug and test builds), a wrapped, wrong index in release. Open.
+#[test]
+#[ignore = "open: index overflow inside tobj 4.0.5"]
+fn obj_open_findings() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz/unfixed");
+    for e in std::fs::read_dir(&dir).unwrap() {
+        let path = e.unwrap().path();
+        if path.extension().is_some_and(|e| e == "obj") {
+            let bytes = std::fs::read(&path).unwrap();
+            let r = std::panic::catch_unwind(|| obj_from_bytes(&bytes).map(|_| ()));
+            assert!(matches!(r, Ok(Err(_))), "{}: {r:?}", path.display());
+        }
+    }
+}
