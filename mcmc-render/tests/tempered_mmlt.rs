@@ -16,11 +16,12 @@
 
 mod common;
 
-use common::{MeanAgreement, image_mean, mc_reps, pt_of, repo_scene_tilted};
+use common::{
+    MeanAgreement, image_mean, mc_reps, pt_of, registry_image_bits as render, repo_scene_tilted,
+};
 use mcmc_core::rng::stream_rng;
 use mcmc_core::runner::with_threads;
 use mcmc_core::space::TorusPoint;
-use mcmc_render::integrators::RunSettings;
 use mcmc_render::integrators::registry;
 use mcmc_render::integrators::tempered_mmlt::{TemperedMmlt, TemperedMmltFamily};
 use mcmc_render::integrators::tempered_pssmlt::TemperedLadder;
@@ -141,25 +142,6 @@ fn hot_levels_differ_from_the_cold_one() {
         })
         .sum();
     assert!(differing > 50, "only {differing} states differ");
-}
-
-fn render(name: &str, sets: &[(&str, &str)], scene: &Scene, seed: u64) -> Vec<u32> {
-    let sets: Vec<(String, String)> = sets
-        .iter()
-        .map(|(k, v)| (k.to_string(), v.to_string()))
-        .collect();
-    let integrator = registry::configure(None, Some(name), &sets).expect("configures");
-    let run = RunSettings {
-        seed,
-        ..RunSettings::default()
-    };
-    let out = integrator
-        .render(scene, &run, &AtomicBool::new(false), &NoObserver)
-        .expect("renders");
-    out.image
-        .iter()
-        .flat_map(|c| [c.r.to_bits(), c.g.to_bits(), c.b.to_bits()])
-        .collect()
 }
 
 const SMALL: [(&str, &str); 4] = [

@@ -142,6 +142,34 @@ pub fn render_image(scene: &Scene, integ: &dyn Integrator, spp: u32, seed: u64) 
 }
 
 /// Per-channel image mean.
+/// The bits of the image integrator `name` of the registry renders of
+/// `scene` with the settings `sets` and seed `seed` (for bit-identity
+/// tests).
+pub fn registry_image_bits(
+    name: &str,
+    sets: &[(&str, &str)],
+    scene: &Scene,
+    seed: u64,
+) -> Vec<u32> {
+    let sets: Vec<(String, String)> = sets
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
+    let integrator =
+        mcmc_render::integrators::registry::configure(None, Some(name), &sets).expect("configures");
+    let run = mcmc_render::integrators::RunSettings {
+        seed,
+        ..Default::default()
+    };
+    let out = integrator
+        .render(scene, &run, &AtomicBool::new(false), &NoObserver)
+        .expect("renders");
+    out.image
+        .iter()
+        .flat_map(|c| [c.r.to_bits(), c.g.to_bits(), c.b.to_bits()])
+        .collect()
+}
+
 pub fn image_mean(img: &[Rgb]) -> [f64; 3] {
     masked_mean(img, None)
 }
