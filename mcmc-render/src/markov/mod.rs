@@ -359,12 +359,14 @@ pub struct ExchangeSummary {
     pub pairs: Vec<ExchangePair>,
 }
 
-/// Exchanges between two members.
+/// Exchanges between two levels of a replica set (members, with one
+/// replica group; with several, the counts of equal levels are summed
+/// over the groups).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct ExchangePair {
-    /// Lower member.
+    /// Lower level.
     pub i: usize,
-    /// Upper member (`i` itself counts identity draws of importance-sampled moves).
+    /// Upper level (`i` itself counts identity draws of importance-sampled moves).
     pub j: usize,
     /// Exchanges attempted.
     pub attempted: u64,
