@@ -22,11 +22,15 @@ use common::{
 use mcmc_core::rng::stream_rng;
 use mcmc_core::runner::with_threads;
 use mcmc_core::space::TorusPoint;
+use mcmc_render::color::Rgb;
+use mcmc_render::integrators::registry;
 use mcmc_render::integrators::tempered_pssmlt::{TemperedExchange, TemperedFamily, TemperedPssmlt};
+use mcmc_render::integrators::{Rendered, RunSettings};
 use mcmc_render::markov::{self, Normalization};
 use mcmc_render::observer::NoObserver;
 use mcmc_render::pss::{PssTarget, PssmltSettings};
 use mcmc_render::scene::Scene;
+use mcmc_render::staged::stage_seed;
 use mcmc_render::tempered::{
     Regularization, RegularizationSchedule, ScheduleKind, TemperedBdpt, TemperedBsdfs,
     chain_mis_weights, level_density, temperatures,
@@ -216,6 +220,124 @@ fn the_regularisation_schedules_are_selectable() {
         gamma: 0.5,
     };
     assert!((r.floor(3) - 0.00125).abs() < 1e-15);
+}
+
+/// A registry render of `name` with `sets` on `scene`.
+fn render_full(name: &str, sets: &[(&str, &str)], scene: &Scene, seed: u64) -> Rendered {
+    let sets: Vec<(String, String)> = sets
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
+    let integrator = registry::configure(None, Some(name), &sets).expect("configures");
+    let run = RunSettings {
+        seed,
+        ..Default::default()
+    };
+    integrator
+        .render(scene, &run, &AtomicBool::new(false), &NoObserver)
+        .expect("renders")
+}
+
+/// Staged regularisation (`regularization_stages`, `mcmc_render::staged`):
+/// a two-stage run is exactly the sample-weighted mean of two one-stage
+/// runs, the first at the floor of sample index 0 with a third of the
+/// budget, the second at the floor of the samples per pixel before it
+/// (`regularization_n`), with two thirds and the second stage's seed. The
+/// statistics show the floors falling as ρ₀ (n+1)^(−γ). Controls: the
+/// second stage at the first stage's floor, or combined with equal
+/// weights, is another image.
+#[test]
+fn staged_regularisation_is_the_weighted_mean_of_its_stages() {
+    let scene = glossy();
+    let mut base = SMALL.to_vec();
+    base.retain(|(k, _)| *k != "mutations_per_pixel");
+    base.extend([
+        ("levels", "4"),
+        ("regularization", "power"),
+        ("rho0", "0.05"),
+        ("gamma", "0.5"),
+    ]);
+    let with = |extra: &[(&'static str, &'static str)]| {
+        let mut s = base.clone();
+        s.extend_from_slice(extra);
+        s
+    };
+    let staged = render_full(
+        "tempered-pssmlt",
+        &with(&[
+            ("regularization_stages", "2"),
+            ("mutations_per_pixel", "15"),
+        ]),
+        scene,
+        3,
+    );
+    // Stage budgets 15·1/3 = 5 and 15·2/3 = 10 per pixel.
+    let first = render_full(
+        "tempered-pssmlt",
+        &with(&[("mutations_per_pixel", "5")]),
+        scene,
+        3,
+    );
+    let second_seed = stage_seed(3, 1);
+    let second = render_full(
+        "tempered-pssmlt",
+        &with(&[("mutations_per_pixel", "10"), ("regularization_n", "5")]),
+        scene,
+        second_seed,
+    );
+    let (a, b) = (first.samples as f32, second.samples as f32);
+    assert_eq!(staged.samples, first.samples + second.samples);
+    let mean_of = |x: &Rendered, y: &Rendered, wx: f32, wy: f32| -> Vec<Rgb> {
+        x.image
+            .iter()
+            .zip(&y.image)
+            .map(|(p, q)| (*p * wx + *q * wy) * (1.0 / (wx + wy)))
+            .collect()
+    };
+    let max_rel = |u: &[Rgb], v: &[Rgb]| -> f64 {
+        u.iter()
+            .zip(v)
+            .flat_map(|(p, q)| [(p.r, q.r), (p.g, q.g), (p.b, q.b)])
+            .map(|(x, y)| f64::from((x - y).abs()) / f64::from(x.abs().max(y.abs()).max(1e-6)))
+            .fold(0.0, f64::max)
+    };
+    // f32 sums of two weighted terms: a few ulps.
+    let expected = mean_of(&first, &second, a, b);
+    assert!(max_rel(&staged.image, &expected) < 1e-5);
+    let floors: Vec<f64> = staged.statistics["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["floor"].as_f64().unwrap())
+        .collect();
+    assert_eq!(floors, [0.05, 0.05 / 6f64.sqrt()]);
+    // Controls.
+    assert!(max_rel(&staged.image, &mean_of(&first, &second, 1.0, 1.0)) > 1e-3);
+    let held = render_full(
+        "tempered-pssmlt",
+        &with(&[("mutations_per_pixel", "10")]),
+        scene,
+        second_seed,
+    );
+    assert!(max_rel(&staged.image, &mean_of(&first, &held, a, b)) > 1e-3);
+}
+
+#[test]
+fn stages_need_a_decaying_schedule() {
+    for schedule in ["off", "constant"] {
+        let sets = vec![
+            ("max_depth".to_string(), "5".to_string()),
+            ("regularization".to_string(), schedule.to_string()),
+            ("regularization_stages".to_string(), "3".to_string()),
+        ];
+        let e = registry::configure(None, Some("tempered-mmlt"), &sets)
+            .err()
+            .expect("refused");
+        assert!(
+            e.contains("needs a decaying schedule") && !e.contains('\n'),
+            "{e}"
+        );
+    }
 }
 
 /// Image means of `k` tempered runs on the tilted box (4 levels, T up to

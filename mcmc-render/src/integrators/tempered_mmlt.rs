@@ -28,7 +28,7 @@
 use super::registry::IntegratorSettings;
 use super::tempered_pssmlt::{LevelTarget, TemperedLadder, report};
 use super::{DepthParams, RenderError, Rendered, RunSettings};
-use crate::markov::{self, ChainFamily, ChainParams};
+use crate::markov::{self, ChainFamily, ChainParams, ChainSettings};
 use crate::observer::Observer;
 use crate::pss::{Mutation, MutationParams, PATH_CLASSES, PathSample, PssFamily};
 use crate::pss_dump::DumpSampler;
@@ -57,9 +57,16 @@ crate::settings! {
 }
 
 impl TemperedMmlt {
-    /// One tempered sampler per path depth `1..=max_depth` on `scene`.
+    /// One tempered sampler per path depth `1..=max_depth` on `scene`, at
+    /// the first stage's regularisation floor.
     pub fn samplers(&self, scene: &Scene) -> Vec<TemperedMmltDepth> {
-        let bsdfs = self.ladder.bsdfs(scene);
+        self.samplers_at(scene, 0)
+    }
+
+    /// The samplers of a stage that starts after `samples_per_pixel`
+    /// samples per pixel.
+    pub fn samplers_at(&self, scene: &Scene, samples_per_pixel: u64) -> Vec<TemperedMmltDepth> {
+        let bsdfs = self.ladder.bsdfs_at(scene, samples_per_pixel);
         super::mmlt::depths(&self.depth)
             .into_iter()
             .map(|depth| TemperedMmltDepth {
@@ -182,26 +189,39 @@ impl IntegratorSettings for TemperedMmlt {
         observer: &dyn Observer,
     ) -> Result<Rendered, RenderError> {
         IntegratorSettings::validate(self).map_err(RenderError::Invalid)?;
-        let settings = self
-            .chain
-            .chain_settings(self.mutation.mutation().map_err(RenderError::Invalid)?, run);
-        let samplers = self.samplers(scene);
-        let result = if self.ladder.levels == 1 {
-            let family = PssFamily::new(scene, samplers.clone());
-            markov::run(scene, &family, &settings, stop, observer)?
-        } else {
-            let family = TemperedMmltFamily::new(scene, &samplers, &self.ladder);
-            markov::run(scene, &family, &settings, stop, observer)?
-        };
-        let rendered =
-            markov::report::rendered(&result, DumpSampler::Mmlt, self.depth.limit(), true);
-        let levels = self.ladder.levels;
-        Ok(report(
-            rendered,
-            &result,
-            &self.ladder,
-            &samplers[0].bsdfs,
-            |m| format!("depth-{}-level-{}", m / levels + 1, m % levels),
-        ))
+        let mutation = self.mutation.mutation().map_err(RenderError::Invalid)?;
+        self.ladder.render_stages(
+            scene,
+            &self.chain,
+            run,
+            stop,
+            observer,
+            |stage, observer| {
+                let settings = ChainSettings {
+                    mutations_per_pixel: stage.samples_per_pixel,
+                    ..self.chain.chain_settings(mutation, &stage.run)
+                };
+                let before = stage.samples_per_pixel_before;
+                let samplers = self.samplers_at(scene, before);
+                let result = if self.ladder.levels == 1 {
+                    let family = PssFamily::new(scene, samplers.clone());
+                    markov::run(scene, &family, &settings, stop, observer)?
+                } else {
+                    let family = TemperedMmltFamily::new(scene, &samplers, &self.ladder);
+                    markov::run(scene, &family, &settings, stop, observer)?
+                };
+                let rendered =
+                    markov::report::rendered(&result, DumpSampler::Mmlt, self.depth.limit(), true);
+                let levels = self.ladder.levels;
+                Ok(report(
+                    rendered,
+                    &result,
+                    &self.ladder,
+                    &samplers[0].bsdfs,
+                    self.ladder.sample_index(before),
+                    |m| format!("depth-{}-level-{}", m / levels + 1, m % levels),
+                ))
+            },
+        )
     }
 }

@@ -19,8 +19,11 @@
 //!   `C(u)` weighted by the balance heuristic over chains,
 //!   `C(u) / (N Σ_j π_j(u)/b̂_j)` per sample, scaled by the level's `b`.
 //! - **Regularisation**: the schedule of [`Regularization`], evaluated at
-//!   sample index `regularization_n` and held for the run (the driver's
-//!   targets are stationary; see docs/tempered-replica-exchange.md).
+//!   sample index `regularization_n` and held for the run, or, with
+//!   `regularization_stages` K > 1, held within each of K stages of
+//!   doubling budget and evaluated at the samples per pixel before it
+//!   ([`crate::staged`]; the driver's targets are stationary, see
+//!   docs/tempered-replica-exchange.md).
 //!
 //! With one level (and no regularisation) the family is plain PSSMLT over
 //! BDPT ([`PssFamily`]), bit for bit.
@@ -28,7 +31,7 @@
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
 use crate::integrators::bdpt::{Bdpt, MisHeuristic};
-use crate::markov::{self, ChainFamily, ChainParams, MltResult};
+use crate::markov::{self, ChainFamily, ChainParams, ChainSettings, MltResult};
 use crate::observer::Observer;
 use crate::pss::{
     Mutation, MutationParams, PATH_CLASSES, PathSample, PssFamily, PssPathSampler, PssTarget,
@@ -36,6 +39,7 @@ use crate::pss::{
 use crate::pss_dump::DumpSampler;
 use crate::scene::Scene;
 use crate::settings::check;
+use crate::staged::{MAX_STAGES, Stage, render_in_stages};
 use crate::tempered::{
     MAX_LEVELS, Regularization, RegularizationSchedule, ScheduleKind, TemperedBdpt, TemperedBsdfs,
     chain_mis_factors, ladder_json, level_density, log_of, temperatures,
@@ -44,7 +48,7 @@ use mcmc_core::kernel::Mixture;
 use mcmc_core::replica::{EvenOdd, ExchangeMove, IsPermutation, IsSwap, NeighbourSwap};
 use mcmc_core::space::TorusPoint;
 use mcmc_core::target::{Evaluation, Target};
-use serde_json::json;
+use serde_json::{Value, json};
 use std::sync::atomic::AtomicBool;
 
 crate::choice! {
@@ -88,8 +92,18 @@ crate::settings! {
         pub rho0: f64 = 4e-3, check check::non_negative;
         /// Regularisation decline rate γ.
         pub gamma: f64 = 1e-5, check check::non_negative;
-        /// Sample index n at which the schedule is evaluated (held for the run).
+        /// Sample index n at which the schedule is evaluated (the first stage's; held within a stage).
         pub regularization_n: usize = 0;
+        /// Stages of doubling budget, each at the floor of the samples per pixel before it (decaying schedules only; 1: one floor for the run).
+        pub regularization_stages: usize = 1, check stage_count;
+    }
+}
+
+fn stage_count(v: &usize) -> Result<(), String> {
+    if (1..=MAX_STAGES).contains(v) {
+        Ok(())
+    } else {
+        Err(format!("must lie in 1..={MAX_STAGES}"))
     }
 }
 
@@ -119,13 +133,57 @@ impl TemperedLadder {
         }
     }
 
-    /// The ladder's roughened BSDFs on `scene`.
+    /// The ladder's roughened BSDFs on `scene` at the first stage's floor.
     pub fn bsdfs(&self, scene: &Scene) -> TemperedBsdfs {
+        self.bsdfs_at(scene, 0)
+    }
+
+    /// The sample index of a stage that starts after `samples_per_pixel`
+    /// samples per pixel: `regularization_n` plus those.
+    pub fn sample_index(&self, samples_per_pixel: u64) -> u64 {
+        self.regularization_n as u64 + samples_per_pixel
+    }
+
+    /// The ladder's roughened BSDFs on `scene` for a stage that starts
+    /// after `samples_per_pixel` samples per pixel.
+    pub fn bsdfs_at(&self, scene: &Scene, samples_per_pixel: u64) -> TemperedBsdfs {
         TemperedBsdfs::new(
             scene,
             &temperatures(self.levels, self.t_max),
-            self.schedule().floor(self.regularization_n as u64),
+            self.schedule().floor(self.sample_index(samples_per_pixel)),
         )
+    }
+
+    /// Renders the stages of a tempered integrator (one stage unless
+    /// `regularization_stages` says more; see [`crate::staged`]) and adds
+    /// each stage's regularisation floor to the `stages` statistics: the
+    /// regularised roughness over the run.
+    pub fn render_stages(
+        &self,
+        scene: &Scene,
+        chain: &ChainParams,
+        run: &RunSettings,
+        stop: &AtomicBool,
+        observer: &dyn Observer,
+        render_stage: impl FnMut(&Stage, &dyn Observer) -> Result<Rendered, RenderError>,
+    ) -> Result<Rendered, RenderError> {
+        let pixels = u64::from(scene.film.width) * u64::from(scene.film.height);
+        let mut rendered = render_in_stages(
+            self.regularization_stages,
+            pixels,
+            chain.mutations_per_pixel(run),
+            run,
+            stop,
+            observer,
+            render_stage,
+        )?;
+        if let Some(Value::Array(stages)) = rendered.statistics.get_mut("stages") {
+            for stage in stages {
+                let n = self.sample_index(stage["n"].as_u64().unwrap_or(0));
+                stage["floor"] = json!(self.schedule().floor(n));
+            }
+        }
+        Ok(rendered)
     }
 
     /// The checks a tempered integrator's settings need beyond each
@@ -138,6 +196,17 @@ impl TemperedLadder {
         }
         if self.regularization != ScheduleKind::Off && !(self.rho0 > 0.0) {
             return Err("regularization needs rho0 > 0".into());
+        }
+        if self.regularization_stages > 1
+            && !matches!(
+                self.regularization,
+                ScheduleKind::Geometric | ScheduleKind::Power
+            )
+        {
+            return Err(format!(
+                "regularization_stages={} needs a decaying schedule (regularization=geometric or power)",
+                self.regularization_stages
+            ));
         }
         Ok(())
     }
@@ -284,29 +353,42 @@ impl IntegratorSettings for TemperedPssmlt {
         observer: &dyn Observer,
     ) -> Result<Rendered, RenderError> {
         IntegratorSettings::validate(self).map_err(RenderError::Invalid)?;
-        let settings = self
-            .chain
-            .chain_settings(self.mutation.mutation().map_err(RenderError::Invalid)?, run);
-        let sampler = TemperedBdpt {
-            bdpt: self.bdpt(),
-            bsdfs: self.ladder(scene),
-        };
-        let result = if self.ladder.levels == 1 {
-            let family = PssFamily::new(scene, vec![sampler.clone()]);
-            markov::run(scene, &family, &settings, stop, observer)?
-        } else {
-            let family = TemperedFamily::new(scene, &sampler, self.ladder.exchange);
-            markov::run(scene, &family, &settings, stop, observer)?
-        };
-        let rendered =
-            markov::report::rendered(&result, DumpSampler::Bdpt, self.depth.limit(), false);
-        Ok(report(
-            rendered,
-            &result,
-            &self.ladder,
-            &sampler.bsdfs,
-            |k| format!("level-{k}"),
-        ))
+        let mutation = self.mutation.mutation().map_err(RenderError::Invalid)?;
+        self.ladder.render_stages(
+            scene,
+            &self.chain,
+            run,
+            stop,
+            observer,
+            |stage, observer| {
+                let settings = ChainSettings {
+                    mutations_per_pixel: stage.samples_per_pixel,
+                    ..self.chain.chain_settings(mutation, &stage.run)
+                };
+                let before = stage.samples_per_pixel_before;
+                let sampler = TemperedBdpt {
+                    bdpt: self.bdpt(),
+                    bsdfs: self.ladder.bsdfs_at(scene, before),
+                };
+                let result = if self.ladder.levels == 1 {
+                    let family = PssFamily::new(scene, vec![sampler.clone()]);
+                    markov::run(scene, &family, &settings, stop, observer)?
+                } else {
+                    let family = TemperedFamily::new(scene, &sampler, self.ladder.exchange);
+                    markov::run(scene, &family, &settings, stop, observer)?
+                };
+                let rendered =
+                    markov::report::rendered(&result, DumpSampler::Bdpt, self.depth.limit(), false);
+                Ok(report(
+                    rendered,
+                    &result,
+                    &self.ladder,
+                    &sampler.bsdfs,
+                    self.ladder.sample_index(before),
+                    |k| format!("level-{k}"),
+                ))
+            },
+        )
     }
 }
 
@@ -314,16 +396,16 @@ impl IntegratorSettings for TemperedPssmlt {
 /// member: `families[k]` acceptance, image share; `exchange`: pairs, round
 /// trips) plus the ladder, the swap acceptance matrix (summed over replica
 /// sets) and round trips per hour, and each member's image as a layer
-/// named by `layer`.
+/// named by `layer`. `n` is the sample index the floor was evaluated at.
 pub fn report(
     mut rendered: Rendered,
     result: &MltResult,
     settings: &TemperedLadder,
     bsdfs: &TemperedBsdfs,
+    n: u64,
     layer: impl Fn(usize) -> String,
 ) -> Rendered {
     let schedule = settings.schedule();
-    let n = settings.regularization_n as u64;
     let mut ladder = ladder_json(bsdfs, &schedule, n);
     if let Some(ex) = &result.exchange {
         let m = settings.levels;
