@@ -576,3 +576,23 @@ fn thin_lens_crop_and_tent_parse_and_bad_values_are_refused() {
         assert_eq!(e.lines().count(), 1, "{e}");
     }
 }
+
+/// Every scene file in the repo's `scenes/` loads with its own defaults
+/// (a renamed mesh or texture, or a scene written for a feature the loader
+/// refuses, fails here first).
+#[test]
+fn every_repo_scene_loads() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    let mut names: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "xml"))
+        .collect();
+    names.sort();
+    assert!(names.len() >= 20, "{} scenes", names.len());
+    for path in &names {
+        if let Err(e) = mcmc_render::scene::Scene::load(path, &HashMap::new()) {
+            panic!("{}: {e}", path.display());
+        }
+    }
+}
