@@ -31,7 +31,7 @@ pub mod quadtree;
 pub mod sd_tree;
 
 pub use quadtree::QuadTree;
-pub use sd_tree::{LeafId, RecordBuffer, SdTree, TreeSize};
+pub use sd_tree::{ExactRecords, LeafId, RecordBuffer, SdTree, TreeSize};
 
 use crate::bsdf::TransportMode;
 use crate::bsdf::textured::BsdfAt;

@@ -86,18 +86,30 @@ impl QuadTree {
     /// Adds `value` to the leaf containing `p` (a point of `[0, 1)²`).
     /// Interior energies are left stale until [`QuadTree::sum_up`].
     pub fn record(&mut self, p: (f32, f32), value: f64) {
+        let n = self.leaf_index(p);
+        self.add_energy(n, value);
+    }
+
+    /// The index of the leaf containing `p` (a point of `[0, 1)²`).
+    pub fn leaf_index(&self, p: (f32, f32)) -> usize {
         let mut p = (f64::from(p.0), f64::from(p.1));
         let mut n = 0usize;
         loop {
             let c = self.nodes[n].first_child as usize;
             if c == 0 {
-                self.nodes[n].energy += value;
-                return;
+                return n;
             }
             let (q, rest) = quadrant(p);
             n = c + q;
             p = rest;
         }
+    }
+
+    /// Adds `value` to node `n`'s energy (a leaf from
+    /// [`QuadTree::leaf_index`]; interior energies are left stale until
+    /// [`QuadTree::sum_up`]).
+    pub fn add_energy(&mut self, n: usize, value: f64) {
+        self.nodes[n].energy += value;
     }
 
     /// Sets every interior node's energy to the sum of its children's

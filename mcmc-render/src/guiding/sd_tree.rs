@@ -90,6 +90,39 @@ impl RecordBuffer {
 }
 
 /// Sizes of an SD-tree, for statistics.
+/// Fixed-point scale of [`ExactRecords`]: a record is rounded to a
+/// multiple of 2⁻⁴⁰ (about 1e−12, far below any flux that matters).
+const EXACT_SCALE: f64 = (1u64 << 40) as f64;
+/// Largest record value [`ExactRecords`] keeps (2⁶⁴; larger values are
+/// clamped, so that a sum of 2²⁴ of them still fits in 128 bits).
+const EXACT_MAX: f64 = 18_446_744_073_709_551_616.0;
+
+/// Records summed per building quadtree leaf in fixed point, for
+/// recorders that cannot fix the order of their records (the chains of
+/// `mcmc-pg`'s online variant, spread over threads by the scheduler):
+/// integer sums are exact, so merging them ([`SdTree::merge_exact`])
+/// gives the same tree in any order, and memory is bounded by the tree's
+/// leaves rather than by the number of records.
+#[derive(Clone, Debug, Default)]
+pub struct ExactRecords {
+    /// Records per spatial leaf (all of them, zero-valued included).
+    samples: Vec<u64>,
+    /// Fixed-point energy per (spatial leaf, building quadtree node).
+    energy: std::collections::HashMap<(u32, u32), u128>,
+}
+
+impl ExactRecords {
+    /// Records accumulated so far.
+    pub fn len(&self) -> u64 {
+        self.samples.iter().sum()
+    }
+
+    /// Whether nothing was accumulated.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub struct TreeSize {
     /// Nodes of the spatial tree (interior and leaves).
@@ -228,6 +261,50 @@ impl SdTree {
             .sampling
             .density(direction_to_square(dir));
         (density / (4.0 * PI)) as f32
+    }
+
+    /// Moves the records of `buffer` into `into`, summed per building
+    /// quadtree leaf in fixed point (see [`ExactRecords`]). The tree's
+    /// shape must not change before [`SdTree::merge_exact`].
+    pub fn accumulate(&self, buffer: &mut RecordBuffer, into: &mut ExactRecords) {
+        if into.samples.len() < self.leaves.len() {
+            into.samples.resize(self.leaves.len(), 0);
+        }
+        for r in buffer.records.drain(..) {
+            into.samples[r.leaf as usize] += 1;
+            if r.value > 0.0 {
+                let node = self.leaves[r.leaf as usize].building.leaf_index(r.p);
+                let fixed = (f64::from(r.value).min(EXACT_MAX) * EXACT_SCALE).round() as u128;
+                let e = into.energy.entry((r.leaf, node as u32)).or_insert(0);
+                *e = e.saturating_add(fixed);
+            }
+        }
+    }
+
+    /// Adds the exact sums of `parts` to the building quadtrees (and the
+    /// leaves' record counts). Integer sums do not depend on the order of
+    /// the parts or of the records in them, so the tree is the same
+    /// whichever thread recorded what.
+    pub fn merge_exact(&mut self, parts: impl IntoIterator<Item = ExactRecords>) {
+        let mut samples = vec![0u64; self.leaves.len()];
+        let mut energy: std::collections::BTreeMap<(u32, u32), u128> = Default::default();
+        for part in parts {
+            for (s, n) in samples.iter_mut().zip(&part.samples) {
+                *s += n;
+            }
+            for (k, v) in part.energy {
+                let e = energy.entry(k).or_insert(0);
+                *e = e.saturating_add(v);
+            }
+        }
+        for (leaf, n) in self.leaves.iter_mut().zip(samples) {
+            leaf.samples += n;
+        }
+        for ((leaf, node), v) in energy {
+            self.leaves[leaf as usize]
+                .building
+                .add_energy(node as usize, v as f64 / EXACT_SCALE);
+        }
     }
 
     /// Adds the records of `buffers` to the building quadtrees, in the

@@ -297,6 +297,42 @@ fn check_initial_depth(v: &u32) -> Result<(), String> {
     }
 }
 
+/// The doubling schedule (see the module documentation): the length of
+/// the next iteration, whose nominal length is `nominal` (`2^(k−1)`), in
+/// samples per pixel (`None`: until the deadline), and whether it is the
+/// last. `budget`: samples per pixel in all (`None`: a time budget ending
+/// at `deadline`), of which `done` are spent; `previous_seconds`: how long
+/// the previous iteration took. `mcmc-pg`'s online variant runs the same
+/// schedule on mutations per pixel.
+pub fn next_iteration(
+    budget: Option<u64>,
+    done: u64,
+    nominal: u64,
+    deadline: Option<Instant>,
+    previous_seconds: Option<f64>,
+) -> (Option<u64>, bool) {
+    match budget {
+        Some(n) => {
+            let left = n.saturating_sub(done);
+            if nominal.saturating_mul(3) > left {
+                (Some(left), true)
+            } else {
+                (Some(nominal), false)
+            }
+        }
+        None => {
+            let left = deadline.map_or(0.0, |d| {
+                d.saturating_duration_since(Instant::now()).as_secs_f64()
+            });
+            if previous_seconds.is_some_and(|t| 3.0 * 2.0 * t > left) {
+                (None, true)
+            } else {
+                (Some(nominal), false)
+            }
+        }
+    }
+}
+
 /// One finished (or interrupted) iteration, for the statistics.
 #[derive(Clone, Debug, serde::Serialize)]
 struct IterationStats {
@@ -329,6 +365,24 @@ impl IntegratorSettings for GuidedSettings {
         stop: &AtomicBool,
         observer: &dyn Observer,
     ) -> Result<Rendered, RenderError> {
+        self.render_and_train(scene, run, stop, observer, false)
+            .map(|(rendered, _)| rendered)
+    }
+}
+
+impl GuidedSettings {
+    /// Renders as [`IntegratorSettings::render`] and returns the tree too.
+    /// With `train_last`, the last iteration also records and ends with
+    /// [`SdTree::end_iteration`], so that every sample trains the returned
+    /// tree (`mcmc-pg`'s pre-training, where the image is not wanted).
+    pub fn render_and_train(
+        &self,
+        scene: &Scene,
+        run: &RunSettings,
+        stop: &AtomicBool,
+        observer: &dyn Observer,
+        train_last: bool,
+    ) -> Result<(Rendered, SdTree), RenderError> {
         let start = Instant::now();
         let (width, height) = (scene.film.width, scene.film.height);
         let pixels = u64::from(width) * u64::from(height);
@@ -355,27 +409,13 @@ impl IntegratorSettings for GuidedSettings {
         let mut nominal = 1u64;
         for k in 1u32.. {
             // Is this the last iteration, and how long is it?
-            let (iteration_spp, last) = match budget_spp {
-                Some(n) => {
-                    let left = n - spp_done;
-                    if nominal.saturating_mul(3) > left {
-                        (Some(left), true)
-                    } else {
-                        (Some(nominal), false)
-                    }
-                }
-                None => {
-                    let left = deadline.map_or(0.0, |d| {
-                        d.saturating_duration_since(Instant::now()).as_secs_f64()
-                    });
-                    let predicted = iterations.last().map(|it| 2.0 * it.seconds);
-                    if predicted.is_some_and(|t| 3.0 * t > left) {
-                        (None, true)
-                    } else {
-                        (Some(nominal), false)
-                    }
-                }
-            };
+            let (iteration_spp, last) = next_iteration(
+                budget_spp,
+                spp_done,
+                nominal,
+                deadline,
+                iterations.last().map(|it| it.seconds),
+            );
             let iteration_start = Instant::now();
             let mut film = Film::new(width, height, filter.clone());
             let mut done = 0u64;
@@ -388,7 +428,8 @@ impl IntegratorSettings for GuidedSettings {
                     interrupted = true;
                     break;
                 }
-                let cap = if last { PASS_SPP } else { training_pass_spp };
+                let record = !last || train_last;
+                let cap = if record { training_pass_spp } else { PASS_SPP };
                 let spp = iteration_spp.map_or(cap, |n| (n - done).min(cap)) as u32;
                 let aborted = AtomicBool::new(false);
                 let check_abort = || {
@@ -405,7 +446,7 @@ impl IntegratorSettings for GuidedSettings {
                         let mut tile =
                             Film::for_tile(width, height, x0, y0, x1, y1, filter.clone());
                         let mut st = SampleStats::default();
-                        let mut training = (!last).then(Training::default);
+                        let mut training = record.then(Training::default);
                         if check_abort() {
                             return (tile, training, st);
                         }
@@ -432,7 +473,7 @@ impl IntegratorSettings for GuidedSettings {
                     film.add_film(tile);
                     stats.merge(st);
                 }
-                if !last {
+                if record {
                     let buffers: Vec<&RecordBuffer> = results
                         .iter()
                         .filter_map(|r| r.1.as_ref().map(|t| &t.records))
@@ -460,6 +501,9 @@ impl IntegratorSettings for GuidedSettings {
                 .then(|| (film.develop(0.0), done));
             if last || interrupted {
                 image = current.or(previous.take());
+                if train_last && records > 0 {
+                    tree.end_iteration(k, self.spatial_threshold, self.quadtree_threshold);
+                }
                 break;
             }
             previous = current;
@@ -491,7 +535,7 @@ impl IntegratorSettings for GuidedSettings {
             "bvh_build_seconds": scene.geometry.build_time.as_secs_f64(),
             "triangles": scene.geometry.triangles,
         });
-        Ok(Rendered {
+        let rendered = Rendered {
             image,
             seconds,
             samples,
@@ -512,6 +556,7 @@ impl IntegratorSettings for GuidedSettings {
                 size.bytes as f64 / 1e6,
                 if interrupted { ", stopped early" } else { "" }
             ),
-        })
+        };
+        Ok((rendered, tree))
     }
 }

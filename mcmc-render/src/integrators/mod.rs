@@ -55,6 +55,7 @@ pub mod erpt;
 pub mod fused;
 pub mod guided;
 pub mod lt;
+pub mod mcmc_pg;
 pub mod mcmc_vcm;
 pub mod mept;
 pub mod mlt;

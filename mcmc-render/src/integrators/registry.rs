@@ -158,6 +158,7 @@ pub static REGISTRY: &[Registration] = &[
     register::<super::erpt::Erpt>(),
     register::<super::fused::Fused>(),
     register::<super::mcmc_vcm::McmcVcmSettings>(),
+    register::<super::mcmc_pg::McmcPg>(),
 ];
 
 /// The registered names, comma-separated.

@@ -1,0 +1,522 @@
+//! MCMC with path guiding (MCMC-PG, seed 003 §10): primary sample space
+//! MLT whose path sampler is the guided path tracer
+//! ([`super::guided::GuidedPathTracer`]) over an SD-tree.
+//!
+//! # Target
+//! A primary-sample point `u` is mapped by the guided tracer (no NEE by
+//! default, as the thesis) to a path whose contribution is
+//! `f_PG = Π f_j |cos| / (q p_tree + (1 − q) p_bsdf) · Le` (Eq. 4.2): the
+//! guided density enters only through the PSS-to-path map, so the
+//! acceptance stays `min(1, I_PG(v)/I_PG(u))` for the symmetric PSS
+//! proposals and nothing else changes: start-up, estimator, normalisation
+//! and the kernels are the Markov driver's and `mcmc-core`'s, exactly as
+//! for `pssmlt` ([`super::pssmlt::render_pssmlt`]). Large steps stay
+//! uniform in primary sample space; through the guided map they become
+//! guided independent proposals, which is where the gain is meant to come
+//! from (Table 4.2: large-step acceptance on Veach-ajar 0.003 → 0.089).
+//!
+//! # Variants (`training`)
+//! - **`pretrained`** (Alg. 8): guided path tracing on the `guided`
+//!   integrator's doubling schedule trains the tree with a share
+//!   `training_share` (1/8, the thesis's 512 of 4096 spp) of the budget;
+//!   every training iteration records, the last one included; the
+//!   training samples do not enter the image. The tree is then frozen and
+//!   PSSMLT runs over the guided tracer with the rest of the budget: one
+//!   fixed target, a valid MCMC.
+//! - **`online`** (Alg. 9): iterations of doubling length `2^(k−1)`
+//!   mutations per pixel on the same schedule (on mutations instead of
+//!   samples). Each iteration bootstraps anew (new seeds) with the current
+//!   sampling tree, starts its chains from that bootstrap, and every
+//!   traced path (bootstrap candidates and every proposal, accepted or
+//!   not, large or small, unweighted by the acceptance) records into the
+//!   building tree; then the tree is updated. Only the last iteration's
+//!   image is kept, and the last iteration does not record (its records
+//!   would train nothing).
+//!
+//! **How the target change is handled (online).** The sampling half of
+//! the tree is read-only during an iteration (records go to the building
+//! half, which the tracer never reads), so within an iteration the target
+//! `I_PG` is fixed and the iteration is an ordinary PSSMLT run with its
+//! own start-up and normalisation `b_k`. Between iterations the map from
+//! `u` to paths changes, so a chain state of iteration `k` is not
+//! distributed as iteration `k + 1`'s target: carrying states over would
+//! bring back a start-up bias that no normalisation removes. As Alg. 9
+//! does, chains are therefore not carried over but re-seeded from a new
+//! bootstrap `∝ I_PG` of the current tree (the driver's resampled start,
+//! which removes start-up bias), and only the last iteration's image,
+//! scaled by its own `b`, is the result: it is unbiased whatever the
+//! earlier iterations did, because the tree only shapes the sampler. What
+//! the online records are *not* is an unbiased flux estimate: proposals
+//! follow the chains, not the guided sampler, so bright regions are
+//! over-recorded (spec §14.15); that costs efficiency, not correctness.
+//!
+//! # Determinism
+//! The pre-trained tree is the `guided` integrator's (deterministic per
+//! seed). Online records come from chains the scheduler spreads over
+//! threads, so their order is not fixed; each thread sums them in fixed
+//! point per building quadtree leaf ([`ExactRecords`]), whose integer sums
+//! do not depend on order: one seed gives the same trees and image on any
+//! thread count.
+//!
+//! # Random numbers per state
+//! Coordinates 0–1 the raster position (2–3 the lens of a thin-lens
+//! camera), then 8 per scattering vertex as [`super::guided`] documents.
+
+use super::guided::{GuidedPathTracer, GuidedSettings, Training, next_iteration};
+use super::registry::IntegratorSettings;
+use super::{RenderError, Rendered, RunSettings};
+use crate::guiding::{ExactRecords, SdTree};
+use crate::markov::{self, ChainParams, MltResult};
+use crate::observer::Observer;
+use crate::pss::{
+    LARGE_STEP_COMPONENT, MutationParams, PssPathSampler, PssSource, Splat, raster_of,
+};
+use crate::pss_dump::DumpSampler;
+use crate::sampling::RandomSource;
+use crate::scene::Scene;
+use glam::Vec3;
+use mcmc_core::rng::splitmix64;
+use serde_json::{Value, json};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+/// Numbers the guided tracer reads per scattering vertex.
+const NUMBERS_PER_VERTEX: usize = 8;
+/// Stream offset from which the online iterations' seeds are derived.
+const ONLINE_STREAM: u64 = 1 << 44;
+
+crate::choice! {
+    /// When the SD-tree is trained.
+    pub enum TrainingMode {
+        /// Guided path tracing first, then MCMC with the frozen tree (Alg. 8).
+        Pretrained = "pretrained",
+        /// Refined between MCMC iterations from the chains' paths (Alg. 9).
+        Online = "online",
+    }
+}
+
+crate::settings! {
+    /// MCMC-PG settings.
+    pub struct McmcPg {
+        /// pretrained (guided path tracing trains, then MCMC with the frozen tree) or online (iterations of MCMC train the tree; the last makes the image).
+        pub training: TrainingMode = TrainingMode::Pretrained;
+        /// Pretrained: the share of the budget (mutations per pixel as samples per pixel, or time) spent on training, in (0, 1).
+        pub training_share: f64 = 0.125, check check_share;
+        flatten {
+            /// The guided tracer and its tree.
+            pub guiding: GuidedSettings = GuidedSettings::default();
+            /// The mutation.
+            pub mutation: MutationParams = MutationParams::default();
+            /// The driver.
+            pub chain: ChainParams = ChainParams::default();
+        }
+    }
+}
+
+/// `share ∈ (0, 1)`.
+fn check_share(v: &f64) -> Result<(), String> {
+    if *v > 0.0 && *v < 1.0 {
+        Ok(())
+    } else {
+        Err("must lie in (0, 1)".into())
+    }
+}
+
+/// Per-thread record slots of the online variant: a thread locks only its
+/// own slot (its index in the pool), so the locks are uncontended.
+#[derive(Default)]
+struct RecordSink {
+    slots: Vec<Mutex<Slot>>,
+}
+
+/// One thread's records: the tracer's path buffer and the exact sums.
+#[derive(Default)]
+struct Slot {
+    training: Training,
+    exact: ExactRecords,
+}
+
+impl RecordSink {
+    /// One slot per thread of the current pool, plus one for callers
+    /// outside it.
+    fn new() -> Self {
+        let n = rayon::current_num_threads() + 1;
+        RecordSink {
+            slots: (0..n).map(|_| Mutex::default()).collect(),
+        }
+    }
+
+    /// The calling thread's slot.
+    fn slot(&self) -> MutexGuard<'_, Slot> {
+        let last = self.slots.len() - 1;
+        let i = rayon::current_thread_index().map_or(last, |i| i.min(last));
+        self.slots[i].lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// The exact sums of every slot.
+    fn into_parts(self) -> impl Iterator<Item = ExactRecords> {
+        self.slots
+            .into_iter()
+            .map(|m| m.into_inner().unwrap_or_else(|e| e.into_inner()).exact)
+    }
+}
+
+/// The guided path tracer as a primary-sample path sampler, over a tree
+/// whose sampling half stays fixed while it is used; with a sink, every
+/// traced path records into it.
+#[derive(Clone, Copy)]
+pub struct GuidedPss<'t> {
+    /// The tracer.
+    pub tracer: GuidedPathTracer,
+    /// The tree it samples.
+    pub tree: &'t SdTree,
+    sink: Option<&'t RecordSink>,
+}
+
+impl<'t> GuidedPss<'t> {
+    /// The sampler over the frozen `tree`.
+    pub fn frozen(tracer: GuidedPathTracer, tree: &'t SdTree) -> Self {
+        GuidedPss {
+            tracer,
+            tree,
+            sink: None,
+        }
+    }
+}
+
+impl PssPathSampler for GuidedPss<'_> {
+    fn streams(&self) -> usize {
+        1
+    }
+
+    fn trace(&self, scene: &Scene, source: &mut PssSource<'_>, out: &mut Vec<Splat>) -> u32 {
+        let p = raster_of(scene, source);
+        let (ray, lens_numbers) = if scene.camera.has_lens() {
+            (scene.camera.generate_ray_lens(p, source.next_2d()), 2)
+        } else {
+            (scene.camera.generate_ray(p), 0)
+        };
+        let l = match self.sink {
+            None => self.tracer.li(scene, ray, source, self.tree, None),
+            Some(sink) => {
+                let mut slot = sink.slot();
+                let Slot { training, exact } = &mut *slot;
+                let l = self
+                    .tracer
+                    .li(scene, ray, source, self.tree, Some(&mut *training));
+                self.tree.accumulate(&mut training.records, exact);
+                l
+            }
+        };
+        out.push(Splat { p, l, class: 0 });
+        ((source.consumed(0) - 2 - lens_numbers) / NUMBERS_PER_VERTEX) as u32
+    }
+}
+
+/// Forwards progress but no snapshots: training images are not MCMC-PG's
+/// image, so `convergence` must not record them.
+struct ProgressOnly<'a>(&'a dyn Observer);
+
+impl Observer for ProgressOnly<'_> {
+    fn progress(&self, n: u64) {
+        self.0.progress(n);
+    }
+}
+
+/// One MCMC phase (online: one iteration), for the statistics.
+#[derive(Clone, Debug, serde::Serialize)]
+struct PhaseStats {
+    iteration: u32,
+    mutations_per_pixel: f64,
+    seconds: f64,
+    acceptance_large: f64,
+    acceptance_small: f64,
+    records: u64,
+    tree_memory_bytes: usize,
+}
+
+/// What a variant hands back for the report.
+struct Outcome {
+    /// The run that makes the image.
+    result: MltResult,
+    /// The tree it sampled.
+    tree: SdTree,
+    /// The MCMC phases (online: every iteration; pre-trained: one).
+    phases: Vec<PhaseStats>,
+    /// The pre-training's per-iteration figures (`guided`'s).
+    pretraining: Option<Value>,
+    /// Seconds spent on what does not make the image.
+    training_seconds: f64,
+}
+
+/// Acceptance of the small and the large step of a PSSMLT run.
+fn acceptances(result: &MltResult) -> (f64, f64) {
+    let c = &result.chain_stats.components;
+    let rate = |i: usize| c.get(i).map_or(f64::NAN, |c| c.acceptance_rate());
+    (rate(1 - LARGE_STEP_COMPONENT), rate(LARGE_STEP_COMPONENT))
+}
+
+impl McmcPg {
+    /// The scene's tree, untrained.
+    fn new_tree(&self, scene: &Scene) -> SdTree {
+        let bounds = scene
+            .geometry
+            .bounds()
+            .unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
+        SdTree::new(bounds, self.guiding.initial_depth)
+    }
+
+    /// PSSMLT over `sampler` with `mutations_per_pixel` and a time budget
+    /// ending at `deadline`.
+    fn chains(
+        &self,
+        scene: &Scene,
+        sampler: GuidedPss<'_>,
+        (mutations_per_pixel, deadline, seed): (Option<u64>, Option<Instant>, u64),
+        stop: &AtomicBool,
+        observer: &dyn Observer,
+    ) -> Result<MltResult, RenderError> {
+        let mutation = self.mutation.mutation().map_err(RenderError::Invalid)?;
+        let run = RunSettings {
+            seed,
+            ..RunSettings::default()
+        };
+        let mut settings = self.chain.chain_settings(mutation, &run);
+        settings.mutations_per_pixel = mutations_per_pixel;
+        // At least a moment, so that a budget spent in training still
+        // ends (the driver needs a budget).
+        settings.time_budget = deadline.map(|d| {
+            d.saturating_duration_since(Instant::now())
+                .max(Duration::from_millis(1))
+        });
+        Ok(super::pssmlt::render_pssmlt(
+            scene, sampler, &settings, stop, observer,
+        )?)
+    }
+
+    /// Alg. 8: train, freeze, run the chains.
+    fn render_pretrained(
+        &self,
+        scene: &Scene,
+        run: &RunSettings,
+        stop: &AtomicBool,
+        observer: &dyn Observer,
+    ) -> Result<Outcome, RenderError> {
+        let start = Instant::now();
+        let deadline = run.time_budget.map(|b| start + b);
+        let budget = self.chain.mutations_per_pixel(run);
+        let (train_run, chain_mpp) = match budget {
+            Some(m) => {
+                let t =
+                    ((m as f64 * self.training_share).round() as u64).clamp(1, u64::from(u32::MAX));
+                let train = RunSettings {
+                    spp: Some(t as u32),
+                    time_budget: None,
+                    ..run.clone()
+                };
+                (train, Some(m.saturating_sub(t).max(1)))
+            }
+            None => {
+                let train = RunSettings {
+                    spp: None,
+                    time_budget: run.time_budget.map(|b| b.mul_f64(self.training_share)),
+                    ..run.clone()
+                };
+                (train, None)
+            }
+        };
+        let (trained, tree) = self.guiding.render_and_train(
+            scene,
+            &train_run,
+            stop,
+            &ProgressOnly(observer),
+            true,
+        )?;
+        let training_seconds = start.elapsed().as_secs_f64();
+        let sampler = GuidedPss::frozen(self.guiding.tracer(), &tree);
+        let result = self.chains(
+            scene,
+            sampler,
+            (chain_mpp, deadline, run.seed),
+            stop,
+            observer,
+        )?;
+        let (small, large) = acceptances(&result);
+        let stat = |key: &str| trained.statistics.get(key).cloned().unwrap_or(Value::Null);
+        let phases = vec![PhaseStats {
+            // The tree after this many training iterations.
+            iteration: stat("iterations").as_u64().unwrap_or(0) as u32,
+            mutations_per_pixel: result.mutations_per_pixel,
+            seconds: result.seconds,
+            acceptance_large: large,
+            acceptance_small: small,
+            records: 0,
+            tree_memory_bytes: tree.size().bytes,
+        }];
+        let pretraining = json!({
+            "spp_per_iteration": stat("spp_per_iteration"),
+            "seconds_per_iteration": stat("seconds_per_iteration"),
+            "records_per_iteration": stat("records_per_iteration"),
+        });
+        Ok(Outcome {
+            result,
+            tree,
+            phases,
+            pretraining: Some(pretraining),
+            training_seconds,
+        })
+    }
+
+    /// Alg. 9: iterations of MCMC on the current tree, each training the
+    /// next; the last makes the image.
+    fn render_online(
+        &self,
+        scene: &Scene,
+        run: &RunSettings,
+        stop: &AtomicBool,
+        observer: &dyn Observer,
+    ) -> Result<Outcome, RenderError> {
+        let start = Instant::now();
+        let deadline = run.time_budget.map(|b| start + b);
+        let budget = self.chain.mutations_per_pixel(run);
+        let tracer = self.guiding.tracer();
+        let mut tree = self.new_tree(scene);
+        let mut phases: Vec<PhaseStats> = Vec::new();
+        let mut previous: Option<MltResult> = None;
+        let mut training_seconds = 0.0;
+        let mut done = 0u64;
+        let mut nominal = 1u64;
+        for k in 1u32.. {
+            let (mpp, last) = next_iteration(
+                budget,
+                done,
+                nominal,
+                deadline,
+                phases.last().map(|p| p.seconds),
+            );
+            let iteration_start = Instant::now();
+            let sink = (!last).then(RecordSink::new);
+            let sampler = GuidedPss {
+                tracer,
+                tree: &tree,
+                sink: sink.as_ref(),
+            };
+            let seed = splitmix64(run.seed ^ splitmix64(ONLINE_STREAM + u64::from(k)));
+            let progress = ProgressOnly(observer);
+            let shown: &dyn Observer = if last { observer } else { &progress };
+            let result = self.chains(scene, sampler, (mpp, deadline, seed), stop, shown)?;
+            let seconds = iteration_start.elapsed().as_secs_f64();
+            let (small, large) = acceptances(&result);
+            let interrupted = result.interrupted && !last;
+            let parts: Vec<ExactRecords> =
+                sink.map(|s| s.into_parts().collect()).unwrap_or_default();
+            phases.push(PhaseStats {
+                iteration: k,
+                mutations_per_pixel: result.mutations_per_pixel,
+                seconds,
+                acceptance_large: large,
+                acceptance_small: small,
+                records: parts.iter().map(ExactRecords::len).sum(),
+                tree_memory_bytes: tree.size().bytes,
+            });
+            if last || interrupted {
+                // A stopped iteration is the result if it holds at least
+                // as many mutations as the one before.
+                let keep = previous
+                    .take()
+                    .filter(|p| !last && p.mutations > result.mutations);
+                return Ok(Outcome {
+                    result: keep.unwrap_or(result),
+                    tree,
+                    phases,
+                    pretraining: None,
+                    training_seconds,
+                });
+            }
+            training_seconds += seconds;
+            tree.merge_exact(parts);
+            tree.end_iteration(
+                k,
+                self.guiding.spatial_threshold,
+                self.guiding.quadtree_threshold,
+            );
+            previous = Some(result);
+            done += mpp.unwrap_or(0);
+            nominal = nominal.saturating_mul(2);
+        }
+        unreachable!("the schedule ends")
+    }
+}
+
+impl IntegratorSettings for McmcPg {
+    const NAME: &'static str = "mcmc-pg";
+    const DESCRIPTION: &'static str = "PSSMLT over the SD-tree guided path tracer (seed 003 §10), tree pre-trained (Alg. 8) or trained online (Alg. 9).";
+
+    fn validate(&self) -> Result<(), String> {
+        self.mutation.mutation().map(|_| ())
+    }
+
+    fn planned_samples(&self, scene: &Scene, run: &RunSettings) -> Option<u64> {
+        self.chain.planned_mutations(scene, run)
+    }
+
+    fn render(
+        &self,
+        scene: &Scene,
+        run: &RunSettings,
+        stop: &AtomicBool,
+        observer: &dyn Observer,
+    ) -> Result<Rendered, RenderError> {
+        let start = Instant::now();
+        let Outcome {
+            result,
+            tree,
+            phases,
+            pretraining,
+            training_seconds,
+        } = match self.training {
+            TrainingMode::Pretrained => self.render_pretrained(scene, run, stop, observer)?,
+            TrainingMode::Online => self.render_online(scene, run, stop, observer)?,
+        };
+        let seconds = start.elapsed().as_secs_f64();
+        let mut rendered =
+            markov::report::rendered(&result, DumpSampler::Pt, self.guiding.depth.limit(), false);
+        // A dump could not be replayed without the tree.
+        rendered.nonfinite_dump = None;
+        rendered.seconds = seconds;
+        rendered.interrupted |= stop.load(Ordering::Relaxed);
+        let (small, large) = acceptances(&result);
+        let size = tree.size();
+        let s = &mut rendered.statistics;
+        s.insert("training".into(), json!(self.training.name()));
+        s.insert("acceptance_large".into(), json!(large));
+        s.insert("acceptance_small".into(), json!(small));
+        s.insert("iterations".into(), json!(phases));
+        if let Some(p) = pretraining {
+            s.insert("pretraining".into(), p);
+        }
+        s.insert("training_seconds".into(), json!(training_seconds));
+        s.insert(
+            "training_time_share".into(),
+            json!(if seconds > 0.0 {
+                training_seconds / seconds
+            } else {
+                0.0
+            }),
+        );
+        s.insert("tree_memory_bytes".into(), json!(size.bytes));
+        s.insert("tree".into(), json!(size));
+        rendered.summary = format!(
+            "{}; {} training, {:.2} s of {:.2} s; large-step acceptance {:.4}, small {:.3}; tree {:.1} MB",
+            rendered.summary,
+            self.training.name(),
+            training_seconds,
+            seconds,
+            large,
+            small,
+            size.bytes as f64 / 1e6
+        );
+        Ok(rendered)
+    }
+}
