@@ -77,7 +77,10 @@ fn exr_from_reader(
         .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
     let size = image.layer_data.size;
     let (_, pixels) = image.layer_data.channel_data.pixels;
-    Ok((size.width() as u32, size.height() as u32, pixels))
+    let side = |n: usize| {
+        u32::try_from(n).map_err(|_| cannot(&format!("a side of {n} pixels is more than 2^32")))
+    };
+    Ok((side(size.width())?, side(size.height())?, pixels))
 }
 
 /// sRGB transfer function of a linear value clamped to [0, 1].

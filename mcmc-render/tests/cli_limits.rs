@@ -20,6 +20,35 @@ fn a_time_budget_too_large_for_a_duration_is_refused() {
     assert_clean_failure(&out, &["--time", "1e300", "too large"]);
 }
 
+/// `convergence` converted `--time` before checking it: a negative value
+/// panicked. Checked with the other flags now, before any file is read
+/// (`r.exr` does not exist).
+#[test]
+fn a_convergence_time_budget_out_of_range_is_refused() {
+    let dir = setup("limits-convergence-time");
+    for (time, needles) in [
+        (
+            "-1",
+            &["--time must be a positive number of seconds, got -1"][..],
+        ),
+        ("1e300", &["--time 1e300 is too large"][..]),
+        ("NaN", &["--time must be a positive", "NaN"][..]),
+    ] {
+        let out = run(
+            &[
+                "convergence",
+                "s.xml",
+                "--reference",
+                "r.exr",
+                "--time",
+                time,
+            ],
+            &dir,
+        );
+        assert_clean_failure(&out, needles);
+    }
+}
+
 #[test]
 fn a_sample_count_too_large_for_u32_is_refused() {
     let dir = setup("limits-spp");

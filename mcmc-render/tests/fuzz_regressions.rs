@@ -198,8 +198,10 @@ fn mmlt_with_a_huge_max_depth_is_refused() {
 }
 
 /// EXR headers claiming gigapixel images (the `exr` target's findings in
-/// `tests/data/fuzz/exr-*.exr`, 0.9–7.6 KB files asking for 50–309 GB)
-/// made `read_exr` allocate the claimed image and abort. The header's
+/// `tests/data/fuzz/exr-*.exr`, 0.9–7.6 KB files asking for 4–309 GB)
+/// made `read_exr` allocate the claimed image and abort (the three
+/// `exr-oom-*` files kept apart at first grew past 2 GB: the same class,
+/// refused by the same check, 5 MB peak for all three). The header's
 /// sizes are now checked against the file's length and the memory
 /// available before anything is allocated.
 #[test]
@@ -229,42 +231,134 @@ fn exr_headers_claiming_more_than_the_file_holds_are_refused() {
     assert_eq!(px.len(), w as usize * h as usize);
 }
 
-/// EXR findings whose memory grows inside the `exr` crate's decoding of a
-/// small claimed image (not the allocation of the claimed size): not fixed
-/// yet (see docs/fuzzing.md). Run under a memory limit:
-/// `ulimit -v 4000000; cargo test -p mcmc-render --test fuzz_regressions -- --ignored`.
+/// OBJ findings of the `obj` target (`tests/data/fuzz/obj-*.obj`): a
+/// relative face index reaching before the first texture coordinate or
+/// normal overflowed `vt * 2` / `vn * 3` inside tobj 4.0.5 (`lib.rs:852`,
+/// `:860`): a panic where overflow checks are on (debug and test builds), a
+/// wrapped, wrong index in release. Face indices are now checked before
+/// tobj reads the text; each finding is one line naming the line and the
+/// corner.
 #[test]
-#[ignore = "open: memory grows inside the exr crate"]
-fn exr_open_findings() {
-    use mcmc_render::image_io::exr_from_bytes;
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz/unfixed");
-    for e in std::fs::read_dir(&dir).unwrap() {
-        let path = e.unwrap().path();
+fn obj_face_indices_out_of_range_are_refused() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "obj"))
+        .collect();
+    files.sort();
+    assert_eq!(files.len(), 6, "the committed findings are missing");
+    for path in files {
         let bytes = std::fs::read(&path).unwrap();
-        let name = path.display().to_string();
-        let err = within(20, &name, move || {
-            exr_from_bytes(&bytes, Path::new("x.exr")).map(|_| ())
-        })
+        let r = std::panic::catch_unwind(|| obj_from_bytes(&bytes).map(|_| ()));
+        let err = match r {
+            Ok(Err(e)) => e,
+            other => panic!("{}: {other:?}", path.display()),
+        };
+        assert_clean_err(&err, "line ");
+        assert_clean_err(&err, "index");
+    }
+    // Through the scene loader the error names the scene, the mesh, its
+    // line and the corner.
+    let dir = std::env::temp_dir().join(format!("mcmc-fuzz-objidx-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(
+        dir.join("m.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//-5 3//1\n",
+    )
+    .unwrap();
+    let xml = r#"<scene version="3.0.0">
+<shape type="obj"><string name="filename" value="m.obj"/></shape>
+</scene>"#;
+    std::fs::write(dir.join("s.xml"), xml).unwrap();
+    let err = mcmc_render::scene::Scene::load(&dir.join("s.xml"), &Default::default())
         .err()
-        .unwrap_or_else(|| panic!("{name} was accepted"));
-        assert_clean_err(&err, "cannot read x.exr: ");
+        .expect("refused")
+        .to_string();
+    assert_clean_err(
+        &err,
+        "cannot load mesh \"m.obj\": line 5: relative normal index -5 in face corner '2//-5' reaches before the first normal (1 read so far)",
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// tobj's own errors carry no position; the reader adds the line it
+/// stopped at.
+#[test]
+fn obj_parse_errors_name_their_line() {
+    let err = obj_from_bytes(b"v 0 0 0\nv 1 0\nv 0 1 0\nf 1 2 3\n").unwrap_err();
+    assert_clean_err(&err, "line 2: position parse error");
+    let err = obj_from_bytes(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n\xff\n").unwrap_err();
+    assert_clean_err(&err, "line 5: not UTF-8 text");
+    // A bad index before a line that is not UTF-8 is the error reported.
+    let err = obj_from_bytes(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 -4\n\xff\n").unwrap_err();
+    assert_clean_err(&err, "line 4: relative vertex index -4");
+}
+
+/// The face-index check (`scene/obj_indices.rs`) on each kind of index.
+const OBJ_HEAD: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\n";
+
+fn obj_err(faces: &str) -> String {
+    obj_from_bytes(format!("{OBJ_HEAD}{faces}").as_bytes()).unwrap_err()
+}
+
+#[test]
+fn obj_valid_face_indices_pass() {
+    for faces in [
+        "f 1 2 3\n",
+        "f -3 -2 -1\n",
+        "f 1/1/1 2/1/1 3//1\n",
+        "f 1/-1/-1 2/1 3\nl 1 2\n",
+        // A face may name a vertex listed after it (tobj exports at the
+        // object's end).
+        "f 1 2 4\nv 1 1 0\n",
+    ] {
+        obj_from_bytes(format!("{OBJ_HEAD}{faces}").as_bytes()).unwrap();
     }
 }
 
-/// OBJ findings of the `obj` target (`tests/data/fuzz/unfixed/obj-*`): a
-/// face index near `usize::MAX` overflows `vt * 2` / `vn * 3` inside tobj
-/// 4.0.5 (`lib.rs:852`, `:860`): a panic where overflow checks are on
-/// (debug and test builds), a wrapped, wrong index in release. Open.
 #[test]
-#[ignore = "open: index overflow inside tobj 4.0.5"]
-fn obj_open_findings() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz/unfixed");
-    for e in std::fs::read_dir(&dir).unwrap() {
-        let path = e.unwrap().path();
-        if path.extension().is_some_and(|e| e == "obj") {
-            let bytes = std::fs::read(&path).unwrap();
-            let r = std::panic::catch_unwind(|| obj_from_bytes(&bytes).map(|_| ()));
-            assert!(matches!(r, Ok(Err(_))), "{}: {r:?}", path.display());
-        }
+fn obj_every_kind_of_bad_face_index_is_one_line_naming_line_and_value() {
+    for (faces, needle) in [
+        (
+            "f 1/1/-5 2 3\n",
+            "line 6: relative normal index -5 in face corner '1/1/-5' reaches before the first normal (1 read so far)",
+        ),
+        (
+            "f 1/-2 2 3\n",
+            "line 6: relative texture coordinate index -2",
+        ),
+        ("f -4 2 3\n", "line 6: relative vertex index -4"),
+        (
+            "f 1/0 2 3\n",
+            "line 6: texture coordinate index 0 in face corner '1/0' (OBJ indices start at 1)",
+        ),
+        (
+            "f 1/9223372036854775807 2 3\n",
+            "line 6: texture coordinate index 9223372036854775807 in face corner '1/9223372036854775807', but the file has 1 texture coordinates",
+        ),
+        (
+            "f 1 2 3\nf 1 2 4\n",
+            "line 7: vertex index 4 in face corner '4', but the file has 3 vertices",
+        ),
+        (
+            "f 1 2 99999999999999999999\n",
+            "line 6: vertex index '99999999999999999999' of face corner '99999999999999999999' is not an integer",
+        ),
+        (
+            "f 1/1/1/1 2 3\n",
+            "line 6: face corner '1/1/1/1' has more than three indices",
+        ),
+        ("f\n", "line 6: 'f' with no indices"),
+        ("l 1 -9\n", "line 6: relative vertex index -9"),
+        // CRLF line ends.
+        (
+            "f 1 2 3\r\nf 1 2 5\r\n",
+            "line 7: vertex index 5 in face corner '5'",
+        ),
+    ] {
+        let e = obj_err(faces);
+        assert!(!e.contains('\n'), "{e}");
+        assert!(e.contains(needle), "{e:?} lacks {needle:?}");
     }
 }

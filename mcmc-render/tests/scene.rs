@@ -596,3 +596,21 @@ fn every_repo_scene_loads() {
         }
     }
 }
+
+/// A sample count beyond `u32` was clamped to 4294967295; it is refused
+/// at its line, as 0 is.
+#[test]
+fn a_sample_count_beyond_u32_is_refused_not_clamped() {
+    for value in ["4294967296", "0"] {
+        let text = format!(
+            "<scene version=\"3.0.0\">\n<sensor type=\"perspective\"><sampler type=\"independent\"><integer name=\"sample_count\" value=\"{value}\"/></sampler></sensor>\n</scene>\n"
+        );
+        let e = mcmc_render::scene::Scene::load_str(&text, Path::new("s.xml"), Path::new("."))
+            .err()
+            .expect("refused")
+            .to_string();
+        let needle = format!("sample_count must be between 1 and 4294967295, got {value}");
+        assert!(e.contains("s.xml:2") && e.contains(&needle), "{e}");
+        assert!(!e.contains('\n'), "{e}");
+    }
+}

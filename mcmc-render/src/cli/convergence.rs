@@ -93,6 +93,7 @@ pub(crate) fn command(args: ConvergenceArgs) -> Result<(), Failure> {
     let title = args.title.clone().unwrap_or_else(|| stem(scene));
     // Flags first, then files.
     let threads = super::thread_count(args.threads)?;
+    time_budget(args.time)?;
     check_writable(&args.out, "csv")?;
     let defines = parse_defines(&args.define)?;
     let loaded = Scene::load(scene, &defines).map_err(|e| e.to_string())?;
@@ -303,6 +304,17 @@ pub fn variant(
         .map_err(|e| format!("`{name}`: {e}"))
 }
 
+/// `--time` as a budget: positive, finite and within a `Duration`, checked
+/// before it is converted (a negative or huge value panicked there).
+fn time_budget(seconds: f64) -> Result<Duration, String> {
+    if !(seconds > 0.0 && seconds.is_finite()) {
+        return Err(format!(
+            "--time must be a positive number of seconds, got {seconds}"
+        ));
+    }
+    Duration::try_from_secs_f64(seconds).map_err(|_| format!("--time {seconds:e} is too large"))
+}
+
 /// Runs the study on `scene` against `reference`. Setting `stop` ends the
 /// integrator in flight (its records so far are kept) and skips the rest.
 pub fn run(
@@ -320,13 +332,7 @@ pub fn run(
         images,
     } = study;
     let (seconds, checkpoints, seed) = (*seconds, *checkpoints, *seed);
-    if !(seconds > 0.0 && seconds.is_finite()) {
-        return Err(format!(
-            "--time must be a positive number of seconds, got {seconds}"
-        ));
-    }
-    let budget = Duration::try_from_secs_f64(seconds)
-        .map_err(|_| format!("--time {seconds:e} is too large"))?;
+    let budget = time_budget(seconds)?;
     if checkpoints == 0 {
         return Err("--checkpoints must be at least 1".into());
     }

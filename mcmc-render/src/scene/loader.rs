@@ -464,10 +464,14 @@ impl Loader {
                     let mut props = Props::new(c);
                     let spp = props.int("sample_count", 4)?;
                     props.finish()?;
-                    if spp <= 0 {
-                        return Err(err(&c.loc, "sample_count must be positive"));
-                    }
-                    self.desc.sample_count = spp.min(u32::MAX as i64) as u32;
+                    // Refused, not clamped: a count beyond u32 is a typo.
+                    self.desc.sample_count =
+                        u32::try_from(spp).ok().filter(|&n| n > 0).ok_or_else(|| {
+                            err(
+                                &c.loc,
+                                format!("sample_count must be between 1 and 4294967295, got {spp}"),
+                            )
+                        })?;
                 }
                 (tag, kind) => {
                     return Err(err(

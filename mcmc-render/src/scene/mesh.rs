@@ -37,16 +37,24 @@ pub struct TriMesh {
 
 /// Reads a Wavefront OBJ file (all objects merged, polygons triangulated).
 pub fn load_obj(path: &Path) -> Result<RawMesh, String> {
-    let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
-    obj_from_reader(&mut std::io::BufReader::new(file))
+    // Read whole: the face indices are checked before tobj parses the text.
+    let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
+    obj_from_bytes(&bytes)
 }
 
-/// Reads OBJ text held in memory, as [`load_obj`] reads a file.
+/// Reads OBJ text held in memory, as [`load_obj`] reads a file. Every face
+/// index is checked first (`obj_indices`): one naming no element of the
+/// file is refused with its line, before tobj's index arithmetic sees it.
 pub fn obj_from_bytes(bytes: &[u8]) -> Result<RawMesh, String> {
-    obj_from_reader(&mut &bytes[..])
-}
-
-fn obj_from_reader(reader: &mut impl std::io::BufRead) -> Result<RawMesh, String> {
+    super::obj_indices::check_face_indices(bytes)?;
+    std::str::from_utf8(bytes).map_err(|e| {
+        let line = bytes[..e.valid_up_to()]
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count()
+            + 1;
+        format!("line {line}: not UTF-8 text")
+    })?;
     let opts = tobj::LoadOptions {
         triangulate: true,
         single_index: true,
@@ -55,9 +63,13 @@ fn obj_from_reader(reader: &mut impl std::io::BufRead) -> Result<RawMesh, String
     };
     // Materials are not used, so `mtllib` files are not opened (one naming
     // a device such as /dev/zero would never end).
+    let mut reader = LineCounter {
+        rest: bytes,
+        read: 0,
+    };
     let (models, _materials) =
-        tobj::load_obj_buf(reader, &opts, |_| Err(tobj::LoadError::OpenFileFailed))
-            .map_err(|e| e.to_string())?;
+        tobj::load_obj_buf(&mut reader, &opts, |_| Err(tobj::LoadError::OpenFileFailed))
+            .map_err(|e| reader.locate(bytes, e))?;
     let mut out = RawMesh::default();
     let mut all_have_normals = true;
     let mut normals = Vec::new();
@@ -65,7 +77,8 @@ fn obj_from_reader(reader: &mut impl std::io::BufRead) -> Result<RawMesh, String
     let mut uvs = Vec::new();
     for m in &models {
         let mesh = &m.mesh;
-        let base = out.positions.len() as u32;
+        let base = u32::try_from(out.positions.len())
+            .map_err(|_| "more than 2^32 vertices".to_string())?;
         out.positions.extend(
             mesh.positions
                 .chunks_exact(3)
@@ -89,11 +102,10 @@ fn obj_from_reader(reader: &mut impl std::io::BufRead) -> Result<RawMesh, String
         } else {
             all_have_uvs = false;
         }
-        out.indices.extend(
-            mesh.indices
-                .chunks_exact(3)
-                .map(|t| [base + t[0], base + t[1], base + t[2]]),
-        );
+        for t in mesh.indices.chunks_exact(3) {
+            let shift = |i: u32| base.checked_add(i).ok_or("more than 2^32 vertices");
+            out.indices.push([shift(t[0])?, shift(t[1])?, shift(t[2])?]);
+        }
     }
     if all_have_normals && !normals.is_empty() {
         out.normals = Some(normals);
@@ -105,6 +117,56 @@ fn obj_from_reader(reader: &mut impl std::io::BufRead) -> Result<RawMesh, String
         return Err("the file holds no triangles".into());
     }
     Ok(out)
+}
+
+/// The OBJ bytes as tobj reads them, counting what it has consumed so that
+/// its errors (which carry no position) can name their line.
+struct LineCounter<'a> {
+    rest: &'a [u8],
+    read: usize,
+}
+
+impl std::io::Read for LineCounter<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.rest.read(buf)?;
+        self.read += n;
+        Ok(n)
+    }
+}
+
+impl std::io::BufRead for LineCounter<'_> {
+    fn fill_buf(&mut self) -> std::io::Result<&[u8]> {
+        Ok(self.rest)
+    }
+    fn consume(&mut self, amount: usize) {
+        self.rest = &self.rest[amount..];
+        self.read += amount;
+    }
+}
+
+impl LineCounter<'_> {
+    /// tobj's error, with the line it stopped at for errors raised while
+    /// parsing a line (index errors are raised when an object ends, and
+    /// `obj_indices` has already refused those with their own line).
+    fn locate(&self, bytes: &[u8], e: tobj::LoadError) -> String {
+        use tobj::LoadError::*;
+        match e {
+            FaceVertexOutOfBounds
+            | FaceTexCoordOutOfBounds
+            | FaceNormalOutOfBounds
+            | FaceColorOutOfBounds
+            | InvalidPolygon
+            | GenericFailure => e.to_string(),
+            _ => {
+                let read = &bytes[..self.read];
+                let mut line = read.iter().filter(|&&b| b == b'\n').count();
+                if read.last().is_some_and(|&b| b != b'\n') {
+                    line += 1;
+                }
+                format!("line {line}: {e}")
+            }
+        }
+    }
 }
 
 /// One PLY vertex as read (typed, so a large file costs no per-vertex maps).

@@ -6,6 +6,7 @@
 pub mod loader;
 pub mod mesh;
 pub mod named;
+mod obj_indices;
 pub mod serialized;
 pub mod upgrade;
 pub mod xml;
