@@ -8,8 +8,9 @@
 //! BDPT, PSSMLT and MMLT on `scenes/env-textured-plastic.xml` (a textured
 //! floor and sphere, a rough-plastic mesh with interpolated normals, an
 //! environment map), issue 12's combined check, where `guided`, `relt`,
-//! `tempered-pssmlt` and `mcmc-vcm` agree too and `mlt`, `mept`, `erpt`
-//! and `fused` refuse the scene with one line. (Agreement with
+//! `tempered-pssmlt`, `mcmc-vcm` and (with merging, radius reduced)
+//! `vcm` and `mcmc-vcm` agree too and `mlt`, `mept`, `erpt` and `fused`
+//! refuse the scene with one line. (Agreement with
 //! Mitsuba 3: `mitsuba_scenes.rs`; BDPT's MIS weights with an environment
 //! are checked exactly in `bdpt_mis.rs`.)
 //!
@@ -401,7 +402,8 @@ fn mmlt_agrees_with_pt_through_alpha_cut_outs() {
 /// `guided` (path guiding over PT) agrees with PT as above; `mlt`
 /// (Veach's path space) cannot handle an emitter at infinity and refuses
 /// the scene with one line instead of rendering it wrong. (`vcm` is
-/// checked against BDPT on this scene in `vcm.rs`; `relt`,
+/// checked against BDPT on this scene in `vcm.rs` and against PT below;
+/// `relt`,
 /// `tempered-pssmlt`, `mcmc-vcm`, `mept`, `erpt` and `fused` in the next
 /// test.)
 #[test]
@@ -583,3 +585,130 @@ const TEMPERED_REPS: (u64, u64) = (16, 3200);
 const MCMC_VCM_REPS: (u64, u64) = (16, 3300);
 /// `mcmc-vcm` iterations per replicate (one light subpath per pixel each).
 const MCMC_VCM_ITERATIONS: u32 = 16;
+
+/// Image means and merge shares (`energy_shares.merge` of the sidecar) of
+/// `k` registry runs on the combined scene.
+fn registered_reps_with_merge_share(
+    name: &str,
+    sets: &[(&str, &str)],
+    spp: u32,
+    k: u64,
+    seed0: u64,
+) -> (Vec<[f64; 3]>, f64) {
+    let mut merge = 0.0;
+    let means = (0..k)
+        .map(|i| {
+            let r = render_registered(combined_scene(), name, sets, Some(spp), seed0 + i)
+                .unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_eq!(r.statistics["nonfinite_samples"], 0, "{name}");
+            merge += r.statistics["energy_shares"]["merge"]
+                .as_f64()
+                .expect("merge share");
+            common::image_mean(&r.image)
+        })
+        .collect();
+    (means, merge / k as f64)
+}
+
+/// Issue 12's last detours closed: `vcm` and `mcmc-vcm`, **with merging**,
+/// against PT directly on the combined scene (until now `vcm` was checked
+/// against BDPT only, and `mcmc-vcm` with merging against `vcm` only).
+///
+/// Merging with a fixed radius is biased (photon mapping's blur and corner
+/// bias), so both run with SmallVCM's radius reduction, α = 0.75: the
+/// radius starts at 15% of the scene's radius (at 5%, as in `vcm.rs`,
+/// merging carried 0.6% of the energy here; SmallVCM's 0.3% nothing at
+/// 16×16) and shrinks as `i^{(α−1)/2}` (to 0.55× after 128 iterations), so
+/// the bias vanishes as the iterations grow; what is left after this budget
+/// is below the test's resolution (measured: see the constants below).
+/// `mcmc-vcm` with reduction needs `normalisation = iteration` (its
+/// render-wide normalisation needs a fixed radius, docs/vcm.md). Each run
+/// must give merging a real share of the energy (asserted > 1%), or the
+/// check would not test it.
+///
+/// Tolerance (as the rest of this file): `K` replicates with fixed seeds
+/// per estimator; the standard error of each mean is sd(replicate
+/// means)/√K and σ that of the difference, √(se_pt² + se_test²). A channel
+/// passes when |difference| < 4σ (Student's t with K − 1 = 23 degrees of
+/// freedom per mean: two-sided false-alarm rate below 1e-3 per channel) and < 1% of PT's mean; `check_against` also asserts 5σ < 1%,
+/// so a 1% discrepancy lies ≥ 5σ out and fails with probability ≈ 0.84.
+/// Control: `vcm`'s replicates scaled by 1.01 must fail.
+#[test]
+fn vcm_with_merging_agrees_with_pt_on_the_textured_plastic_scene() {
+    let pt = combined_pt();
+    let reduce = MERGE_RADIUS_RULE;
+    let (vcm, vcm_merge) = registered_reps_with_merge_share(
+        "vcm",
+        &reduce,
+        VCM_PT.iterations,
+        VCM_PT.reps,
+        VCM_PT.seed0,
+    );
+    eprintln!("vcm merge share {vcm_merge}");
+    assert!(vcm_merge > 0.01, "vcm merges too little: {vcm_merge}");
+    check_against("combined vcm (merging, alpha 0.75)", pt, &vcm);
+    let biased: Vec<[f64; 3]> = vcm.iter().map(|m| m.map(|v| v * 1.01)).collect();
+    let a = MeanAgreement::new(pt, &biased);
+    eprintln!("vcm x1.01: rel {:?}\n  {a:?}", a.rel());
+    assert!(
+        !a.failures(4.0, 0.01).is_empty(),
+        "a 1% bias passed the check: {a:?}"
+    );
+}
+
+/// `mcmc-vcm` with merging against PT, as the test above (same radius
+/// rule and tolerance; the control there applies to this check too).
+#[test]
+fn mcmc_vcm_with_merging_agrees_with_pt_on_the_textured_plastic_scene() {
+    let pt = combined_pt();
+    let reduce = MERGE_RADIUS_RULE;
+    let (mcmc, mcmc_merge) = registered_reps_with_merge_share(
+        "mcmc-vcm",
+        &[
+            reduce[0],
+            reduce[1],
+            ("normalisation", "iteration"),
+            ("candidates", "1024"),
+            ("units", "4"),
+        ],
+        MCMC_VCM_PT.iterations,
+        MCMC_VCM_PT.reps,
+        MCMC_VCM_PT.seed0,
+    );
+    eprintln!("mcmc-vcm merge share {mcmc_merge}");
+    assert!(
+        mcmc_merge > 0.01,
+        "mcmc-vcm merges too little: {mcmc_merge}"
+    );
+    check_against("combined mcmc-vcm (merging, alpha 0.75)", pt, &mcmc);
+}
+
+/// Budget of one estimator in the test above: iterations per replicate,
+/// replicates, first seed.
+struct RepBudget {
+    iterations: u32,
+    reps: u64,
+    seed0: u64,
+}
+
+/// `vcm`: 24 × 128 iterations (as `vcm.rs`). Measured: merging 17% of the
+/// energy; +0.11%, +0.08%, +0.20% against PT (σ of the difference 0.11%,
+/// 0.09%, 0.06%); the ×1.01 control reads +1.11% to +1.20% (≥ 10σ), rejected.
+const VCM_PT: RepBudget = RepBudget {
+    iterations: 128,
+    reps: 24,
+    seed0: 3400,
+};
+/// `mcmc-vcm`: 24 × 128 iterations (16 × 32 left σ at 0.33–0.43%, 5σ > 1%).
+/// Measured: merging 32%; +0.32%, +0.29%, +0.44% (σ 0.12%, 0.14%, 0.17%):
+/// within 4σ and 1%, but 2.1–2.6σ high on every channel, as its `bpt`-mode
+/// run above (a small positive excess this budget does not resolve). Both
+/// tests together: 17 s of CPU.
+const MCMC_VCM_PT: RepBudget = RepBudget {
+    iterations: 128,
+    reps: 24,
+    seed0: 3500,
+};
+/// The merge radius of both tests above: 15% of the scene's radius at the
+/// first iteration, reduced with α = 0.75.
+const MERGE_RADIUS_RULE: [(&str, &str); 2] = [("radius_factor", "0.15"), ("alpha", "0.75")];
