@@ -11,7 +11,7 @@ use mcmc_core::space::TorusPoint;
 use mcmc_render::color::Rgb;
 use mcmc_render::integrators::bdpt::{Bdpt, MisHeuristic};
 use mcmc_render::integrators::registry::IntegratorSettings;
-use mcmc_render::integrators::relt::{Relt, ReltFamily};
+use mcmc_render::integrators::relt::{Relt, ReltExchange, ReltFamily};
 use mcmc_render::integrators::{Rendered, RunSettings};
 use mcmc_render::markov::ChainFamily;
 use mcmc_render::observer::NoObserver;
@@ -118,17 +118,21 @@ proptest! {
     /// Eq. 23's weights `w_k = b̂_k · factor_k · q_k / b̂_k` (the factor
     /// times `q_k`, since the driver scales by `b_k`) sum to 1 over the
     /// replicas that film a class, for any `b̂ > 0` and `β ≥ 1`; `L0` is
-    /// filmed by the specific replica alone, with weight 1.
+    /// filmed by the specific replica alone, with weight 1. A uniform
+    /// replica drawing in a share of the sweeps only changes how the
+    /// weight is split (each film is over its own draws): the sum stays 1.
     #[test]
     fn mis_weights_sum_to_one(
         v in prop::array::uniform6(0.0f64..10.0),
         b_hat in prop::array::uniform4(1e-3f64..10.0),
         beta in 1.0f64..3.0,
         luminance in any::<bool>(),
+        uniform_share in 0.01f64..=1.0,
     ) {
         let scene = repo_scene("cornell-box.xml", 4);
         let settings = Relt {
             mis_power: beta,
+            uniform_share,
             target: if luminance { ClassScalar::Luminance } else { ClassScalar::XyzSum },
             ..Relt::default()
         };
@@ -180,6 +184,45 @@ fn bits(r: &Rendered) -> Vec<u32> {
         .iter()
         .flat_map(|p| [p.r.to_bits(), p.g.to_bits(), p.b.to_bits()])
         .collect()
+}
+
+#[test]
+fn a_resting_uniform_replica_with_one_swap_per_sweep_is_bit_identical_across_thread_counts() {
+    // uniform_share = 1/4: the uniform replica draws in every fourth sweep
+    // of each set, exactly (⌊(i+1)/4⌋ > ⌊i/4⌋); one random pair per sweep.
+    let scene = repo_scene_tilted("cornell-glossy-glass.xml", 16, 5);
+    let settings = || Relt {
+        uniform_share: 0.25,
+        exchange: ReltExchange::RandomNeighbour,
+        ..small_settings()
+    };
+    let one = with_threads(1, || small(&scene, 5, settings()));
+    let two = with_threads(2, || small(&scene, 5, settings()));
+    let three = with_threads(3, || small(&scene, 5, settings()));
+    assert!(bits(&one) == bits(&two), "1 vs 2 threads differ");
+    assert!(bits(&one) == bits(&three), "1 vs 3 threads differ");
+    assert_eq!(one.statistics["exchange"], two.statistics["exchange"]);
+    let m: Vec<u64> = one.statistics["families"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["mutations"].as_u64().unwrap())
+        .collect();
+    // 16 × 16 pixels × 16 mutations per pixel = 4096 mutations over
+    // 1 + 1 + 1 + 1/4 per sweep: ⌈4096/3.25⌉ = 1261 sweeps, shared out
+    // over 16 sets (64 chains / 4) as 13 sets of 79 and 3 of 78. The
+    // uniform replica draws in sweeps 3, 7, 11, …: ⌊79/4⌋ = ⌊78/4⌋ = 19
+    // per set.
+    assert_eq!(m, vec![16 * 19, 1261, 1261, 1261]);
+    // One pair tried per sweep, every pair tried, and exchanges happen.
+    let ex = &one.statistics["exchange"];
+    let pairs = ex["pairs"].as_array().unwrap();
+    let attempts: u64 = pairs.iter().map(|p| p["attempted"].as_u64().unwrap()).sum();
+    assert_eq!(attempts, 1261, "{ex}");
+    assert!(
+        pairs.iter().all(|p| p["accepted"].as_u64().unwrap() > 0),
+        "{ex}"
+    );
 }
 
 #[test]

@@ -174,6 +174,16 @@ fn sweep_matrix(lp: &[Vec<f64>], kind: &str) -> TransitionMatrix {
         }
         "even-odd" => compose(&mutate_all(lp), &swap_matrix(lp, 0, 1)),
         "is-permutation" => compose(&mutate_all(lp), &is_permutation_matrix(lp).unwrap()),
+        "random-neighbour" => {
+            // Pair (0,1) or (1,2), each with probability 1/2.
+            let (a, b) = (swap_matrix(lp, 0, 1), swap_matrix(lp, 1, 2));
+            let half: TransitionMatrix = a
+                .iter()
+                .zip(&b)
+                .map(|(ra, rb)| ra.iter().zip(rb).map(|(x, y)| 0.5 * (x + y)).collect())
+                .collect();
+            compose(&mutate_all(lp), &half)
+        }
         "eem" => compose(&mutate_all(lp), &equi_energy_matrix(lp, &rings_eem())),
         "is-swap" | "frequent-eem" => {
             let mut p: Option<TransitionMatrix> = None;
@@ -195,8 +205,9 @@ fn sweep_matrix(lp: &[Vec<f64>], kind: &str) -> TransitionMatrix {
     }
 }
 
-const KINDS: [&str; 6] = [
+const KINDS: [&str; 7] = [
     "neighbour",
+    "random-neighbour",
     "even-odd",
     "is-permutation",
     "eem",
@@ -208,6 +219,7 @@ fn make_move(kind: &str) -> Box<dyn ExchangeMove<usize, ()>> {
     match kind {
         "neighbour" => Box::new(NeighbourSwap::new()),
         "even-odd" => Box::new(EvenOdd::new()),
+        "random-neighbour" => Box::new(RandomNeighbour::new()),
         "is-permutation" => Box::new(IsPermutation::new(3).unwrap()),
         "eem" => Box::new(
             EquiEnergyMove::new(
@@ -257,7 +269,7 @@ fn sampler_sweeps_follow_the_exact_matrices() {
     // (fresh seeds) and compare the frequency of each arrival configuration
     // with the exact sweep matrix. Each count is Binomial(N, p): we allow
     // 5 standard deviations plus one count, so a correct sampler fails a
-    // cell with probability < 1e-6 (64 cells × 6 moves × 3 starts).
+    // cell with probability < 1e-6 (64 cells × 7 moves × 3 starts).
     let lp = log_pi();
     let table = lp.clone();
     let n_runs = 20_000u64;
@@ -290,5 +302,59 @@ fn sampler_sweeps_follow_the_exact_matrices() {
                 );
             }
         }
+    }
+}
+
+#[test]
+fn a_sweep_with_a_resting_level_follows_its_exact_matrix() {
+    // Neighbour swaps with level 0 resting (`sweep_observed_active_levels`):
+    // mutate 2, swap(2,1), mutate 1, swap(1,0), and no mutation of level
+    // 0. The matrix leaves the product target invariant, and the sampler's
+    // one-sweep frequencies match it (tolerance as in the test above: 5
+    // binomial standard deviations plus one count).
+    let lp = log_pi();
+    let pi = joint_target(&lp);
+    let p = compose(
+        &compose(
+            &compose(&mutation(&lp, 2), &swap_matrix(&lp, 2, 1)),
+            &mutation(&lp, 1),
+        ),
+        &swap_matrix(&lp, 1, 0),
+    );
+    check_stationary("neighbour, level 0 resting", &pi, &p);
+    // Control: the full sweep's matrix differs from it (level 0 moves).
+    let full = sweep_matrix(&lp, "neighbour");
+    let start = [1usize, 3, 0];
+    let s = joint_index(&start, 4);
+    assert!((0..64).any(|y| (full[s][y] - p[s][y]).abs() > 0.01));
+    let n_runs = 20_000u64;
+    let mut counts = vec![0u64; 64];
+    for seed in 0..n_runs {
+        let t = lp.clone();
+        let family = FnFamily::new(3, move |l: usize, x: &usize| t[l][*x]);
+        let algs = (0..3)
+            .map(|_| MetropolisHastings::new(proposal()))
+            .collect();
+        let mut re = ReplicaExchange::new(
+            family,
+            start.to_vec(),
+            algs,
+            Box::new(NeighbourSwap::new()),
+            seed,
+        )
+        .unwrap();
+        re.sweep_observed_active_levels(&|l| l != 0, &mut |_, _| {});
+        let c: Vec<usize> = (0..3).map(|l| re.current(l).state).collect();
+        counts[joint_index(&c, 4)] += 1;
+    }
+    for y in 0..64 {
+        let f = counts[y] as f64 / n_runs as f64;
+        let q = p[s][y];
+        let tol = 5.0 * (q * (1.0 - q) / n_runs as f64).sqrt() + 1.0 / n_runs as f64;
+        assert!(
+            (f - q).abs() <= tol,
+            "resting level 0, to {:?}: frequency {f}, exact {q}",
+            joint_config(y, 3, 4)
+        );
     }
 }

@@ -180,9 +180,26 @@ where
     /// level into its own film). Same streams, same result as
     /// [`ReplicaExchange::sweep`]; equi-energy jumps are not reported.
     pub fn sweep_observed_levels(&mut self, observer: &mut LevelObserver<'_, S, F::Payload>) {
+        self.sweep_observed_active_levels(&|_| true, observer);
+    }
+
+    /// [`ReplicaExchange::sweep_observed_levels`] in which only the levels
+    /// with `active(level)` mutate; the others keep their sample (and draw
+    /// nothing from their streams), while the exchange move runs on its
+    /// schedule as usual. Every mutation and every exchange leaves the
+    /// product target invariant, so any choice of resting levels does
+    /// (a renderer gives cheap-to-film levels fewer mutations this way).
+    pub fn sweep_observed_active_levels(
+        &mut self,
+        active: &dyn Fn(usize) -> bool,
+        observer: &mut LevelObserver<'_, S, F::Payload>,
+    ) {
         self.sweep_scheduled(|re, level| match level {
-            None => (0..re.levels()).for_each(|l| re.mutate_reporting(l, observer)),
-            Some(level) => re.mutate_reporting(level, observer),
+            None => (0..re.levels())
+                .filter(|&l| active(l))
+                .for_each(|l| re.mutate_reporting(l, observer)),
+            Some(level) if active(level) => re.mutate_reporting(level, observer),
+            Some(_) => {}
         });
     }
 

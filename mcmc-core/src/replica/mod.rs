@@ -27,7 +27,8 @@
 //!   parallel on rayon, so a run is bit-identical for any thread count.
 //!
 //! Moves (one file each): [`NeighbourSwap`] (the thesis's sweep §5.3.1),
-//! [`EvenOdd`] (deterministic, non-reversible), [`IsPermutation`] (§5.3.2,
+//! [`EvenOdd`] (deterministic, non-reversible), [`RandomNeighbour`]
+//! (one uniformly chosen neighbour pair per sweep, Kitaoka et al. 2009), [`IsPermutation`] (§5.3.2,
 //! subset DP in [`permutation_dp`]), [`IsSwap`] (§5.3.3),
 //! [`EquiEnergyMove`] (§5.3.4), [`FrequentEquiEnergy`] (§5.3.5),
 //! [`EquiEnergySampler`] (Kou et al. 2006) and [`AdaptiveEquiEnergy`]
@@ -48,6 +49,7 @@ mod is_swap;
 mod neighbour;
 pub mod permutation_dp;
 pub mod population_annealing;
+mod random_neighbour;
 mod rings;
 pub mod schedule;
 mod stats;
@@ -67,6 +69,7 @@ pub use frequent_equi_energy::{FrequentEquiEnergy, frequent_partners};
 pub use is_permutation::IsPermutation;
 pub use is_swap::{IsSwap, is_swap_log_acceptance, is_swap_log_weights};
 pub use neighbour::NeighbourSwap;
+pub use random_neighbour::RandomNeighbour;
 pub use rings::{EnergyRings, RingRange};
 pub use stats::{IndexProcess, PairStatistics, ReplicaStatistics};
 

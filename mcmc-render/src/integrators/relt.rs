@@ -38,7 +38,9 @@ use crate::pss_dump::DumpSampler;
 use crate::scene::Scene;
 use crate::settings::check;
 use mcmc_core::kernel::Mixture;
-use mcmc_core::replica::{EvenOdd, ExchangeMove, IsPermutation, IsSwap, NeighbourSwap};
+use mcmc_core::replica::{
+    EvenOdd, ExchangeMove, IsPermutation, IsSwap, NeighbourSwap, RandomNeighbour,
+};
 use mcmc_core::space::TorusPoint;
 use mcmc_core::target::{Evaluation, Target};
 use serde_json::json;
@@ -57,6 +59,9 @@ crate::choice! {
         IsSwap = "is_swap",
         /// No exchanges: every replica mixes alone (the paper's Fig. 8).
         None = "none",
+        /// One neighbouring pair per sweep, drawn uniformly, after all
+        /// replicas mutated (the paper's Algorithm 1).
+        RandomNeighbour = "random_neighbour",
     }
 }
 
@@ -75,8 +80,10 @@ crate::settings! {
         pub s2_indirect: f64 = 1.0 / 64.0, check check::probability;
         /// Largest Kelemen step of the specific-path replica.
         pub s2_specific: f64 = 1.0 / 96.0, check check::probability;
-        /// Exchange move: neighbour, even_odd, is_permutation, is_swap or none.
+        /// Exchange move: neighbour, even_odd, is_permutation, is_swap, none or random_neighbour.
         pub exchange: ReltExchange = ReltExchange::Neighbour;
+        /// Share of the sweeps in which the uniform replica draws (1: every sweep, as in the paper).
+        pub uniform_share: f64 = 1.0, check share;
         /// Exponent β ≥ 1 of the power heuristic over replicas (1: balance).
         pub mis_power: f64 = 1.0, check check::at_least_one;
         /// Particles of the population-annealing start-up (0: start every replica from its own bootstrap).
@@ -94,6 +101,15 @@ crate::settings! {
     }
 }
 
+/// A share of the sweeps: in `(0, 1]`.
+fn share(v: &f64) -> Result<(), String> {
+    if *v > 0.0 && *v <= 1.0 {
+        Ok(())
+    } else {
+        Err("must lie in (0, 1]".into())
+    }
+}
+
 /// One replica: its name and how its density weighs the classes.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Replica {
@@ -103,6 +119,8 @@ pub struct Replica {
     pub weights: Option<[f64; PATH_CLASSES]>,
     /// Largest Kelemen step (unused by the uniform replica).
     pub s2: f64,
+    /// Share of the sweeps in which the replica mutates.
+    pub share: f64,
 }
 
 impl Replica {
@@ -136,16 +154,19 @@ impl Relt {
                 name: "uniform",
                 weights: None,
                 s2: self.s2_full,
+                share: self.uniform_share,
             },
             Replica {
                 name: "full",
                 weights: Some([1.0, 0.0, 1.0, 1.0, 1.0, 1.0]),
                 s2: self.s2_full,
+                share: 1.0,
             },
             Replica {
                 name: "indirect",
                 weights: Some([1.0, 0.0, 0.0, 1.0, 1.0, 1.0]),
                 s2: self.s2_indirect,
+                share: 1.0,
             },
         ];
         if self.specific_replica {
@@ -153,6 +174,7 @@ impl Relt {
                 name: "specific",
                 weights: Some([1.0, 0.0, 0.0, 0.0, 0.0, self.delta]),
                 s2: self.s2_specific,
+                share: 1.0,
             });
         }
         r
@@ -277,10 +299,14 @@ impl<'a> ChainFamily for ReltFamily<'a> {
             )),
             ReltExchange::IsSwap => Some(Box::new(IsSwap::new())),
             ReltExchange::None => None,
+            ReltExchange::RandomNeighbour => Some(Box::new(RandomNeighbour::new())),
         }
     }
     fn annealing(&self) -> Option<Annealing> {
         self.annealing
+    }
+    fn sweep_share(&self, member: usize) -> f64 {
+        self.targets[member].replica.share
     }
     fn member_log_density(&self, member: usize, payload: &PathSample) -> Option<f64> {
         let v = class_values(&payload.splats, self.scalar);
@@ -300,12 +326,18 @@ impl<'a> ChainFamily for ReltFamily<'a> {
             w[0] = 1.0 / q(member);
             return Some(w);
         }
+        // The power heuristic with sample counts: replica l draws in a
+        // share f_l of the sweeps, so w_k = (f_k q_k/b̂_k)^β / Σ_l (f_l
+        // q_l/b̂_l)^β, and the factor is w_k/q_k (its film is over its own
+        // mutations). With every f_l = 1 this is the paper's Eq. 22.
         let beta = self.mis_power;
+        let f = |k: usize| self.targets[k].replica.share;
         let denominator: f64 = (0..self.members())
             .filter(|&l| Some(l) != self.specific)
-            .map(|l| (q(l) / b_hat[l]).powf(beta))
+            .map(|l| (f(l) * q(l) / b_hat[l]).powf(beta))
             .sum();
-        let factor = (q(member) / b_hat[member]).powf(beta - 1.0) / (b_hat[member] * denominator);
+        let factor = f(member) * (f(member) * q(member) / b_hat[member]).powf(beta - 1.0)
+            / (b_hat[member] * denominator);
         w.fill(factor);
         if self.specific.is_some() {
             w[0] = 0.0;

@@ -276,6 +276,18 @@ pub trait ChainFamily: Sync {
     ) -> Option<[f64; PATH_CLASSES]> {
         None
     }
+    /// The share of its replica set's sweeps in which member `member`
+    /// mutates, in `(0, 1]`; only replica sets (families with an exchange
+    /// move) use it. Default 1: every member mutates in every sweep. A
+    /// member of share `r` mutates in sweep `i` iff `⌊(i+1)r⌋ > ⌊ir⌋`
+    /// (evenly spaced and deterministic, so a run stays bit-identical for
+    /// any thread count) and rests otherwise, while exchanges run as usual.
+    /// Its image is its film over its own mutations, so a family whose
+    /// splat weights are MIS over members should count the shares in
+    /// (the `n_k` of the multi-sample estimator).
+    fn sweep_share(&self, _member: usize) -> f64 {
+        1.0
+    }
     /// Start-up by population annealing over the members, in order
     /// (`mcmc_core::replica::population_annealing`): member 0's particles
     /// are resampled from its bootstrap, every later member's are annealed
@@ -1007,7 +1019,23 @@ fn replica_tasks<'f, F: ChainFamily>(
     let seed = settings.seed;
     let all_sets: usize = sets_of_group.iter().sum();
     let set_size = family.members().div_ceil(groups.len());
-    let sweeps = total.map(|t| t.div_ceil(set_size as u64));
+    let shares: Vec<f64> = (0..family.members())
+        .map(|m| family.sweep_share(m))
+        .collect();
+    if let Some(r) = shares.iter().find(|r| !(**r > 0.0 && **r <= 1.0)) {
+        return Err(MltError::Setting(format!(
+            "a member's share of the sweeps must be in (0, 1], got {r}"
+        )));
+    }
+    // Mutations per sweep of a set: the set size unless members rest.
+    let per_sweep: f64 = groups[0].clone().map(|m| shares[m]).sum();
+    let sweeps = total.map(|t| {
+        if per_sweep == set_size as f64 {
+            t.div_ceil(set_size as u64)
+        } else {
+            (t as f64 / per_sweep).ceil() as u64
+        }
+    });
     let mut tasks: Vec<Task<F>> = Vec::new();
     let mut set = 0;
     for (g, &sets) in groups.iter().zip(sets_of_group) {
@@ -1049,6 +1077,7 @@ fn replica_tasks<'f, F: ChainFamily>(
             };
             slots.push(ReplicaSlot {
                 set: ensemble,
+                sweeps: 0,
                 remaining: sweeps.map(|t| share(t, all_sets, set)),
             });
             set += 1;

@@ -94,6 +94,9 @@ pub(crate) struct ChainSlot<F: ChainFamily> {
 /// A replica set and the sweeps it still has to do (`None`: until stopped).
 pub(crate) struct ReplicaSlot<'f, F: ChainFamily> {
     pub set: ReplicaSet<'f, F>,
+    /// Sweeps done (they decide which members rest, see
+    /// [`ChainFamily::sweep_share`]).
+    pub sweeps: u64,
     pub remaining: Option<u64>,
 }
 
@@ -205,6 +208,7 @@ impl<'f, F: ChainFamily> Task<'f, F> {
             Units::Replicas(sets) => {
                 let levels = members.len() as u64;
                 let round = (ROUND / levels).max(1);
+                let shares: Vec<f64> = members.iter().map(|&m| family.sweep_share(m)).collect();
                 for slot in sets.iter_mut() {
                     if abort() {
                         return false;
@@ -220,14 +224,24 @@ impl<'f, F: ChainFamily> Task<'f, F> {
                             observe(family, t, &weights[members[level]], &mut sink, counts);
                             share_independent_draw(family, members, level, t, running);
                         };
+                    let mut done = 0;
                     for _ in 0..n {
-                        slot.set.sweep_observed_levels(&mut observe_level);
+                        let i = slot.sweeps;
+                        let active = |l: usize| mutates_in_sweep(shares[l], i);
+                        slot.set
+                            .sweep_observed_active_levels(&active, &mut observe_level);
+                        for (l, m) in mutations.iter_mut().enumerate() {
+                            if active(l) {
+                                *m += 1;
+                                done += 1;
+                            }
+                        }
+                        slot.sweeps += 1;
                     }
                     if let Some(r) = slot.remaining.as_mut() {
                         *r -= n;
                     }
-                    mutations.iter_mut().for_each(|m| *m += n);
-                    observer.progress(n * levels);
+                    observer.progress(done);
                 }
             }
         }
@@ -262,6 +276,12 @@ impl<'f, F: ChainFamily> Task<'f, F> {
             }
         }
     }
+}
+
+/// Whether a member of sweep share `share` mutates in sweep `sweep`
+/// ([`ChainFamily::sweep_share`]): `⌊(i+1)r⌋ > ⌊ir⌋`, always for `r ≥ 1`.
+pub(crate) fn mutates_in_sweep(share: f64, sweep: u64) -> bool {
+    share >= 1.0 || ((sweep + 1) as f64 * share).floor() > (sweep as f64 * share).floor()
 }
 
 /// An independent proposal of level `level` of a replica set (member
