@@ -90,7 +90,7 @@ fn stage_time(
 /// `sum += weight · image`.
 fn accumulate(sum: &mut [Rgb], image: &[Rgb], weight: f64) {
     for (s, p) in sum.iter_mut().zip(image) {
-        *s = *s + *p * weight as f32;
+        *s += *p * weight as f32;
     }
 }
 
@@ -103,7 +103,7 @@ fn combined(earlier: &[Rgb], earlier_samples: u64, image: &[Rgb], samples: u64) 
     let mut out = earlier.to_vec();
     accumulate(&mut out, image, samples as f64);
     let inv = (1.0 / total) as f32;
-    out.iter_mut().for_each(|p| *p = *p * inv);
+    out.iter_mut().for_each(|p| *p *= inv);
     out
 }
 
@@ -240,7 +240,7 @@ pub fn render_in_stages(
     let normalise = |mut image: Vec<Rgb>| {
         if samples_so_far > 0 {
             let inv = (1.0 / samples_so_far as f64) as f32;
-            image.iter_mut().for_each(|p| *p = *p * inv);
+            image.iter_mut().for_each(|p| *p *= inv);
         }
         image
     };
