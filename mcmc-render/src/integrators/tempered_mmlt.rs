@@ -28,7 +28,7 @@
 use super::registry::IntegratorSettings;
 use super::tempered_pssmlt::{LevelTarget, TemperedLadder, report};
 use super::{DepthParams, RenderError, Rendered, RunSettings};
-use crate::markov::{self, ChainFamily, ChainParams, ChainSettings};
+use crate::markov::{self, ChainFamily, ChainParams};
 use crate::observer::Observer;
 use crate::pss::{Mutation, MutationParams, PATH_CLASSES, PathSample, PssFamily};
 use crate::pss_dump::DumpSampler;
@@ -193,22 +193,18 @@ impl IntegratorSettings for TemperedMmlt {
         self.ladder.render_stages(
             scene,
             &self.chain,
+            mutation,
             run,
             stop,
             observer,
-            |stage, observer| {
-                let settings = ChainSettings {
-                    mutations_per_pixel: stage.samples_per_pixel,
-                    ..self.chain.chain_settings(mutation, &stage.run)
-                };
-                let before = stage.samples_per_pixel_before;
+            |settings, before, observer| {
                 let samplers = self.samplers_at(scene, before);
                 let result = if self.ladder.levels == 1 {
                     let family = PssFamily::new(scene, samplers.clone());
-                    markov::run(scene, &family, &settings, stop, observer)?
+                    markov::run(scene, &family, settings, stop, observer)?
                 } else {
                     let family = TemperedMmltFamily::new(scene, &samplers, &self.ladder);
-                    markov::run(scene, &family, &settings, stop, observer)?
+                    markov::run(scene, &family, settings, stop, observer)?
                 };
                 let rendered =
                     markov::report::rendered(&result, DumpSampler::Mmlt, self.depth.limit(), true);

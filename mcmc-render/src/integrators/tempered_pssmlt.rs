@@ -157,15 +157,23 @@ impl TemperedLadder {
     /// Renders the stages of a tempered integrator (one stage unless
     /// `regularization_stages` says more; see [`crate::staged`]) and adds
     /// each stage's regularisation floor to the `stages` statistics: the
-    /// regularised roughness over the run.
+    /// regularised roughness over the run. `render_stage` gets the
+    /// stage's driver settings (`chain` and `mutation` under the stage's
+    /// budget and seed) and the samples per pixel before the stage.
+    #[allow(clippy::too_many_arguments)]
     pub fn render_stages(
         &self,
         scene: &Scene,
         chain: &ChainParams,
+        mutation: Mutation,
         run: &RunSettings,
         stop: &AtomicBool,
         observer: &dyn Observer,
-        render_stage: impl FnMut(&Stage, &dyn Observer) -> Result<Rendered, RenderError>,
+        mut render_stage: impl FnMut(
+            &ChainSettings<Mutation>,
+            u64,
+            &dyn Observer,
+        ) -> Result<Rendered, RenderError>,
     ) -> Result<Rendered, RenderError> {
         let pixels = u64::from(scene.film.width) * u64::from(scene.film.height);
         let mut rendered = render_in_stages(
@@ -175,7 +183,13 @@ impl TemperedLadder {
             run,
             stop,
             observer,
-            render_stage,
+            |stage: &Stage, observer: &dyn Observer| {
+                let settings = ChainSettings {
+                    mutations_per_pixel: stage.samples_per_pixel,
+                    ..chain.chain_settings(mutation, &stage.run)
+                };
+                render_stage(&settings, stage.samples_per_pixel_before, observer)
+            },
         )?;
         if let Some(Value::Array(stages)) = rendered.statistics.get_mut("stages") {
             for stage in stages {
@@ -357,25 +371,21 @@ impl IntegratorSettings for TemperedPssmlt {
         self.ladder.render_stages(
             scene,
             &self.chain,
+            mutation,
             run,
             stop,
             observer,
-            |stage, observer| {
-                let settings = ChainSettings {
-                    mutations_per_pixel: stage.samples_per_pixel,
-                    ..self.chain.chain_settings(mutation, &stage.run)
-                };
-                let before = stage.samples_per_pixel_before;
+            |settings, before, observer| {
                 let sampler = TemperedBdpt {
                     bdpt: self.bdpt(),
                     bsdfs: self.ladder.bsdfs_at(scene, before),
                 };
                 let result = if self.ladder.levels == 1 {
                     let family = PssFamily::new(scene, vec![sampler.clone()]);
-                    markov::run(scene, &family, &settings, stop, observer)?
+                    markov::run(scene, &family, settings, stop, observer)?
                 } else {
                     let family = TemperedFamily::new(scene, &sampler, self.ladder.exchange);
-                    markov::run(scene, &family, &settings, stop, observer)?
+                    markov::run(scene, &family, settings, stop, observer)?
                 };
                 let rendered =
                     markov::report::rendered(&result, DumpSampler::Bdpt, self.depth.limit(), false);
