@@ -158,6 +158,7 @@ pub static REGISTRY: &[Registration] = &[
     register::<super::erpt::Erpt>(),
     register::<super::fused::Fused>(),
     register::<super::mcmc_vcm::McmcVcmSettings>(),
+    register::<super::smcmc::Smcmc>(),
 ];
 
 /// The registered names, comma-separated.
