@@ -362,7 +362,7 @@ impl<S: TileShift> Sampler<'_, S> {
             a += b;
             a
         };
-        if round % 2 == 0 {
+        if round.is_multiple_of(2) {
             tiles
                 .par_chunks_mut(w)
                 .enumerate()
@@ -471,7 +471,7 @@ impl Smcmc {
                 .for_each(|(s, tile)| sampler.step(s, tile));
             iterations += 1;
             observer.progress(n as u64);
-            if self.exchange && iterations % u64::from(self.exchange_every) == 0 {
+            if self.exchange && iterations.is_multiple_of(u64::from(self.exchange_every)) {
                 exchange += sampler.exchange_round(&mut tiles, rounds);
                 rounds += 1;
             }

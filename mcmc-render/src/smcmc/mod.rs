@@ -152,8 +152,8 @@ pub fn develop(tiling: &Tiling, tiles: &[TileSums], alpha: f64, iterations: usiz
         .map(|j| {
             let (mut sum, mut n) = ([0.0; 3], 0u64);
             for (s, k) in tiling.covering(j) {
-                for c in 0..3 {
-                    sum[c] += tiles[s].large[k][c];
+                for (acc, v) in sum.iter_mut().zip(tiles[s].large[k]) {
+                    *acc += v;
                 }
                 n += tiles[s].large_samples;
             }
@@ -193,8 +193,8 @@ pub fn develop(tiling: &Tiling, tiles: &[TileSums], alpha: f64, iterations: usiz
             count += luminance(tiles[s].g[k]);
             if active[s] {
                 let w = alignment.b[s] / tiles[s].samples as f64;
-                for c in 0..3 {
-                    sum[c] += w * tiles[s].g[k][c];
+                for (acc, v) in sum.iter_mut().zip(tiles[s].g[k]) {
+                    *acc += w * v;
                 }
                 n += 1;
             }
