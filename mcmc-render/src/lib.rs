@@ -63,6 +63,7 @@ pub mod resources;
 pub mod sampling;
 pub mod scene;
 pub mod settings;
+pub mod smcmc;
 pub mod staged;
 pub mod tempered;
 pub mod texture;

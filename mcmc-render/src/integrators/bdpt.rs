@@ -595,6 +595,29 @@ pub fn mis_weight_in<B: ConnectionBsdfs>(
     sampled: Option<&Vertex>,
     heuristic: MisHeuristic,
 ) -> f32 {
+    mis_weight_among(
+        scene, bsdfs, level, camera, light, s, t, sampled, heuristic, 1,
+    )
+}
+
+/// [`mis_weight_in`] renormalised over the techniques with at least
+/// `min_camera` camera vertices (`1`: all of them; `2`: no light tracing,
+/// as stratified MCMC's BDPT shift needs, spec seed003 §11.1). The
+/// technique `(s, t)` itself must have `t ≥ min_camera`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub fn mis_weight_among<B: ConnectionBsdfs>(
+    scene: &Scene,
+    bsdfs: &B,
+    level: usize,
+    camera: &[Vertex],
+    light: &[Vertex],
+    s: usize,
+    t: usize,
+    sampled: Option<&Vertex>,
+    heuristic: MisHeuristic,
+    min_camera: usize,
+) -> f32 {
     if s + t == 2 {
         return 1.0;
     }
@@ -656,7 +679,7 @@ pub fn mis_weight_in<B: ConnectionBsdfs>(
             (camera[i].pdf_rev, camera[i].pdf_fwd, camera[i].delta)
         };
         ri *= remap0(rev) / remap0(fwd);
-        if !delta && !camera[i - 1].delta {
+        if i >= min_camera && !delta && !camera[i - 1].delta {
             sum += power(ri);
         }
     }

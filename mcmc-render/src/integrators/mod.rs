@@ -65,6 +65,7 @@ pub mod pssmlt;
 pub mod pt;
 pub mod registry;
 pub mod relt;
+pub mod smcmc;
 pub mod tempered_mmlt;
 pub mod tempered_pssmlt;
 pub mod vcm;

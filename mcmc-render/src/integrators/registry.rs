@@ -159,6 +159,7 @@ pub static REGISTRY: &[Registration] = &[
     register::<super::fused::Fused>(),
     register::<super::mcmc_vcm::McmcVcmSettings>(),
     register::<super::mcmc_pg::McmcPg>(),
+    register::<super::smcmc::Smcmc>(),
 ];
 
 /// The registered names, comma-separated.

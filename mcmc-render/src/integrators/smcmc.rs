@@ -1,0 +1,566 @@
+//! Stratified MCMC (Gruson, West and Hachisuka 2020; spec seed003 §8) with
+//! the random replay and BDPT shifts (`shift`).
+//!
+//! - **Chains**: one per pixel `s`, over primary sample space, targeting
+//!   the tile's summed luminance `π̃_s` ([`crate::smcmc::TileTarget`]);
+//!   the kernel is `mcmc-core`'s Metropolis–Hastings with the PSS mutation
+//!   ([`crate::pss::Mutation`]: small step, large step with probability
+//!   `large_step_probability`).
+//! - **Estimator, alignment, image**: [`crate::smcmc`] (mean-value
+//!   substitution per tile, Jacobi alignment of Eq. 3.38, `Î(j)` averaged over
+//!   the tiles containing `j`).
+//! - **Tile exchange** (§8.6): every `exchange_every` iterations, the
+//!   states of neighbouring tiles are swapped with
+//!   `r = min(1, π̃_s(u_t) π̃_t(u_s) / (π̃_s(u_s) π̃_t(u_t)))`
+//!   (`mcmc_core::replica::swap_log_acceptance`, decided by
+//!   `mcmc_core::mh::accept_probability`); rounds cycle through horizontal
+//!   pairs from even columns, vertical pairs from even rows, then both
+//!   from odd ones, so each tile meets all four neighbours. An exchange
+//!   splats both states with weights `r` and `1 − r`. A running tile next
+//!   to one that never started hands it a copy of its state (§8.7,
+//!   start-up bias, consistent).
+//! - **Initialisation** (naive, §8.7): each tile draws `init_candidates`
+//!   uniform states (which also feed `Ĩ`) and starts from one resampled
+//!   `∝ π̃_s`; a tile whose candidates are all black draws one more
+//!   uniform state per iteration until one carries light (or receives a
+//!   neighbour's state). Global-chain initialisation is not implemented.
+//! - **Determinism**: every tile owns its streams (seeded from the run's
+//!   seed and its index); tiles step in parallel, exchange pairs are
+//!   disjoint, and all sums are reduced in a fixed order, so a seed gives
+//!   the same image on any thread count.
+
+use super::registry::IntegratorSettings;
+use super::{DepthParams, RenderError, Rendered, RunSettings};
+use crate::integrators::bdpt::{Bdpt, MisHeuristic};
+use crate::integrators::pt::PathTracer;
+use crate::observer::Observer;
+use crate::pss::{LARGE_STEP_COMPONENT, Mutation, MutationParams};
+use crate::scene::Scene;
+use crate::settings::check;
+use crate::smcmc::bdpt_shift::BdptShift;
+use crate::smcmc::random_replay::RandomReplay;
+use crate::smcmc::{
+    TileShape, TileShift, TileSums, TileTarget, TileValues, Tiling, accumulate, develop,
+};
+use mcmc_core::chain::Chain;
+use mcmc_core::kernel::Mixture;
+use mcmc_core::mh::{MetropolisHastings, accept_probability};
+use mcmc_core::replica::swap_log_acceptance;
+use mcmc_core::rng::{ChainRng, splitmix64, stream_rng, uniform};
+use mcmc_core::sample::Sample;
+use mcmc_core::space::TorusPoint;
+use mcmc_core::stats::ChainStatistics;
+use rayon::prelude::*;
+use serde_json::{Value, json};
+use std::ops::AddAssign;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+crate::choice! {
+    /// The shift operator that evaluates a tile from one state.
+    pub enum SmcmcShift {
+        /// Random replay over the path tracer (same numbers, pixel moved).
+        Rr = "rr",
+        /// BDPT with one light subpath shared by the tile, t ≥ 2, MIS renormalised.
+        Bdpt = "bdpt",
+    }
+}
+
+crate::settings! {
+    /// Stratified MCMC settings (defaults from spec seed003 §13).
+    pub struct Smcmc {
+        /// Shift operator: rr (random replay over pt) or bdpt (shared light subpath, t ≥ 2).
+        pub shift: SmcmcShift = SmcmcShift::Rr;
+        /// Tile shape: plus (the five-pixel t shape) or square (3×3).
+        pub tile: TileShape = TileShape::Plus;
+        /// Replica exchange between neighbouring tiles.
+        pub exchange: bool = true;
+        /// Iterations between two exchange rounds (2: every other iteration).
+        pub exchange_every: u32 = 2, check check::positive_count;
+        /// Weight α of the large-step estimate in the tile alignment (Eq. 3.38).
+        pub alpha: f64 = 0.05, check check::positive;
+        /// Jacobi sweeps of the tile alignment (the thesis's 200).
+        pub solver_iterations: usize = 200;
+        /// Uniform candidates per tile at start-up (the start state is resampled from them).
+        pub init_candidates: usize = 16, check check::count;
+        /// Iterations, each one mutation of every tile (auto: 100, or until the time budget is spent).
+        pub mutations_per_pixel: Option<u64> = None, check check::auto_or_at_least_one;
+        flatten {
+            /// Path depth.
+            pub depth: DepthParams = DepthParams::default();
+            /// The mutation.
+            pub mutation: MutationParams = MutationParams::default();
+        }
+    }
+}
+
+impl IntegratorSettings for Smcmc {
+    const NAME: &'static str = "smcmc";
+    const DESCRIPTION: &'static str = "Stratified MCMC (Gruson et al. 2020): one chain per pixel on a tile, random replay or BDPT shift, tile exchange and alignment.";
+
+    fn validate(&self) -> Result<(), String> {
+        self.mutation.mutation().map(|_| ())
+    }
+
+    fn planned_samples(&self, scene: &Scene, run: &RunSettings) -> Option<u64> {
+        let pixels = u64::from(scene.film.width) * u64::from(scene.film.height);
+        self.iterations(run).map(|m| m * pixels)
+    }
+
+    fn render(
+        &self,
+        scene: &Scene,
+        run: &RunSettings,
+        stop: &AtomicBool,
+        observer: &dyn Observer,
+    ) -> Result<Rendered, RenderError> {
+        let mutation = self.mutation.mutation().map_err(RenderError::Invalid)?;
+        let pt = PathTracer {
+            max_depth: self.depth.limit(),
+            rr_depth: self.depth.rr_depth,
+        };
+        match self.shift {
+            SmcmcShift::Rr => self.run(scene, &RandomReplay { pt }, &mutation, run, stop, observer),
+            SmcmcShift::Bdpt => {
+                let bdpt = Bdpt {
+                    max_depth: pt.max_depth,
+                    rr_depth: pt.rr_depth,
+                    heuristic: MisHeuristic::Power,
+                };
+                self.run(scene, &BdptShift { bdpt }, &mutation, run, stop, observer)
+            }
+        }
+    }
+}
+
+type TileKernel = Mixture<TorusPoint, TileValues>;
+type TileChain =
+    Chain<TorusPoint, TileValues, MetropolisHastings<TileKernel, TorusPoint, TileValues>>;
+
+/// One tile's chain (once started), streams and sums.
+struct Tile {
+    chain: Option<TileChain>,
+    /// Seed of the tile's streams: 0 for the chain, `1 + k` for its `k`-th
+    /// uniform draw.
+    seed: u64,
+    draws: u64,
+    sums: TileSums,
+}
+
+/// Exchange counts of a round.
+#[derive(Clone, Copy, Debug, Default)]
+struct ExchangeCounts {
+    attempts: u64,
+    accepted: u64,
+    alpha_sum: f64,
+    copies: u64,
+}
+
+impl AddAssign for ExchangeCounts {
+    fn add_assign(&mut self, o: Self) {
+        self.attempts += o.attempts;
+        self.accepted += o.accepted;
+        self.alpha_sum += o.alpha_sum;
+        self.copies += o.copies;
+    }
+}
+
+/// Stream offset of the tiles' seeds.
+const TILE_STREAM: u64 = 1 << 44;
+
+/// The tile sampler of one run.
+struct Sampler<'a, S> {
+    scene: &'a Scene,
+    shift: &'a S,
+    tiling: Tiling,
+    mutation: Mutation,
+}
+
+impl<S: TileShift> Sampler<'_, S> {
+    fn target(&self, s: usize) -> TileTarget<'_, S> {
+        TileTarget {
+            scene: self.scene,
+            shift: self.shift,
+            pixels: self.tiling.slot_pixels(s),
+            slots: self.tiling.slots(),
+        }
+    }
+
+    /// A chain of tile `s` started at `current` (which carries light).
+    fn start_chain(&self, tile: &Tile, current: Sample<TorusPoint, TileValues>) -> TileChain {
+        let kernel = self
+            .mutation
+            .kernel()
+            .expect("the mutation was checked by validate");
+        Chain::from_sample(
+            current,
+            MetropolisHastings::new(kernel),
+            stream_rng(tile.seed, 0),
+        )
+        .expect("a state with light starts a chain")
+    }
+
+    /// The next uniform draw of `tile`, evaluated, counted in its
+    /// large-step sums.
+    fn draw(&self, s: usize, tile: &mut Tile) -> Sample<TorusPoint, TileValues> {
+        tile.draws += 1;
+        let x = Sample::evaluate(
+            &self.target(s),
+            TorusPoint::fresh(stream_rng(tile.seed, tile.draws)),
+        );
+        tile.sums.large_samples += 1;
+        if !x.log_density.is_nan() {
+            accumulate(&mut tile.sums.large, &x.payload, 1.0);
+        }
+        x
+    }
+
+    /// Tile `s` with `candidates` uniform draws, started from one
+    /// resampled `∝ π̃_s` if any carries light.
+    fn new_tile(&self, seed: u64, s: usize, candidates: usize) -> Tile {
+        let mut tile = Tile {
+            chain: None,
+            seed: splitmix64(seed ^ splitmix64(TILE_STREAM + s as u64)),
+            draws: 0,
+            sums: TileSums::default(),
+        };
+        let draws: Vec<_> = (0..candidates).map(|_| self.draw(s, &mut tile)).collect();
+        let weight = |x: &Sample<TorusPoint, TileValues>| {
+            if x.log_density.is_finite() {
+                x.payload.total
+            } else {
+                0.0
+            }
+        };
+        let total: f64 = draws.iter().map(weight).sum();
+        if total > 0.0 {
+            let mut rng: ChainRng = stream_rng(tile.seed, u64::MAX);
+            let mut u = uniform(&mut rng) * total;
+            let mut pick = None;
+            for x in draws {
+                let w = weight(&x);
+                if w > 0.0 {
+                    pick = Some(x);
+                    if u < w {
+                        break;
+                    }
+                    u -= w;
+                }
+            }
+            let start = pick.expect("a candidate carries light");
+            tile.chain = Some(self.start_chain(&tile, start));
+            tile.sums.active = true;
+        }
+        tile
+    }
+
+    /// One mutation of tile `s` (or one more uniform draw if it has not
+    /// started), splatted with the expected-value weights.
+    fn step(&self, s: usize, tile: &mut Tile) {
+        let target = self.target(s);
+        let Some(chain) = &mut tile.chain else {
+            let x = self.draw(s, tile);
+            if x.log_density.is_finite() {
+                tile.chain = Some(self.start_chain(tile, x));
+                tile.sums.active = true;
+            }
+            return;
+        };
+        let sums = &mut tile.sums;
+        chain.step_with(&target, |tr| {
+            let a = tr.alpha;
+            if let Some(p) = tr.proposal {
+                if tr.component == LARGE_STEP_COMPONENT {
+                    sums.large_samples += 1;
+                    if !p.log_density.is_nan() {
+                        accumulate(&mut sums.large, &p.payload, 1.0);
+                    }
+                }
+                if a > 0.0 {
+                    accumulate(&mut sums.g, &p.payload, a / p.payload.total);
+                }
+            }
+            if a < 1.0 {
+                accumulate(
+                    &mut sums.g,
+                    &tr.current.payload,
+                    (1.0 - a) / tr.current.payload.total,
+                );
+            }
+            sums.samples += 1;
+        });
+    }
+
+    /// A replica exchange between tiles `s` and `t` (§8.6), or the copy of
+    /// a running tile's state into one that has not started.
+    fn exchange_pair(&self, s: usize, a: &mut Tile, t: usize, b: &mut Tile) -> ExchangeCounts {
+        let mut counts = ExchangeCounts::default();
+        match (a.chain.is_some(), b.chain.is_some()) {
+            (true, true) => {
+                let (ca, cb) = (a.chain.as_mut().unwrap(), b.chain.as_mut().unwrap());
+                // π̃_s(u_t) and π̃_t(u_s).
+                let xa = Sample::evaluate(&self.target(s), cb.state().clone());
+                let xb = Sample::evaluate(&self.target(t), ca.state().clone());
+                let log_r = swap_log_acceptance(
+                    ca.current().log_density,
+                    cb.current().log_density,
+                    xa.log_density,
+                    xb.log_density,
+                );
+                let (r, accepted) = accept_probability(log_r, ca.rng_mut());
+                for (sums, current, swapped) in [
+                    (&mut a.sums, ca.current(), &xa),
+                    (&mut b.sums, cb.current(), &xb),
+                ] {
+                    if r > 0.0 {
+                        accumulate(&mut sums.g, &swapped.payload, r / swapped.payload.total);
+                    }
+                    if r < 1.0 {
+                        accumulate(
+                            &mut sums.g,
+                            &current.payload,
+                            (1.0 - r) / current.payload.total,
+                        );
+                    }
+                    sums.samples += 1;
+                }
+                if accepted {
+                    ca.parts_mut().current = xa;
+                    cb.parts_mut().current = xb;
+                }
+                counts.attempts = 1;
+                counts.accepted = u64::from(accepted);
+                counts.alpha_sum = r;
+            }
+            (true, false) => counts.copies = self.copy_into(a, t, b),
+            (false, true) => counts.copies = self.copy_into(b, s, a),
+            (false, false) => {}
+        }
+        counts
+    }
+
+    /// Starts tile `t` at `from`'s state if it carries light there.
+    fn copy_into(&self, from: &Tile, t: usize, to: &mut Tile) -> u64 {
+        let state = from.chain.as_ref().expect("running").state().clone();
+        let x = Sample::evaluate(&self.target(t), state);
+        if x.log_density.is_finite() {
+            to.chain = Some(self.start_chain(to, x));
+            to.sums.active = true;
+            1
+        } else {
+            0
+        }
+    }
+
+    /// Exchange round `round`: horizontal pairs on even rounds, vertical on
+    /// odd ones, from even columns/rows on rounds `≡ 0, 1 (mod 4)`.
+    fn exchange_round(&self, tiles: &mut [Tile], round: u64) -> ExchangeCounts {
+        let w = self.tiling.width as usize;
+        let parity = ((round / 2) % 2) as usize;
+        let sum = |a: ExchangeCounts, b: ExchangeCounts| {
+            let mut a = a;
+            a += b;
+            a
+        };
+        if round.is_multiple_of(2) {
+            tiles
+                .par_chunks_mut(w)
+                .enumerate()
+                .map(|(y, row)| {
+                    let mut c = ExchangeCounts::default();
+                    let mut x = parity;
+                    while x + 1 < w {
+                        let (left, right) = row.split_at_mut(x + 1);
+                        c += self.exchange_pair(
+                            y * w + x,
+                            &mut left[x],
+                            y * w + x + 1,
+                            &mut right[0],
+                        );
+                        x += 2;
+                    }
+                    c
+                })
+                .collect::<Vec<_>>()
+                .into_iter()
+                .fold(ExchangeCounts::default(), sum)
+        } else {
+            let first = (parity * w).min(tiles.len());
+            tiles[first..]
+                .par_chunks_mut(2 * w)
+                .enumerate()
+                .map(|(i, rows)| {
+                    let mut c = ExchangeCounts::default();
+                    if rows.len() < 2 * w {
+                        return c;
+                    }
+                    let y = parity + 2 * i;
+                    let (top, bottom) = rows.split_at_mut(w);
+                    for x in 0..w {
+                        c += self.exchange_pair(
+                            y * w + x,
+                            &mut top[x],
+                            (y + 1) * w + x,
+                            &mut bottom[x],
+                        );
+                    }
+                    c
+                })
+                .collect::<Vec<_>>()
+                .into_iter()
+                .fold(ExchangeCounts::default(), sum)
+        }
+    }
+}
+
+impl Smcmc {
+    /// Iterations under `run`: the setting, or 100 without a time budget;
+    /// `None`: until the budget is spent.
+    fn iterations(&self, run: &RunSettings) -> Option<u64> {
+        match (self.mutations_per_pixel, run.time_budget) {
+            (Some(m), _) => Some(m),
+            (None, Some(_)) => None,
+            (None, None) => Some(100),
+        }
+    }
+
+    fn run<S: TileShift>(
+        &self,
+        scene: &Scene,
+        shift: &S,
+        mutation: &Mutation,
+        run: &RunSettings,
+        stop: &AtomicBool,
+        observer: &dyn Observer,
+    ) -> Result<Rendered, RenderError> {
+        let start = Instant::now();
+        let tiling = Tiling::new(scene.film.width, scene.film.height, self.tile);
+        let n = tiling.tiles();
+        let sampler = Sampler {
+            scene,
+            shift,
+            tiling,
+            mutation: *mutation,
+        };
+        let out_of_time = || run.time_budget.is_some_and(|b| start.elapsed() >= b);
+        let mut tiles: Vec<Tile> = (0..n)
+            .into_par_iter()
+            .map(|s| sampler.new_tile(run.seed, s, self.init_candidates))
+            .collect();
+        let started_at_init = tiles.iter().filter(|t| t.chain.is_some()).count();
+        let start_seconds = start.elapsed().as_secs_f64();
+        let develop_now = |tiles: &[Tile]| {
+            let sums: Vec<TileSums> = tiles.iter().map(|t| t.sums.clone()).collect();
+            develop(&sampler.tiling, &sums, self.alpha, self.solver_iterations)
+        };
+
+        let planned = self.iterations(run);
+        let mut iterations = 0u64;
+        let mut rounds = 0u64;
+        let mut exchange = ExchangeCounts::default();
+        let mut interrupted = false;
+        let mut last_preview = Instant::now();
+        while planned.is_none_or(|m| iterations < m) {
+            if stop.load(Ordering::Relaxed) || out_of_time() {
+                interrupted = true;
+                break;
+            }
+            tiles
+                .par_iter_mut()
+                .enumerate()
+                .for_each(|(s, tile)| sampler.step(s, tile));
+            iterations += 1;
+            observer.progress(n as u64);
+            if self.exchange && iterations.is_multiple_of(u64::from(self.exchange_every)) {
+                exchange += sampler.exchange_round(&mut tiles, rounds);
+                rounds += 1;
+            }
+            if last_preview.elapsed() >= run.snapshot_every {
+                last_preview = Instant::now();
+                observer.snapshot(&|| develop_now(&tiles).image, iterations * n as u64);
+            }
+        }
+        let developed = develop_now(&tiles);
+        let mutations = iterations * n as u64;
+        let seconds = start.elapsed().as_secs_f64();
+
+        let mut stats: Option<ChainStatistics> = None;
+        for c in tiles.iter().filter_map(|t| t.chain.as_ref()) {
+            match stats.as_mut() {
+                Some(s) => s.merge(c.stats()),
+                None => stats = Some(c.stats().clone()),
+            }
+        }
+        let cs = stats.unwrap_or_else(|| ChainStatistics::new(Vec::new()));
+        let started = tiles.iter().filter(|t| t.chain.is_some()).count();
+        let large_samples: u64 = tiles.iter().map(|t| t.sums.large_samples).sum();
+        let mut density: Vec<f64> = developed.samples.iter().map(|c| f64::from(c.r)).collect();
+        density.sort_by(f64::total_cmp);
+        let median = density.get(density.len() / 2).copied().unwrap_or(0.0);
+        let max = density.last().copied().unwrap_or(0.0);
+        let per_second = if seconds > start_seconds {
+            mutations as f64 / (seconds - start_seconds)
+        } else {
+            0.0
+        };
+        let component = |k: usize| cs.components.get(k).map(|c| c.acceptance_rate());
+        let statistics = json!({
+            "shift": shift.name(),
+            "tile": self.tile.name(),
+            "tiles": n,
+            "iterations": iterations,
+            "mutations": mutations,
+            "mutations_per_second": per_second,
+            "start_seconds": start_seconds,
+            "initialised_tiles_at_start": started_at_init as f64 / n as f64,
+            "initialised_tiles": started as f64 / n as f64,
+            "acceptance": cs.acceptance_rate(),
+            "acceptance_per_component": cs.components.iter().map(|c| json!({
+                "name": c.name,
+                "proposed": c.proposed,
+                "accepted": c.accepted,
+                "acceptance": c.acceptance_rate(),
+            })).collect::<Vec<_>>(),
+            "acceptance_per_shift": { shift.name(): {
+                "large": component(LARGE_STEP_COMPONENT),
+                "small": component(0),
+            }},
+            "exchange": {
+                "rounds": rounds,
+                "attempts": exchange.attempts,
+                "accepted": exchange.accepted,
+                "rate": exchange.accepted as f64 / exchange.attempts.max(1) as f64,
+                "mean_alpha": exchange.alpha_sum / exchange.attempts.max(1) as f64,
+                "copies": exchange.copies,
+            },
+            "solver": {
+                "alpha": self.alpha,
+                "iterations": developed.alignment.iterations,
+                "initial_residual": developed.alignment.initial_residual,
+                "residual": developed.alignment.residual,
+            },
+            "large_step_samples": large_samples,
+            "samples_per_pixel_max_over_median": if median > 0.0 { max / median } else { f64::NAN },
+            "nonfinite_contributions": cs.invalid_density,
+        });
+        let Value::Object(statistics) = statistics else {
+            unreachable!("json! of an object literal is an object")
+        };
+        Ok(Rendered {
+            image: developed.image,
+            seconds,
+            samples: mutations,
+            interrupted,
+            statistics,
+            nonfinite_dump: None,
+            layers: vec![("samples".into(), developed.samples)],
+            summary: format!(
+                "{iterations} iterations of {n} tiles ({mutations} mutations) in {seconds:.2} s, {:.1}% of tiles started, exchange rate {:.3}, solver residual {:.2e}{}",
+                100.0 * started as f64 / n as f64,
+                exchange.accepted as f64 / exchange.attempts.max(1) as f64,
+                developed.alignment.residual,
+                if interrupted { ", stopped early" } else { "" },
+            ),
+        })
+    }
+}

@@ -1,0 +1,138 @@
+//! The BDPT shift (spec seed003 §11.1, "SMCMC-BDPT"): one light subpath,
+//! traced from the state's light stream, is shared by every pixel of the
+//! tile; each pixel gets its own camera subpath by random replay (the same
+//! camera numbers, the sub-pixel offset moved to the pixel) and the full
+//! BDPT sum over the techniques with `t ≥ 2` camera vertices, whose MIS
+//! weights are renormalised over those techniques only
+//! ([`mis_weight_among`] with `min_camera = 2`). Light tracing (`t = 1`)
+//! is left out because its samples land on other pixels than the tile's
+//! (each tile has its own normalisation, §14.11), so paths that only
+//! `t = 1` can sample (a caustic seen through a specular surface, the
+//! thesis's Veach-egg region) are missed.
+//!
+//! Per pixel this is BDPT with the shared light subpath: in primary sample
+//! space every pixel's sample is uniform, so the shift's Jacobian is 1 as
+//! for random replay, and `Σ_{s, t≥2} w'_{s,t} f/p_{s,t}` is an unbiased
+//! estimate of the pixel over the paths some `t ≥ 2` technique samples.
+//!
+//! Coordinates: three interleaved streams as BDPT's (camera, light,
+//! connection); the camera stream starts with the sub-pixel offset; each
+//! pixel replays the camera and connection streams from their start.
+
+use super::TileShift;
+use crate::color::Rgb;
+use crate::integrators::bdpt::{
+    Bdpt, SubpathBuffers, connect, generate_camera_subpath, generate_light_subpath,
+    mis_weight_among,
+};
+use crate::integrators::path_vertex::SceneBsdfs;
+use crate::pss::PssSource;
+use crate::sampling::{RandomSource, Stream};
+use crate::scene::Scene;
+use glam::Vec2;
+use mcmc_core::space::TorusPoint;
+use std::cell::RefCell;
+
+thread_local! {
+    /// Per-thread subpath storage.
+    static BUFFERS: RefCell<SubpathBuffers> = RefCell::new(SubpathBuffers::default());
+}
+
+/// The BDPT shift over `bdpt`'s depth limits and MIS heuristic.
+#[derive(Clone, Copy, Debug)]
+pub struct BdptShift {
+    /// The bidirectional path tracer.
+    pub bdpt: Bdpt,
+}
+
+impl BdptShift {
+    /// The renormalised BDPT sum of pixel `(x, y)` with the light subpath
+    /// in `buffers.light` (`light` vertices).
+    fn pixel(
+        &self,
+        scene: &Scene,
+        point: &TorusPoint,
+        (x, y): (u32, u32),
+        buffers: &mut SubpathBuffers,
+    ) -> Rgb {
+        let mut source = PssSource::new(point, Stream::COUNT);
+        source.set_stream(Stream::Camera);
+        let (ox, oy) = source.next_2d();
+        let raster = Vec2::new(x as f32 + ox, y as f32 + oy);
+        let nc = generate_camera_subpath(
+            scene,
+            raster,
+            &mut source,
+            self.bdpt.max_camera_vertices(),
+            Some(self.bdpt.rr_depth),
+            &mut buffers.camera,
+        );
+        source.set_stream(Stream::Connection);
+        let nl = buffers.light.len();
+        let max_depth = self.bdpt.max_depth as usize;
+        let mut l = Rgb::BLACK;
+        for t in 2..=nc {
+            for s in 0..=nl {
+                if s + t - 1 > max_depth {
+                    continue;
+                }
+                let Some(c) = connect(
+                    scene,
+                    &buffers.camera,
+                    &buffers.light,
+                    s,
+                    t,
+                    &mut source,
+                    self.bdpt.heuristic,
+                ) else {
+                    continue;
+                };
+                if c.weight > 0.0 {
+                    let w = mis_weight_among(
+                        scene,
+                        &SceneBsdfs,
+                        0,
+                        &buffers.camera,
+                        &buffers.light,
+                        s,
+                        t,
+                        c.sampled.as_ref(),
+                        self.bdpt.heuristic,
+                        2,
+                    );
+                    l += c.l * (w / c.weight);
+                }
+            }
+        }
+        l
+    }
+}
+
+impl TileShift for BdptShift {
+    fn name(&self) -> &'static str {
+        "bdpt"
+    }
+
+    fn evaluate(
+        &self,
+        scene: &Scene,
+        point: &TorusPoint,
+        pixels: &[Option<(u32, u32)>],
+        out: &mut [Rgb],
+    ) {
+        BUFFERS.with_borrow_mut(|buffers| {
+            let mut source = PssSource::new(point, Stream::COUNT);
+            source.set_stream(Stream::Light);
+            generate_light_subpath(
+                scene,
+                &mut source,
+                self.bdpt.max_light_vertices(),
+                Some(self.bdpt.rr_depth),
+                &mut buffers.light,
+            );
+            for (q, o) in pixels.iter().zip(out.iter_mut()) {
+                *o = q.map_or(Rgb::BLACK, |q| self.pixel(scene, point, q, buffers));
+            }
+        });
+    }
+}

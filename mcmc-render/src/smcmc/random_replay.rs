@@ -1,0 +1,63 @@
+//! The random replay shift (spec seed003 §8.5, Eq. 3.39–3.41): every pixel
+//! `q` of a tile is estimated from the same primary-sample vector `u`,
+//! with the same sub-pixel offset moved to `q` and the rest of `u`
+//! replayed by the path tracer.
+//!
+//! In primary sample space every pixel's path has density 1, so the
+//! Jacobian `p(X)/p(T(X))` of the shift is 1: `f(T_q(u))` is exactly what
+//! a path tracer would return for a camera sample at the same raster
+//! position in `q` driven by the same numbers (`tests/smcmc.rs` checks it
+//! bit for bit against [`PathTracer`]'s own PSS sampler).
+//!
+//! Coordinate layout (one stream, as [`PathTracer`]'s PSS sampler):
+//! coordinates 0 and 1 are the sub-pixel offset, then the lens sample if
+//! the camera has one, then the path tracer's numbers.
+
+use super::TileShift;
+use crate::color::Rgb;
+use crate::integrators::pt::PathTracer;
+use crate::pss::PssSource;
+use crate::sampling::RandomSource;
+use crate::scene::Scene;
+use glam::Vec2;
+use mcmc_core::space::TorusPoint;
+
+/// Random replay over the path tracer (next-event estimation included).
+#[derive(Clone, Copy, Debug)]
+pub struct RandomReplay {
+    /// The path tracer replayed at every pixel.
+    pub pt: PathTracer,
+}
+
+impl RandomReplay {
+    /// `f` of the path of `point` through pixel `(x, y)`.
+    pub fn trace(&self, scene: &Scene, point: &TorusPoint, (x, y): (u32, u32)) -> Rgb {
+        let mut source = PssSource::new(point, 1);
+        let (ox, oy) = source.next_2d();
+        let p = Vec2::new(x as f32 + ox, y as f32 + oy);
+        let ray = if scene.camera.has_lens() {
+            scene.camera.generate_ray_lens(p, source.next_2d())
+        } else {
+            scene.camera.generate_ray(p)
+        };
+        self.pt.li(scene, ray, &mut source)
+    }
+}
+
+impl TileShift for RandomReplay {
+    fn name(&self) -> &'static str {
+        "rr"
+    }
+
+    fn evaluate(
+        &self,
+        scene: &Scene,
+        point: &TorusPoint,
+        pixels: &[Option<(u32, u32)>],
+        out: &mut [Rgb],
+    ) {
+        for (q, o) in pixels.iter().zip(out.iter_mut()) {
+            *o = q.map_or(Rgb::BLACK, |q| self.trace(scene, point, q));
+        }
+    }
+}

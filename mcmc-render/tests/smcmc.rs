@@ -1,0 +1,273 @@
+//! Stratified MCMC (`smcmc`): the tile alignment on synthetic data, the
+//! random replay shift against the path tracer, agreement with PT on the
+//! tilted Cornell box, and thread-count determinism.
+//!
+//! # Tolerances of the agreement test
+//!
+//! As in `agree_mlt.rs`: each estimator runs as `K` independent replicates
+//! (distinct fixed seeds); the standard error of a mean is
+//! sd(replicate means)/√K, so it includes everything that varies between
+//! seeds (for SMCMC: the large-step estimate `Ĩ` that anchors the tile
+//! alignment, the chains and the alignment itself). With `σ` the standard
+//! error of the difference to PT, a channel passes when the difference is
+//! within 4σ (false-alarm rate ~1e-3 per channel for Student's t with 11
+//! degrees of freedom, the smallest K − 1 here) and within 1%; the budgets
+//! are chosen so that 5σ < 1% (asserted), so a 1% discrepancy lies 5σ out
+//! and fails the 4σ check with probability ≈ 0.8 (t₁₁), a 1.5% one with
+//! probability > 0.99. The control checks that the SMCMC replicates scaled
+//! by 1.01 are rejected.
+
+mod common;
+
+use common::{MeanAgreement, image_mean, mc_reps, pt_of, repo_scene, repo_scene_tilted};
+use mcmc_core::rng::{stream_rng, uniform};
+use mcmc_core::runner::with_threads;
+use mcmc_core::space::TorusPoint;
+use mcmc_render::integrators::registry;
+use mcmc_render::integrators::{Rendered, RunSettings};
+use mcmc_render::observer::NoObserver;
+use mcmc_render::pss::PssTarget;
+use mcmc_render::scene::Scene;
+use mcmc_render::smcmc::random_replay::RandomReplay;
+use mcmc_render::smcmc::solver::AlignmentProblem;
+use mcmc_render::smcmc::{TileShape, Tiling};
+use std::sync::OnceLock;
+use std::sync::atomic::AtomicBool;
+
+/// Noise-free synthetic tiles: image `I`, normalisations `b_s`, histograms
+/// `G_s(j) = I(j)/b_s` and `Ĩ = I`; the minimiser of Eq. 3.38 is then
+/// `b` exactly (every pair term and the attachment vanish there, and the
+/// loss is positive definite), whatever `b⁰`.
+fn synthetic(
+    shape: TileShape,
+    w: u32,
+    h: u32,
+    seed: u64,
+) -> (Tiling, Vec<f64>, Vec<f64>, Vec<f64>) {
+    let tiling = Tiling::new(w, h, shape);
+    let mut rng = stream_rng(seed, 0);
+    let image: Vec<f64> = (0..tiling.tiles())
+        .map(|_| 0.1 + 1.9 * uniform(&mut rng))
+        .collect();
+    let b: Vec<f64> = (0..tiling.tiles())
+        .map(|_| 0.5 + 2.5 * uniform(&mut rng))
+        .collect();
+    let slots = tiling.slots();
+    let mut g = vec![0.0; tiling.tiles() * slots];
+    for s in 0..tiling.tiles() {
+        for (k, j) in tiling.pixels(s) {
+            g[s * slots + k] = image[j] / b[s];
+        }
+    }
+    (tiling, image, b, g)
+}
+
+fn max_relative_error(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| ((x - y) / y).abs())
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn the_tile_solver_recovers_known_normalisations() {
+    for shape in [TileShape::Plus, TileShape::Square] {
+        let (tiling, image, b, g) = synthetic(shape, 12, 9, 5);
+        let active = vec![true; tiling.tiles()];
+        // Start ±30% off.
+        let mut rng = stream_rng(6, 0);
+        let b0: Vec<f64> = b
+            .iter()
+            .map(|v| v * (0.7 + 0.6 * uniform(&mut rng)))
+            .collect();
+        let problem = AlignmentProblem {
+            tiling: &tiling,
+            g: &g,
+            active: &active,
+            i_tilde: &image,
+            alpha: 0.05,
+        };
+        // The control: without sweeps the error is b⁰'s.
+        let none = problem.solve(&b0, 0);
+        assert!(
+            max_relative_error(&none.b, &b) > 0.1,
+            "{shape:?}: b⁰ too close"
+        );
+        // Jacobi's slowest mode contracts by ≈ 1 − α/(2n²(n−1)) per sweep
+        // plus the lattice's low frequencies; 40 000 sweeps of a 108-tile
+        // system take milliseconds.
+        let solved = problem.solve(&b0, 40_000);
+        let err = max_relative_error(&solved.b, &b);
+        eprintln!(
+            "{shape:?}: max rel error {err:.2e}, residual {:.2e} -> {:.2e}",
+            solved.initial_residual, solved.residual
+        );
+        assert!(err <= 1e-6, "{shape:?}: max relative error {err:e}");
+        assert!(solved.residual < 1e-8 && solved.initial_residual > 1e-2);
+    }
+}
+
+#[test]
+fn random_replay_is_the_path_tracer_at_the_shifted_pixel() {
+    // A power-of-two width so that the direct sampler's raster position
+    // `u₀·w` and the shift's `x + offset` round to the same f32.
+    let scene = repo_scene("cornell-box.xml", 32);
+    let pt = pt_of(&scene);
+    let rr = RandomReplay { pt };
+    let direct = PssTarget {
+        scene: &scene,
+        sampler: pt,
+    };
+    let (mut lit, mut neighbour_differs) = (0, 0);
+    for i in 0..400u64 {
+        let u = TorusPoint::fresh(stream_rng(11, i));
+        let q = ((i * 7 % 32) as u32, (i * 13 % 32) as u32);
+        let shifted = rr.trace(&scene, &u, q);
+        let mut v = u.materialize();
+        let (ox, oy) = (v[0] as f32, v[1] as f32);
+        // The same raster position as a uniform image coordinate.
+        v[0] = (f64::from(q.0) + f64::from(ox)) / 32.0;
+        v[1] = (f64::from(q.1) + f64::from(oy)) / 32.0;
+        let path = direct.trace(&TorusPoint::from_values(&v, stream_rng(12, i)));
+        let l = path.payload.splats[0].l;
+        assert_eq!(
+            [l.r.to_bits(), l.g.to_bits(), l.b.to_bits()],
+            [
+                shifted.r.to_bits(),
+                shifted.g.to_bits(),
+                shifted.b.to_bits()
+            ],
+            "sample {i} at {q:?}"
+        );
+        lit += usize::from(!l.is_black());
+        // Sensitivity: the neighbouring pixel's value differs.
+        let other = rr.trace(&scene, &u, ((q.0 + 1) % 32, q.1));
+        neighbour_differs += usize::from(other != shifted);
+    }
+    assert!(lit > 200, "only {lit} of 400 samples carry light");
+    assert!(neighbour_differs > 200, "{neighbour_differs}");
+}
+
+const RES: u32 = 16;
+const DEPTH: u32 = 5;
+
+fn cornell() -> &'static Scene {
+    static SCENE: OnceLock<Scene> = OnceLock::new();
+    SCENE.get_or_init(|| repo_scene_tilted("cornell-box.xml", RES, DEPTH))
+}
+
+fn smcmc(scene: &Scene, sets: &[(&str, &str)], seed: u64) -> Rendered {
+    let sets: Vec<(String, String)> = sets
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
+    let integrator = registry::configure(scene.integrator_element.as_ref(), Some("smcmc"), &sets)
+        .expect("configures");
+    let run = RunSettings {
+        seed,
+        ..Default::default()
+    };
+    integrator
+        .render(scene, &run, &AtomicBool::new(false), &NoObserver)
+        .expect("renders")
+}
+
+/// PT replicates: 48 × 128 spp (measured SE of the mean 0.07–0.1% per
+/// channel).
+fn pt_reference() -> &'static [[f64; 3]] {
+    static PT: OnceLock<Vec<[f64; 3]>> = OnceLock::new();
+    PT.get_or_init(|| mc_reps(cornell(), &pt_of(cornell()), 128, 48, 1000))
+}
+
+/// SMCMC replicates: 20 runs of 256 iterations (256 mutations per pixel,
+/// five paths each, exchanges every other iteration); measured
+/// per-replicate spread 0.6% per channel, so SE ≈ 0.13% and, with PT's,
+/// σ ≈ 0.15%: 5σ < 1%.
+fn smcmc_reps() -> &'static [[f64; 3]] {
+    static SM: OnceLock<Vec<[f64; 3]>> = OnceLock::new();
+    SM.get_or_init(|| {
+        (0..20)
+            .map(|k| {
+                let r = smcmc(cornell(), &[("mutations_per_pixel", "256")], 500 + k);
+                assert_eq!(r.statistics["nonfinite_contributions"], 0);
+                image_mean(&r.image)
+            })
+            .collect()
+    })
+}
+
+#[test]
+fn smcmc_agrees_with_pt_on_the_cornell_box() {
+    let a = MeanAgreement::new(pt_reference(), smcmc_reps());
+    eprintln!("smcmc: rel {:?}\n  {a:?}", a.rel());
+    assert!(
+        a.failures(4.0, 0.01).is_empty(),
+        "smcmc disagrees with PT: {a:?}"
+    );
+    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
+}
+
+/// SMCMC with the BDPT shift: 48 runs of 128 iterations (five BDPT
+/// samples with one shared light subpath per mutation). Measured
+/// per-replicate spread ≈ 1% per channel (12 runs gave SE 0.3%, too
+/// coarse for 1%), so 48 give SE ≈ 0.15% and, with PT's, 5σ < 1%.
+fn bdpt_shift_reps() -> Vec<[f64; 3]> {
+    (0..48)
+        .map(|k| {
+            let sets = [("mutations_per_pixel", "128"), ("shift", "bdpt")];
+            let r = smcmc(cornell(), &sets, 700 + k);
+            assert_eq!(r.statistics["nonfinite_contributions"], 0);
+            image_mean(&r.image)
+        })
+        .collect()
+}
+
+/// About a minute of one core: `cargo test -p mcmc-render --test smcmc --
+/// --ignored`.
+#[test]
+#[ignore]
+fn smcmc_with_the_bdpt_shift_agrees_with_pt_on_the_cornell_box() {
+    // The tilted box has no path that only light tracing (t = 1) samples,
+    // so dropping t = 1 and renormalising the MIS weights over t ≥ 2 must
+    // leave the image mean unchanged.
+    let a = MeanAgreement::new(pt_reference(), &bdpt_shift_reps());
+    eprintln!("smcmc bdpt shift: rel {:?}\n  {a:?}", a.rel());
+    assert!(a.failures(4.0, 0.01).is_empty(), "disagrees with PT: {a:?}");
+    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
+}
+
+#[test]
+fn a_one_percent_bias_is_rejected() {
+    let biased: Vec<[f64; 3]> = smcmc_reps().iter().map(|m| m.map(|v| v * 1.01)).collect();
+    let a = MeanAgreement::new(pt_reference(), &biased);
+    eprintln!("smcmc x1.01: rel {:?}\n  {a:?}", a.rel());
+    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
+    assert!(!a.failures(4.0, 0.01).is_empty(), "a 1% bias passed: {a:?}");
+}
+
+#[test]
+fn smcmc_is_bit_identical_across_thread_counts() {
+    let scene = repo_scene("cornell-box.xml", 12);
+    let bits = |threads: usize| {
+        let r = with_threads(threads, || {
+            smcmc(&scene, &[("mutations_per_pixel", "6")], 3)
+        });
+        let stats = &r.statistics;
+        for key in [
+            "acceptance_per_shift",
+            "exchange",
+            "solver",
+            "initialised_tiles",
+        ] {
+            assert!(stats.contains_key(key), "no {key} in the statistics");
+        }
+        assert_eq!(r.layers[0].0, "samples");
+        r.image
+            .iter()
+            .flat_map(|c| [c.r.to_bits(), c.g.to_bits(), c.b.to_bits()])
+            .collect::<Vec<u32>>()
+    };
+    let one = bits(1);
+    assert!(one == bits(2), "1 vs 2 threads differ");
+    assert!(one == bits(3), "1 vs 3 threads differ");
+}
