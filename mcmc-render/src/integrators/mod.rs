@@ -150,8 +150,10 @@ pub struct Rendered {
     pub statistics: Map<String, Value>,
     /// The coordinates of the first NaN/inf contribution, for `--replay`.
     pub nonfinite_dump: Option<PssDump>,
-    /// Named partial images that sum to the image (RELT's per-replica
-    /// images); the CLI writes each as `<out>.NAME.exr`.
+    /// Named images beside the main one: partial images that sum to it
+    /// (RELT's per-replica images, the tempered levels) or per-pixel
+    /// statistics (`smcmc`'s `samples`, the sample count of each pixel);
+    /// the CLI writes each as `<out>.NAME.exr`.
     pub layers: Vec<(String, Vec<Rgb>)>,
     /// One line for the terminal.
     pub summary: String,
