@@ -24,6 +24,12 @@
 //!   keep to paths of three or more segments, and the two images are
 //!   summed. With a time budget the pass runs first and the chains get
 //!   the rest. Previews during the run show the chains' part only.
+//! - **Specular-chain pass** (`specular_samples`, default 16 spp; not in
+//!   Mitsuba): the paths `L S* E` (emitters seen directly or through
+//!   Dirac vertices only) are path traced
+//!   ([`crate::path_space::specular_pass`]) and the chains leave them out:
+//!   no bidirectional move keeps a vertex of such a path, so chains
+//!   resampled onto a rare bright one never left it.
 //! - Emitters at infinity (environment maps, directional lights) are not
 //!   supported yet; such scenes are refused.
 
