@@ -397,7 +397,10 @@ fn degenerate_paths_are_outside_the_support() {
     use mcmc_render::path_space::PathTarget;
     let scene = cornell();
     let mut p = Path::new(scene);
-    assert_eq!(PathTarget.evaluate(&p).log_density, f64::NEG_INFINITY);
+    assert_eq!(
+        PathTarget::default().evaluate(&p).log_density,
+        f64::NEG_INFINITY
+    );
     let x = start_path(scene);
     p.vertices = vec![x.vertices[0]];
     p.evaluate();
@@ -408,7 +411,7 @@ fn degenerate_paths_are_outside_the_support() {
     q.contribution = Rgb::new(f32::INFINITY, 1.0, 1.0);
     assert!(q.log_density().is_nan());
     // The start path: finite, positive, one splat at its raster position.
-    let e = PathTarget.evaluate(&x);
+    let e = PathTarget::default().evaluate(&x);
     assert!(e.log_density.is_finite());
     assert_eq!(e.payload.splats.len(), 1);
     assert_eq!(e.payload.splats[0].p, x.raster);

@@ -1017,7 +1017,7 @@ fn chain_means<'s, K: Kernel<Path<'s>, PathSample>>(
         acc += (c.1 - max).exp();
         cdf.push(acc);
     }
-    let target = mcmc_render::path_space::PathTarget;
+    let target = mcmc_render::path_space::PathTarget::default();
     let mut per_chain = Vec::with_capacity(k);
     for chain in 0..k {
         let mut rng = stream_rng(seed, chain as u64);

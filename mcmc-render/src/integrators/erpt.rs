@@ -311,7 +311,7 @@ impl IntegratorSettings for Erpt {
                                 };
                                 let film = &mut out.film;
                                 for _ in 0..self.chain_length {
-                                    mh.step(&mut chain, &PathTarget, &mut |t| {
+                                    mh.step(&mut chain, &PathTarget::default(), &mut |t| {
                                         deposit(film, t.current, 1.0 - t.alpha, e_d);
                                         if let Some(y) = t.proposal {
                                             deposit(film, y, t.alpha, e_d);

@@ -24,6 +24,12 @@
 //!   keep to paths of three or more segments, and the two images are
 //!   summed. With a time budget the pass runs first and the chains get
 //!   the rest. Previews during the run show the chains' part only.
+//! - **Specular-chain pass** (`specular_samples`, default 16 spp; not in
+//!   Mitsuba): the paths `L S* E` (emitters seen directly or through
+//!   Dirac vertices only) are path traced
+//!   ([`crate::path_space::specular_pass`]) and the chains leave them out:
+//!   no bidirectional move keeps a vertex of such a path, so chains
+//!   resampled onto a rare bright one never left it.
 //! - Emitters at infinity (environment maps, directional lights) are not
 //!   supported yet; such scenes are refused.
 
@@ -33,6 +39,7 @@ use super::{DepthParams, RenderError, Rendered, RunSettings};
 use crate::markov::{self, ChainParams, MltError, MltResult};
 use crate::observer::Observer;
 use crate::path_space::proposal_clock::{ProposalClock, mutation_types};
+use crate::path_space::specular_pass::SpecularChains;
 use crate::path_space::{PathFamily, PathMutations, emitters_at_infinity_refusal};
 use crate::pss_dump::DumpSampler;
 use crate::scene::Scene;
@@ -65,6 +72,8 @@ crate::settings! {
         pub suitability: bool = false;
         /// Samples per pixel of the direct-lighting pass (path tracing of paths up to two segments; the chains take the rest); -1: off, the chains do everything (Mitsuba's default is 16).
         pub direct_samples: i64 = -1, check direct_samples;
+        /// Samples per pixel of the specular-chain pass (path tracing of the paths L S* E, emitters seen directly or through mirrors and glass, which the chains then leave out: no bidirectional move keeps a vertex of them); -1: off, the chains do them (not in Mitsuba).
+        pub specular_samples: i64 = 16, check direct_samples;
         flatten {
             /// Path depth (rr_depth applies to the direct pass only: path-space walks have exact lengths).
             pub depth: DepthParams = DepthParams::default();
@@ -98,6 +107,11 @@ impl Mlt {
     /// Samples per pixel of the direct-lighting pass, if it runs.
     pub fn direct_pass(&self) -> Option<u32> {
         (self.direct_samples > 0).then(|| self.direct_samples.min(i64::from(u32::MAX)) as u32)
+    }
+
+    /// Samples per pixel of the specular-chain pass, if it runs.
+    pub fn specular_pass(&self) -> Option<u32> {
+        (self.specular_samples > 0).then(|| self.specular_samples.min(i64::from(u32::MAX)) as u32)
     }
 
     /// Shortest path the chains sample: 3 segments with the direct pass.
@@ -157,6 +171,20 @@ impl IntegratorSettings for Mlt {
             };
             crate::render::run_per_pixel(scene, &pt, &pass, stop, observer)
         });
+        // The specular chains of the lengths the chains would sample
+        // (the direct pass has those of one and two segments).
+        let specular = self.specular_pass().map(|spp| {
+            let pass = SpecularChains {
+                min_depth: self.min_segments() as u32,
+                max_depth: self.max_segments().map_or(u32::MAX, |m| m as u32),
+            };
+            let run = RunSettings {
+                spp: Some(spp),
+                time_budget: None,
+                ..run.clone()
+            };
+            crate::render::run_per_pixel(scene, &pass, &run, stop, observer)
+        });
         let chains_run = RunSettings {
             time_budget: run.time_budget.map(|t| t.saturating_sub(start.elapsed())),
             ..run.clone()
@@ -183,6 +211,25 @@ impl IntegratorSettings for Mlt {
                 result.seconds - result.bootstrap_seconds,
             ),
         );
+        if let Some(pass) = specular {
+            for (p, d) in out.image.iter_mut().zip(&pass.image) {
+                *p += *d;
+            }
+            out.statistics.insert(
+                "specular_pass".into(),
+                json!({
+                    "samples_per_pixel": self.specular_samples,
+                    "seconds": pass.seconds,
+                    "interrupted": pass.interrupted,
+                }),
+            );
+            out.seconds = start.elapsed().as_secs_f64();
+            out.interrupted |= pass.interrupted;
+            out.summary = format!(
+                "specular-chain pass {} spp in {:.2} s; {}",
+                self.specular_samples, pass.seconds, out.summary
+            );
+        }
         if let Some(direct) = direct {
             for (p, d) in out.image.iter_mut().zip(&direct.image) {
                 *p += *d;
@@ -219,8 +266,11 @@ pub fn render_mlt(
     if scene.lights.has_emitter_at_infinity() {
         return Err(MltError::Setting(emitters_at_infinity_refusal("mlt")));
     }
-    let family = PathFamily::between(scene, settings.min_segments(), settings.max_segments())
+    let mut family = PathFamily::between(scene, settings.min_segments(), settings.max_segments())
         .timed(clock.clone());
+    if settings.specular_pass().is_some() {
+        family = family.without_specular_chains();
+    }
     markov::run(
         scene,
         &family,

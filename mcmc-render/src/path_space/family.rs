@@ -299,13 +299,25 @@ impl<'s> PathFamily<'s> {
             scene,
             max_segments,
             min_segments: min_segments.max(1),
-            target: PathTarget,
+            target: PathTarget::default(),
             area_lights: scene
                 .lights
                 .lights
                 .iter()
                 .any(|l| matches!(l, Light::Area { .. })),
             clock: None,
+        }
+    }
+
+    /// The family with the specular chains left out of its target
+    /// ([`PathTarget::without_specular_chains`]; `mlt`'s specular-chain
+    /// pass renders them).
+    pub fn without_specular_chains(self) -> Self {
+        PathFamily {
+            target: PathTarget {
+                without_specular_chains: true,
+            },
+            ..self
         }
     }
 
@@ -426,7 +438,7 @@ impl<'s> ChainFamily for PathFamily<'s> {
         self.log_candidate_density(state)
     }
     fn candidate_log_weight(&self, _member: usize, state: &Path<'s>) -> f64 {
-        let log_i = state.log_density();
+        let log_i = self.target.log_density(state);
         if log_i == f64::NEG_INFINITY {
             return f64::NEG_INFINITY;
         }

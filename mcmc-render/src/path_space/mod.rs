@@ -56,6 +56,7 @@ pub mod manifold_perturbation;
 pub mod multi_chain_perturbation;
 pub mod proposal_clock;
 pub mod retrace;
+pub mod specular_pass;
 pub mod state;
 pub mod walk;
 

@@ -186,6 +186,15 @@ impl<'s> Path<'s> {
         }
     }
 
+    /// True for a path `L S* E`: at least one segment, and every vertex
+    /// between the emitter point and the camera scatters through a Dirac
+    /// lobe (an emitter seen directly or through mirrors and glass). No
+    /// bidirectional move can keep a vertex of such a path.
+    pub fn is_specular_chain(&self) -> bool {
+        let k = self.segments();
+        k >= 1 && self.vertices[1..k].iter().all(|v| v.delta)
+    }
+
     /// The payload the Markov-chain driver films: one splat of `f(x)` at
     /// the raster position, depth `k`.
     pub fn sample(&self) -> PathSample {
@@ -404,7 +413,9 @@ pub fn dirac_lobe(
     let frame = Frame::from_normal(v.sp.ns);
     let bsdf = scene.bsdf_at(&v.sp);
     let (lo, li) = (frame.to_local(wo), frame.to_local(wi));
-    let inverse = bsdf.invert(lo, li, 0.5)?;
+    // In the walk's own mode: a normal or bump map's importance sampler
+    // picks between two frames, which the radiance-mode inverse misses.
+    let inverse = bsdf.invert_in(lo, li, 0.5, mode)?;
     let u_lobe = 0.5 * (inverse.u_lobe.0 + inverse.u_lobe.1);
     let bs = bsdf.sample(lo, u_lobe, (0.5, 0.5), mode)?;
     if !bs.is_delta || !(bs.pdf > 0.0) || bs.wi.dot(li) < 1.0 - 1e-4 {
@@ -481,12 +492,28 @@ pub fn walk_density(
 /// path carries (mutations evaluate proposals when they build them), so an
 /// evaluation costs no rays. Its payload is [`Path::sample`].
 #[derive(Clone, Copy, Debug, Default)]
-pub struct PathTarget;
+pub struct PathTarget {
+    /// Leave out the specular chains ([`Path::is_specular_chain`]:
+    /// `I = 0` there), which `mlt`'s specular-chain pass path traces
+    /// instead ([`super::specular_pass`]).
+    pub without_specular_chains: bool,
+}
+
+impl PathTarget {
+    /// `ln I(x)` as [`Path::log_density`], `−∞` on a left-out specular chain.
+    pub fn log_density(&self, path: &Path<'_>) -> f64 {
+        if self.without_specular_chains && path.is_specular_chain() {
+            f64::NEG_INFINITY
+        } else {
+            path.log_density()
+        }
+    }
+}
 
 impl Target<Path<'_>> for PathTarget {
     type Payload = PathSample;
 
     fn evaluate(&self, state: &Path<'_>) -> Evaluation<PathSample> {
-        Evaluation::new(state.log_density(), state.sample())
+        Evaluation::new(self.log_density(state), state.sample())
     }
 }
