@@ -325,7 +325,14 @@ fn ply_from_reader(input: impl std::io::BufRead) -> Result<RawMesh, String> {
         out.uvs = Some(vertices.iter().map(|v| Vec2::from(v.uv)).collect());
     }
     drop(vertices);
-    let n = out.positions.len() as u32;
+    // Face indices are u32: a vertex count beyond that could not be indexed.
+    let n = u32::try_from(out.positions.len()).map_err(|_| {
+        format!(
+            "the file has {} vertices; at most {} are supported",
+            out.positions.len(),
+            u32::MAX
+        )
+    })?;
     for (i, f) in faces.iter().enumerate() {
         let idx = f
             .idx
