@@ -164,12 +164,10 @@ impl IntegratorSettings for Mlt {
                 max_depth: 2,
                 rr_depth: self.depth.rr_depth,
             };
-            let pass = RunSettings {
-                spp: Some(spp),
-                time_budget: None,
-                ..run.clone()
-            };
-            crate::render::run_per_pixel(scene, &pt, &pass, stop, observer)
+            (
+                spp,
+                crate::render::run_per_pixel(scene, &pt, &fixed_spp(run, spp), stop, observer),
+            )
         });
         // The specular chains of the lengths the chains would sample
         // (the direct pass has those of one and two segments).
@@ -178,12 +176,10 @@ impl IntegratorSettings for Mlt {
                 min_depth: self.min_segments() as u32,
                 max_depth: self.max_segments().map_or(u32::MAX, |m| m as u32),
             };
-            let run = RunSettings {
-                spp: Some(spp),
-                time_budget: None,
-                ..run.clone()
-            };
-            crate::render::run_per_pixel(scene, &pass, &run, stop, observer)
+            (
+                spp,
+                crate::render::run_per_pixel(scene, &pass, &fixed_spp(run, spp), stop, observer),
+            )
         });
         let chains_run = RunSettings {
             time_budget: run.time_budget.map(|t| t.saturating_sub(start.elapsed())),
@@ -211,46 +207,54 @@ impl IntegratorSettings for Mlt {
                 result.seconds - result.bootstrap_seconds,
             ),
         );
-        if let Some(pass) = specular {
-            for (p, d) in out.image.iter_mut().zip(&pass.image) {
-                *p += *d;
-            }
-            out.statistics.insert(
-                "specular_pass".into(),
-                json!({
-                    "samples_per_pixel": self.specular_samples,
-                    "seconds": pass.seconds,
-                    "interrupted": pass.interrupted,
-                }),
-            );
-            out.seconds = start.elapsed().as_secs_f64();
-            out.interrupted |= pass.interrupted;
-            out.summary = format!(
-                "specular-chain pass {} spp in {:.2} s; {}",
-                self.specular_samples, pass.seconds, out.summary
+        if let Some((spp, pass)) = specular {
+            add_pass(
+                &mut out,
+                &pass,
+                "specular_pass",
+                "specular-chain pass",
+                spp,
+                start,
             );
         }
-        if let Some(direct) = direct {
-            for (p, d) in out.image.iter_mut().zip(&direct.image) {
-                *p += *d;
-            }
-            out.statistics.insert(
-                "direct_pass".into(),
-                json!({
-                    "samples_per_pixel": self.direct_samples,
-                    "seconds": direct.seconds,
-                    "interrupted": direct.interrupted,
-                }),
-            );
-            out.seconds = start.elapsed().as_secs_f64();
-            out.interrupted |= direct.interrupted;
-            out.summary = format!(
-                "direct pass {} spp in {:.2} s; {}",
-                self.direct_samples, direct.seconds, out.summary
-            );
+        if let Some((spp, pass)) = direct {
+            add_pass(&mut out, &pass, "direct_pass", "direct pass", spp, start);
         }
         Ok(out)
     }
+}
+
+/// `run` with a fixed `spp` per pixel and no time budget (the per-pixel
+/// passes beside the chains).
+fn fixed_spp(run: &RunSettings, spp: u32) -> RunSettings {
+    RunSettings {
+        spp: Some(spp),
+        time_budget: None,
+        ..run.clone()
+    }
+}
+
+/// Adds a per-pixel pass (`spp` samples per pixel) to the chains' report
+/// `out`: its image, its statistics under `key`, its time (the run's
+/// wall-clock since `start`) and `label` in the summary.
+fn add_pass(out: &mut Rendered, pass: &Rendered, key: &str, label: &str, spp: u32, start: Instant) {
+    for (p, d) in out.image.iter_mut().zip(&pass.image) {
+        *p += *d;
+    }
+    out.statistics.insert(
+        key.into(),
+        json!({
+            "samples_per_pixel": spp,
+            "seconds": pass.seconds,
+            "interrupted": pass.interrupted,
+        }),
+    );
+    out.seconds = start.elapsed().as_secs_f64();
+    out.interrupted |= pass.interrupted;
+    out.summary = format!(
+        "{label} {spp} spp in {:.2} s; {}",
+        pass.seconds, out.summary
+    );
 }
 
 /// Renders `scene` with path-space MLT as `settings` say, timing each
