@@ -25,6 +25,21 @@ impl Frame {
         Frame { s, t, n }
     }
 
+    /// Mitsuba 3's shading frame: `s` is the tangent `dp_du` made
+    /// orthogonal to the unit normal `n`, `t = n × s`; the frame of
+    /// [`Frame::from_normal`] when `dp_du` has no component in the tangent
+    /// plane. Anisotropic BSDFs need it: their `alpha_u` lies along `s`.
+    pub fn from_normal_and_tangent(n: Vec3, dp_du: Vec3) -> Self {
+        match (dp_du - n * n.dot(dp_du)).try_normalize() {
+            Some(s) => Frame {
+                s,
+                t: n.cross(s),
+                n,
+            },
+            None => Frame::from_normal(n),
+        }
+    }
+
     /// World direction to local coordinates.
     pub fn to_local(&self, v: Vec3) -> Vec3 {
         Vec3::new(v.dot(self.s), v.dot(self.t), v.dot(self.n))

@@ -446,6 +446,22 @@ impl Bsdf {
         }
     }
 
+    /// True when the roughness differs along the two tangents
+    /// (`alpha_u ≠ alpha_v`): only then does the BSDF depend on which way
+    /// the shading frame's tangent points (see [`crate::scene::Scene::shading_frame`]).
+    pub fn is_anisotropic(&self) -> bool {
+        let m = match self {
+            Bsdf::RoughConductor(b) | Bsdf::TwoSided(OneSided::RoughConductor(b)) => {
+                &b.distribution
+            }
+            Bsdf::RoughDielectric(b) => &b.distribution,
+            Bsdf::RoughPlastic(b) | Bsdf::TwoSided(OneSided::RoughPlastic(b)) => b.distribution(),
+            _ => return false,
+        };
+        let (au, av) = m.alpha();
+        au != av
+    }
+
     /// True when at least one lobe is a Dirac delta: the delta models, and
     /// the smooth `plastic`, whose coating reflection is a Dirac lobe over a
     /// diffuse one (its samples say per sample with `is_delta`).

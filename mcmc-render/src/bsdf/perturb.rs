@@ -79,13 +79,8 @@ impl Perturbation {
             PerturbKind::Normal(texture) => {
                 let c = texture.eval(uv);
                 let local = Vec3::new(2.0 * c.r - 1.0, 2.0 * c.g - 1.0, 2.0 * c.b - 1.0);
-                // Mitsuba's shading frame: s is ∂p/∂u made orthogonal to
-                // ns (an arbitrary tangent when ∂p/∂u vanishes), t = n × s.
-                let s = (dp_du - ns * ns.dot(dp_du))
-                    .try_normalize()
-                    .unwrap_or_else(|| Frame::from_normal(ns).s);
-                let t = ns.cross(s);
-                s * local.x + t * local.y + ns * local.z
+                // The map's tangent space is Mitsuba's shading frame.
+                Frame::from_normal_and_tangent(ns, dp_du).to_world(local)
             }
             PerturbKind::Bump { height, scale } => {
                 let g = height.luminance_gradient(uv) * *scale;

@@ -138,6 +138,14 @@ impl BsdfTextures {
         self.0.is_empty()
     }
 
+    /// True when `alpha_u` or `alpha_v` is textured: the roughness may
+    /// then differ along the two tangents somewhere on the surface.
+    pub fn may_be_anisotropic(&self) -> bool {
+        self.0
+            .iter()
+            .any(|(param, _)| matches!(param, TexturedParam::AlphaU | TexturedParam::AlphaV))
+    }
+
     /// Checks that `bsdf` has every textured parameter (one line naming
     /// the first it lacks).
     pub fn check(&self, bsdf: &Bsdf) -> Result<(), String> {
@@ -168,7 +176,7 @@ impl BsdfTextures {
 /// model lent when untextured, a copy textured at the point's UV, or
 /// either under `normalmap`, `bumpmap` or `mask` with what they make of
 /// the point ([`Wrap`]: the perturbed frame, the opacity). Its `eval`, `eval_pdf`, `sample` and `pdf` take
-/// directions in the point's shading frame (`Frame::from_normal(sp.ns)`),
+/// directions in the point's shading frame ([`crate::scene::Scene::shading_frame`]),
 /// as [`Bsdf`]'s do.
 #[derive(Clone, Copy, Debug)]
 pub enum BsdfAt<'a> {

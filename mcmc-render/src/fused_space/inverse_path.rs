@@ -28,7 +28,6 @@
 //! the reversible-jump fill of spec seed001 §4.
 
 use crate::bsdf::TransportMode;
-use crate::frame::Frame;
 use crate::fused_space::FusedState;
 use crate::integrators::bdpt::SubpathBuffers;
 use crate::integrators::path_vertex::Vertex;
@@ -169,7 +168,7 @@ fn invert_scattering(
     let (Some(wo), Some(wi)) = (dir(v, from), dir(v, to)) else {
         return Err(InverseFailure::Bsdf);
     };
-    let frame = Frame::from_normal(v.sp.ns);
+    let frame = scene.shading_frame(&v.sp);
     // Light subpaths scatter in importance mode (normal and bump maps
     // sample them differently).
     let mode = match stream {

@@ -56,7 +56,6 @@ use super::{DepthParams, RenderError, Rendered, RunSettings};
 use super::{FilmSink, Integrator, SampleDomain, SampleStats, rr_probability};
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
-use crate::frame::Frame;
 use crate::geometry::Ray;
 use crate::observer::Observer;
 use crate::sampling::{RandomSource, Stream};
@@ -172,7 +171,7 @@ pub(crate) fn random_walk(
         let u_dir = source.next_2d();
         let u_rr = source.next_1d();
         let bsdf = scene.bsdf_at(&sp);
-        let frame = Frame::from_normal(sp.ns);
+        let frame = scene.shading_frame(&sp);
         let wo = frame.to_local(-ray.d);
         let Some(bs) = bsdf.sample(wo, u_lobe, u_dir, mode) else {
             break;

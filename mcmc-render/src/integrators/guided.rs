@@ -51,7 +51,6 @@ use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings, SampleStats, rr_probability};
 use crate::color::Rgb;
 use crate::film::{Film, Filter};
-use crate::frame::Frame;
 use crate::geometry::Ray;
 use crate::guiding::{LeafId, Mixture, RecordBuffer, SdTree};
 use crate::observer::Observer;
@@ -149,7 +148,7 @@ impl GuidedPathTracer {
             }
 
             let bsdf = scene.bsdf_at(&sp);
-            let frame = Frame::from_normal(sp.ns);
+            let frame = scene.shading_frame(&sp);
             let wo = frame.to_local(wo_world);
             let mixture = Mixture::new(tree, sp.p, &bsdf, self.tree_probability);
 

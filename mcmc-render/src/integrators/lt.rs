@@ -11,7 +11,6 @@ use super::{FilmSink, Integrator, SampleDomain, SampleStats, rr_probability};
 use crate::bsdf::TransportMode;
 use crate::camera::Camera;
 use crate::color::Rgb;
-use crate::frame::Frame;
 use crate::geometry::Ray;
 use crate::observer::Observer;
 use crate::sampling::RandomSource;
@@ -122,7 +121,7 @@ impl Integrator for LightTracer {
             let sp = its.sp;
             let wo_world = -ray.d;
             let bsdf = scene.bsdf_at(&sp);
-            let frame = Frame::from_normal(sp.ns);
+            let frame = scene.shading_frame(&sp);
             let wo = frame.to_local(wo_world);
 
             // Connect to the camera: a path of depth + 1 segments.

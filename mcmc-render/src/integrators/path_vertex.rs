@@ -13,7 +13,6 @@
 use crate::bsdf::TransportMode;
 use crate::bsdf::textured::BsdfAt;
 use crate::color::Rgb;
-use crate::frame::Frame;
 use crate::geometry::SurfacePoint;
 use crate::light::Light;
 use crate::scene::Scene;
@@ -256,7 +255,7 @@ impl Vertex {
         let Some(wi) = self.direction_to(next) else {
             return Rgb::BLACK;
         };
-        let frame = Frame::from_normal(self.sp.ns);
+        let frame = scene.shading_frame(&self.sp);
         let f = bsdfs.bsdf_at(scene, level, &self.sp).eval(
             frame.to_local(self.wo),
             frame.to_local(wi),
@@ -333,7 +332,7 @@ impl Vertex {
                 let Some(wp) = prev.and_then(|prev| self.direction_to(prev)) else {
                     return 0.0;
                 };
-                let frame = Frame::from_normal(self.sp.ns);
+                let frame = scene.shading_frame(&self.sp);
                 bsdfs.bsdf_at(scene, level, &self.sp).pdf(
                     frame.to_local(wp),
                     frame.to_local(wn),

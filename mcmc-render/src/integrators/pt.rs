@@ -61,7 +61,7 @@ impl PathTracer {
             }
 
             let bsdf = scene.bsdf_at(&sp);
-            let frame = Frame::from_normal(sp.ns);
+            let frame = scene.shading_frame(&sp);
             let wo = frame.to_local(wo_world);
 
             // Next-event estimation (numbers drawn even when unused).

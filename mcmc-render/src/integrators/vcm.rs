@@ -265,7 +265,7 @@ pub struct LightVertex {
 /// Solid-angle density of the BSDF at `v` scattering from `wo` into `wi`
 /// (unit world directions away from `v`).
 fn scatter_pdf(scene: &Scene, v: &Vertex, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
-    let frame = Frame::from_normal(v.sp.ns);
+    let frame = scene.shading_frame(&v.sp);
     scene
         .bsdf_at(&v.sp)
         .pdf(frame.to_local(wo), frame.to_local(wi), mode)
@@ -545,7 +545,7 @@ impl<'a> MergePoint<'a> {
     /// Camera vertex `z[j]` (`j ≥ 1`) of a camera subpath.
     pub fn new(scene: &'a Scene, z: &[Vertex], j: usize) -> Self {
         let zj = &z[j];
-        let frame = Frame::from_normal(zj.sp.ns);
+        let frame = scene.shading_frame(&zj.sp);
         MergePoint {
             bsdf: scene.bsdf_at(&zj.sp),
             frame,

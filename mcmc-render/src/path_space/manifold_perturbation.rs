@@ -86,7 +86,6 @@ use super::lens_perturbation::{OffsetKernel, film_pixels};
 use super::retrace::component_names;
 use super::state::Path;
 use crate::bsdf::TransportMode;
-use crate::frame::Frame;
 use crate::integrators::path_vertex::{Vertex, VertexKind};
 use crate::light::Light;
 use crate::manifold::constraint::{generalized_geometry, offset_frame};
@@ -379,7 +378,7 @@ impl ManifoldPerturbation {
             },
             VertexKind::Surface => match other.and_then(|o| v.direction_to(&x.vertices[o])) {
                 Some(wo) => {
-                    let frame = Frame::from_normal(v.sp.ns);
+                    let frame = x.scene.shading_frame(&v.sp);
                     x.scene.bsdf_at(&v.sp).pdf(
                         frame.to_local(wo),
                         frame.to_local(w32),

@@ -51,7 +51,6 @@ use super::state::Path;
 use super::walk::ChainSource;
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
-use crate::frame::Frame;
 use crate::integrators::path_vertex::{Vertex, VertexKind};
 use crate::pss::PathSample;
 use crate::sampling::RandomSource;
@@ -206,7 +205,7 @@ impl MultiChainPerturbation {
                 } else {
                     let u_lobe = source.next_1d();
                     let u = source.next_2d();
-                    let frame = Frame::from_normal(its.sp.ns);
+                    let frame = scene.shading_frame(&its.sp);
                     let bs = scene
                         .bsdf_at(&its.sp)
                         .sample(frame.to_local(wo), u_lobe, u, TransportMode::Radiance)

@@ -18,7 +18,6 @@
 
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
-use crate::frame::Frame;
 use crate::integrators::pt::{ScatterOrigin, camera_ray, emitter_hit};
 use crate::integrators::{FilmSink, Integrator, SampleDomain, SampleStats};
 use crate::sampling::RandomSource;
@@ -62,7 +61,7 @@ impl SpecularChains {
             if depth == self.max_depth {
                 break;
             }
-            let frame = Frame::from_normal(sp.ns);
+            let frame = scene.shading_frame(&sp);
             let u_lobe = source.next_1d();
             let u_dir = source.next_2d();
             let Some(bs) = scene.bsdf_at(&sp).sample(

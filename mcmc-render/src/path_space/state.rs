@@ -70,7 +70,6 @@
 
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
-use crate::frame::Frame;
 use crate::integrators::path_vertex::{Vertex, VertexKind, shading_correction};
 use crate::light::Light;
 use crate::pss::{PathSample, Splat};
@@ -410,7 +409,7 @@ pub fn dirac_lobe(
     wi: Vec3,
     mode: TransportMode,
 ) -> Option<(f32, Rgb)> {
-    let frame = Frame::from_normal(v.sp.ns);
+    let frame = scene.shading_frame(&v.sp);
     let bsdf = scene.bsdf_at(&v.sp);
     let (lo, li) = (frame.to_local(wo), frame.to_local(wi));
     // In the walk's own mode: a normal or bump map's importance sampler
@@ -438,7 +437,7 @@ pub fn scattering(scene: &Scene, light: &Vertex, v: &Vertex, camera: &Vertex) ->
     if v.delta {
         return dirac_lobe(scene, v, wc, wl, TransportMode::Radiance).map_or(Rgb::BLACK, |l| l.1);
     }
-    let frame = Frame::from_normal(v.sp.ns);
+    let frame = scene.shading_frame(&v.sp);
     scene.bsdf_at(&v.sp).eval(
         frame.to_local(wc),
         frame.to_local(wl),

@@ -90,7 +90,7 @@ pub fn extend_walk(
             };
             let u_lobe = source.next_1d();
             let u = source.next_2d();
-            let frame = Frame::from_normal(from.sp.ns);
+            let frame = scene.shading_frame(&from.sp);
             let Some(bs) = scene
                 .bsdf_at(&from.sp)
                 .sample(frame.to_local(wb), u_lobe, u, mode)

@@ -293,6 +293,10 @@ pub struct Scene {
     wrappers: Vec<Wrappers>,
     /// True when some BSDF is a `mask`.
     has_masks: bool,
+    /// Per BSDF (indexed like `bsdfs`; empty when none is anisotropic):
+    /// true when its shading frame must follow ∂p/∂u, as Mitsuba 3's does,
+    /// because its roughness is (or may be, textured) anisotropic.
+    tangent_framed: Vec<bool>,
     /// Parsed BSDFs, for reporting.
     pub bsdf_descs: Vec<BsdfDesc>,
     /// Emitters and the light-selection distribution.
@@ -346,6 +350,20 @@ impl Scene {
             }
             bsdfs.push(b);
         }
+        let tangent_framed: Vec<bool> = (0..bsdfs.len())
+            .map(|i| {
+                bsdfs[i].is_anisotropic()
+                    || desc
+                        .bsdf_textures
+                        .get(i)
+                        .is_some_and(BsdfTextures::may_be_anisotropic)
+            })
+            .collect();
+        let tangent_framed = if tangent_framed.contains(&true) {
+            tangent_framed
+        } else {
+            Vec::new()
+        };
         let textures = if desc.bsdf_textures.iter().all(BsdfTextures::is_empty) {
             Vec::new()
         } else {
@@ -433,6 +451,7 @@ impl Scene {
             bsdfs,
             textures,
             has_masks: wrappers.iter().any(|w| w.opacity.is_some()),
+            tangent_framed,
             wrappers,
             bsdf_descs: desc.bsdfs,
             lights,
@@ -455,10 +474,32 @@ impl Scene {
         })
     }
 
+    /// The shading frame at a surface point, in which every integrator
+    /// evaluates, samples and inverts [`Scene::bsdf_at`]: +z the shading
+    /// normal. Isotropic BSDFs do not depend on the tangent, so they get
+    /// the cheap [`Frame::from_normal`]; anisotropic ones get Mitsuba 3's
+    /// frame, whose tangent is ∂p/∂u ([`Frame::from_normal_and_tangent`]),
+    /// so `alpha_u` lies along the texture's u axis as in Mitsuba.
+    #[inline(always)]
+    pub fn shading_frame(&self, sp: &SurfacePoint) -> Frame {
+        let bsdf = self.shapes[sp.shape as usize].bsdf as usize;
+        if self.tangent_framed.get(bsdf).copied().unwrap_or(false) {
+            self.tangent_frame(sp)
+        } else {
+            Frame::from_normal(sp.ns)
+        }
+    }
+
+    /// Mitsuba 3's shading frame at `sp` (kept out of the hot path).
+    #[inline(never)]
+    fn tangent_frame(&self, sp: &SurfacePoint) -> Frame {
+        Frame::from_normal_and_tangent(sp.ns, self.geometry.tangents(sp).0)
+    }
+
     /// The BSDF at a surface point, with its textured parameters (if any)
     /// evaluated at the point's UV and, under `normalmap` or `bumpmap`,
     /// the perturbed frame at the point (relative to the shading frame
-    /// `Frame::from_normal(sp.ns)` the integrators use).
+    /// [`Scene::shading_frame`] the integrators use).
     #[inline(always)]
     pub fn bsdf_at(&self, sp: &SurfacePoint) -> BsdfAt<'_> {
         self.bsdf_at_in(&self.bsdfs, sp)
@@ -489,7 +530,7 @@ impl Scene {
     fn wrap(&self, w: &Wrappers, sp: &SurfacePoint) -> Wrap {
         let perturbed = w.perturbation.as_ref().map(|p| {
             let n = p.normal(sp.ns, sp.ng, sp.uv, self.geometry.tangents(sp));
-            p.at(&Frame::from_normal(sp.ns), n)
+            p.at(&self.shading_frame(sp), n)
         });
         let opacity = w
             .opacity
