@@ -251,7 +251,13 @@ fn relt_agrees_with_pt_on_the_cornell_box() {
     check("relt", pt_reference(), &relt_reps(None, 12, 8000));
 }
 
+/// Ignored for its budget (about 70 s of the default suite's 15 minutes):
+/// the two settings' mechanisms are checked exactly in mcmc-core (the
+/// random-neighbour move in the transition-matrix tests, the sweep shares
+/// by the resting-level exact test); run with
+/// `cargo test -p mcmc-render --test agree_mlt -- --ignored relt_with_a_resting`.
 #[test]
+#[ignore]
 fn relt_with_a_resting_uniform_replica_and_one_swap_per_sweep_agrees_with_pt() {
     // The non-default allocation and exchange: the uniform replica draws
     // in a quarter of the sweeps (its film over its own draws, the MIS
