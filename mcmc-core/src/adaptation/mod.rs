@@ -7,7 +7,10 @@
 //!   metric is estimated, and a final fast buffer (50);
 //! - [`MetricEstimator`]: Welford estimates of the variances (diagonal) or
 //!   covariance (dense), regularised towards `10⁻³ I` like Stan;
-//! - [`Warmup`]: all three together. After the last warm-up iteration (or
+//! - [`StepSizeAdaptation`]: whether dual averaging restarts at every
+//!   metric update (Stan) or runs once through the warm-up (nuts-rs; NUTS's
+//!   default);
+//! - [`Warmup`]: all of these together. After the last warm-up iteration (or
 //!   [`Warmup::freeze`]) nothing changes any more, so sampling is an exact
 //!   Markov chain.
 
