@@ -16,10 +16,13 @@
 //! buffer (CmdStan's `term_buffer`; default that of
 //! `NutsSettings::default()`). `--samplers` also takes the warm-up
 //! variants `nuts-stan` (CmdStan's 75 / 25 / 50, diagonal metric from the
-//! draws), `nuts-tb150` (terminal buffer 150), `nuts-early` (10 / 10 /
-//! 150: metric windows from early on), `nuts-grad` and `nuts-grad-early`
-//! (the same with nuts-rs's metric from draws and gradients,
-//! `MetricAdaptation::DiagonalGradient`).
+//! draws, step size restarted at every metric update), `nuts-tb150`
+//! (terminal buffer 150), `nuts-early` (10 / 10 / 150: metric windows from
+//! early on), `nuts-grad` and `nuts-grad-early` (the same with nuts-rs's
+//! metric from draws and gradients, `MetricAdaptation::DiagonalGradient`),
+//! all with Stan's restarts, and `nuts-cont-tb50` (75 / 25 / 50 with the
+//! default continuous step-size adaptation). `sampling` counts the
+//! gradients after warm-up.
 //!
 //! Every sampler runs `chains` chains one after the other on one thread,
 //! each with `warmup` adaptation steps and `draws` kept draws, from a
@@ -42,7 +45,7 @@
 #[path = "targets.rs"]
 mod targets;
 
-use mcmc_core::adaptation::{MetricAdaptation, WarmupSchedule};
+use mcmc_core::adaptation::{MetricAdaptation, StepSizeAdaptation, WarmupSchedule};
 use mcmc_core::diagnostics::summarize;
 use mcmc_core::fit::NutsSettings;
 use mcmc_core::gradient::{Differentiable, GradientPayload, GradientTarget};
@@ -63,6 +66,8 @@ struct Run {
     sampler: String,
     seconds: f64,
     gradient_evaluations: u64,
+    /// Of `gradient_evaluations`, those spent after warm-up.
+    sampling_gradients: u64,
     hessian_evaluations: u64,
     ess_bulk_min: f64,
     rhat_max: f64,
@@ -99,20 +104,60 @@ const SAMPLERS: [&str; 5] = ["nuts", "hmc", "mala", "h2mc", "nuts-rs"];
 
 /// Warm-up variants of our NUTS, selectable with `--samplers` beside the
 /// default `nuts` (`mcmc_core::fit::NutsSettings::default()`'s warm-up):
-/// name, metric, CmdStan's `init_buffer`, `window`, `term_buffer`.
-const NUTS_VARIANTS: [(&str, MetricAdaptation, usize, usize, usize); 5] = [
-    ("nuts-stan", MetricAdaptation::Diagonal, 75, 25, 50),
-    ("nuts-tb150", MetricAdaptation::Diagonal, 75, 25, 150),
-    ("nuts-early", MetricAdaptation::Diagonal, 10, 10, 150),
-    ("nuts-grad", MetricAdaptation::DiagonalGradient, 75, 25, 150),
+/// name, metric, CmdStan's `init_buffer`, `window`, `term_buffer`, and what
+/// the step size does at metric updates.
+const NUTS_VARIANTS: [(
+    &str,
+    MetricAdaptation,
+    usize,
+    usize,
+    usize,
+    StepSizeAdaptation,
+); 6] = [
+    ("nuts-stan", MetricAdaptation::Diagonal, 75, 25, 50, RESTART),
+    (
+        "nuts-tb150",
+        MetricAdaptation::Diagonal,
+        75,
+        25,
+        150,
+        RESTART,
+    ),
+    (
+        "nuts-early",
+        MetricAdaptation::Diagonal,
+        10,
+        10,
+        150,
+        RESTART,
+    ),
+    (
+        "nuts-grad",
+        MetricAdaptation::DiagonalGradient,
+        75,
+        25,
+        150,
+        RESTART,
+    ),
     (
         "nuts-grad-early",
         MetricAdaptation::DiagonalGradient,
         10,
         10,
         150,
+        RESTART,
+    ),
+    (
+        "nuts-cont-tb50",
+        MetricAdaptation::Diagonal,
+        75,
+        25,
+        50,
+        CONTINUOUS,
     ),
 ];
+const RESTART: StepSizeAdaptation = StepSizeAdaptation::Restart;
+const CONTINUOUS: StepSizeAdaptation = StepSizeAdaptation::Continuous;
 
 fn parse() -> Result<Options, String> {
     let mut o = Options {
@@ -249,6 +294,7 @@ impl<G: GradientTarget> Counted for H2mc<G> {
 /// What a run counted besides its draws.
 struct Counts {
     gradients: u64,
+    sampling_gradients: u64,
     hessians: u64,
     divergences: u64,
     step: f64,
@@ -267,6 +313,7 @@ fn finish(target: &str, sampler: &str, seconds: f64, c: Counts, draws: &[Vec<Vec
         sampler: sampler.into(),
         seconds,
         gradient_evaluations: c.gradients,
+        sampling_gradients: c.sampling_gradients,
         hessian_evaluations: c.hessians,
         ess_bulk_min: ess,
         rhat_max: rhat,
@@ -296,6 +343,7 @@ where
     let start = Instant::now();
     let mut all = Vec::new();
     let (mut grads, mut hessians, mut divergences, mut step) = (0, 0, 0, 0.0);
+    let mut sampling_grads = 0;
     for c in 0..o.chains {
         let mut chain = Chain::new(
             &t,
@@ -309,6 +357,7 @@ where
         }
         chain.freeze();
         let warm_divergences = chain.algorithm().kernel().counts().divergences;
+        let warm_gradients = chain.algorithm().kernel().counts().gradient_evaluations;
         let mut draws = Vec::with_capacity(o.draws);
         for _ in 0..o.draws {
             for _ in 0..thin {
@@ -318,6 +367,7 @@ where
         }
         let k = chain.algorithm().kernel();
         grads += k.counts().gradient_evaluations + 1;
+        sampling_grads += k.counts().gradient_evaluations - warm_gradients;
         if sampler == "h2mc" {
             // One Hessian per proposal (at the proposed state) plus the start.
             hessians += k.counts().trajectories + 1;
@@ -332,6 +382,7 @@ where
         start.elapsed().as_secs_f64(),
         Counts {
             gradients: grads,
+            sampling_gradients: sampling_grads,
             hessians,
             divergences,
             step,
@@ -407,6 +458,7 @@ fn run_nuts<G: GradientTarget + Clone>(
     let start = Instant::now();
     let mut all = Vec::new();
     let (mut grads, mut divergences, mut step) = (0, 0, 0.0);
+    let mut sampling_grads = 0;
     for c in 0..o.chains {
         let math = CpuMath::new(NutsTarget {
             g: g.clone(),
@@ -424,6 +476,7 @@ fn run_nuts<G: GradientTarget + Clone>(
             let (x, info) = chain.draw().map_err(|e| format!("nuts-rs: {e}"))?;
             grads += info.num_steps;
             if i >= o.warmup {
+                sampling_grads += info.num_steps;
                 divergences += info.diverging as u64;
                 step = info.step_size;
                 draws.push(x.to_vec());
@@ -437,6 +490,7 @@ fn run_nuts<G: GradientTarget + Clone>(
         start.elapsed().as_secs_f64(),
         Counts {
             gradients: grads,
+            sampling_gradients: sampling_grads,
             hessians: 0,
             divergences,
             step,
@@ -497,11 +551,12 @@ fn main() {
         return;
     }
     println!(
-        "{:<40} {:<8} {:>8} {:>11} {:>9} {:>7} {:>9} {:>10} {:>5} {:>8}",
+        "{:<40} {:<8} {:>8} {:>11} {:>11} {:>9} {:>7} {:>9} {:>10} {:>5} {:>8}",
         "target",
         "sampler",
         "seconds",
         "gradients",
+        "sampling",
         "ESS min",
         "R-hat",
         "ESS/s",
@@ -511,11 +566,12 @@ fn main() {
     );
     for r in &report.runs {
         println!(
-            "{:<40} {:<8} {:>8.3} {:>11} {:>9.0} {:>7.3} {:>9.0} {:>10.5} {:>5} {:>8.4}",
+            "{:<40} {:<8} {:>8.3} {:>11} {:>11} {:>9.0} {:>7.3} {:>9.0} {:>10.5} {:>5} {:>8.4}",
             r.target,
             r.sampler,
             r.seconds,
             r.gradient_evaluations,
+            r.sampling_gradients,
             r.ess_bulk_min,
             r.rhat_max,
             r.ess_per_second,
@@ -542,12 +598,13 @@ fn compare<G: GradientTarget + Clone>(name: &str, g: &G, time: f64, o: &Options)
     if on("nuts") {
         let s = NutsSettings::default();
         let tb = o.nuts_term_buffer.unwrap_or(s.term_buffer);
-        let make = || nuts(g.clone(), w, s.metric, s.init_buffer, s.window, tb);
+        let schedule = (s.init_buffer, s.window, tb);
+        let make = || nuts(g.clone(), w, s.metric, schedule, s.step_size_adaptation);
         runs.push(run_ours(name, "nuts", g, make, 1, o));
     }
-    for (variant, metric, init, window, term) in NUTS_VARIANTS {
+    for (variant, metric, init, window, term, mode) in NUTS_VARIANTS {
         if on(variant) {
-            let make = || nuts(g.clone(), w, metric, init, window, term);
+            let make = || nuts(g.clone(), w, metric, (init, window, term), mode);
             runs.push(run_ours(name, variant, g, make, 1, o));
         }
     }
@@ -580,19 +637,20 @@ fn fail(e: &str) -> ! {
 }
 
 /// Our NUTS: warm-up with Stan's step-size heuristic, dual averaging to
-/// 0.8 and `metric` windows (`init` / first `window` / `term` buffer, as
-/// CmdStan's `init_buffer`, `window`, `term_buffer`); maximum depth 10.
+/// 0.8 (restarted at metric updates or not, `mode`) and `metric` windows
+/// (`schedule` = init / first `window` / `term` buffer, as CmdStan's
+/// `init_buffer`, `window`, `term_buffer`); maximum depth 10.
 fn nuts<G: GradientTarget>(
     g: G,
     warmup: usize,
     metric: MetricAdaptation,
-    init: usize,
-    window: usize,
-    term: usize,
+    (init, window, term): (usize, usize, usize),
+    mode: StepSizeAdaptation,
 ) -> Nuts<G> {
     Nuts::new(g, 1.0)
         .and_then(|n| n.with_warmup(warmup, 0.8, metric))
         .and_then(|n| n.with_warmup_schedule(WarmupSchedule::new(warmup, init, window, term)))
+        .map(|n| n.with_step_size_adaptation(mode))
         .expect("valid settings")
 }
 

@@ -1,6 +1,7 @@
 //! The posteriordb example's models and its agreement with posteriordb's
 //! reference draws.
 
+use mcmc_core::adaptation::StepSizeAdaptation;
 use mcmc_core::fit::NutsSettings;
 use mcmc_core::gradient::GradientTarget;
 use mcmc_core::rng::{standard_normal, stream_rng};
@@ -58,8 +59,10 @@ fn gradients_match_finite_differences() {
 fn nuts_agrees_with_posteriordb_references() {
     let settings = NutsSettings {
         seed: 2026,
-        // CmdStan's terminal buffer: the committed expectations were made with it.
+        // CmdStan's terminal buffer and step-size restarts: the committed
+        // expectations were made with them.
         term_buffer: 50,
+        step_size_adaptation: StepSizeAdaptation::Restart,
         ..Default::default()
     };
     let mut failures = Vec::new();
@@ -120,8 +123,10 @@ fn dropped_jacobian_fails_the_reference_check() {
     };
     let settings = NutsSettings {
         seed: 2026,
-        // CmdStan's terminal buffer: the committed expectations were made with it.
+        // CmdStan's terminal buffer and step-size restarts: the committed
+        // expectations were made with them.
         term_buffer: 50,
+        step_size_adaptation: StepSizeAdaptation::Restart,
         ..Default::default()
     };
     let (r, _) = run(&wrong, &settings).unwrap();

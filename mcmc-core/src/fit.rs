@@ -6,7 +6,7 @@
 //! its initial point and every transition from `stream_rng(seed, c)` only,
 //! so a fit is bit-identical for any number of threads.
 
-use crate::adaptation::{MetricAdaptation, WarmupSchedule};
+use crate::adaptation::{MetricAdaptation, StepSizeAdaptation, WarmupSchedule};
 use crate::chain::Chain;
 use crate::diagnostics::{DiagnosticsError, Summary, e_bfmi, summarize};
 use crate::error::{Result, invalid};
@@ -50,7 +50,8 @@ pub struct NutsSettings {
     /// buffer gives a better settled step size: on the four targets of
     /// `examples/hmc_vs_nuts` it had the best ESS per gradient of the
     /// variants measured (`docs/performance.md`; 22 % fewer gradients on
-    /// the 100-d Gaussian). Set 50 to reproduce CmdStan's runs.
+    /// the 100-d Gaussian). Set 50 (and `step_size_adaptation: Restart`)
+    /// to reproduce CmdStan's runs.
     pub term_buffer: usize,
     /// Warm-up iterations before the first metric window, step size only
     /// (CmdStan's `init_buffer`, 75).
@@ -58,6 +59,9 @@ pub struct NutsSettings {
     /// Length of the first metric window; later windows double (CmdStan's
     /// `window`, 25).
     pub window: usize,
+    /// What the step size does at metric updates: `Continuous` (default,
+    /// one dual-averaging run as nuts-rs) or `Restart` (CmdStan's).
+    pub step_size_adaptation: StepSizeAdaptation,
 }
 
 impl Default for NutsSettings {
@@ -75,6 +79,7 @@ impl Default for NutsSettings {
             term_buffer: 150,
             init_buffer: 75,
             window: 25,
+            step_size_adaptation: StepSizeAdaptation::Continuous,
         }
     }
 }
@@ -213,7 +218,8 @@ where
                 settings.init_buffer,
                 settings.window,
                 settings.term_buffer,
-            ))?;
+            ))?
+            .with_step_size_adaptation(settings.step_size_adaptation);
         let mut chain = Chain::new(&t, start, MetropolisHastings::new(nuts), rng)?;
         let clock = Instant::now();
         for _ in 0..settings.warmup {

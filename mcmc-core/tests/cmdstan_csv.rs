@@ -16,6 +16,7 @@
 //! reading with ours: the draws and sampler statistics ArviZ and cmdstanpy
 //! parsed, and ArviZ's summary and E-BFMI against `mcmc_core::diagnostics`.
 
+use mcmc_core::adaptation::StepSizeAdaptation;
 use mcmc_core::cmdstan::{vector_names, write_chain};
 use mcmc_core::diagnostics::{ess_bulk, rank_normalized_split_rhat};
 use mcmc_core::fit::{Fit, NutsSettings, sample_nuts};
@@ -52,8 +53,10 @@ fn fit() -> Fit {
         warmup: 300,
         draws: 200,
         seed: 5,
-        // CmdStan's terminal buffer: the committed expectations were made with it.
+        // CmdStan's terminal buffer and step-size restarts: the committed
+        // expectations were made with them.
         term_buffer: 50,
+        step_size_adaptation: StepSizeAdaptation::Restart,
         ..Default::default()
     };
     sample_nuts(&Gauss3, &s, None::<fn(usize) -> Vec<f64>>).unwrap()

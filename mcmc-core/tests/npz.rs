@@ -14,6 +14,7 @@
 //! This test regenerates the fit, checks that the writer still produces
 //! the committed bytes, and compares numpy's reading with the fit.
 
+use mcmc_core::adaptation::StepSizeAdaptation;
 use mcmc_core::fit::{Fit, NutsSettings, sample_nuts};
 use mcmc_core::npz::write_npz;
 use serde_json::Value;
@@ -29,8 +30,10 @@ fn fit() -> Fit {
         warmup: 200,
         draws: 100,
         seed: 9,
-        // CmdStan's terminal buffer: the committed expectations were made with it.
+        // CmdStan's terminal buffer and step-size restarts: the committed
+        // expectations were made with them.
         term_buffer: 50,
+        step_size_adaptation: StepSizeAdaptation::Restart,
         ..Default::default()
     };
     sample_nuts(&Ar1Gaussian::new(3, 0.5), &s, None::<fn(usize) -> Vec<f64>>).unwrap()

@@ -336,3 +336,78 @@ fn mid_run_non_finite_densities_are_counted_divergences_and_sampling_stays_exact
         assert!(z.abs() < 4.5, "truncated mean: z = {z}");
     }
 }
+
+/// The U-turn test sums its dot products in four interleaved partial sums
+/// plus a tail; for every dimension from 1 to 13 (empty, partial and full
+/// blocks, tails of 0–3) its answer equals that of a plain left-to-right
+/// sum on random vectors (whose dot products are far from 0 relative to
+/// rounding, so the two orders cannot disagree honestly). Control: a
+/// version that forgot the tail disagrees somewhere.
+#[test]
+fn no_u_turn_agrees_with_a_plain_sum_in_every_dimension() {
+    use mcmc_core::kernel::nuts::no_u_turn;
+    use mcmc_core::rng::standard_normal;
+    let plain = |sm: &[f64], sp: &[f64], a: &[f64], b: &[f64], n: usize| {
+        let (mut m, mut p) = (0.0, 0.0);
+        for i in 0..n {
+            m += sm[i] * (a[i] + b[i]);
+            p += sp[i] * (a[i] + b[i]);
+        }
+        m > 0.0 && p > 0.0
+    };
+    let mut rng = stream_rng(77, 0);
+    let (mut checked, mut control_differs) = (0, false);
+    for d in 1..=13 {
+        for _ in 0..500 {
+            let v: Vec<Vec<f64>> = (0..4)
+                .map(|_| (0..d).map(|_| standard_normal(&mut rng)).collect())
+                .collect();
+            assert_eq!(
+                no_u_turn(&v[0], &v[1], &v[2], &v[3]),
+                plain(&v[0], &v[1], &v[2], &v[3], d),
+                "d = {d}"
+            );
+            checked += 1;
+            if plain(&v[0], &v[1], &v[2], &v[3], d / 4 * 4) != plain(&v[0], &v[1], &v[2], &v[3], d)
+            {
+                control_differs = true;
+            }
+        }
+    }
+    assert_eq!(checked, 13 * 500);
+    assert!(control_differs, "the tail-dropping control must disagree");
+}
+
+/// Standard normal in 9-d whose gradient entry `j` is +∞ where `x_j > 1.5`
+/// (a finite density with a non-finite gradient is an invalid point).
+#[derive(Clone, Copy)]
+struct InfiniteGradientAt(usize);
+
+impl GradientTarget for InfiniteGradientAt {
+    fn dim(&self) -> usize {
+        9
+    }
+    fn log_density_gradient(&self, x: &[f64], g: &mut [f64]) -> f64 {
+        for i in 0..9 {
+            g[i] = -x[i];
+        }
+        if x[self.0] > 1.5 {
+            g[self.0] = f64::INFINITY;
+        }
+        -0.5 * x.iter().map(|v| v * v).sum::<f64>()
+    }
+}
+
+/// The gradient's finiteness check runs over blocks of four and a tail: an
+/// infinite entry inside a block (index 5) and in the tail (index 8) both
+/// end the trajectory as an invalid point, counted, and no draw lies
+/// beyond the wall.
+#[test]
+fn an_infinite_gradient_entry_anywhere_is_an_invalid_point() {
+    for j in [5, 8] {
+        let fit = sample_nuts(&InfiniteGradientAt(j), &settings(1, 200, 400, 3), NO_INIT).unwrap();
+        let k = &fit.chains[0].kernel;
+        assert!(k.invalid > 0, "j = {j}: {k:?}");
+        assert!(fit.chains[0].draws.iter().all(|x| x[j] <= 1.5), "j = {j}");
+    }
+}

@@ -35,10 +35,11 @@
 
 use super::phase_pool::PhasePoint;
 use super::{Kernel, Metric, Proposal, StepObservation};
-use crate::adaptation::{MetricAdaptation, Warmup, WarmupSchedule};
+use crate::adaptation::{MetricAdaptation, StepSizeAdaptation, Warmup, WarmupSchedule};
 use crate::error::{Result, invalid};
 use crate::gradient::{
-    GradientPayload, GradientTarget, check_dimension, check_state_dimension, evaluate_checked,
+    GradientPayload, GradientTarget, all_finite, check_dimension, check_state_dimension,
+    evaluate_checked,
 };
 use crate::rng::{ChainRng, uniform};
 use crate::sample::Sample;
@@ -210,6 +211,14 @@ impl<G: GradientTarget> Hmc<G> {
         Ok(self)
     }
 
+    /// Sets what the warm-up's step size does at metric updates (no effect
+    /// without a warm-up).
+    pub(crate) fn set_step_size_adaptation(&mut self, mode: StepSizeAdaptation) {
+        if let Some(w) = self.warmup.take() {
+            self.warmup = Some(w.with_step_size_adaptation(mode));
+        }
+    }
+
     /// Replaces the windows of the warm-up set by [`Self::with_warmup`].
     pub(crate) fn with_warmup_schedule(mut self, schedule: WarmupSchedule) -> Result<Self> {
         let w = self
@@ -358,7 +367,7 @@ impl<G: GradientTarget> Hmc<G> {
     #[inline]
     fn evaluate_at(&mut self, x: &[f64], grad: &mut [f64]) -> f64 {
         self.stats.gradient_evaluations += 1;
-        if x.iter().all(|v| v.is_finite()) {
+        if all_finite(x) {
             evaluate_checked(&self.target, x, grad)
         } else {
             f64::NAN

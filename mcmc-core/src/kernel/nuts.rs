@@ -23,8 +23,12 @@
 //!
 //! **Warm-up**: the HMC warm-up (dual averaging of the step size on
 //! `accept_stat`, Stan's windows for a diagonal or dense metric), plus
-//! Stan's step-size heuristic at the start and after each metric update
-//! (double or halve `ε` until the one-step acceptance crosses 0.8).
+//! Stan's step-size heuristic at the start (double or halve `ε` until the
+//! one-step acceptance crosses 0.8). By default dual averaging then runs
+//! through the whole warm-up without restarting at metric updates
+//! ([`StepSizeAdaptation::Continuous`], as nuts-rs); with
+//! [`StepSizeAdaptation::Restart`] it is Stan's: heuristic and restart
+//! after every metric update.
 //!
 //! **Failures**: a point with `H − H₀ > 1000` (Stan's `max_deltaH`) or a
 //! NaN/infinite density or gradient, or `ln π = −∞`, ends the tree as a
@@ -33,7 +37,7 @@
 
 use super::phase_pool::PointPool;
 use super::{Hmc, Kernel, Metric, Proposal, StepObservation};
-use crate::adaptation::{MetricAdaptation, WarmupSchedule};
+use crate::adaptation::{MetricAdaptation, StepSizeAdaptation, WarmupSchedule};
 use crate::error::{Result, invalid};
 use crate::gradient::{GradientPayload, GradientTarget};
 use crate::kernel::GradientKernelStatistics;
@@ -90,15 +94,34 @@ struct SubTree {
 /// The generalised no-U-turn criterion for a trajectory whose summed
 /// momentum is `rho_a + rho_b` and whose end velocities are `sharp_minus`
 /// and `sharp_plus`: true while both ends still move along `rho`.
+///
+/// The two dot products are summed in four interleaved partial sums (the
+/// tree builder calls this three times per merge, i.e. about three times
+/// per leapfrog step; a single running sum is a chain of dependent
+/// additions that costs more than a cheap gradient).
 #[inline]
 pub fn no_u_turn(sharp_minus: &[f64], sharp_plus: &[f64], rho_a: &[f64], rho_b: &[f64]) -> bool {
-    let (mut minus, mut plus) = (0.0, 0.0);
-    for i in 0..rho_a.len() {
-        let r = rho_a[i] + rho_b[i];
-        minus += sharp_minus[i] * r;
-        plus += sharp_plus[i] * r;
+    let d = rho_a.len();
+    let (sm, sp, rb) = (&sharp_minus[..d], &sharp_plus[..d], &rho_b[..d]);
+    let (mut minus, mut plus) = ([0.0f64; 4], [0.0f64; 4]);
+    let blocks = d / 4 * 4;
+    for i in (0..blocks).step_by(4) {
+        for k in 0..4 {
+            let r = rho_a[i + k] + rb[i + k];
+            minus[k] += sm[i + k] * r;
+            plus[k] += sp[i + k] * r;
+        }
     }
-    minus > 0.0 && plus > 0.0
+    let (mut m, mut p) = (
+        (minus[0] + minus[1]) + (minus[2] + minus[3]),
+        (plus[0] + plus[1]) + (plus[2] + plus[3]),
+    );
+    for i in blocks..d {
+        let r = rho_a[i] + rb[i];
+        m += sm[i] * r;
+        p += sp[i] * r;
+    }
+    m > 0.0 && p > 0.0
 }
 
 /// NUTS over `Vec<f64>` with gradient payloads.
@@ -123,6 +146,7 @@ pub struct Nuts<G> {
     max_delta_h: f64,
     // Run Stan's step-size heuristic before the next transition.
     init_step_pending: bool,
+    step_size_adaptation: StepSizeAdaptation,
     last: NutsDrawStatistics,
     depth_saturated: u64,
     // Test control only: always take the newest sub-tree's sample (biased).
@@ -143,6 +167,7 @@ impl<G: GradientTarget> Nuts<G> {
             max_depth: 10,
             max_delta_h: 1000.0,
             init_step_pending: false,
+            step_size_adaptation: StepSizeAdaptation::Continuous,
             last: NutsDrawStatistics::default(),
             depth_saturated: 0,
             take_newest: false,
@@ -186,8 +211,20 @@ impl<G: GradientTarget> Nuts<G> {
         metric: MetricAdaptation,
     ) -> Result<Self> {
         self.hmc = self.hmc.with_warmup(iterations, target_accept, metric)?;
+        self.hmc.set_step_size_adaptation(self.step_size_adaptation);
         self.init_step_pending = iterations > 0;
         Ok(self)
+    }
+
+    /// What the warm-up's step size does at metric updates: by default
+    /// [`StepSizeAdaptation::Continuous`] (one dual-averaging run through
+    /// the warm-up, as nuts-rs; more ESS per gradient on every target of
+    /// `examples/hmc_vs_nuts`, `docs/performance.md`);
+    /// [`StepSizeAdaptation::Restart`] reproduces Stan's warm-up.
+    pub fn with_step_size_adaptation(mut self, mode: StepSizeAdaptation) -> Self {
+        self.step_size_adaptation = mode;
+        self.hmc.set_step_size_adaptation(mode);
+        self
     }
 
     /// Replaces the Stan windows of [`Self::with_warmup`] by `schedule`
@@ -623,7 +660,7 @@ impl<G: GradientTarget> Kernel<Vec<f64>, GradientPayload> for Nuts<G> {
                 .adapt_with_gradient(self.last.accept_stat, observation.state, gradient)
         {
             // Stan re-runs its step-size heuristic after a metric update.
-            self.init_step_pending = true;
+            self.init_step_pending = self.step_size_adaptation == StepSizeAdaptation::Restart;
         }
     }
 
@@ -964,7 +1001,8 @@ mod tests {
 
     /// The draws and statistics of fixed seeds, recorded with the tree
     /// builder of commit f7741c7 (before the point pool): any change to the
-    /// tree building must leave them bit-identical.
+    /// tree building must leave them bit-identical. The warm-up cases pin
+    /// Stan's step-size restarts, the default when they were recorded.
     #[test]
     fn draws_are_bit_identical_to_the_recorded_fingerprints() {
         let cases = [
@@ -973,7 +1011,8 @@ mod tests {
                 Nuts::new(Correlated, 1.0)
                     .unwrap()
                     .with_warmup(150, 0.8, MetricAdaptation::Diagonal)
-                    .unwrap(),
+                    .unwrap()
+                    .with_step_size_adaptation(StepSizeAdaptation::Restart),
                 vec![0.3, -0.2],
                 400,
             ),
@@ -984,7 +1023,8 @@ mod tests {
                     .with_metric(Metric::dense(&[vec![4.0, 0.5], vec![0.5, 9.0]]).unwrap())
                     .unwrap()
                     .with_warmup(100, 0.8, MetricAdaptation::Dense)
-                    .unwrap(),
+                    .unwrap()
+                    .with_step_size_adaptation(StepSizeAdaptation::Restart),
                 vec![0.5, 0.5],
                 300,
             ),
