@@ -93,10 +93,12 @@ fn mept_is_mlt_with_the_manifold_perturbation_on() {
     let m = mept_mutations();
     assert_eq!(m.manifold_perturbation, 1.0);
     assert_eq!(m.independent, 0.3);
+    assert_eq!(m.lens_perturbation, 0.0);
     assert_eq!(
         PathMutations {
             manifold_perturbation: 0.0,
             independent: 0.0,
+            lens_perturbation: 1.0,
             ..m
         },
         mcmc_render::integrators::mlt::Mlt::default().mutations()

@@ -8,9 +8,11 @@
 //! registered name of its own rather than an alias of `mlt`, because an
 //! alias shares `mlt`'s defaults and the point of the name is a different
 //! defaults: the settings are exactly `mlt`'s (every parameter, same
-//! names), with `manifold_perturbation` = 1 instead of 0 and
-//! `independent_mutation` = 0.3 instead of 0. `--integrator mlt --set
-//! manifold_perturbation=1 --set independent_mutation=0.3` runs the same
+//! names), with `manifold_perturbation` = 1 instead of 0,
+//! `independent_mutation` = 0.3 instead of 0 and `lens_perturbation` = 0
+//! instead of 1 (`mept` was measured on caustic-sds without it).
+//! `--integrator mlt --set manifold_perturbation=1 --set
+//! independent_mutation=0.3 --set lens_perturbation=0` runs the same
 //! thing.
 //!
 //! Why the independent proposal (a fresh start-up path as a large step)
@@ -34,15 +36,15 @@ crate::settings! {
     /// `mlt`'s settings with the manifold perturbation on.
     pub struct Mept {
         flatten {
-            /// Every `mlt` parameter (manifold_perturbation defaults to 1, independent_mutation to 0.3).
-            pub mlt: Mlt = Mlt { manifold_perturbation: 1.0, independent_mutation: 0.3, ..Mlt::default() };
+            /// Every `mlt` parameter (manifold_perturbation defaults to 1, independent_mutation to 0.3, lens_perturbation to 0).
+            pub mlt: Mlt = Mlt { manifold_perturbation: 1.0, independent_mutation: 0.3, lens_perturbation: 0.0, ..Mlt::default() };
         }
     }
 }
 
 impl IntegratorSettings for Mept {
     const NAME: &'static str = "mept";
-    const DESCRIPTION: &'static str = "Path-space MLT with the manifold perturbation on (manifold exploration, Jakob & Marschner 2012): mlt with manifold_perturbation = 1 and independent_mutation = 0.3.";
+    const DESCRIPTION: &'static str = "Path-space MLT with the manifold perturbation on (manifold exploration, Jakob & Marschner 2012): mlt with manifold_perturbation = 1, independent_mutation = 0.3 and lens_perturbation = 0.";
 
     fn validate(&self) -> Result<(), String> {
         IntegratorSettings::validate(&self.mlt)
