@@ -94,6 +94,7 @@ fn mept_is_mlt_with_the_manifold_perturbation_on() {
     assert_eq!(m.manifold_perturbation, 1.0);
     assert_eq!(m.independent, 0.3);
     assert_eq!(m.lens_perturbation, 0.0);
+    assert_eq!(Mept::default().mlt.chain.bootstrap, 1_000_000);
     assert_eq!(
         PathMutations {
             manifold_perturbation: 0.0,
