@@ -44,7 +44,8 @@ fn pt_reference() -> &'static [[f64; 3]] {
 }
 
 /// The `mept` mixture: the bidirectional mutation and the manifold
-/// perturbation, weight 1 each (what `mept`'s defaults select).
+/// perturbation, weight 1 each, and the independent proposal at 0.3
+/// (what `mept`'s defaults select).
 fn mept_mutations() -> PathMutations {
     Mept::default().mlt.mutations()
 }
@@ -91,9 +92,14 @@ fn mept_replicates() -> &'static [[f64; 3]] {
 fn mept_is_mlt_with_the_manifold_perturbation_on() {
     let m = mept_mutations();
     assert_eq!(m.manifold_perturbation, 1.0);
+    assert_eq!(m.independent, 0.3);
+    assert_eq!(m.lens_perturbation, 0.0);
+    assert_eq!(Mept::default().mlt.chain.bootstrap, 1_000_000);
     assert_eq!(
         PathMutations {
             manifold_perturbation: 0.0,
+            independent: 0.0,
+            lens_perturbation: 1.0,
             ..m
         },
         mcmc_render::integrators::mlt::Mlt::default().mutations()
@@ -103,6 +109,7 @@ fn mept_is_mlt_with_the_manifold_perturbation_on() {
     assert_eq!(integ.name(), "mept");
     let json = integ.settings_json();
     assert_eq!(json["manifold_perturbation"], 1.0);
+    assert_eq!(json["independent_mutation"], 0.3);
     assert!(
         registry::configure(
             None,

@@ -1177,6 +1177,51 @@ fn perturbations_keep_exact_start_states_exact() {
     );
 }
 
+/// Veach's bidirectional mutation alone keeps exact start states exact:
+/// the stationarity check above (mirror box, paths of up to 4 segments,
+/// 2 000 chains of 300 steps from importance-resampled starts, the last
+/// 200 averaged, |z| < 4 against the independent importance estimate),
+/// for the length-changing and the fixed-length variant on all paths
+/// (both keep `π` invariant on every path; the fixed-length one on each
+/// length). Control: the length-changing mutation with its ratio set to 0
+/// (the sum over splits, the length and deletion pmfs dropped) must fail.
+#[test]
+fn bidirectional_mutation_keeps_exact_start_states_exact() {
+    let scene = mirror_box();
+    let family = PathFamily::new(scene, Some(4));
+    let all = |_: &Path| true;
+    let z_changing = stationarity_z(
+        "bidirectional",
+        &mut Bidirectional::new(1, Some(4), false),
+        &family,
+        &all,
+        600,
+    );
+    let z_fixed = stationarity_z(
+        "bidirectional, fixed length",
+        &mut Bidirectional::new(1, Some(4), true),
+        &family,
+        &all,
+        700,
+    );
+    let control = stationarity_z(
+        "bidirectional, ratio 0",
+        &mut Symmetric(Bidirectional::new(1, Some(4), false)),
+        &family,
+        &all,
+        600,
+    );
+    assert!(
+        z_changing < 4.0,
+        "length-changing: the chains drift from π: |z| = {z_changing:.2}"
+    );
+    assert!(
+        z_fixed < 4.0,
+        "fixed length: the chains drift from π: |z| = {z_fixed:.2}"
+    );
+    assert!(control > 4.0, "control passed: |z| = {control:.2}");
+}
+
 /// `mlt` with every built mutation at Mitsuba 0.6's selection (all on,
 /// weight 1 each: bidirectional, lens, caustic, multi-chain) against PT on
 /// the tilted glossy-glass Cornell box, with the lens test's method and

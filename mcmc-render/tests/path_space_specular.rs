@@ -25,7 +25,9 @@
 //! freedom (the smaller replicate count; 5.41 for 7). The budget must
 //! resolve 20% (`t σ < 20%`), or the test fails: a replicate set whose
 //! spread cannot see 20% is no agreement. Measured with the pass: rel
-//! −3.8% / −3.5% / −4.0% (R/G/B), σ 2.3% / 2.1% / 2.2% of the box mean,
+//! −3.8% / −3.5% / −4.0% (R/G/B), σ 2.3% / 2.1% / 2.2% of the box mean
+//! (bidirectional mutation alone; with session 10's default lens
+//! perturbation: rel −5.7% / −4.5% / −5.5%, passed),
 //! so `t σ` ≈ 12.6%: the 16 mutations per pixel of 8 replicates resolve
 //! about 13%, not 5% (that needs ≈ 50 replicates: over the suite's
 //! budget).
