@@ -343,14 +343,25 @@ fn stages_need_a_decaying_schedule() {
 /// Image means of `k` tempered runs on the tilted box (4 levels, T up to
 /// 2500, IS permutations), `control`: with [`UnnormalisedMis`].
 fn tempered_reps(scene: &Scene, control: bool, k: u64, seed0: u64) -> Vec<[f64; 3]> {
+    tempered_reps_with(scene, control, (10_000, 1024), k, seed0)
+}
+
+/// [`tempered_reps`] with `(bootstrap candidates, mutations per pixel)`.
+fn tempered_reps_with(
+    scene: &Scene,
+    control: bool,
+    (bootstrap, mpp): (usize, u64),
+    k: u64,
+    seed0: u64,
+) -> Vec<[f64; 3]> {
     let stop = AtomicBool::new(false);
     let s = sampler(scene, &temperatures(4, 2500.0), 0.0);
     (0..k)
         .map(|i| {
             let settings = PssmltSettings {
-                bootstrap: 10_000,
+                bootstrap,
                 chains: 512,
-                mutations_per_pixel: Some(1024),
+                mutations_per_pixel: Some(mpp),
                 seed: seed0 + i,
                 normalization: Normalization::Running,
                 ..PssmltSettings::default()
@@ -397,4 +408,28 @@ fn eq_5_13_without_the_normalisations_is_rejected() {
         !a.failures(4.0, 0.01).is_empty(),
         "the control passed: {a:?}"
     );
+}
+
+/// Issue 15's agreement where the levels really differ: the tilted
+/// glossy-glass box (glass sphere, glossy gold, diffuse walls; depth 5),
+/// 4 levels up to T = 2500 combined by Eq. 5.13 (32 replicates of 100k
+/// bootstrap candidates and 4096 mutations per pixel), against PT (64 ×
+/// 2048 spp). Tolerance as `MeanAgreement`: within 4σ and 1%, and 5σ < 1%
+/// asserted; the control, the same replicates × 1.01, must fail.
+/// Measured with PT at 64 × 1024 spp: −0.18%, −0.20%, −0.30% (σ 0.15%,
+/// 0.16%, 0.21%; 1.2–1.5σ), but 5σ was 1.03% in blue, where PT's own SE
+/// (0.15%) dominated: hence PT's 2048 spp (13 min at load average 8).
+#[test]
+#[ignore = "minutes: tempered PSSMLT to 1% on the glossy-glass box"]
+fn tempered_pssmlt_agrees_with_pt_on_the_glossy_glass_box() {
+    let scene = glossy();
+    let pt = mc_reps(scene, &pt_of(scene), 2048, 64, 1000);
+    let reps = tempered_reps_with(scene, false, (100_000, 4096), 32, 16_000);
+    let a = MeanAgreement::new(&pt, &reps);
+    eprintln!("tempered-pssmlt glossy: rel {:?}\n  {a:?}", a.rel());
+    assert!(a.failures(4.0, 0.01).is_empty(), "disagrees with PT: {a:?}");
+    assert!(a.resolves(5.0, 0.01), "noise too large: {a:?}");
+    let biased: Vec<[f64; 3]> = reps.iter().map(|m| m.map(|v| v * 1.01)).collect();
+    let b = MeanAgreement::new(&pt, &biased);
+    assert!(!b.failures(4.0, 0.01).is_empty(), "a 1% bias passed: {b:?}");
 }
