@@ -19,11 +19,17 @@
 //!   splats both states with weights `r` and `1 − r`. A running tile next
 //!   to one that never started hands it a copy of its state (§8.7,
 //!   start-up bias, consistent).
-//! - **Initialisation** (naive, §8.7): each tile draws `init_candidates`
-//!   uniform states (which also feed `Ĩ`) and starts from one resampled
-//!   `∝ π̃_s`; a tile whose candidates are all black draws one more
-//!   uniform state per iteration until one carries light (or receives a
-//!   neighbour's state). Global-chain initialisation is not implemented.
+//! - **Initialisation** (§8.7): with `init=global`, global chains over the
+//!   film hand their states to the tiles they visit
+//!   ([`crate::smcmc::global_init`]); otherwise (and for tiles they miss)
+//!   each tile draws `init_candidates` uniform states (which also feed
+//!   `Ĩ`) and starts from one resampled `∝ π̃_s`; a tile whose candidates
+//!   are all black draws one more uniform state per iteration until one
+//!   carries light (or receives a neighbour's state).
+//! - **Stopping**: the stop flag and the time budget are checked before
+//!   every tile step, exchange pair and start-up draw, so a run ends
+//!   mid-iteration with a valid image (each tile is normalised by its own
+//!   transition count).
 //! - **Determinism**: every tile owns its streams (seeded from the run's
 //!   seed and its index); tiles step in parallel, exchange pairs are
 //!   disjoint, and all sums are reduced in a fixed order, so a seed gives
