@@ -19,11 +19,17 @@
 //!   splats both states with weights `r` and `1 − r`. A running tile next
 //!   to one that never started hands it a copy of its state (§8.7,
 //!   start-up bias, consistent).
-//! - **Initialisation** (naive, §8.7): each tile draws `init_candidates`
-//!   uniform states (which also feed `Ĩ`) and starts from one resampled
-//!   `∝ π̃_s`; a tile whose candidates are all black draws one more
-//!   uniform state per iteration until one carries light (or receives a
-//!   neighbour's state). Global-chain initialisation is not implemented.
+//! - **Initialisation** (§8.7): with `init=global`, global chains over the
+//!   film hand their states to the tiles they visit
+//!   ([`crate::smcmc::global_init`]); otherwise (and for tiles they miss)
+//!   each tile draws `init_candidates` uniform states (which also feed
+//!   `Ĩ`) and starts from one resampled `∝ π̃_s`; a tile whose candidates
+//!   are all black draws one more uniform state per iteration until one
+//!   carries light (or receives a neighbour's state).
+//! - **Stopping**: the stop flag and the time budget are checked before
+//!   every tile step, exchange pair and start-up draw, so a run ends
+//!   mid-iteration with a valid image (each tile is normalised by its own
+//!   transition count).
 //! - **Determinism**: every tile owns its streams (seeded from the run's
 //!   seed and its index); tiles step in parallel, exchange pairs are
 //!   disjoint, and all sums are reduced in a fixed order, so a seed gives
@@ -38,6 +44,7 @@ use crate::pss::{LARGE_STEP_COMPONENT, Mutation, MutationParams};
 use crate::scene::Scene;
 use crate::settings::check;
 use crate::smcmc::bdpt_shift::BdptShift;
+use crate::smcmc::global_init::{GlobalInit, Visits};
 use crate::smcmc::random_replay::RandomReplay;
 use crate::smcmc::{
     TileShape, TileShift, TileSums, TileTarget, TileValues, Tiling, accumulate, develop,
@@ -66,6 +73,16 @@ crate::choice! {
     }
 }
 
+crate::choice! {
+    /// How the tiles' chains find their first lit state (spec §8.7).
+    pub enum SmcmcInit {
+        /// `init_candidates` uniform states per tile, one resampled.
+        Naive = "naive",
+        /// Global PSSMLT chains over the film hand their states to the tiles they visit.
+        Global = "global",
+    }
+}
+
 crate::settings! {
     /// Stratified MCMC settings (defaults from spec seed003 §13).
     pub struct Smcmc {
@@ -83,6 +100,14 @@ crate::settings! {
         pub solver_iterations: usize = 200;
         /// Uniform candidates per tile at start-up (the start state is resampled from them).
         pub init_candidates: usize = 16, check check::count;
+        /// Start-up: naive (per-tile uniform candidates) or global (global chains; tiles they miss then draw init_candidates).
+        pub init: SmcmcInit = SmcmcInit::Naive;
+        /// Global start-up: number of global chains.
+        pub init_chains: usize = 8, check check::count;
+        /// Global start-up: uniform states of the bootstrap population the chains start from.
+        pub init_bootstrap: usize = 10000, check check::count;
+        /// Global start-up: global mutations per pixel (all chains together).
+        pub init_mutations: f64 = 4.0, check check::positive;
         /// Iterations, each one mutation of every tile (auto: 100, or until the time budget is spent).
         pub mutations_per_pixel: Option<u64> = None, check check::auto_or_at_least_one;
         flatten {
@@ -144,6 +169,9 @@ struct Tile {
     /// uniform draw.
     seed: u64,
     draws: u64,
+    /// Iterations this tile took part in (a stop can end an iteration
+    /// before every tile has stepped).
+    steps: u64,
     sums: TileSums,
 }
 
@@ -215,16 +243,44 @@ impl<S: TileShift> Sampler<'_, S> {
         x
     }
 
-    /// Tile `s` with `candidates` uniform draws, started from one
-    /// resampled `∝ π̃_s` if any carries light.
-    fn new_tile(&self, seed: u64, s: usize, candidates: usize) -> Tile {
+    /// Tile `s` started from the first state of the global start-up
+    /// `visits` (its own pixel first, then the others in slot order) that
+    /// carries light in the tile; failing that, with `candidates` uniform
+    /// draws, started from one resampled `∝ π̃_s` if any carries light.
+    fn new_tile(
+        &self,
+        seed: u64,
+        s: usize,
+        candidates: usize,
+        visits: Option<&Visits>,
+        halt: &dyn Fn() -> bool,
+    ) -> Tile {
         let mut tile = Tile {
             chain: None,
             seed: splitmix64(seed ^ splitmix64(TILE_STREAM + s as u64)),
             draws: 0,
+            steps: 0,
             sums: TileSums::default(),
         };
-        let draws: Vec<_> = (0..candidates).map(|_| self.draw(s, &mut tile)).collect();
+        if let Some(v) = visits {
+            for (_, p) in self.tiling.pixels(s) {
+                if halt() {
+                    return tile;
+                }
+                if let Some(state) = v.state(p, stream_rng(tile.seed, u64::MAX - 1)) {
+                    let x = Sample::evaluate(&self.target(s), state);
+                    if x.log_density.is_finite() {
+                        tile.chain = Some(self.start_chain(&tile, x));
+                        tile.sums.active = true;
+                        return tile;
+                    }
+                }
+            }
+        }
+        // A stop during start-up leaves the remaining candidates undrawn.
+        let draws: Vec<_> = (0..candidates)
+            .map_while(|_| (!halt()).then(|| self.draw(s, &mut tile)))
+            .collect();
         let weight = |x: &Sample<TorusPoint, TileValues>| {
             if x.log_density.is_finite() {
                 x.payload.total
@@ -257,6 +313,7 @@ impl<S: TileShift> Sampler<'_, S> {
     /// One mutation of tile `s` (or one more uniform draw if it has not
     /// started), splatted with the expected-value weights.
     fn step(&self, s: usize, tile: &mut Tile) {
+        tile.steps += 1;
         let target = self.target(s);
         let Some(chain) = &mut tile.chain else {
             let x = self.draw(s, tile);
@@ -354,7 +411,13 @@ impl<S: TileShift> Sampler<'_, S> {
 
     /// Exchange round `round`: horizontal pairs on even rounds, vertical on
     /// odd ones, from even columns/rows on rounds `≡ 0, 1 (mod 4)`.
-    fn exchange_round(&self, tiles: &mut [Tile], round: u64) -> ExchangeCounts {
+    /// Pairs left when `halt()` turns true are skipped.
+    fn exchange_round(
+        &self,
+        tiles: &mut [Tile],
+        round: u64,
+        halt: &(dyn Fn() -> bool + Sync),
+    ) -> ExchangeCounts {
         let w = self.tiling.width as usize;
         let parity = ((round / 2) % 2) as usize;
         let sum = |a: ExchangeCounts, b: ExchangeCounts| {
@@ -369,7 +432,7 @@ impl<S: TileShift> Sampler<'_, S> {
                 .map(|(y, row)| {
                     let mut c = ExchangeCounts::default();
                     let mut x = parity;
-                    while x + 1 < w {
+                    while x + 1 < w && !halt() {
                         let (left, right) = row.split_at_mut(x + 1);
                         c += self.exchange_pair(
                             y * w + x,
@@ -396,7 +459,7 @@ impl<S: TileShift> Sampler<'_, S> {
                     }
                     let y = parity + 2 * i;
                     let (top, bottom) = rows.split_at_mut(w);
-                    for x in 0..w {
+                    for x in (0..w).take_while(|_| !halt()) {
                         c += self.exchange_pair(
                             y * w + x,
                             &mut top[x],
@@ -442,10 +505,25 @@ impl Smcmc {
             tiling,
             mutation: *mutation,
         };
-        let out_of_time = || run.time_budget.is_some_and(|b| start.elapsed() >= b);
+        // Checked before every tile step, exchange pair and start-up
+        // candidate, so a stop or the end of the time budget is seen within
+        // one mutation's time, mid-iteration: each tile's histogram is
+        // normalised by its own transition count, so tiles that took one
+        // step fewer than their neighbours still give a valid estimate.
+        let halt = || {
+            stop.load(Ordering::Relaxed) || run.time_budget.is_some_and(|b| start.elapsed() >= b)
+        };
+        let visits = (self.init == SmcmcInit::Global).then(|| {
+            GlobalInit {
+                chains: self.init_chains,
+                bootstrap: self.init_bootstrap,
+                mutations_per_pixel: self.init_mutations,
+            }
+            .run(scene, shift, mutation, run.seed, &halt)
+        });
         let mut tiles: Vec<Tile> = (0..n)
             .into_par_iter()
-            .map(|s| sampler.new_tile(run.seed, s, self.init_candidates))
+            .map(|s| sampler.new_tile(run.seed, s, self.init_candidates, visits.as_ref(), &halt))
             .collect();
         let started_at_init = tiles.iter().filter(|t| t.chain.is_some()).count();
         let start_seconds = start.elapsed().as_secs_f64();
@@ -458,30 +536,30 @@ impl Smcmc {
         let mut iterations = 0u64;
         let mut rounds = 0u64;
         let mut exchange = ExchangeCounts::default();
-        let mut interrupted = false;
         let mut last_preview = Instant::now();
-        while planned.is_none_or(|m| iterations < m) {
-            if stop.load(Ordering::Relaxed) || out_of_time() {
-                interrupted = true;
-                break;
-            }
-            tiles
-                .par_iter_mut()
-                .enumerate()
-                .for_each(|(s, tile)| sampler.step(s, tile));
+        while planned.is_none_or(|m| iterations < m) && !halt() {
+            tiles.par_iter_mut().enumerate().for_each(|(s, tile)| {
+                if !halt() {
+                    sampler.step(s, tile);
+                    observer.progress(1);
+                }
+            });
             iterations += 1;
-            observer.progress(n as u64);
             if self.exchange && iterations.is_multiple_of(u64::from(self.exchange_every)) {
-                exchange += sampler.exchange_round(&mut tiles, rounds);
+                exchange += sampler.exchange_round(&mut tiles, rounds, &halt);
                 rounds += 1;
             }
-            if last_preview.elapsed() >= run.snapshot_every {
+            if last_preview.elapsed() >= run.snapshot_every && !halt() {
                 last_preview = Instant::now();
-                observer.snapshot(&|| develop_now(&tiles).image, iterations * n as u64);
+                let done = tiles.iter().map(|t| t.steps).sum();
+                observer.snapshot(&|| develop_now(&tiles).image, done);
             }
         }
+        // Every tile steps once per iteration (a tile not started draws),
+        // so a tile short of the plan means the run was stopped.
+        let interrupted = planned.is_none_or(|m| tiles.iter().any(|t| t.steps < m));
         let developed = develop_now(&tiles);
-        let mutations = iterations * n as u64;
+        let mutations: u64 = tiles.iter().map(|t| t.steps).sum();
         let seconds = start.elapsed().as_secs_f64();
 
         let mut stats: Option<ChainStatistics> = None;
@@ -513,6 +591,14 @@ impl Smcmc {
             "mutations_per_second": per_second,
             "start_seconds": start_seconds,
             "initialised_tiles_at_start": started_at_init as f64 / n as f64,
+            "init": self.init.name(),
+            "global_init": visits.as_ref().map(|v| json!({
+                "chains": self.init_chains,
+                "mutations": v.mutations,
+                "lit_bootstrap": v.lit_bootstrap,
+                "visited_pixels": v.visited as f64 / n as f64,
+                "acceptance": v.stats.as_ref().map(|s| s.acceptance_rate()),
+            })),
             "initialised_tiles": started as f64 / n as f64,
             "acceptance": cs.acceptance_rate(),
             "acceptance_per_component": cs.components.iter().map(|c| json!({

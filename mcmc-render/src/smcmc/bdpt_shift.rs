@@ -19,7 +19,7 @@
 //! connection); the camera stream starts with the sub-pixel offset; each
 //! pixel replays the camera and connection streams from their start.
 
-use super::TileShift;
+use super::{Placement, TileShift};
 use crate::color::Rgb;
 use crate::integrators::bdpt::{
     Bdpt, SubpathBuffers, connect, generate_camera_subpath, generate_light_subpath,
@@ -46,19 +46,20 @@ pub struct BdptShift {
 }
 
 impl BdptShift {
-    /// The renormalised BDPT sum of pixel `(x, y)` with the light subpath
-    /// in `buffers.light` (`light` vertices).
+    /// The raster position of `point` placed by `place` and the
+    /// renormalised BDPT sum there, with the light subpath in
+    /// `buffers.light`.
     fn pixel(
         &self,
         scene: &Scene,
         point: &TorusPoint,
-        (x, y): (u32, u32),
+        place: Placement,
         buffers: &mut SubpathBuffers,
-    ) -> Rgb {
+    ) -> (Vec2, Rgb) {
         let mut source = PssSource::new(point, Stream::COUNT);
         source.set_stream(Stream::Camera);
         let (ox, oy) = source.next_2d();
-        let raster = Vec2::new(x as f32 + ox, y as f32 + oy);
+        let raster = place.raster(ox, oy);
         let nc = generate_camera_subpath(
             scene,
             raster,
@@ -104,7 +105,20 @@ impl BdptShift {
                 }
             }
         }
-        l
+        (raster, l)
+    }
+
+    /// Traces the light subpath of `point` into `buffers.light`.
+    fn light_subpath(&self, scene: &Scene, point: &TorusPoint, buffers: &mut SubpathBuffers) {
+        let mut source = PssSource::new(point, Stream::COUNT);
+        source.set_stream(Stream::Light);
+        generate_light_subpath(
+            scene,
+            &mut source,
+            self.bdpt.max_light_vertices(),
+            Some(self.bdpt.rr_depth),
+            &mut buffers.light,
+        );
     }
 }
 
@@ -121,18 +135,27 @@ impl TileShift for BdptShift {
         out: &mut [Rgb],
     ) {
         BUFFERS.with_borrow_mut(|buffers| {
-            let mut source = PssSource::new(point, Stream::COUNT);
-            source.set_stream(Stream::Light);
-            generate_light_subpath(
-                scene,
-                &mut source,
-                self.bdpt.max_light_vertices(),
-                Some(self.bdpt.rr_depth),
-                &mut buffers.light,
-            );
+            self.light_subpath(scene, point, buffers);
             for (q, o) in pixels.iter().zip(out.iter_mut()) {
-                *o = q.map_or(Rgb::BLACK, |q| self.pixel(scene, point, q, buffers));
+                *o = q.map_or(Rgb::BLACK, |q| {
+                    self.pixel(scene, point, Placement::Pixel(q), buffers).1
+                });
             }
         });
+    }
+
+    fn evaluate_film(&self, scene: &Scene, point: &TorusPoint) -> (Vec2, Rgb) {
+        let film = Placement::Film((scene.film.width, scene.film.height));
+        BUFFERS.with_borrow_mut(|buffers| {
+            self.light_subpath(scene, point, buffers);
+            self.pixel(scene, point, film, buffers)
+        })
+    }
+
+    fn offset_coordinates(&self) -> [usize; 2] {
+        // The camera stream's first two numbers (PssSource interleaves the
+        // streams: number i of stream k is coordinate COUNT·i + k).
+        let k = Stream::Camera as usize;
+        [k, Stream::COUNT + k]
     }
 }

@@ -23,12 +23,14 @@
 //! over their footprint (the thesis's `h_j`), whatever the scene's filter.
 
 pub mod bdpt_shift;
+pub mod global_init;
 pub mod random_replay;
 pub mod solver;
 pub mod tile;
 
 use crate::color::Rgb;
 use crate::scene::Scene;
+use glam::Vec2;
 use mcmc_core::space::TorusPoint;
 use mcmc_core::target::{Evaluation, Target};
 pub use tile::{MAX_TILE_PIXELS, TileShape, TileValues, Tiling};
@@ -47,6 +49,36 @@ pub trait TileShift: Sync {
         pixels: &[Option<(u32, u32)>],
         out: &mut [Rgb],
     );
+
+    /// The state read with its sub-pixel offset `o` taken as a position on
+    /// the whole film (`raster = (o_x W, o_y H)`): that raster position and
+    /// `f` of the path there (the target of the global start-up chains,
+    /// [`global_init`]).
+    fn evaluate_film(&self, scene: &Scene, point: &TorusPoint) -> (Vec2, Rgb);
+
+    /// Indices of the two sub-pixel offset numbers among the state's
+    /// coordinates.
+    fn offset_coordinates(&self) -> [usize; 2];
+}
+
+/// Where a shift puts the camera sample of a state whose sub-pixel offset
+/// is `(o_x, o_y)`.
+#[derive(Clone, Copy, Debug)]
+pub enum Placement {
+    /// In pixel `(x, y)`: raster `(x + o_x, y + o_y)` (a tile's pixel).
+    Pixel((u32, u32)),
+    /// Anywhere on a `W × H` film: raster `(o_x W, o_y H)`.
+    Film((u32, u32)),
+}
+
+impl Placement {
+    /// The raster position of offset `(ox, oy)`.
+    pub fn raster(self, ox: f32, oy: f32) -> Vec2 {
+        match self {
+            Placement::Pixel((x, y)) => Vec2::new(x as f32 + ox, y as f32 + oy),
+            Placement::Film((w, h)) => Vec2::new(ox * w as f32, oy * h as f32),
+        }
+    }
 }
 
 /// The target `ln π̃_s` of one tile; its payload holds the values at every

@@ -13,7 +13,7 @@
 //! coordinates 0 and 1 are the sub-pixel offset, then the lens sample if
 //! the camera has one, then the path tracer's numbers.
 
-use super::TileShift;
+use super::{Placement, TileShift};
 use crate::color::Rgb;
 use crate::integrators::pt::PathTracer;
 use crate::pss::PssSource;
@@ -31,16 +31,21 @@ pub struct RandomReplay {
 
 impl RandomReplay {
     /// `f` of the path of `point` through pixel `(x, y)`.
-    pub fn trace(&self, scene: &Scene, point: &TorusPoint, (x, y): (u32, u32)) -> Rgb {
+    pub fn trace(&self, scene: &Scene, point: &TorusPoint, q: (u32, u32)) -> Rgb {
+        self.trace_at(scene, point, Placement::Pixel(q)).1
+    }
+
+    /// The raster position of `point` placed by `place`, and `f` of its path.
+    fn trace_at(&self, scene: &Scene, point: &TorusPoint, place: Placement) -> (Vec2, Rgb) {
         let mut source = PssSource::new(point, 1);
         let (ox, oy) = source.next_2d();
-        let p = Vec2::new(x as f32 + ox, y as f32 + oy);
+        let p = place.raster(ox, oy);
         let ray = if scene.camera.has_lens() {
             scene.camera.generate_ray_lens(p, source.next_2d())
         } else {
             scene.camera.generate_ray(p)
         };
-        self.pt.li(scene, ray, &mut source)
+        (p, self.pt.li(scene, ray, &mut source))
     }
 }
 
@@ -59,5 +64,14 @@ impl TileShift for RandomReplay {
         for (q, o) in pixels.iter().zip(out.iter_mut()) {
             *o = q.map_or(Rgb::BLACK, |q| self.trace(scene, point, q));
         }
+    }
+
+    fn evaluate_film(&self, scene: &Scene, point: &TorusPoint) -> (Vec2, Rgb) {
+        let film = (scene.film.width, scene.film.height);
+        self.trace_at(scene, point, Placement::Film(film))
+    }
+
+    fn offset_coordinates(&self) -> [usize; 2] {
+        [0, 1]
     }
 }

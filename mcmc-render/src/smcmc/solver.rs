@@ -30,6 +30,7 @@
 //! between neighbouring tiles (the thesis's Fig. 3.9).
 
 use super::tile::Tiling;
+use rayon::prelude::*;
 
 /// The result of an alignment.
 #[derive(Clone, Debug, PartialEq)]
@@ -94,31 +95,45 @@ impl AlignmentProblem<'_> {
     /// `‖r(b)‖/‖c‖`, with `c_s = α Ĩ̄_s` the part of the equations that
     /// does not depend on `b`.
     fn residual(&self, b: &[f64]) -> f64 {
+        // Terms in parallel, summed in tile order (the same bits on any
+        // thread count).
+        let terms: Vec<(f64, f64)> = (0..self.tiling.tiles())
+            .into_par_iter()
+            .map(|s| {
+                if self.active[s] {
+                    let (r, _, c) = self.terms(s, b);
+                    (r * r, c * c)
+                } else {
+                    (0.0, 0.0)
+                }
+            })
+            .collect();
         let (mut r2, mut c2) = (0.0, 0.0);
-        for s in (0..self.tiling.tiles()).filter(|&s| self.active[s]) {
-            let (r, _, c) = self.terms(s, b);
-            r2 += r * r;
-            c2 += c * c;
+        for (r, c) in terms {
+            r2 += r;
+            c2 += c;
         }
         if c2 > 0.0 { (r2 / c2).sqrt() } else { 0.0 }
     }
 
-    /// `iterations` Jacobi sweeps from `b0`.
+    /// `iterations` Jacobi sweeps from `b0`; each sweep updates the tiles
+    /// in parallel (every update reads only the previous sweep, so the
+    /// result does not depend on the thread count).
     pub fn solve(&self, b0: &[f64], iterations: usize) -> Alignment {
         let initial_residual = self.residual(b0);
         let mut b = b0.to_vec();
         let mut next = b.clone();
         for _ in 0..iterations {
-            for s in 0..self.tiling.tiles() {
-                next[s] = b[s];
+            next.par_iter_mut().enumerate().for_each(|(s, next)| {
+                *next = b[s];
                 if self.active[s] {
                     let (r, den, _) = self.terms(s, &b);
                     // A tile whose histogram is black keeps b⁰.
                     if den > 0.0 {
-                        next[s] -= r / den;
+                        *next -= r / den;
                     }
                 }
-            }
+            });
             std::mem::swap(&mut b, &mut next);
         }
         Alignment {
