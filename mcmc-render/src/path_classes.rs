@@ -16,10 +16,11 @@
 //! | `L5` indirect | `s ≥ 2`, `t ≥ 2` |
 
 use crate::color::Rgb;
-use crate::integrators::bdpt::{Bdpt, Connection, SubpathBuffers};
+use crate::integrators::bdpt::{Bdpt, Connection, SubpathBuffers, generate_camera_subpath};
 use crate::pss::{PATH_CLASSES, PssPathSampler, PssSource, Splat, raster_of};
 use crate::sampling::{RandomSource, Stream};
 use crate::scene::Scene;
+use mcmc_core::space::TorusPoint;
 use std::cell::RefCell;
 
 /// The class of a technique.
@@ -146,6 +147,33 @@ impl PssPathSampler for ClassifiedBdpt {
                 });
             }
             (buffers.camera.len() + buffers.light.len()).saturating_sub(1) as u32
+        })
+    }
+}
+
+impl ClassifiedBdpt {
+    /// Whether the sample at `point` can carry `L0`: its camera subpath,
+    /// traced alone exactly as [`PssPathSampler::trace`] traces it (same
+    /// stream, same numbers; no light subpath, no connections), reaches an
+    /// emitter after a Dirac-delta bounce. When this is false the sample's
+    /// `L0` is exactly 0, so a search for `L0` paths need only trace the
+    /// others in full (RELT's start-up, `docs/relt.md`).
+    pub fn may_carry_specular_implicit(&self, scene: &Scene, point: &TorusPoint) -> bool {
+        let mut source = PssSource::new(point, Stream::COUNT);
+        source.set_stream(Stream::Camera);
+        let raster = raster_of(scene, &mut source);
+        BUFFERS.with_borrow_mut(|buffers| {
+            generate_camera_subpath(
+                scene,
+                raster,
+                &mut source,
+                self.0.max_camera_vertices(),
+                Some(self.0.rr_depth),
+                &mut buffers.camera,
+            );
+            // Technique (0, t) reads vertex t − 1 (t ≥ 2), as `connect_in`.
+            (2..=buffers.camera.len())
+                .any(|t| buffers.camera[t - 1].is_light() && camera_subpath_is_specular(buffers, t))
         })
     }
 }

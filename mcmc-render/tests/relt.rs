@@ -8,6 +8,7 @@ use common::{repo_scene, repo_scene_tilted};
 use mcmc_core::rng::stream_rng;
 use mcmc_core::runner::with_threads;
 use mcmc_core::space::TorusPoint;
+use mcmc_core::target::Target;
 use mcmc_render::color::Rgb;
 use mcmc_render::integrators::bdpt::{Bdpt, MisHeuristic};
 use mcmc_render::integrators::registry::IntegratorSettings;
@@ -176,6 +177,8 @@ fn small_settings() -> Relt {
     s.chain.chains = 64;
     s.chain.mutations_per_pixel = Some(16);
     s.depth.max_depth = 5;
+    // A small search: still run (and so covered by the thread-count tests).
+    s.l0_search = 20_000;
     s
 }
 
@@ -321,4 +324,146 @@ fn ratios_need_members_that_share_an_evaluation() {
         Ok(_) => panic!("pssmlt ran with normalization=ratios"),
     };
     assert!(e.contains("normalization=ratios"), "{e}");
+}
+
+#[test]
+fn the_l0_screen_misses_no_l0_path() {
+    // The specific replica's search traces in full only the draws whose
+    // camera subpath alone reaches an emitter after a Dirac delta, and
+    // gives the others L0 = 0: that is exact only if no sample with
+    // L0 > 0 fails the screen.
+    for (name, samples) in [
+        ("cornell-glossy-glass.xml", 6000),
+        ("caustic-sds.xml", 3000),
+    ] {
+        let scene = repo_scene(name, 16);
+        let sampler = ClassifiedBdpt(bdpt_of(&scene));
+        let (mut l0, mut screened) = (0, 0);
+        for i in 0..samples {
+            let v = class_values(&trace(&scene, &sampler, i), ClassScalar::XyzSum);
+            let point = TorusPoint::fresh(stream_rng(11, i));
+            let pass = sampler.may_carry_specular_implicit(&scene, &point);
+            screened += usize::from(pass);
+            if v[PathClass::SpecularImplicit as usize] > 0.0 {
+                l0 += 1;
+                assert!(pass, "{name}: sample {i} carries L0 but fails the screen");
+            }
+        }
+        eprintln!("{name}: {l0} samples with L0, {screened} pass the screen of {samples}");
+        if name == "cornell-glossy-glass.xml" {
+            assert!(l0 > 0, "{name}: no L0 sample to check the screen on");
+        }
+    }
+}
+
+/// Mean and standard error of `n` values whose non-zero ones are `w`.
+fn mean_se(w: impl Iterator<Item = f64>, n: u64) -> (f64, f64) {
+    let (s, s2) = w.fold((0.0, 0.0), |(s, s2), x| (s + x, s2 + x * x));
+    let n = n as f64;
+    let mean = s / n;
+    (mean, ((s2 / n - mean * mean) / (n - 1.0)).sqrt())
+}
+
+#[test]
+fn the_l0_search_estimates_b4_without_bias() {
+    // The search's mean weight over its draws against the plain mean of
+    // q_4 over independent full traces, on the glossy-glass box (L0 is
+    // common there) with δ = 1 so that the L5 part, which the search
+    // estimates from a subsample of 1 in 10 draws, is large. Both are
+    // means of many independent draws (10^5 and 2·10^4), so their
+    // difference is normal to a good approximation: pass within 4σ
+    // (false alarm 6e-5). Control: the subsample without its factor 10
+    // (L5 undercounted) must fall outside 4σ.
+    let scene = repo_scene("cornell-glossy-glass.xml", 16);
+    let settings = Relt {
+        delta: 1.0,
+        l0_search: 100_000,
+        ..Relt::default()
+    };
+    let fam = family(&scene, &settings);
+    let specific = 3;
+    let search = fam
+        .search(specific, 5)
+        .expect("the specific replica searches");
+    assert_eq!(search.draws, 100_000);
+    let stride = 10.0;
+    let sampler = ClassifiedBdpt(bdpt_of(&scene));
+    let subsampled: Vec<bool> = search
+        .weighted
+        .iter()
+        .map(|&(i, _)| !sampler.may_carry_specular_implicit(&scene, &fam.candidate(5, i)))
+        .collect();
+    let found = search.weighted.iter().map(|w| w.1.exp());
+    let (b_search, se_search) = mean_se(found.clone(), search.draws);
+    let plain_n = 20_000;
+    let plain = (0..plain_n).map(|i| {
+        fam.target(specific)
+            .evaluate(&fam.candidate(5, i))
+            .log_density
+            .exp()
+    });
+    let (b_plain, se_plain) = mean_se(plain, plain_n);
+    let sigma = se_search.hypot(se_plain);
+    eprintln!("b_4: search {b_search:.5} ± {se_search:.5}, plain {b_plain:.5} ± {se_plain:.5}");
+    assert!(subsampled.iter().any(|&s| s) && subsampled.iter().any(|&s| !s));
+    assert!((b_search - b_plain).abs() < 4.0 * sigma, "search disagrees");
+    let control = found
+        .zip(&subsampled)
+        .map(|(w, &s)| if s { w / stride } else { w });
+    let (b_control, _) = mean_se(control, search.draws);
+    eprintln!("control (subsample unscaled): {b_control:.5}");
+    assert!((b_control - b_plain).abs() > 4.0 * sigma, "control passed");
+}
+
+#[test]
+fn the_l0_search_starts_the_specific_replica_on_l0_paths() {
+    // The glass cube of docs/relt.md: its L0 paths (the yellow cube seen
+    // and lit through the glass, caustics seen through it) are rare, and
+    // the bootstrap and annealing start-up found none. The search finds
+    // some, and the specific replica's starts are resampled from its
+    // weights: the number of starts on an L0 path is Binomial(n, share),
+    // share = the L0 draws' part of the total weight; checked within 4
+    // binomial standard deviations (plus one for the discreteness of
+    // systematic resampling).
+    let scene = repo_scene("relt-glass-cube.xml", 16);
+    let settings = Relt {
+        l0_search: 100_000,
+        ..Relt::default()
+    };
+    let fam = family(&scene, &settings);
+    let specific = 3;
+    let search = fam
+        .search(specific, 7)
+        .expect("the specific replica searches");
+    let l0_of = |x: &TorusPoint| {
+        let e = fam.target(specific).evaluate(x);
+        class_values(&e.payload.splats, ClassScalar::XyzSum)[PathClass::SpecularImplicit as usize]
+    };
+    let (mut l0_draws, mut l0_weight, mut total) = (0, 0.0, 0.0);
+    for &(i, lw) in &search.weighted {
+        total += lw.exp();
+        if l0_of(&fam.candidate(7, i)) > 0.0 {
+            l0_draws += 1;
+            l0_weight += lw.exp();
+        }
+    }
+    let share = l0_weight / total;
+    let n = 64;
+    let starts = search
+        .starts(&fam, n, 7, specific)
+        .expect("resampling")
+        .expect("weighted draws");
+    let on_l0 = starts.iter().filter(|x| l0_of(x) > 0.0).count();
+    eprintln!(
+        "{l0_draws} L0 draws of {} weighted, L0 share {share:.3}, starts on L0 {on_l0}/{n}",
+        search.weighted.len()
+    );
+    assert!(l0_draws > 0, "the search found no L0 path");
+    let expected = n as f64 * share;
+    let sd = (n as f64 * share * (1.0 - share)).sqrt();
+    assert!(on_l0 > 0, "no start on an L0 path");
+    assert!(
+        (on_l0 as f64 - expected).abs() <= 4.0 * sd + 1.0,
+        "{on_l0} starts on L0, expected {expected:.1} ± {sd:.1}"
+    );
 }

@@ -30,7 +30,7 @@
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
 use crate::integrators::bdpt::{Bdpt, MisHeuristic};
-use crate::markov::{self, Annealing, ChainFamily, ChainParams, MltError, MltResult};
+use crate::markov::{self, Annealing, ChainFamily, ChainParams, MltError, MltResult, Search};
 use crate::observer::Observer;
 use crate::path_classes::{ClassScalar, ClassifiedBdpt, class_values};
 use crate::pss::{Mutation, PATH_CLASSES, PathSample, PssTarget, SmallStepKind};
@@ -43,6 +43,7 @@ use mcmc_core::replica::{
 };
 use mcmc_core::space::TorusPoint;
 use mcmc_core::target::{Evaluation, Target};
+use rayon::prelude::*;
 use serde_json::json;
 use std::sync::atomic::AtomicBool;
 
@@ -90,6 +91,8 @@ crate::settings! {
         pub annealing_particles: usize = 10_000;
         /// Metropolis–Hastings steps per particle and replica in the annealing.
         pub annealing_sweeps: usize = 1;
+        /// Uniform draws screened for L0 paths to start the specific replica (0: no search; docs/relt.md).
+        pub l0_search: usize = 1_000_000;
         flatten {
             /// Path depth.
             pub depth: DepthParams = DepthParams::default();
@@ -220,7 +223,17 @@ pub struct ReltFamily<'a> {
     custom_exchange: Option<MakeExchange>,
     /// The start-up's population annealing.
     annealing: Option<Annealing>,
+    /// Draws of the specific replica's search for `L0` paths.
+    l0_search: u64,
 }
+
+/// First start-up candidate index of the specific replica's search (the
+/// bootstrap's are `0 .. bootstrap · members`).
+const SEARCH_OFFSET: u64 = 1 << 39;
+
+/// Draws of the search traced in full whatever their camera subpath
+/// (every `stride`-th): they estimate the `δ·L5` part of `b_4`.
+const SEARCH_FULL_DRAWS: u64 = 10_000;
 
 /// Makes a fresh exchange move for one replica set.
 pub type MakeExchange = fn(usize) -> Box<dyn ExchangeMove<TorusPoint, PathSample>>;
@@ -249,7 +262,47 @@ impl<'a> ReltFamily<'a> {
                 particles: settings.annealing_particles,
                 sweeps: settings.annealing_sweeps,
             }),
+            l0_search: settings.l0_search as u64,
         }
+    }
+
+    /// The specific replica's search for `L0` paths: `l0_search` uniform
+    /// draws (rounded up to a multiple of the stride), each screened by its
+    /// camera subpath alone
+    /// ([`ClassifiedBdpt::may_carry_specular_implicit`]). A draw that
+    /// passes is traced in full with weight `q_4`; of the others (whose
+    /// `L0` is exactly 0, so `q_4 = δ·L5`), every `stride`-th by index is
+    /// traced with weight `stride · q_4`, the rest get 0. Membership of
+    /// the subsample depends on the index only, so the mean weight over
+    /// all draws is an unbiased estimate of `b_4 = ∫ q_4`, and the
+    /// weighted draws are an importance sample of `q_4` to start from.
+    fn search_specific(&self, member: usize, seed: u64) -> Search {
+        let stride = (self.l0_search / SEARCH_FULL_DRAWS).max(1);
+        let draws = self.l0_search.div_ceil(stride) * stride;
+        let target = &self.targets[member];
+        let weighted = (0..draws)
+            .into_par_iter()
+            .filter_map(|j| {
+                let index = SEARCH_OFFSET + j;
+                let x = self.candidate(seed, index);
+                let scale = if target
+                    .pss
+                    .sampler
+                    .may_carry_specular_implicit(target.pss.scene, &x)
+                {
+                    1.0
+                } else if j % stride == 0 {
+                    stride as f64
+                } else {
+                    return None;
+                };
+                let log_q = target.evaluate(&x).log_density;
+                // Zero and NaN weigh nothing (NaN as in the running
+                // normalisation: counted as a zero).
+                log_q.is_finite().then(|| (index, log_q + scale.ln()))
+            })
+            .collect();
+        Search { draws, weighted }
     }
 
     /// The family with the exchange move `make(replicas)` (any move of
@@ -304,6 +357,10 @@ impl<'a> ChainFamily for ReltFamily<'a> {
     }
     fn annealing(&self) -> Option<Annealing> {
         self.annealing
+    }
+    fn search(&self, member: usize, seed: u64) -> Option<Search> {
+        (Some(member) == self.specific && self.l0_search > 0)
+            .then(|| self.search_specific(member, seed))
     }
     fn sweep_share(&self, member: usize) -> f64 {
         self.targets[member].replica.share

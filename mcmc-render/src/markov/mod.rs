@@ -298,6 +298,65 @@ pub trait ChainFamily: Sync {
     fn annealing(&self) -> Option<Annealing> {
         None
     }
+    /// A member's own search of independent draws beyond the bootstrap
+    /// (RELT's search for the specific replica's rare paths), run once at
+    /// start-up: its weighted draws start the member's chains (resampled
+    /// in place of the bootstrap's or annealing's starts, when any carries
+    /// weight) and join the member's running normalisation and `b̂`.
+    /// `None` (the default): no search.
+    fn search(&self, _member: usize, _seed: u64) -> Option<Search> {
+        None
+    }
+}
+
+/// The result of [`ChainFamily::search`]: `draws` independent draws from
+/// the reference measure, each with a weight `w ≥ 0` whose mean over all
+/// `draws` is an unbiased estimate of the member's `b_d` (a draw left out
+/// of `weighted` has `w = 0`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Search {
+    /// Draws made.
+    pub draws: u64,
+    /// The draws with `w > 0`: the candidate index (for
+    /// [`ChainFamily::candidate`]) and `ln w`.
+    pub weighted: Vec<(u64, f64)>,
+}
+
+/// Stream offset of the resampling of searched starts.
+const SEARCH_RESAMPLE_STREAM: u64 = RESAMPLE_STREAM + (1 << 20);
+
+impl Search {
+    /// The draws as a running estimate of `b_d`.
+    fn running(&self) -> RunningNormalization {
+        let mut r = RunningNormalization::new();
+        self.weighted.iter().for_each(|&(_, lw)| r.add(lw));
+        let zeros = self.draws.saturating_sub(self.weighted.len() as u64);
+        (0..zeros).for_each(|_| r.add(f64::NEG_INFINITY));
+        r
+    }
+
+    /// `n` start states resampled from the weighted draws (`None` when no
+    /// draw carries weight), as the driver starts `member`'s chains.
+    pub fn starts<F: ChainFamily>(
+        &self,
+        family: &F,
+        n: usize,
+        seed: u64,
+        member: usize,
+    ) -> Result<Option<Vec<F::State>>, MltError> {
+        let log_w: Vec<f64> = self.weighted.iter().map(|w| w.1).collect();
+        if n == 0 || !log_w.iter().any(|w| w.is_finite()) {
+            return Ok(None);
+        }
+        let boot = index_bootstrap(&log_w, 0)?;
+        let mut rng = stream_rng(seed, SEARCH_RESAMPLE_STREAM + member as u64);
+        Ok(Some(
+            boot.resample(n, &mut rng)?
+                .into_iter()
+                .map(|x| family.candidate(seed, self.weighted[x.state].0))
+                .collect(),
+        ))
+    }
 }
 
 /// Population annealing settings of a start-up.
@@ -318,6 +377,17 @@ pub struct AnnealedMember {
     pub relative_error: f64,
     /// Acceptance of the member's MH sweeps (NaN for member 0).
     pub acceptance: f64,
+}
+
+/// One member's start-up search, as reported.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct SearchSummary {
+    /// Independent draws made.
+    pub draws: u64,
+    /// Draws with a positive weight.
+    pub weighted: u64,
+    /// Chains started from them (0: the member kept its other starts).
+    pub started_chains: usize,
 }
 
 /// Stream offset from which the annealing's seed is derived.
@@ -508,6 +578,8 @@ pub struct MltResult {
     pub exchange: Option<ExchangeSummary>,
     /// Population annealing per member, for families that anneal.
     pub annealing: Option<Vec<AnnealedMember>>,
+    /// Each member's own start-up search ([`ChainFamily::search`]), if any.
+    pub searches: Vec<Option<SearchSummary>>,
     /// Acceptance per path depth (index = depth).
     pub per_depth: Vec<DepthAcceptance>,
     /// Bootstrap candidates with a NaN/inf contribution.
@@ -764,6 +836,25 @@ pub fn run<F: ChainFamily>(
             }
         });
     }
+    // The members' own searches: more draws for their running `b_d` and
+    // `b̂`, and their starts.
+    let mut boot_running = boot_running;
+    let mut searches: Vec<Option<SearchSummary>> = vec![None; members];
+    for d in 0..members {
+        if let Some(search) = family.search(d, seed) {
+            boot_running[d].merge(&search.running());
+            bootstrap_b[d] = (boot_running[d].b(), boot_running[d].standard_error());
+            let resampled = search.starts(family, chains_of[d], seed, d)?;
+            searches[d] = Some(SearchSummary {
+                draws: search.draws,
+                weighted: search.weighted.len() as u64,
+                started_chains: resampled.as_ref().map_or(0, Vec::len),
+            });
+            if let Some(s) = resampled {
+                starts[d] = s;
+            }
+        }
+    }
     let bootstrap_seconds = start.elapsed().as_secs_f64();
 
     let total = settings.mutations_per_pixel.map(|m| m * pixels);
@@ -883,6 +974,7 @@ pub fn run<F: ChainFamily>(
                 })
                 .collect()
         }),
+        searches,
         bootstrap_invalid: invalid,
         first_nonfinite,
         bootstrap_seconds,

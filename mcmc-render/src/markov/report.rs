@@ -80,6 +80,9 @@ pub fn rendered(
     if let Some(exchange) = &result.exchange {
         statistics.insert("exchange".into(), json!(exchange));
     }
+    if result.searches.iter().any(Option::is_some) {
+        statistics.insert("searches".into(), json!(result.searches));
+    }
     if let Some(annealing) = &result.annealing {
         statistics.insert("annealing".into(), json!(annealing));
     }
