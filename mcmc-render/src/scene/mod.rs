@@ -350,9 +350,11 @@ impl Scene {
             }
             bsdfs.push(b);
         }
-        let tangent_framed: Vec<bool> = (0..bsdfs.len())
-            .map(|i| {
-                bsdfs[i].is_anisotropic()
+        let tangent_framed: Vec<bool> = bsdfs
+            .iter()
+            .enumerate()
+            .map(|(i, b)| {
+                b.is_anisotropic()
                     || desc
                         .bsdf_textures
                         .get(i)
@@ -482,8 +484,10 @@ impl Scene {
     /// so `alpha_u` lies along the texture's u axis as in Mitsuba.
     #[inline(always)]
     pub fn shading_frame(&self, sp: &SurfacePoint) -> Frame {
-        let bsdf = self.shapes[sp.shape as usize].bsdf as usize;
-        if self.tangent_framed.get(bsdf).copied().unwrap_or(false) {
+        // Scenes without anisotropic BSDFs (most) skip the shape lookup.
+        if !self.tangent_framed.is_empty()
+            && self.tangent_framed[self.shapes[sp.shape as usize].bsdf as usize]
+        {
             self.tangent_frame(sp)
         } else {
             Frame::from_normal(sp.ns)
