@@ -12,9 +12,15 @@
 //! cargo run --release --example hmc_vs_nuts -- --samplers nuts,nuts-rs --nuts-term-buffer 150
 //! ```
 //!
+//! `--targets a,b` runs only the named targets (default all four:
+//! `gaussian-100`, `logistic-25`, `arK-arK`,
+//! `eight_schools-eight_schools_noncentered`).
+//!
 //! `--nuts-term-buffer N` sets our NUTS's final step-size-only warm-up
 //! buffer (CmdStan's `term_buffer`; default that of
-//! `NutsSettings::default()`). `--samplers` also takes the warm-up
+//! `NutsSettings::default()`), `--nuts-init-buffer N` and `--nuts-window N`
+//! its initial step-size-only buffer and first metric window (CmdStan's
+//! `init_buffer`, `window`). `--samplers` also takes the warm-up
 //! variants `nuts-stan` (CmdStan's 75 / 25 / 50, diagonal metric from the
 //! draws, step size restarted at every metric update), `nuts-tb150`
 //! (terminal buffer 150), `nuts-early` (10 / 10 / 150: metric windows from
@@ -96,8 +102,19 @@ struct Options {
     h2mc_tau: f64,
     mala_steps: usize,
     nuts_term_buffer: Option<usize>,
+    nuts_init_buffer: Option<usize>,
+    nuts_window: Option<usize>,
     samplers: Vec<String>,
+    targets: Vec<String>,
 }
+
+/// Every target of the comparison, in the order they run.
+const TARGETS: [&str; 4] = [
+    "gaussian-100",
+    "logistic-25",
+    "arK-arK",
+    "eight_schools-eight_schools_noncentered",
+];
 
 /// Every sampler the comparison knows.
 const SAMPLERS: [&str; 5] = ["nuts", "hmc", "mala", "h2mc", "nuts-rs"];
@@ -170,7 +187,10 @@ fn parse() -> Result<Options, String> {
         h2mc_tau: 1.0,
         mala_steps: 20,
         nuts_term_buffer: None,
+        nuts_init_buffer: None,
+        nuts_window: None,
         samplers: SAMPLERS.map(String::from).to_vec(),
+        targets: TARGETS.map(String::from).to_vec(),
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -217,11 +237,34 @@ fn parse() -> Result<Options, String> {
                     ));
                 }
             }
+            "--targets" => {
+                o.targets = value("--targets")?.split(',').map(String::from).collect();
+                if let Some(bad) = o.targets.iter().find(|t| !TARGETS.contains(&t.as_str())) {
+                    return Err(format!(
+                        "--targets: unknown target `{bad}` ({})",
+                        TARGETS.join(", ")
+                    ));
+                }
+            }
             "--nuts-term-buffer" => {
                 o.nuts_term_buffer = Some(
                     value("--nuts-term-buffer")?
                         .parse()
                         .map_err(|e| format!("--nuts-term-buffer: {e}"))?,
+                )
+            }
+            "--nuts-init-buffer" => {
+                o.nuts_init_buffer = Some(
+                    value("--nuts-init-buffer")?
+                        .parse()
+                        .map_err(|e| format!("--nuts-init-buffer: {e}"))?,
+                )
+            }
+            "--nuts-window" => {
+                o.nuts_window = Some(
+                    value("--nuts-window")?
+                        .parse()
+                        .map_err(|e| format!("--nuts-window: {e}"))?,
                 )
             }
             "--mala-steps" => {
@@ -236,7 +279,7 @@ fn parse() -> Result<Options, String> {
             }
             other => {
                 return Err(format!(
-                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --hmc-time T, --h2mc-tau τ, --mala-steps k, --nuts-term-buffer N, --samplers a,b)"
+                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --hmc-time T, --h2mc-tau τ, --mala-steps k, --nuts-term-buffer N, --nuts-init-buffer N, --nuts-window N, --samplers a,b, --targets a,b)"
                 ));
             }
         }
@@ -510,18 +553,23 @@ fn main() {
     let gauss = CorrelatedGaussian::new(100, 0.5);
     let logistic = LogisticRegression::synthetic(1000, 25, 7);
     let mut runs = Vec::new();
-    runs.extend(compare(
-        "gaussian-100",
-        &gauss,
-        o.hmc_time.unwrap_or(2.5),
-        &o,
-    ));
-    runs.extend(compare(
-        "logistic-25",
-        &logistic,
-        o.hmc_time.unwrap_or(2.0),
-        &o,
-    ));
+    let on = |t: &str| o.targets.iter().any(|x| x == t);
+    if on("gaussian-100") {
+        runs.extend(compare(
+            "gaussian-100",
+            &gauss,
+            o.hmc_time.unwrap_or(2.5),
+            &o,
+        ));
+    }
+    if on("logistic-25") {
+        runs.extend(compare(
+            "logistic-25",
+            &logistic,
+            o.hmc_time.unwrap_or(2.0),
+            &o,
+        ));
+    }
     // Posteriordb posteriors: the NUTS comparison only (HMC's integration
     // time is hand-chosen per target; MALA and H²MC are compared above).
     let nuts_only = Options {
@@ -534,6 +582,9 @@ fn main() {
         ..o.clone()
     };
     for name in ["arK-arK", "eight_schools-eight_schools_noncentered"] {
+        if !on(name) {
+            continue;
+        }
         let p = posteriordb::load(name).unwrap_or_else(|e| fail(&e));
         runs.extend(compare(name, &p.model, 1.0, &nuts_only));
     }
@@ -598,7 +649,11 @@ fn compare<G: GradientTarget + Clone>(name: &str, g: &G, time: f64, o: &Options)
     if on("nuts") {
         let s = NutsSettings::default();
         let tb = o.nuts_term_buffer.unwrap_or(s.term_buffer);
-        let schedule = (s.init_buffer, s.window, tb);
+        let schedule = (
+            o.nuts_init_buffer.unwrap_or(s.init_buffer),
+            o.nuts_window.unwrap_or(s.window),
+            tb,
+        );
         let make = || nuts(g.clone(), w, s.metric, schedule, s.step_size_adaptation);
         runs.push(run_ours(name, "nuts", g, make, 1, o));
     }

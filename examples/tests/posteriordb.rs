@@ -59,8 +59,10 @@ fn gradients_match_finite_differences() {
 fn nuts_agrees_with_posteriordb_references() {
     let settings = NutsSettings {
         seed: 2026,
-        // CmdStan's terminal buffer and step-size restarts: the committed
-        // expectations were made with them.
+        // CmdStan's windows (75 / 25 / 50) and step-size restarts: the
+        // committed expectations were made with them.
+        init_buffer: 75,
+        window: 25,
         term_buffer: 50,
         step_size_adaptation: StepSizeAdaptation::Restart,
         ..Default::default()
@@ -123,8 +125,10 @@ fn dropped_jacobian_fails_the_reference_check() {
     };
     let settings = NutsSettings {
         seed: 2026,
-        // CmdStan's terminal buffer and step-size restarts: the committed
-        // expectations were made with them.
+        // CmdStan's windows (75 / 25 / 50) and step-size restarts: the
+        // committed expectations were made with them.
+        init_buffer: 75,
+        window: 25,
         term_buffer: 50,
         step_size_adaptation: StepSizeAdaptation::Restart,
         ..Default::default()

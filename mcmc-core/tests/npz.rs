@@ -30,8 +30,10 @@ fn fit() -> Fit {
         warmup: 200,
         draws: 100,
         seed: 9,
-        // CmdStan's terminal buffer and step-size restarts: the committed
-        // expectations were made with them.
+        // CmdStan's windows (75 / 25 / 50) and step-size restarts: the
+        // committed expectations were made with them.
+        init_buffer: 75,
+        window: 25,
         term_buffer: 50,
         step_size_adaptation: StepSizeAdaptation::Restart,
         ..Default::default()

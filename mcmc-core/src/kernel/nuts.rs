@@ -365,20 +365,21 @@ impl<G: GradientTarget> Nuts<G> {
         };
         let mut log_sum_weight = 0.0; // ln e^{H₀ − H₀}
         let mut depth = 0;
+        for r in [&mut w.rho_fwd, &mut w.rho_bck] {
+            r.resize(d, 0.0);
+        }
         while depth < self.max_depth {
-            w.rho_fwd.clear();
-            w.rho_fwd.resize(d, 0.0);
-            w.rho_bck.clear();
-            w.rho_bck.resize(d, 0.0);
             let mut log_sum_weight_subtree = f64::NEG_INFINITY;
             let forward = uniform(builder.rng) > 0.5;
-            // The old tree becomes the half opposite the extension; its end
-            // on the extension side is the inner end of that half.
+            // The old tree becomes the half opposite the extension (its
+            // summed momentum moves there: a swap, no copy); its end on the
+            // extension side is the inner end of that half. `build_tree`
+            // overwrites the new half's sum.
             let (old_end, rho_new) = if forward {
-                w.rho_bck.clone_from(&w.rho);
+                std::mem::swap(&mut w.rho, &mut w.rho_bck);
                 (fwd, &mut w.rho_fwd)
             } else {
-                w.rho_fwd.clone_from(&w.rho);
+                std::mem::swap(&mut w.rho, &mut w.rho_fwd);
                 (bck, &mut w.rho_bck)
             };
             let sign = if forward { 1.0 } else { -1.0 };
@@ -399,9 +400,6 @@ impl<G: GradientTarget> Nuts<G> {
                 builder.pool.release(sub.propose);
             }
             log_sum_weight = log_sum_exp2(log_sum_weight, log_sum_weight_subtree);
-            for i in 0..d {
-                w.rho[i] = w.rho_bck[i] + w.rho_fwd[i];
-            }
             // Ends of the two halves: `(bck_bck, bck_fwd)` and
             // `(fwd_bck, fwd_fwd)`.
             let (bck_bck, bck_fwd, fwd_bck, fwd_fwd) = if forward {
@@ -416,6 +414,9 @@ impl<G: GradientTarget> Nuts<G> {
                 pool.get(fwd_bck),
                 pool.get(fwd_fwd),
             );
+            for i in 0..d {
+                w.rho[i] = w.rho_bck[i] + w.rho_fwd[i];
+            }
             // The whole trajectory, then across the boundary of its halves
             // (each half extended by the neighbouring point of the other).
             let persist = no_u_turn(&bb.v, &ff.v, &w.rho_bck, &w.rho_fwd)
@@ -470,8 +471,8 @@ struct Builder<'a, G> {
 
 impl<G: GradientTarget> Builder<'_, G> {
     /// Builds a sub-tree of `2^depth` leapfrog steps in direction `sign`
-    /// from the pool's point `from`, adding its summed momentum to `rho` and
-    /// its log weight to `log_sum_weight`. `None` when it diverged or
+    /// from the pool's point `from`, writing its summed momentum into `rho`
+    /// (length `d`) and adding its log weight to `log_sum_weight`. `None` when it diverged or
     /// U-turned inside (the sub-tree is then discarded; its points may stay
     /// referenced until the pool's next reset).
     fn build_tree(
@@ -503,9 +504,7 @@ impl<G: GradientTarget> Builder<'_, G> {
             let log_w = self.h0 - h;
             *log_sum_weight = log_sum_exp2(*log_sum_weight, log_w);
             self.sum_metro_prob += if log_w > 0.0 { 1.0 } else { log_w.exp() };
-            for (r, p) in rho.iter_mut().zip(&z.p) {
-                *r += p;
-            }
+            rho.copy_from_slice(&z.p);
             if self.divergent {
                 return None;
             }
@@ -538,8 +537,8 @@ impl<G: GradientTarget> Builder<'_, G> {
         f: &mut Frame,
     ) -> Option<SubTree> {
         let d = rho.len();
+        // Overwritten by the two halves: only the first use sizes them.
         for r in [&mut f.rho_init, &mut f.rho_final] {
-            r.clear();
             r.resize(d, 0.0);
         }
         let mut log_sum_weight_init = f64::NEG_INFINITY;
@@ -570,8 +569,10 @@ impl<G: GradientTarget> Builder<'_, G> {
             self.pool.release(fin.propose);
             init.propose
         };
+        // The merged sub-tree's summed momentum (written, not added: the
+        // caller's buffer holds no earlier sum).
         for i in 0..d {
-            rho[i] += f.rho_init[i] + f.rho_final[i];
+            rho[i] = f.rho_init[i] + f.rho_final[i];
         }
         // The merged sub-tree, then each half extended by the neighbouring
         // point of the other half (Stan's extra checks).
