@@ -41,7 +41,8 @@ use crate::scene::Scene;
 use glam::Vec2;
 use std::cell::RefCell;
 
-/// Roughness a smooth BSDF stands in with at `T > 1` (spec §5.2.1).
+/// Roughness a smooth BSDF stands in with at `T > 1` (spec §5.2.1), the
+/// default of [`TemperedBsdfs::with_stand_in`]'s `stand_in`.
 pub const SPECULAR_STAND_IN: f64 = 1e-4;
 
 /// Most levels a ladder may have.
@@ -124,18 +125,31 @@ impl RegularizationSchedule for Regularization {
 
 /// The scene's BSDFs roughened for every level of a ladder: level `k`
 /// holds `bsdf.tempered(√T_k, floor_k)` for every BSDF of the scene, with
-/// `floor_k = max(ρ_reg, [T_k > 1] ρ_min)`.
+/// `floor_k = max(ρ_reg, [T_k > 1] ρ_min)` (`ρ_min`: the stand-in
+/// roughness of smooth BSDFs, [`SPECULAR_STAND_IN`] unless set).
 #[derive(Clone, Debug)]
 pub struct TemperedBsdfs {
     levels: Vec<Vec<Bsdf>>,
     temperatures: Vec<f64>,
     floor: f64,
+    stand_in: f64,
 }
 
 impl TemperedBsdfs {
     /// The ladder `temperatures` (at most [`MAX_LEVELS`]) over `scene`'s
-    /// BSDFs with regularisation floor `floor` (0: none).
+    /// BSDFs with regularisation floor `floor` (0: none) and the thesis's
+    /// stand-in roughness [`SPECULAR_STAND_IN`].
     pub fn new(scene: &Scene, temperatures: &[f64], floor: f64) -> Self {
+        Self::with_stand_in(scene, temperatures, floor, SPECULAR_STAND_IN)
+    }
+
+    /// [`TemperedBsdfs::new`] with smooth BSDFs standing in as Beckmann
+    /// ones of roughness `stand_in` (before the `√T` scale) at the levels
+    /// with `T > 1`. The `T = 1` level never sees it, so the image (whose
+    /// contribution is level 0's, weighted by Eq. 5.13 over all levels)
+    /// stays an estimate of the untempered one whatever `stand_in` is;
+    /// only how well the hot levels explore, and so the noise, changes.
+    pub fn with_stand_in(scene: &Scene, temperatures: &[f64], floor: f64, stand_in: f64) -> Self {
         assert!(
             !temperatures.is_empty() && temperatures.len() <= MAX_LEVELS,
             "a ladder has 1 to {MAX_LEVELS} levels"
@@ -143,11 +157,7 @@ impl TemperedBsdfs {
         let levels = temperatures
             .iter()
             .map(|&t| {
-                let f = if t > 1.0 {
-                    floor.max(SPECULAR_STAND_IN)
-                } else {
-                    floor
-                };
+                let f = if t > 1.0 { floor.max(stand_in) } else { floor };
                 let scale = t.sqrt() as f32;
                 scene
                     .bsdfs
@@ -160,6 +170,7 @@ impl TemperedBsdfs {
             levels,
             temperatures: temperatures.to_vec(),
             floor,
+            stand_in,
         }
     }
 
@@ -171,6 +182,11 @@ impl TemperedBsdfs {
     /// The regularisation floor.
     pub fn floor(&self) -> f64 {
         self.floor
+    }
+
+    /// The stand-in roughness of smooth BSDFs at `T > 1`.
+    pub fn stand_in(&self) -> f64 {
+        self.stand_in
     }
 }
 
@@ -363,6 +379,7 @@ impl PssPathSampler for TemperedMmltDepth {
 pub fn ladder_json(bsdfs: &TemperedBsdfs, reg: &Regularization, n: u64) -> serde_json::Value {
     serde_json::json!({
         "temperatures": bsdfs.temperatures(),
+        "specular_roughness": bsdfs.stand_in(),
         "regularization": {
             "schedule": reg.kind.name(),
             "rho0": reg.rho0,

@@ -16,8 +16,8 @@
 mod common;
 
 use common::{
-    MeanAgreement, bdpt_of, image_mean, mc_reps, pt_of, registry_image_bits as render,
-    repo_scene_tilted,
+    MeanAgreement, bdpt_of, image_mean, load_str, mc_reps, pt_of, registry_image_bits as render,
+    repo_scene_path, repo_scene_tilted,
 };
 use mcmc_core::rng::stream_rng;
 use mcmc_core::runner::with_threads;
@@ -32,8 +32,8 @@ use mcmc_render::pss::{PssTarget, PssmltSettings};
 use mcmc_render::scene::Scene;
 use mcmc_render::staged::stage_seed;
 use mcmc_render::tempered::{
-    Regularization, RegularizationSchedule, ScheduleKind, TemperedBdpt, TemperedBsdfs,
-    chain_mis_weights, level_density, temperatures,
+    Regularization, RegularizationSchedule, SPECULAR_STAND_IN, ScheduleKind, TemperedBdpt,
+    TemperedBsdfs, chain_mis_weights, level_density, temperatures,
 };
 use proptest::prelude::*;
 use std::sync::OnceLock;
@@ -52,10 +52,41 @@ fn cornell() -> &'static Scene {
     SCENE.get_or_init(|| repo_scene_tilted("cornell-box.xml", RES, DEPTH))
 }
 
+/// The plastic box (smooth plastic sphere and box), tilted like the others
+/// (`repo_scene_tilted` expects a 256-pixel default; this scene's is 64).
+fn plastic() -> &'static Scene {
+    static SCENE: OnceLock<Scene> = OnceLock::new();
+    SCENE.get_or_init(|| {
+        let text = std::fs::read_to_string(repo_scene_path("cornell-plastic.xml"))
+            .expect("scene file")
+            .replace(r#"target="0, 0, 0""#, r#"target="0, -1.1, 0""#)
+            .replace(
+                r#""width" value="64""#,
+                &format!(r#""width" value="{RES}""#),
+            )
+            .replace(
+                r#""height" value="64""#,
+                &format!(r#""height" value="{RES}""#),
+            )
+            .replace(
+                r#""max_depth" value="8""#,
+                &format!(r#""max_depth" value="{DEPTH}""#),
+            );
+        let scene = load_str(&text);
+        assert_eq!((scene.film.width, scene.integrator.max_depth), (RES, DEPTH));
+        scene
+    })
+}
+
 fn sampler(scene: &Scene, temps: &[f64], floor: f64) -> TemperedBdpt {
+    sampler_with(scene, temps, floor, SPECULAR_STAND_IN)
+}
+
+/// [`sampler`] with smooth BSDFs standing in as roughness `stand_in` at `T > 1`.
+fn sampler_with(scene: &Scene, temps: &[f64], floor: f64, stand_in: f64) -> TemperedBdpt {
     TemperedBdpt {
         bdpt: bdpt_of(scene),
-        bsdfs: TemperedBsdfs::new(scene, temps, floor),
+        bsdfs: TemperedBsdfs::with_stand_in(scene, temps, floor, stand_in),
     }
 }
 
@@ -343,19 +374,21 @@ fn stages_need_a_decaying_schedule() {
 /// Image means of `k` tempered runs on the tilted box (4 levels, T up to
 /// 2500, IS permutations), `control`: with [`UnnormalisedMis`].
 fn tempered_reps(scene: &Scene, control: bool, k: u64, seed0: u64) -> Vec<[f64; 3]> {
-    tempered_reps_with(scene, control, (10_000, 1024), k, seed0)
+    tempered_reps_with(scene, control, (10_000, 1024), k, seed0, SPECULAR_STAND_IN)
 }
 
-/// [`tempered_reps`] with `(bootstrap candidates, mutations per pixel)`.
+/// [`tempered_reps`] with `(bootstrap candidates, mutations per pixel)`
+/// and the stand-in roughness of smooth BSDFs at `T > 1`.
 fn tempered_reps_with(
     scene: &Scene,
     control: bool,
     (bootstrap, mpp): (usize, u64),
     k: u64,
     seed0: u64,
+    stand_in: f64,
 ) -> Vec<[f64; 3]> {
     let stop = AtomicBool::new(false);
-    let s = sampler(scene, &temperatures(4, 2500.0), 0.0);
+    let s = sampler_with(scene, &temperatures(4, 2500.0), 0.0, stand_in);
     (0..k)
         .map(|i| {
             let settings = PssmltSettings {
@@ -425,9 +458,73 @@ fn eq_5_13_without_the_normalisations_is_rejected() {
 fn tempered_pssmlt_agrees_with_pt_on_the_glossy_glass_box() {
     let scene = glossy();
     let pt = mc_reps(scene, &pt_of(scene), 2048, 64, 1000);
-    let reps = tempered_reps_with(scene, false, (100_000, 4096), 32, 16_000);
+    let reps = tempered_reps_with(scene, false, (100_000, 4096), 32, 16_000, SPECULAR_STAND_IN);
     let a = MeanAgreement::new(&pt, &reps);
     eprintln!("tempered-pssmlt glossy: rel {:?}\n  {a:?}", a.rel());
+    assert!(a.failures(4.0, 0.01).is_empty(), "disagrees with PT: {a:?}");
+    assert!(a.resolves(5.0, 0.01), "noise too large: {a:?}");
+    let biased: Vec<[f64; 3]> = reps.iter().map(|m| m.map(|v| v * 1.01)).collect();
+    let b = MeanAgreement::new(&pt, &biased);
+    assert!(!b.failures(4.0, 0.01).is_empty(), "a 1% bias passed: {b:?}");
+}
+
+/// Stand-in roughness of the smooth plastic coat at `T > 1` in the test
+/// below: `√T · 0.01` reaches 0.5 at the hottest of 4 levels (T = 2500).
+const WIDE_STAND_IN: f64 = 0.01;
+
+#[test]
+fn a_wide_stand_in_makes_the_hot_levels_differ_on_the_plastic_box() {
+    // What makes the agreement test below bite: with the wide stand-in the
+    // smooth plastic coat is a rough lobe at every hot level, so the hot
+    // densities differ from the cold one on many states (and with the
+    // thesis's 10⁻⁴ far fewer states are affected).
+    let scene = plastic();
+    let count = |stand_in: f64| {
+        let target = PssTarget {
+            scene,
+            sampler: sampler_with(scene, &temperatures(4, 2500.0), 0.0, stand_in),
+        };
+        states(1000, 98)
+            .iter()
+            .filter(|x| {
+                let e = target.trace(x);
+                let p0 = level_density(&e.payload, 0).unwrap();
+                let p3 = level_density(&e.payload, 3).unwrap();
+                (p0 - p3).abs() > 0.05 * p0.max(p3)
+            })
+            .count()
+    };
+    let (wide, thesis) = (count(WIDE_STAND_IN), count(SPECULAR_STAND_IN));
+    eprintln!("states differing by > 5%: wide {wide}, thesis {thesis} of 1000");
+    assert!(
+        wide > 100 && wide > 2 * thesis,
+        "wide {wide}, thesis {thesis}"
+    );
+}
+
+/// The stand-in roughness of smooth BSDFs (`specular_roughness`) changes
+/// only the levels with `T > 1`; Eq. 5.13 films level 0's contribution
+/// with weights that sum to 1 over the levels, so the image must stay
+/// PT's. The tilted plastic box (smooth plastic sphere and box, depth 5),
+/// 4 levels up to T = 2500 with the wide stand-in (hot coats up to
+/// roughness 0.5), 24 replicates of 1024 mutations per pixel, against PT
+/// (48 × 1024 spp). Tolerance as the Cornell box's (header; Student's t
+/// with 23 degrees of freedom): within 4σ and 1%, 5σ < 1% asserted; the
+/// control, the same replicates × 1.01, must fail. With 12 replicates and
+/// PT at 256 spp it agreed (+0.05%, +0.33%, +0.41%) but blue's 5σ was
+/// 1.34% (σ 0.27%, the dim blue channel): hence the budget, which puts it
+/// out of the default suite (≈ 5 min at load 10; ≈ 290 s for half of it).
+#[test]
+#[ignore = "minutes: tempered PSSMLT with a wide stand-in to 1% on the plastic box"]
+fn a_wide_stand_in_keeps_the_image_unbiased_on_the_plastic_box() {
+    let scene = plastic();
+    let pt = mc_reps(scene, &pt_of(scene), 1024, 48, 1000);
+    let reps = tempered_reps_with(scene, false, (10_000, 1024), 24, 17_000, WIDE_STAND_IN);
+    let a = MeanAgreement::new(&pt, &reps);
+    eprintln!(
+        "tempered-pssmlt plastic, wide stand-in: rel {:?}\n  {a:?}",
+        a.rel()
+    );
     assert!(a.failures(4.0, 0.01).is_empty(), "disagrees with PT: {a:?}");
     assert!(a.resolves(5.0, 0.01), "noise too large: {a:?}");
     let biased: Vec<[f64; 3]> = reps.iter().map(|m| m.map(|v| v * 1.01)).collect();

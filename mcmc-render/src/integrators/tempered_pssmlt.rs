@@ -96,6 +96,8 @@ crate::settings! {
         pub regularization_n: usize = 0;
         /// Stages of doubling budget, each at the floor of the samples per pixel before it (decaying schedules only; 1: one floor for the run).
         pub regularization_stages: usize = 1, check stage_count;
+        /// Roughness smooth BSDFs stand in with at T > 1 (before the √T scale; thesis 1e-4); T = 1 stays smooth.
+        pub specular_roughness: f64 = crate::tempered::SPECULAR_STAND_IN, check check::non_negative;
     }
 }
 
@@ -147,10 +149,11 @@ impl TemperedLadder {
     /// The ladder's roughened BSDFs on `scene` for a stage that starts
     /// after `samples_per_pixel` samples per pixel.
     pub fn bsdfs_at(&self, scene: &Scene, samples_per_pixel: u64) -> TemperedBsdfs {
-        TemperedBsdfs::new(
+        TemperedBsdfs::with_stand_in(
             scene,
             &temperatures(self.levels, self.t_max),
             self.schedule().floor(self.sample_index(samples_per_pixel)),
+            self.specular_roughness,
         )
     }
 
