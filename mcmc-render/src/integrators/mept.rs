@@ -41,12 +41,13 @@ crate::settings! {
     /// `mlt`'s settings with the manifold perturbation on.
     pub struct Mept {
         flatten {
-            /// Every `mlt` parameter (manifold_perturbation defaults to 1, independent_mutation to 0.3, lens_perturbation to 0, bootstrap to 1 000 000).
+            /// Every `mlt` parameter (manifold_perturbation defaults to 1, independent_mutation to 0.3, lens_perturbation to 0, bdpt_startup to true with bootstrap 200 000 draws).
             pub mlt: Mlt = Mlt {
                 manifold_perturbation: 1.0,
                 independent_mutation: 0.3,
                 lens_perturbation: 0.0,
-                chain: ChainParams { bootstrap: 1_000_000, ..ChainParams::default() },
+                bdpt_startup: true,
+                chain: ChainParams { bootstrap: 200_000, ..ChainParams::default() },
                 ..Mlt::default()
             };
         }
@@ -55,7 +56,7 @@ crate::settings! {
 
 impl IntegratorSettings for Mept {
     const NAME: &'static str = "mept";
-    const DESCRIPTION: &'static str = "Path-space MLT with the manifold perturbation on (manifold exploration, Jakob & Marschner 2012): mlt with manifold_perturbation = 1, independent_mutation = 0.3 and lens_perturbation = 0.";
+    const DESCRIPTION: &'static str = "Path-space MLT with the manifold perturbation on (manifold exploration, Jakob & Marschner 2012): mlt with manifold_perturbation = 1, independent_mutation = 0.3, lens_perturbation = 0 and the BDPT start-up (bdpt_startup, 200 000 draws).";
 
     fn validate(&self) -> Result<(), String> {
         IntegratorSettings::validate(&self.mlt)
