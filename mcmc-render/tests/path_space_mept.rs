@@ -50,23 +50,27 @@ fn mept_mutations() -> PathMutations {
     Mept::default().mlt.mutations()
 }
 
-/// Image means of `k` runs of the `mept` chains (running normalisation).
+/// Image means of `k` runs of the `mept` chains (running normalisation)
+/// with `mept`'s start-up: `draws` BDPT draws (`bdpt_startup`).
 fn mept_reps(
     scene: &Scene,
-    bootstrap: usize,
+    draws: usize,
     chains: usize,
     mpp: u64,
     k: u64,
     seed0: u64,
 ) -> Vec<[f64; 3]> {
     let max = scene.integrator.max_depth;
-    let family = PathFamily::new(scene, (max != u32::MAX).then_some(max as usize));
+    let family = PathFamily::new(scene, (max != u32::MAX).then_some(max as usize))
+        .with_bdpt_startup(draws as u64);
+    assert!(family.has_bdpt_startup());
     let stop = AtomicBool::new(false);
     (0..k)
         .map(|s| {
             let settings = ChainSettings {
                 mutation: mept_mutations(),
-                bootstrap,
+                // The search replaces the bootstrap (as `mept` runs it).
+                bootstrap: 1,
                 chains,
                 mutations_per_pixel: Some(mpp),
                 seed: seed0 + s,
@@ -81,11 +85,12 @@ fn mept_reps(
         .collect()
 }
 
-/// 48 replicates of 300 000 candidates, 512 chains, 1024 mutations per
-/// pixel (the `mlt` test's budget: `b`'s spread between seeds dominates).
+/// 64 replicates of 40 000 BDPT start-up draws (`mept`'s start-up; up to
+/// session 10, 300 000 ordinary candidates), 512 chains, 1024 mutations
+/// per pixel (the `mlt` test's budget).
 fn mept_replicates() -> &'static [[f64; 3]] {
     static MEPT: OnceLock<Vec<[f64; 3]>> = OnceLock::new();
-    MEPT.get_or_init(|| mept_reps(cornell(), 300_000, 512, 1024, 48, 21_000))
+    MEPT.get_or_init(|| mept_reps(cornell(), 40_000, 512, 1024, 64, 21_000))
 }
 
 #[test]
@@ -232,7 +237,7 @@ fn mept_images_are_bit_identical_across_thread_counts() {
 fn mept_agrees_with_pt_on_the_glossy_glass_box() {
     let scene = repo_scene_tilted("cornell-glossy-glass.xml", RES, DEPTH);
     let pt = mc_reps(&scene, &pt_of(&scene), 256, 128, 1000);
-    let reps = mept_reps(&scene, 300_000, 512, 1024, 96, 23_000);
+    let reps = mept_reps(&scene, 40_000, 512, 1024, 96, 23_000);
     let a = MeanAgreement::new(&pt, &reps);
     eprintln!("mept glossy-glass: rel {:?}\n  {a:?}", a.rel());
     assert!(
