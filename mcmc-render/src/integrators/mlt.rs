@@ -17,6 +17,9 @@
 //!   standard error is reported as `scale_standard_error`);
 //!   `independent_mutation > 0` adds a fresh start-up path as a large step
 //!   (not in Mitsuba), which the running normalisation then counts.
+//!   `bdpt_startup` (`mept`'s default) replaces the candidates by BDPT
+//!   draws that count every technique of their two walks
+//!   ([`crate::path_space::bdpt_startup`]).
 //! - **Direct-lighting pass** (`direct_samples`, Mitsuba's `directSamples`;
 //!   off by default here, 16 in Mitsuba): paths of one and two segments
 //!   (emitters seen directly, direct light) are rendered by path tracing
