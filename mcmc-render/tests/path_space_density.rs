@@ -417,3 +417,253 @@ fn degenerate_paths_are_outside_the_support() {
     assert_eq!(e.payload.splats[0].p, x.raster);
     assert_eq!(e.payload.depth, 3);
 }
+
+// ---------------------------------------------------------------------
+// Through a Dirac vertex.
+//
+// A diffuse floor under a smooth glass ceiling (a dielectric rectangle
+// facing down), a small spherical lamp between them. The start path is
+// `x_0` (lamp) `x_1` (floor) `x_2` (ceiling, reflection: Dirac) `x_3`
+// (floor) `x_4` (camera). The fixed-length move that deletes `x_1 x_2`
+// (start `l = 1`, three edges deleted and added) can make a path of this
+// pattern only one way: the camera walk from `x_3` hits the ceiling,
+// reflects (the lobe chosen with probability `F`, Fresnel) and lands on
+// `y_1`, which connects to `x_0`; a split with a light-walk vertex would
+// connect at the Dirac vertex (`NotConnectible`). The reported `T(x→y)`
+// is then `P(record) · (1/#s) · p_ω(x_3→y_2) cos_2/d²_32 · F cos_1/d²_21`:
+// after the Dirac vertex the camera walk's density is the lobe
+// probability `F` turned into area at `y_1`, as BDPT turns it.
+//
+// The histogram bins the direction `x_3 → y_2` about `x_3`'s normal (the
+// move's one continuous choice) over the proposals of that record whose
+// `y_2` is on the ceiling and whose `y_1` is a floor point visible from
+// `x_0` (failed connections at Dirac vertices and ended walks excluded);
+// the expectation integrates `T · d²/|cos θ_y2|` over each cell with the
+// same conditions. Controls, which the chi-square must reject: `T / F`
+// (the lobe's selection probability dropped, the Dirac vertex taken as
+// certain) and `T` without the Dirac segment's area factor.
+// ---------------------------------------------------------------------
+
+/// Floor, glass ceiling, small lamp; 32×32, paths of up to 4 segments.
+fn glass_ceiling() -> &'static Scene {
+    static SCENE: OnceLock<Scene> = OnceLock::new();
+    SCENE.get_or_init(|| {
+        common::load_str(
+            r#"<scene version="3.0.0">
+    <integrator type="path"><integer name="max_depth" value="4"/></integrator>
+    <sensor type="perspective">
+        <float name="fov" value="50"/>
+        <transform name="to_world"><lookat origin="0, 0.8, 2.5" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <sampler type="independent"><integer name="sample_count" value="4"/></sampler>
+        <film type="hdrfilm"><integer name="width" value="32"/><integer name="height" value="32"/><rfilter type="box"/></film>
+    </sensor>
+    <shape type="rectangle">
+        <transform name="to_world"><scale x="5" y="5" z="1"/><rotate x="1" y="0" z="0" angle="-90"/></transform>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>
+    </shape>
+    <shape type="rectangle">
+        <transform name="to_world"><scale x="5" y="5" z="1"/><rotate x="1" y="0" z="0" angle="90"/><translate x="0" y="1.2" z="0"/></transform>
+        <bsdf type="dielectric"><float name="int_ior" value="1.5"/><float name="ext_ior" value="1.0"/></bsdf>
+    </shape>
+    <shape type="sphere">
+        <transform name="to_world"><scale x="0.05" y="0.05" z="0.05"/><translate x="-0.3" y="0.6" z="-0.2"/></transform>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0, 0, 0"/></bsdf>
+        <emitter type="area"><rgb name="radiance" value="50, 50, 50"/></emitter>
+    </shape>
+</scene>"#,
+        )
+    })
+}
+
+/// A start path `L D S D E` with the Dirac vertex on the ceiling (the
+/// first such start-up candidate of a fixed seed).
+fn dirac_start_path(scene: &Scene) -> Path<'_> {
+    let family = PathFamily::new(scene, Some(4));
+    let mut rng = stream_rng(5, 0);
+    for _ in 0..200_000 {
+        let x = family.draw_candidate(&mut rng);
+        let v = &x.vertices;
+        if x.segments() == 4
+            && x.luminance() > 0.0
+            && x.all_visible()
+            && v[2].delta
+            && [1, 3]
+                .iter()
+                .all(|&i| v[i].kind == VertexKind::Surface && !v[i].delta && !v[i].is_light())
+        {
+            return x;
+        }
+    }
+    panic!("no L D S D E path found");
+}
+
+/// The regrowth of `x_1 x_2`.
+const DIRAC_RECORD: MutationRecord = MutationRecord {
+    l: 1,
+    deleted: 3,
+    added: 3,
+    s: 0,
+};
+
+/// Whether a proposal with new vertices `y1`, `y2` is counted: `y2` on a
+/// Dirac surface, `y1` on a non-Dirac, non-emitting one visible from `x0`.
+fn dirac_counted(scene: &Scene, x0: &Vertex, y1: &Vertex, y2: &Vertex) -> bool {
+    scene.bsdf_at(&y2.sp).is_delta()
+        && !scene.bsdf_at(&y1.sp).is_delta()
+        && !y1.is_light()
+        && scene.geometry.visible(&x0.sp, &y1.sp)
+}
+
+/// Which `T` the Dirac expectation integrates.
+#[derive(Clone, Copy, PartialEq)]
+enum DiracDensity {
+    /// The code's `T`.
+    Reported,
+    /// Control: `T / F`, the lobe's selection probability dropped.
+    LobeDropped,
+    /// Control: `T` taken as a density in `x_3`'s solid angle times the
+    /// lobe probability alone (the area factor of the Dirac segment
+    /// `y_2 y_1` forgotten).
+    SegmentFactorDropped,
+}
+
+/// Expected probability of each cell of the direction `x_3 → y_2`, by
+/// midpoint quadrature of `T` in `(cos θ, φ)`. `T` is a density in the
+/// area at `y_2` and, through the Dirac vertex, in the area at `y_1`
+/// (`pdf_rev(y_1) = F |cos θ_1| / d²_21`, BDPT's convention), so the
+/// density of the proposal's one continuous choice, the direction at
+/// `x_3`, is `T · d²_32/|cos θ_2| · d²_21/|cos θ_1|`.
+fn dirac_expected_masses(kernel: &Bidirectional, x: &Path<'_>, density: DiracDensity) -> Vec<f64> {
+    use mcmc_render::bsdf::TransportMode;
+    use mcmc_render::path_space::state::dirac_lobe;
+    let scene = x.scene;
+    let (x0, x3) = (&x.vertices[0], &x.vertices[3]);
+    let frame = Frame::from_normal(x3.sp.ng);
+    let mut masses = vec![0.0; NZ * NPHI];
+    let dz = 1.0 / (NZ * QUAD) as f64;
+    let dphi = 2.0 * PI / (NPHI * QUAD) as f64;
+    for iz in 0..NZ * QUAD {
+        for ip in 0..NPHI * QUAD {
+            let z = (iz as f64 + 0.5) * dz;
+            let phi = (ip as f64 + 0.5) * dphi;
+            let r = (1.0 - z * z).sqrt();
+            let local = glam::Vec3::new((r * phi.cos()) as f32, (r * phi.sin()) as f32, z as f32);
+            let w = frame.to_world(local).normalize();
+            let Some(hit2) = scene.intersect(&x3.sp.spawn_ray(w)) else {
+                continue;
+            };
+            let mut y2 = Vertex::surface(scene, hit2.sp, -w, Rgb::WHITE);
+            y2.delta = true;
+            // The mirror direction about the ceiling's normal.
+            let n = hit2.sp.ng;
+            let wr = (w - 2.0 * w.dot(n) * n).normalize();
+            let Some(hit1) = scene.intersect(&hit2.sp.spawn_ray(wr)) else {
+                continue;
+            };
+            let y1 = Vertex::surface(scene, hit1.sp, -wr, Rgb::WHITE);
+            if !dirac_counted(scene, x0, &y1, &y2) {
+                continue;
+            }
+            let mut y = x.clone();
+            y.vertices[1] = y1;
+            y.vertices[2] = y2;
+            y.normalize_ends();
+            y.evaluate();
+            let mut ln_t = kernel.log_transition_density(x, &y, &DIRAC_RECORD);
+            if ln_t == f64::NEG_INFINITY {
+                continue;
+            }
+            if density == DiracDensity::LobeDropped {
+                let (p, _) = dirac_lobe(scene, &y2, -w, wr, TransportMode::Radiance)
+                    .expect("a reflection lobe");
+                ln_t -= (p as f64).ln();
+            }
+            let d2 = (hit2.sp.p - x3.p()).length_squared() as f64;
+            let cos_y = (n.dot(w) as f64).abs();
+            let segment = if density == DiracDensity::SegmentFactorDropped {
+                1.0
+            } else {
+                let d2_21 = (hit1.sp.p - hit2.sp.p).length_squared() as f64;
+                d2_21 / (hit1.sp.ng.dot(wr) as f64).abs()
+            };
+            let cell = cell_of(&frame, w).expect("upper hemisphere");
+            masses[cell] += ln_t.exp() * d2 / cos_y * segment * dz * dphi;
+        }
+    }
+    masses
+}
+
+/// Histogram of the direction `x_3 → y_2` over `n` proposals from `x`
+/// (module comment above for which are counted).
+fn dirac_histogram(x: &Path<'_>, n: usize, seed: u64) -> Vec<u64> {
+    let scene = x.scene;
+    let mut kernel = Bidirectional::new(1, Some(4), true);
+    let current = sample_of(x);
+    let mut proposal = sample_of(x);
+    let mut rng = stream_rng(seed, 0);
+    let (x0, x3) = (&x.vertices[0], &x.vertices[3]);
+    let frame = Frame::from_normal(x3.sp.ng);
+    let mut counts = vec![0u64; NZ * NPHI];
+    for _ in 0..n {
+        let p = kernel.propose(&current, &mut proposal, &mut rng);
+        let Some(rec) = kernel.last_record() else {
+            continue;
+        };
+        if (rec.l, rec.deleted, rec.added) != (1, 3, 3) {
+            continue;
+        }
+        if p.failed
+            && (p.component == Invalid::WalkEnded as usize
+                || p.component == Invalid::NotConnectible as usize)
+        {
+            continue;
+        }
+        let y = &proposal.state;
+        let (y1, y2) = (&y.vertices[1], &y.vertices[2]);
+        if !dirac_counted(scene, x0, y1, y2) {
+            continue;
+        }
+        let Some(w) = (y2.p() - x3.p()).try_normalize() else {
+            continue;
+        };
+        if let Some(c) = cell_of(&frame, w) {
+            counts[c] += 1;
+        }
+    }
+    counts
+}
+
+#[test]
+fn bidirectional_density_through_a_dirac_vertex_matches_its_proposals() {
+    let scene = glass_ceiling();
+    let x = dirac_start_path(scene);
+    let kernel = Bidirectional::new(1, Some(4), true);
+    let n = 1_000_000;
+    let counts = dirac_histogram(&x, n, 31);
+    let counted: u64 = counts.iter().sum();
+    let masses = dirac_expected_masses(&kernel, &x, DiracDensity::Reported);
+    eprintln!(
+        "counted {counted} of {n}; expected {:.0}",
+        masses.iter().sum::<f64>() * n as f64
+    );
+    // Enough proposals in the cells for the test to have power (a
+    // factor 2 off in one cell of ~25 expected is then ≥ 3σ).
+    assert!(counted > 1500, "only {counted} proposals counted");
+    let p = common::chi_square_p_value(&counts, &masses, n);
+    assert!(
+        p > 1e-4,
+        "T(x→·) through the Dirac vertex disagrees with the proposals: p = {p:.2e}"
+    );
+    for control in [
+        DiracDensity::LobeDropped,
+        DiracDensity::SegmentFactorDropped,
+    ] {
+        let wrong = dirac_expected_masses(&kernel, &x, control);
+        let p_wrong = common::chi_square_p_value(&counts, &wrong, n);
+        assert!(
+            p_wrong < 1e-4,
+            "a control density passed (lobe dropped: {}): p = {p_wrong:.2e}",
+            control == DiracDensity::LobeDropped
+        );
+    }
+}

@@ -50,23 +50,27 @@ fn mept_mutations() -> PathMutations {
     Mept::default().mlt.mutations()
 }
 
-/// Image means of `k` runs of the `mept` chains (running normalisation).
+/// Image means of `k` runs of the `mept` chains (running normalisation)
+/// with `mept`'s start-up: `draws` BDPT draws (`bdpt_startup`).
 fn mept_reps(
     scene: &Scene,
-    bootstrap: usize,
+    draws: usize,
     chains: usize,
     mpp: u64,
     k: u64,
     seed0: u64,
 ) -> Vec<[f64; 3]> {
     let max = scene.integrator.max_depth;
-    let family = PathFamily::new(scene, (max != u32::MAX).then_some(max as usize));
+    let family = PathFamily::new(scene, (max != u32::MAX).then_some(max as usize))
+        .with_bdpt_startup(draws as u64);
+    assert!(family.has_bdpt_startup());
     let stop = AtomicBool::new(false);
     (0..k)
         .map(|s| {
             let settings = ChainSettings {
                 mutation: mept_mutations(),
-                bootstrap,
+                // The search replaces the bootstrap (as `mept` runs it).
+                bootstrap: 1,
                 chains,
                 mutations_per_pixel: Some(mpp),
                 seed: seed0 + s,
@@ -81,11 +85,12 @@ fn mept_reps(
         .collect()
 }
 
-/// 48 replicates of 300 000 candidates, 512 chains, 1024 mutations per
-/// pixel (the `mlt` test's budget: `b`'s spread between seeds dominates).
+/// 64 replicates of 40 000 BDPT start-up draws (`mept`'s start-up; up to
+/// session 10, 300 000 ordinary candidates), 512 chains, 1024 mutations
+/// per pixel (the `mlt` test's budget).
 fn mept_replicates() -> &'static [[f64; 3]] {
     static MEPT: OnceLock<Vec<[f64; 3]>> = OnceLock::new();
-    MEPT.get_or_init(|| mept_reps(cornell(), 300_000, 512, 1024, 48, 21_000))
+    MEPT.get_or_init(|| mept_reps(cornell(), 40_000, 512, 1024, 64, 21_000))
 }
 
 #[test]
@@ -94,7 +99,47 @@ fn mept_is_mlt_with_the_manifold_perturbation_on() {
     assert_eq!(m.manifold_perturbation, 1.0);
     assert_eq!(m.independent, 0.3);
     assert_eq!(m.lens_perturbation, 0.0);
-    assert_eq!(Mept::default().mlt.chain.bootstrap, 1_000_000);
+    assert_eq!(Mept::default().mlt.chain.bootstrap, 200_000);
+    assert!(Mept::default().mlt.bdpt_startup);
+    assert!(!mcmc_render::integrators::mlt::Mlt::default().bdpt_startup);
+    // Perturbation sizes: both ends or neither, 0 < min < max.
+    let sized = registry::configure(
+        None,
+        Some("mept"),
+        &[
+            ("lens_perturbation_min".into(), "0.5".into()),
+            ("lens_perturbation_max".into(), "8".into()),
+        ],
+    )
+    .expect("sizes accepted");
+    assert_eq!(sized.settings_json()["lens_perturbation_max"], 8.0);
+    let mut mlt = mcmc_render::integrators::mlt::Mlt {
+        caustic_perturbation_min: 0.2,
+        caustic_perturbation_max: 4.0,
+        ..Default::default()
+    };
+    let sizes = mlt.mutations().sizes;
+    assert_eq!(sizes.caustic.map(|k| (k.r1, k.r2)), Some((0.2, 4.0)));
+    assert_eq!(sizes.lens, None);
+    mlt.caustic_perturbation_max = -1.0;
+    assert!(
+        mlt.sizes().is_err(),
+        "one end of a size pair alone is refused"
+    );
+    for bad in [("0", "4"), ("4", "2"), ("1", "inf")] {
+        assert!(
+            registry::configure(
+                None,
+                Some("mept"),
+                &[
+                    ("multi_chain_perturbation_min".into(), bad.0.into()),
+                    ("multi_chain_perturbation_max".into(), bad.1.into()),
+                ],
+            )
+            .is_err(),
+            "{bad:?} accepted"
+        );
+    }
     assert_eq!(
         PathMutations {
             manifold_perturbation: 0.0,
@@ -192,7 +237,7 @@ fn mept_images_are_bit_identical_across_thread_counts() {
 fn mept_agrees_with_pt_on_the_glossy_glass_box() {
     let scene = repo_scene_tilted("cornell-glossy-glass.xml", RES, DEPTH);
     let pt = mc_reps(&scene, &pt_of(&scene), 256, 128, 1000);
-    let reps = mept_reps(&scene, 300_000, 512, 1024, 96, 23_000);
+    let reps = mept_reps(&scene, 40_000, 512, 1024, 96, 23_000);
     let a = MeanAgreement::new(&pt, &reps);
     eprintln!("mept glossy-glass: rel {:?}\n  {a:?}", a.rel());
     assert!(
@@ -200,4 +245,75 @@ fn mept_agrees_with_pt_on_the_glossy_glass_box() {
         "mept disagrees with PT: {a:?}"
     );
     assert!(a.resolves(5.0, 0.015), "noise too large for 1.5%: {a:?}");
+}
+
+/// `mept`'s start-up (`bdpt_startup`, `path_space::bdpt_startup`): the
+/// mean of the draws' totals estimates the same `b` as the ordinary
+/// bootstrap, and each weighted state, regenerated from its index, is
+/// the path whose weight was recorded, with `w = I / Σ_s p_s`.
+///
+/// Tolerance: both estimates are means of iid terms (the search's draws,
+/// the bootstrap's candidates; 60 000 and 1 000 000 of them, far above 30,
+/// so the normal quantile applies), each with its sample standard error;
+/// the difference must be within 4σ of the combined error, and 4σ must
+/// resolve 3% of `b`. Control: the search's states weighted without MIS
+/// (`I / p_s` of the split that drew them, every technique counted
+/// fully), which overcounts the paths several techniques reach and must
+/// be rejected.
+#[test]
+fn the_bdpt_startup_estimates_the_bootstraps_b() {
+    use mcmc_render::markov::ChainFamily;
+    use mcmc_render::path_space::bdpt_startup::SEARCH_INDEX;
+    let scene = cornell();
+    let max = scene.integrator.max_depth as usize;
+    let draws = 60_000u64;
+    let family = PathFamily::new(scene, Some(max)).with_bdpt_startup(draws);
+    assert!(family.has_bdpt_startup());
+    let search = family.search(0, 5).expect("a search");
+    assert!(search.replaces_bootstrap);
+    assert_eq!(search.draws, draws);
+    // The search's b: mean and standard error over all draws (zeros too).
+    let mean_se = |totals: &[f64]| {
+        let n = draws as f64;
+        let m = totals.iter().sum::<f64>() / n;
+        let ss =
+            totals.iter().map(|t| (t - m).powi(2)).sum::<f64>() + (n - totals.len() as f64) * m * m;
+        (m, (ss / (n - 1.0) / n).sqrt())
+    };
+    let totals: Vec<f64> = search.per_draw.iter().map(|lw| lw.exp()).collect();
+    let (b_search, se_search) = mean_se(&totals);
+    let (boot, _) =
+        mcmc_render::markov::bootstrap(&PathFamily::new(scene, Some(max)), 1_000_000, 6)
+            .expect("bootstrap");
+    let (b_boot, se_boot) = (boot.b(), boot.standard_error());
+    let sigma = (se_search.powi(2) + se_boot.powi(2)).sqrt();
+    eprintln!("b: search {b_search:.5} ± {se_search:.5}, bootstrap {b_boot:.5} ± {se_boot:.5}");
+    assert!(4.0 * sigma < 0.03 * b_boot, "σ {sigma} does not resolve 3%");
+    assert!(
+        (b_search - b_boot).abs() < 4.0 * sigma,
+        "search b {b_search} vs bootstrap {b_boot} (σ {sigma})"
+    );
+    // Every weighted state, regenerated, carries its recorded weight; and
+    // the control's per-draw totals without MIS.
+    let mut no_mis = vec![0.0; draws as usize];
+    for &(index, log_w) in &search.weighted {
+        let x = family.candidate(5, index);
+        let k = x.segments();
+        let ways: Vec<f64> = (0..=k).map(|s| x.log_regrowth_density(0, k, s)).collect();
+        let expected = x.log_density() - mcmc_core::math::log_sum_exp(&ways);
+        assert!(
+            (expected - log_w).abs() <= 1e-9 * log_w.abs().max(1.0),
+            "state {index:#x}: weight {log_w}, regenerated {expected}"
+        );
+        let i = index - SEARCH_INDEX;
+        let s = ((i >> 6) & 63) as usize;
+        no_mis[(i >> 12) as usize] += (x.log_density() - ways[s]).exp();
+    }
+    let (b_wrong, se_wrong) = mean_se(&no_mis);
+    let sigma_wrong = (se_wrong.powi(2) + se_boot.powi(2)).sqrt();
+    eprintln!("control without MIS: {b_wrong:.5} ± {se_wrong:.5}");
+    assert!(
+        (b_wrong - b_boot).abs() > 4.0 * sigma_wrong,
+        "the control without MIS weights passed"
+    );
 }

@@ -10,23 +10,25 @@
 //! defaults: the settings are exactly `mlt`'s (every parameter, same
 //! names), with `manifold_perturbation` = 1 instead of 0,
 //! `independent_mutation` = 0.3 instead of 0, `lens_perturbation` = 0
-//! instead of 1 (`mept` was measured on caustic-sds without it) and
-//! `bootstrap` = 1 000 000 start-up candidates instead of 100 000.
-//! `--integrator mlt --set manifold_perturbation=1 --set
-//! independent_mutation=0.3 --set lens_perturbation=0 --set
-//! bootstrap=1000000` runs the same thing.
+//! instead of 1 (`mept` was measured on caustic-sds without it) and the
+//! BDPT start-up (`bdpt_startup` = true, `bootstrap` = 200 000 draws)
+//! instead of 100 000 one-technique candidates. `--integrator mlt --set
+//! manifold_perturbation=1 --set independent_mutation=0.3 --set
+//! lens_perturbation=0 --set bdpt_startup=true --set bootstrap=200000`
+//! runs the same thing.
 //!
 //! Why the independent proposal (a fresh start-up path as a large step)
 //! is on here and not in `mlt`: measured at equal time (60 s, seeds 1–3,
 //! `docs/path-space.md`), on caustic-sds it lowered `mept`'s relMSE in
-//! every seed, while on door-ajar it raised `mlt`'s in both seeds. The
-//! start-up estimate of `b` on the SDS scene is heavy-tailed (`L S D S E`
-//! paths come from one technique of the `k + 1`; seed 2's `b` was 0.32 ±
-//! 0.18 against ≈ 0.16), and the independent proposals let the running
-//! normalisation refine it and give chains on such a path a way out.
-//! Ten times the start-up candidates dilute such an outlier tenfold
-//! (seed 2: relMSE 8.9 → 0.068; seed 3: 0.111 → 0.060), for a few
-//! seconds more start-up.
+//! every seed, while on door-ajar it raised `mlt`'s in both seeds.
+//!
+//! Why the BDPT start-up ([`crate::path_space::bdpt_startup`]): the
+//! ordinary start-up's estimate of `b` on the SDS scene is heavy-tailed
+//! (`L S D S E` paths come from one technique of the `k + 1`; session
+//! 10's seed 2 drew `b` = 0.32 ± 0.18 against ≈ 0.16, and even with
+//! 1 000 000 candidates that seed stayed 2.9× `pssmlt`'s relMSE). Counting
+//! every technique of each draw's walks lowered `b`'s variance tenfold at
+//! half the start-up time (`docs/path-space.md`).
 
 use super::mlt::Mlt;
 use super::registry::IntegratorSettings;
@@ -41,12 +43,13 @@ crate::settings! {
     /// `mlt`'s settings with the manifold perturbation on.
     pub struct Mept {
         flatten {
-            /// Every `mlt` parameter (manifold_perturbation defaults to 1, independent_mutation to 0.3, lens_perturbation to 0, bootstrap to 1 000 000).
+            /// Every `mlt` parameter (manifold_perturbation defaults to 1, independent_mutation to 0.3, lens_perturbation to 0, bdpt_startup to true with bootstrap 200 000 draws).
             pub mlt: Mlt = Mlt {
                 manifold_perturbation: 1.0,
                 independent_mutation: 0.3,
                 lens_perturbation: 0.0,
-                chain: ChainParams { bootstrap: 1_000_000, ..ChainParams::default() },
+                bdpt_startup: true,
+                chain: ChainParams { bootstrap: 200_000, ..ChainParams::default() },
                 ..Mlt::default()
             };
         }
@@ -55,7 +58,7 @@ crate::settings! {
 
 impl IntegratorSettings for Mept {
     const NAME: &'static str = "mept";
-    const DESCRIPTION: &'static str = "Path-space MLT with the manifold perturbation on (manifold exploration, Jakob & Marschner 2012): mlt with manifold_perturbation = 1, independent_mutation = 0.3 and lens_perturbation = 0.";
+    const DESCRIPTION: &'static str = "Path-space MLT with the manifold perturbation on (manifold exploration, Jakob & Marschner 2012): mlt with manifold_perturbation = 1, independent_mutation = 0.3, lens_perturbation = 0 and the BDPT start-up (bdpt_startup, 200 000 draws).";
 
     fn validate(&self) -> Result<(), String> {
         IntegratorSettings::validate(&self.mlt)

@@ -17,6 +17,9 @@
 //!   standard error is reported as `scale_standard_error`);
 //!   `independent_mutation > 0` adds a fresh start-up path as a large step
 //!   (not in Mitsuba), which the running normalisation then counts.
+//!   `bdpt_startup` (`mept`'s default) replaces the candidates by BDPT
+//!   draws that count every technique of their two walks
+//!   ([`crate::path_space::bdpt_startup`]).
 //! - **Direct-lighting pass** (`direct_samples`, Mitsuba's `directSamples`;
 //!   off by default here, 16 in Mitsuba): paths of one and two segments
 //!   (emitters seen directly, direct light) are rendered by path tracing
@@ -42,6 +45,7 @@ use super::{DepthParams, RenderError, Rendered, RunSettings};
 use crate::color::Rgb;
 use crate::markov::{self, ChainParams, MltError, MltResult};
 use crate::observer::Observer;
+use crate::path_space::family::PerturbationSizes;
 use crate::path_space::proposal_clock::{ProposalClock, mutation_types};
 use crate::path_space::specular_pass::SpecularChains;
 use crate::path_space::{PathFamily, PathMutations, emitters_at_infinity_refusal};
@@ -78,6 +82,24 @@ crate::settings! {
         pub direct_samples: i64 = -1, check direct_samples;
         /// Samples per pixel of the specular-chain pass (path tracing of the paths L S* E, emitters seen directly or through mirrors and glass, which the chains then leave out: no bidirectional move keeps a vertex of them); -1: off, the chains do them (not in Mitsuba).
         pub specular_samples: i64 = 16, check direct_samples;
+        /// Smallest film offset of the lens perturbation (pixels; -1 with lens_perturbation_max = -1: Mitsuba's 0.1).
+        pub lens_perturbation_min: f64 = -1.0;
+        /// Largest film offset of the lens perturbation (pixels; -1: Mitsuba's √(0.05 · pixels / π)).
+        pub lens_perturbation_max: f64 = -1.0;
+        /// Smallest film offset the caustic perturbation's angles derive from (pixels; -1: Mitsuba's).
+        pub caustic_perturbation_min: f64 = -1.0;
+        /// Largest film offset the caustic perturbation's angles derive from (pixels; -1: Mitsuba's).
+        pub caustic_perturbation_max: f64 = -1.0;
+        /// Smallest film offset of the multi-chain perturbation (pixels; -1: Mitsuba's).
+        pub multi_chain_perturbation_min: f64 = -1.0;
+        /// Largest film offset of the multi-chain perturbation (pixels; -1: Mitsuba's).
+        pub multi_chain_perturbation_max: f64 = -1.0;
+        /// Smallest film offset of the manifold perturbation when it moves the camera end (pixels; -1: Mitsuba's).
+        pub manifold_perturbation_min: f64 = -1.0;
+        /// Largest film offset of the manifold perturbation when it moves the camera end (pixels; -1: Mitsuba's).
+        pub manifold_perturbation_max: f64 = -1.0;
+        /// Start-up by BDPT draws (path_space::bdpt_startup): each of the `bootstrap` draws traces a camera and a light walk and counts every technique (s, t) of them, MIS-weighted, for b and the chains' starts, instead of one technique per candidate; needs max_depth ≤ 62 (else the ordinary start-up).
+        pub bdpt_startup: bool = false;
         flatten {
             /// Path depth (rr_depth applies to the direct pass only: path-space walks have exact lengths).
             pub depth: DepthParams = DepthParams::default();
@@ -88,7 +110,36 @@ crate::settings! {
 }
 
 impl Mlt {
-    /// The mutation mixture these settings select.
+    /// The perturbations' sizes these settings give (an error names a
+    /// pair that is neither both -1 nor `0 < min < max`).
+    pub fn sizes(&self) -> Result<PerturbationSizes, String> {
+        Ok(PerturbationSizes {
+            lens: PerturbationSizes::from_setting(
+                "lens_perturbation",
+                self.lens_perturbation_min,
+                self.lens_perturbation_max,
+            )?,
+            caustic: PerturbationSizes::from_setting(
+                "caustic_perturbation",
+                self.caustic_perturbation_min,
+                self.caustic_perturbation_max,
+            )?,
+            multi_chain: PerturbationSizes::from_setting(
+                "multi_chain_perturbation",
+                self.multi_chain_perturbation_min,
+                self.multi_chain_perturbation_max,
+            )?,
+            manifold: PerturbationSizes::from_setting(
+                "manifold_perturbation",
+                self.manifold_perturbation_min,
+                self.manifold_perturbation_max,
+            )?,
+        })
+    }
+
+    /// The mutation mixture these settings select (Mitsuba's sizes where
+    /// the size settings are invalid: [`IntegratorSettings::validate`]
+    /// refuses those first).
     pub fn mutations(&self) -> PathMutations {
         PathMutations {
             bidirectional: self.bidirectional_mutation,
@@ -100,6 +151,7 @@ impl Mlt {
             lens_subpath: self.lens_subpath_mutation,
             independent: self.independent_mutation,
             suitability: self.suitability,
+            sizes: self.sizes().unwrap_or_default(),
         }
     }
 
@@ -147,6 +199,7 @@ impl IntegratorSettings for Mlt {
                     .into(),
             );
         }
+        self.sizes()?;
         self.mutations().check()
     }
 
@@ -337,11 +390,14 @@ pub fn render_mlt(
     if settings.specular_pass().is_some() {
         family = family.without_specular_chains();
     }
-    markov::run(
-        scene,
-        &family,
-        &settings.chain.chain_settings(settings.mutations(), run),
-        stop,
-        observer,
-    )
+    let mut chain = settings.chain.chain_settings(settings.mutations(), run);
+    if settings.bdpt_startup {
+        family = family.with_bdpt_startup(settings.chain.bootstrap as u64);
+        if family.has_bdpt_startup() {
+            // The family's search replaces the driver's bootstrap, which
+            // still needs one candidate.
+            chain.bootstrap = 1;
+        }
+    }
+    markov::run(scene, &family, &chain, stop, observer)
 }

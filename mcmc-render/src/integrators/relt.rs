@@ -302,7 +302,11 @@ impl<'a> ReltFamily<'a> {
                 log_q.is_finite().then(|| (index, log_q + scale.ln()))
             })
             .collect();
-        Search { draws, weighted }
+        Search {
+            draws,
+            weighted,
+            ..Search::default()
+        }
     }
 
     /// The family with the exchange move `make(replicas)` (any move of

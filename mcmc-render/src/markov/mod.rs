@@ -302,8 +302,10 @@ pub trait ChainFamily: Sync {
     /// (RELT's search for the specific replica's rare paths), run once at
     /// start-up: its weighted draws start the member's chains (resampled
     /// in place of the bootstrap's or annealing's starts, when any carries
-    /// weight) and join the member's running normalisation and `b̂`.
-    /// `None` (the default): no search.
+    /// weight) and join the member's running normalisation and `b̂` (or
+    /// replace them: [`Search::replaces_bootstrap`]); the black-scene check
+    /// and the reported `bootstrap_b` include them. `None` (the default):
+    /// no search.
     fn search(&self, _member: usize, _seed: u64) -> Option<Search> {
         None
     }
@@ -320,6 +322,16 @@ pub struct Search {
     /// The draws with `w > 0`: the candidate index (for
     /// [`ChainFamily::candidate`]) and `ln w`.
     pub weighted: Vec<(u64, f64)>,
+    /// For draws that each yield several weighted states (every technique
+    /// of a BDPT sample, `mlt`'s `bdpt_startup`): `ln` of each draw's
+    /// total weight, whose mean over `draws` estimates `b_d` (draws left
+    /// out weigh 0); the states in `weighted` then weigh `w` for the
+    /// resampling of starts only. Empty: every entry of `weighted` is one
+    /// draw.
+    pub per_draw: Vec<f64>,
+    /// The search replaces the member's bootstrap (its running estimate
+    /// and its starts) instead of joining it.
+    pub replaces_bootstrap: bool,
 }
 
 /// Stream offset of the resampling of searched starts.
@@ -329,8 +341,13 @@ impl Search {
     /// The draws as a running estimate of `b_d`.
     fn running(&self) -> RunningNormalization {
         let mut r = RunningNormalization::new();
-        self.weighted.iter().for_each(|&(_, lw)| r.add(lw));
-        let zeros = self.draws.saturating_sub(self.weighted.len() as u64);
+        let per_draw: Vec<f64> = if self.per_draw.is_empty() {
+            self.weighted.iter().map(|w| w.1).collect()
+        } else {
+            self.per_draw.clone()
+        };
+        per_draw.iter().for_each(|&lw| r.add(lw));
+        let zeros = self.draws.saturating_sub(per_draw.len() as u64);
         (0..zeros).for_each(|_| r.add(f64::NEG_INFINITY));
         r
     }
@@ -785,6 +802,22 @@ pub fn run<F: ChainFamily>(
             *b = (v, v * pa.relative_error(k));
         }
     }
+    // The members' own searches: more draws for their running `b_d` and
+    // `b̂` (or all of them, for a search that replaces the bootstrap),
+    // before the check for a black scene.
+    let mut boot_running = boot_running;
+    let member_searches: Vec<Option<Search>> =
+        (0..members).map(|d| family.search(d, seed)).collect();
+    for (d, search) in member_searches.iter().enumerate() {
+        if let Some(search) = search {
+            if search.replaces_bootstrap {
+                boot_running[d] = search.running();
+            } else {
+                boot_running[d].merge(&search.running());
+            }
+            bootstrap_b[d] = (boot_running[d].b(), boot_running[d].standard_error());
+        }
+    }
     let b_star: f64 = bootstrap_b.iter().map(|b| b.0).sum();
     if b_star == 0.0 || !b_star.is_finite() {
         return Err(MltError::BlackScene {
@@ -827,6 +860,13 @@ pub fn run<F: ChainFamily>(
                 (0..n).map(|i| ps[i * ps.len() / n].state.clone()).collect()
             }
             None if n == 0 => Vec::new(),
+            // The search's starts take their place below.
+            None if member_searches[d]
+                .as_ref()
+                .is_some_and(|s| s.replaces_bootstrap) =>
+            {
+                Vec::new()
+            }
             None => {
                 let mut rng = stream_rng(seed, RESAMPLE_STREAM + 1 + d as u64);
                 boot.resample(n, &mut rng)?
@@ -836,14 +876,10 @@ pub fn run<F: ChainFamily>(
             }
         });
     }
-    // The members' own searches: more draws for their running `b_d` and
-    // `b̂`, and their starts.
-    let mut boot_running = boot_running;
+    // The members' own searches' starts, in place of the bootstrap's.
     let mut searches: Vec<Option<SearchSummary>> = vec![None; members];
-    for d in 0..members {
-        if let Some(search) = family.search(d, seed) {
-            boot_running[d].merge(&search.running());
-            bootstrap_b[d] = (boot_running[d].b(), boot_running[d].standard_error());
+    for (d, search) in member_searches.iter().enumerate() {
+        if let Some(search) = search {
             let resampled = search.starts(family, chains_of[d], seed, d)?;
             searches[d] = Some(SearchSummary {
                 draws: search.draws,

@@ -17,10 +17,11 @@
 //! `b = ∫ I dμ`. The driver resamples the chains' start states from these
 //! candidates in proportion to the weights.
 
+use super::bdpt_startup::SEARCH_INDEX;
 use super::bidirectional::Bidirectional;
 use super::caustic_perturbation::{CausticPerturbation, caustic_chain};
 use super::independent::IndependentPath;
-use super::lens_perturbation::{LensPerturbation, lens_chain};
+use super::lens_perturbation::{LensPerturbation, OffsetKernel, lens_chain};
 use super::lens_subpath::LensSubpath;
 use super::manifold_perturbation::{ManifoldPerturbation, selections as manifold_selections};
 use super::multi_chain_perturbation::{MultiChainPerturbation, multi_chain};
@@ -28,7 +29,7 @@ use super::proposal_clock::{ProposalClock, Timed};
 use super::state::{Path, PathTarget};
 use super::walk::{ChainSource, camera_walk, light_walk};
 use crate::light::Light;
-use crate::markov::{CANDIDATE_STREAM, ChainFamily, MltError};
+use crate::markov::{CANDIDATE_STREAM, ChainFamily, MltError, Search};
 use crate::pss::PathSample;
 use crate::scene::Scene;
 use mcmc_core::kernel::{Kernel, Mixture};
@@ -69,6 +70,41 @@ pub struct PathMutations {
     /// proposal ratio ([`Mixture::state_dependent`]). Off: fixed
     /// probabilities, an inapplicable mutation fails as a pattern mismatch.
     pub suitability: bool,
+    /// The perturbations' film-offset sizes (`None`: Mitsuba's for the
+    /// path's film).
+    pub sizes: PerturbationSizes,
+}
+
+/// The film-offset kernels of the perturbations (`r₁`, `r₂` in pixels;
+/// `None`: Mitsuba 0.6's, `r₁` = 0.1 and `r₂ = √(0.05 · pixels / π)`).
+/// The caustic and multi-chain perturbations derive their angle sizes
+/// from theirs.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PerturbationSizes {
+    /// The lens perturbation's.
+    pub lens: Option<OffsetKernel>,
+    /// The caustic perturbation's.
+    pub caustic: Option<OffsetKernel>,
+    /// The multi-chain perturbation's.
+    pub multi_chain: Option<OffsetKernel>,
+    /// The manifold perturbation's (when its moved vertex is the camera's).
+    pub manifold: Option<OffsetKernel>,
+}
+
+impl PerturbationSizes {
+    /// The kernel of settings `min`, `max` (pixels): both −1 for
+    /// Mitsuba's, or `0 < min < max` (`name` names them in the error).
+    pub fn from_setting(name: &str, min: f64, max: f64) -> Result<Option<OffsetKernel>, String> {
+        if min == -1.0 && max == -1.0 {
+            return Ok(None);
+        }
+        if !(min.is_finite() && max.is_finite() && min > 0.0 && max > min) {
+            return Err(format!(
+                "{name}_min = {min} and {name}_max = {max} (pixels) must satisfy 0 < min < max, or both be -1 (Mitsuba's sizes)"
+            ));
+        }
+        Ok(Some(OffsetKernel { r1: min, r2: max }))
+    }
 }
 
 /// Kernel component of the independent proposal: the mixture always holds
@@ -90,6 +126,7 @@ impl Default for PathMutations {
             lens_subpath: 0.0,
             independent: 0.0,
             suitability: false,
+            sizes: PerturbationSizes::default(),
         }
     }
 }
@@ -185,21 +222,21 @@ impl PathMutations {
             parts.push((
                 self.lens_perturbation,
                 |x| lens_chain(x).is_some(),
-                part(LensPerturbation::default(), clock),
+                part(LensPerturbation::new(self.sizes.lens), clock),
             ));
         }
         if self.caustic_perturbation > 0.0 {
             parts.push((
                 self.caustic_perturbation,
                 |x| caustic_chain(x).is_some(),
-                part(CausticPerturbation::default(), clock),
+                part(CausticPerturbation::new(self.sizes.caustic), clock),
             ));
         }
         if self.multi_chain_perturbation > 0.0 {
             parts.push((
                 self.multi_chain_perturbation,
                 |x| multi_chain(x).is_some(),
-                part(MultiChainPerturbation::default(), clock),
+                part(MultiChainPerturbation::new(self.sizes.multi_chain), clock),
             ));
         }
         if self.lens_subpath > 0.0 {
@@ -213,7 +250,13 @@ impl PathMutations {
             parts.push((
                 self.manifold_perturbation,
                 |x| !manifold_selections(x).is_empty(),
-                part(ManifoldPerturbation::default(), clock),
+                part(
+                    ManifoldPerturbation {
+                        offsets: self.sizes.manifold,
+                        ..ManifoldPerturbation::default()
+                    },
+                    clock,
+                ),
             ));
         }
         if !self.suitability {
@@ -284,6 +327,7 @@ pub struct PathFamily<'s> {
     target: PathTarget,
     area_lights: bool,
     clock: Option<Arc<ProposalClock>>,
+    bdpt_startup: u64,
 }
 
 impl<'s> PathFamily<'s> {
@@ -306,7 +350,28 @@ impl<'s> PathFamily<'s> {
                 .iter()
                 .any(|l| matches!(l, Light::Area { .. })),
             clock: None,
+            bdpt_startup: 0,
         }
+    }
+
+    /// The family with the start-up of [`super::bdpt_startup`]: `draws`
+    /// BDPT draws, every technique of each, in place of the driver's
+    /// bootstrap. Unchanged (the ordinary start-up) when the depth is
+    /// unbounded or longer than [`super::bdpt_startup::MAX_SEARCH_SEGMENTS`]
+    /// or `draws` is 0; [`PathFamily::has_bdpt_startup`] tells which.
+    pub fn with_bdpt_startup(self, draws: u64) -> Self {
+        let bounded = self
+            .max_segments
+            .is_some_and(|m| m <= super::bdpt_startup::MAX_SEARCH_SEGMENTS);
+        PathFamily {
+            bdpt_startup: if bounded { draws } else { 0 },
+            ..self
+        }
+    }
+
+    /// Whether the start-up is [`super::bdpt_startup`]'s.
+    pub fn has_bdpt_startup(&self) -> bool {
+        self.bdpt_startup > 0
     }
 
     /// The family with the specular chains left out of its target
@@ -343,7 +408,7 @@ impl<'s> PathFamily<'s> {
     }
 
     /// Smallest split `s` of a candidate.
-    fn s_min(&self) -> usize {
+    pub(super) fn s_min(&self) -> usize {
         usize::from(!self.area_lights)
     }
 
@@ -390,8 +455,14 @@ impl<'s> PathFamily<'s> {
         path
     }
 
-    /// `ln p₀(x)`, the density of [`PathFamily::draw_candidate`] at `x`.
-    pub fn log_candidate_density(&self, path: &Path<'_>) -> f64 {
+    /// `ln I(x)` of the family's target.
+    pub(super) fn target_log_density(&self, path: &Path<'_>) -> f64 {
+        self.target.log_density(path)
+    }
+
+    /// `ln Σ_s p_s(x)`: the densities of every start-up technique that
+    /// could have drawn `x` (−∞ for none).
+    pub(super) fn log_technique_sum(&self, path: &Path<'_>) -> f64 {
         let k = path.segments();
         let s_min = self.s_min();
         if path.len() < 2 || s_min > k {
@@ -400,7 +471,18 @@ impl<'s> PathFamily<'s> {
         let terms: Vec<f64> = (s_min..=k)
             .map(|s| path.log_regrowth_density(0, k, s))
             .collect();
-        self.length_probability(k).ln() - ((k - s_min + 1) as f64).ln() + log_sum_exp(&terms)
+        log_sum_exp(&terms)
+    }
+
+    /// `ln p₀(x)`, the density of [`PathFamily::draw_candidate`] at `x`.
+    pub fn log_candidate_density(&self, path: &Path<'_>) -> f64 {
+        let k = path.segments();
+        let s_min = self.s_min();
+        if path.len() < 2 || s_min > k {
+            return f64::NEG_INFINITY;
+        }
+        self.length_probability(k).ln() - ((k - s_min + 1) as f64).ln()
+            + self.log_technique_sum(path)
     }
 }
 
@@ -432,6 +514,9 @@ impl<'s> ChainFamily for PathFamily<'s> {
         component == INDEPENDENT_COMPONENT
     }
     fn candidate(&self, seed: u64, index: u64) -> Path<'s> {
+        if index >= SEARCH_INDEX {
+            return self.search_candidate(seed, index);
+        }
         self.draw_candidate(&mut stream_rng(seed, CANDIDATE_STREAM + index))
     }
     fn reference_log_density(&self, state: &Path<'s>) -> f64 {
@@ -452,5 +537,10 @@ impl<'s> ChainFamily for PathFamily<'s> {
     }
     fn coordinates(&self, _state: &Path<'s>) -> Option<Vec<f64>> {
         None
+    }
+    fn search(&self, _member: usize, seed: u64) -> Option<Search> {
+        (self.bdpt_startup > 0)
+            .then(|| self.bdpt_search(seed, self.bdpt_startup))
+            .flatten()
     }
 }

@@ -23,6 +23,8 @@
 //! - [`family`]: the driver's [`crate::markov::ChainFamily`] for path space
 //!   (start-up candidates by bidirectional techniques, the mutation
 //!   mixture).
+//! - [`bdpt_startup`]: a start-up that counts every technique of each
+//!   draw's two walks (`bdpt_startup`).
 //!
 //! # Writing a mutation
 //!
@@ -46,6 +48,7 @@
 //!
 //! `docs/path-space.md` describes the state and each mutation's density.
 
+pub mod bdpt_startup;
 pub mod bidirectional;
 pub mod caustic_perturbation;
 pub mod family;
