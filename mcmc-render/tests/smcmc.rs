@@ -548,8 +548,9 @@ fn the_mmlt_shifts_match_a_direct_sample_at_the_shifted_pixel() {
 /// SMCMC with an MMLT shift against PT on the tilted box (Gaussian filter),
 /// image means as `smcmc_agrees_with_pt_on_the_cornell_box` (its tolerance
 /// derivation). `SMCMC_SHIFT` picks the shift (default `cmmlt`),
-/// `SMCMC_RUNS` and `SMCMC_ITERATIONS` the budget (default 48 × 128; the
-/// spread per replicate sets how many runs 5σ < 1% needs, asserted):
+/// `SMCMC_RUNS` and `SMCMC_ITERATIONS` the budget (default 64 × 768: with
+/// cMMLT, 48 × 128 spread 2.2% per replicate, σ ≈ 0.48%, too coarse; 64 × 768
+/// gave σ ≈ 0.17–0.20%, so 5σ < 1%, asserted; ≈ 3.5 min on two loaded cores):
 /// `SMCMC_SHIFT=ummlt cargo test -p mcmc-render --test smcmc mmlt_shift_agrees
 /// -- --ignored --nocapture`.
 #[test]
@@ -562,7 +563,7 @@ fn smcmc_with_an_mmlt_shift_agrees_with_pt_on_the_cornell_box() {
             .unwrap_or(default)
     };
     let shift = std::env::var("SMCMC_SHIFT").unwrap_or_else(|_| "cmmlt".into());
-    let (runs, iterations) = (var("SMCMC_RUNS", 48), var("SMCMC_ITERATIONS", 128));
+    let (runs, iterations) = (var("SMCMC_RUNS", 64), var("SMCMC_ITERATIONS", 768));
     let iterations = iterations.to_string();
     let sets = [
         ("mutations_per_pixel", iterations.as_str()),
