@@ -24,6 +24,7 @@ use mcmc_core::rng::{stream_rng, uniform};
 use mcmc_core::runner::with_threads;
 use mcmc_core::space::TorusPoint;
 use mcmc_render::color::Rgb;
+use mcmc_render::integrators::bdpt::Bdpt;
 use mcmc_render::integrators::registry;
 use mcmc_render::integrators::{Rendered, RunSettings};
 use mcmc_render::observer::NoObserver;
@@ -32,8 +33,10 @@ use mcmc_render::pss::PssSource;
 use mcmc_render::pss::PssTarget;
 use mcmc_render::sampling::Stream;
 use mcmc_render::scene::{FilterKind, Scene};
+use mcmc_render::smcmc::bdpt_shift::BdptShift;
 use mcmc_render::smcmc::mmlt_shift::MmltShift;
 use mcmc_render::smcmc::random_replay::RandomReplay;
+use mcmc_render::smcmc::rbdpt_shift::RbdptShift;
 use mcmc_render::smcmc::solver::AlignmentProblem;
 use mcmc_render::smcmc::{MAX_TILE_PIXELS, TileShape, TileShift, Tiling};
 use rayon::prelude::*;
@@ -477,6 +480,55 @@ fn tile_sums(
     common::mean_se(&xs)
 }
 
+/// Random replay's tile sums over 200 000 states (the direct samples of
+/// the shift tests).
+fn rr_tile_sums() -> &'static ([f64; 3], [f64; 3]) {
+    static RR: OnceLock<([f64; 3], [f64; 3])> = OnceLock::new();
+    RR.get_or_init(|| {
+        let rr = RandomReplay {
+            pt: pt_of(cornell()),
+        };
+        tile_sums(cornell(), &rr, 200_000, 40, &|_| 1.0)
+    })
+}
+
+/// The z-scores of `m ± se` against random replay's tile sums, and the
+/// relative standard error of the difference.
+fn z_against_rr(m: [f64; 3], se: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+    let (m_rr, se_rr) = *rr_tile_sums();
+    let sigma: [f64; 3] = std::array::from_fn(|c| se[c].hypot(se_rr[c]));
+    (
+        std::array::from_fn(|c| (m[c] - m_rr[c]) / sigma[c]),
+        std::array::from_fn(|c| sigma[c] / m_rr[c]),
+    )
+}
+
+/// The rBDPT shift (spec seed003 §11.2) against direct samples, as
+/// `the_mmlt_shifts_match_a_direct_sample_at_the_shifted_pixel` (its
+/// derivation): 100 000 states, 4σ. Control that must fail: the shift
+/// with `max_depth` one short (the longest paths dropped).
+#[test]
+fn the_rbdpt_shift_matches_a_direct_sample_at_the_shifted_pixel() {
+    let scene = cornell();
+    let rbdpt = |max_depth: u32| RbdptShift {
+        bdpt: BdptShift {
+            bdpt: Bdpt {
+                max_depth,
+                ..common::bdpt_of(scene)
+            },
+        },
+    };
+    let (m, se) = tile_sums(scene, &rbdpt(DEPTH), 100_000, 45, &|_| 1.0);
+    let (z, sigma) = z_against_rr(m, se);
+    eprintln!("rbdpt: mean {m:?} se {se:?}, rel sigma {sigma:?}, z {z:?}");
+    assert!(z.iter().all(|z| z.abs() < 4.0), "rbdpt: z {z:?}");
+    assert!(sigma.iter().all(|&s| s < 0.017), "rbdpt: {sigma:?}");
+    let (mc, sec) = tile_sums(scene, &rbdpt(DEPTH - 1), 100_000, 45, &|_| 1.0);
+    let (zc, _) = z_against_rr(mc, sec);
+    eprintln!("  control (max_depth {}): z {zc:?}", DEPTH - 1);
+    assert!(zc.iter().any(|z| z.abs() > 4.0), "control passed: z {zc:?}");
+}
+
 /// The MMLT shifts' Jacobian (spec seed003 §11.3): the value a shift gives
 /// at each pixel of a tile (the state's sub-pixel offset moved there)
 /// divided by its own probability `p_L c_L(s)` must be, in expectation, a
@@ -498,50 +550,29 @@ fn tile_sums(
 #[test]
 fn the_mmlt_shifts_match_a_direct_sample_at_the_shifted_pixel() {
     let scene = cornell();
-    let rr = RandomReplay { pt: pt_of(scene) };
-    let one = |_: &TorusPoint| 1.0f32;
-    let n_rr = 200_000;
-    let (m_rr, se_rr) = tile_sums(scene, &rr, n_rr, 40, &one);
     for exponent in 0..=3u32 {
         let shift = MmltShift {
             bdpt: common::bdpt_of(scene),
             exponent,
         };
-        let n = 100_000;
-        let (m, se) = tile_sums(scene, &shift, n, 41 + u64::from(exponent), &one);
-        let z = |m: [f64; 3], se: [f64; 3]| -> [f64; 3] {
-            std::array::from_fn(|c| (m[c] - m_rr[c]) / (se[c].powi(2) + se_rr[c].powi(2)).sqrt())
-        };
-        let sigma: [f64; 3] =
-            std::array::from_fn(|c| (se[c].powi(2) + se_rr[c].powi(2)).sqrt() / m_rr[c]);
-        let zs = z(m, se);
-        eprintln!(
-            "{}: mean {m:?} se {se:?} vs rr {m_rr:?} se {se_rr:?}, rel sigma {sigma:?}, z {zs:?}",
-            shift.name()
-        );
-        assert!(
-            zs.iter().all(|z| z.abs() < 4.0),
-            "{}: z {zs:?}",
-            shift.name()
-        );
-        assert!(
-            sigma.iter().all(|&s| s < 0.017),
-            "{}: {sigma:?}",
-            shift.name()
-        );
-        // Control 1: the selection pmf left out of the division.
+        let (name, seed) = (shift.name(), 41 + u64::from(exponent));
+        let (m, se) = tile_sums(scene, &shift, 100_000, seed, &|_| 1.0);
+        let (z, sigma) = z_against_rr(m, se);
+        eprintln!("{name}: mean {m:?} se {se:?}, rel sigma {sigma:?}, z {z:?}");
+        assert!(z.iter().all(|z| z.abs() < 4.0), "{name}: z {z:?}");
+        assert!(sigma.iter().all(|&s| s < 0.017), "{name}: {sigma:?}");
+        // Control: the selection pmf left out of the division.
         let dropped = |u: &TorusPoint| {
             let c = shift.choose(&mut PssSource::new(u, Stream::COUNT));
             c.select[c.s]
         };
-        let (mc, sec) = tile_sums(scene, &shift, n / 4, 41 + u64::from(exponent), &dropped);
-        let zc = z(mc, sec);
+        let (mc, sec) = tile_sums(scene, &shift, 25_000, seed, &dropped);
+        let (zc, _) = z_against_rr(mc, sec);
+        eprintln!("  control (selection pmf dropped): z {zc:?}");
         assert!(
             zc.iter().any(|z| z.abs() > 4.0),
-            "{}: control 1 passed, z {zc:?}",
-            shift.name()
+            "{name}: control passed, z {zc:?}"
         );
-        eprintln!("  control (selection pmf dropped): z {zc:?}");
     }
 }
 

@@ -48,6 +48,7 @@ use crate::smcmc::bdpt_shift::BdptShift;
 use crate::smcmc::global_init::{GlobalInit, Visits};
 use crate::smcmc::mmlt_shift::MmltShift;
 use crate::smcmc::random_replay::RandomReplay;
+use crate::smcmc::rbdpt_shift::RbdptShift;
 use crate::smcmc::{
     FilterSplat, TileShape, TileShift, TileSums, TileTarget, TileValues, Tiling, accumulate,
     develop,
@@ -81,6 +82,8 @@ crate::choice! {
         Qmmlt = "qmmlt",
         /// MMLT shift, technique pmf ∝ (s + 1)³.
         Cmmlt = "cmmlt",
+        /// Random-strategy BDPT: the bdpt shift with one uniform technique per path length.
+        Rbdpt = "rbdpt",
     }
 }
 
@@ -92,8 +95,13 @@ impl SmcmcShift {
             SmcmcShift::Lmmlt => Some(1),
             SmcmcShift::Qmmlt => Some(2),
             SmcmcShift::Cmmlt => Some(3),
-            SmcmcShift::Rr | SmcmcShift::Bdpt => None,
+            SmcmcShift::Rr | SmcmcShift::Bdpt | SmcmcShift::Rbdpt => None,
         }
+    }
+
+    /// Whether the shift needs a finite `max_depth` (it draws per length).
+    pub fn needs_finite_depth(self) -> bool {
+        self.technique_exponent().is_some() || self == SmcmcShift::Rbdpt
     }
 }
 
@@ -110,7 +118,7 @@ crate::choice! {
 crate::settings! {
     /// Stratified MCMC settings (defaults from spec seed003 §13).
     pub struct Smcmc {
-        /// Shift operator: rr (random replay over pt), bdpt (shared light subpath, t ≥ 2), or the MMLT shifts ummlt, lmmlt, qmmlt, cmmlt (one uniform length, one technique ∝ (s+1)^n, n = 0..3).
+        /// Shift operator: rr (random replay over pt), bdpt (shared light subpath, t ≥ 2), the MMLT shifts ummlt, lmmlt, qmmlt, cmmlt (one uniform length, one technique ∝ (s+1)^n, n = 0..3), or rbdpt (bdpt with one uniform technique per length).
         pub shift: SmcmcShift = SmcmcShift::Rr;
         /// Tile shape: plus (the five-pixel t shape) or square (3×3).
         pub tile: TileShape = TileShape::Plus;
@@ -145,12 +153,10 @@ crate::settings! {
 
 impl IntegratorSettings for Smcmc {
     const NAME: &'static str = "smcmc";
-    const DESCRIPTION: &'static str = "Stratified MCMC (Gruson et al. 2020): one chain per pixel on a tile, random replay, BDPT or MMLT shifts, tile exchange and alignment.";
+    const DESCRIPTION: &'static str = "Stratified MCMC (Gruson et al. 2020): one chain per pixel on a tile, random replay, BDPT, rBDPT or MMLT shifts, tile exchange and alignment.";
 
     fn validate(&self) -> Result<(), String> {
-        if self.shift.technique_exponent().is_some()
-            && !(1..=MMLT_MAX_DEPTH).contains(&self.depth.limit())
-        {
+        if self.shift.needs_finite_depth() && !(1..=MMLT_MAX_DEPTH).contains(&self.depth.limit()) {
             return Err(format!(
                 "smcmc: shift={} needs a finite max_depth from 1 to {MMLT_MAX_DEPTH} (give --max-depth)",
                 self.shift.name()
@@ -181,14 +187,18 @@ impl IntegratorSettings for Smcmc {
             rr_depth: pt.rr_depth,
             heuristic: MisHeuristic::Power,
         };
+        IntegratorSettings::validate(self).map_err(RenderError::Invalid)?;
         if let Some(exponent) = self.shift.technique_exponent() {
-            IntegratorSettings::validate(self).map_err(RenderError::Invalid)?;
             let shift = MmltShift { bdpt, exponent };
             return self.run(scene, &shift, &mutation, run, stop, observer);
         }
+        let bdpt = BdptShift { bdpt };
         match self.shift {
             SmcmcShift::Rr => self.run(scene, &RandomReplay { pt }, &mutation, run, stop, observer),
-            _ => self.run(scene, &BdptShift { bdpt }, &mutation, run, stop, observer),
+            SmcmcShift::Rbdpt => {
+                self.run(scene, &RbdptShift { bdpt }, &mutation, run, stop, observer)
+            }
+            _ => self.run(scene, &bdpt, &mutation, run, stop, observer),
         }
     }
 }

@@ -228,7 +228,6 @@ impl TileShift for MmltShift {
     }
 
     fn offset_coordinates(&self) -> [usize; 2] {
-        let k = Stream::Camera as usize;
-        [k, Stream::COUNT + k]
+        super::camera_stream_offset_coordinates()
     }
 }

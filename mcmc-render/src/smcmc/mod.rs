@@ -2,7 +2,7 @@
 //! it (spec `seed003-smcmc.md` §8, §11): one Markov chain per pixel,
 //! confined to a tile around it ([`tile`]); shift operators that evaluate
 //! every pixel of the tile from one primary-sample state ([`TileShift`]:
-//! [`random_replay`], [`bdpt_shift`], [`mmlt_shift`]); per-tile estimates aligned by a least-squares solve
+//! [`random_replay`], [`bdpt_shift`], [`rbdpt_shift`], [`mmlt_shift`]); per-tile estimates aligned by a least-squares solve
 //! ([`solver`]). The driver, with tile replica exchange and the
 //! statistics, is `crate::integrators::smcmc`.
 //!
@@ -45,6 +45,7 @@ pub mod bdpt_shift;
 pub mod global_init;
 pub mod mmlt_shift;
 pub mod random_replay;
+pub mod rbdpt_shift;
 pub mod solver;
 pub mod tile;
 
@@ -82,6 +83,15 @@ pub trait TileShift: Sync {
     /// Indices of the two sub-pixel offset numbers among the state's
     /// coordinates.
     fn offset_coordinates(&self) -> [usize; 2];
+}
+
+/// The sub-pixel offset's coordinates for shifts that read a state with
+/// BDPT's interleaved streams (camera, light, connection): the camera
+/// stream's first two numbers (number `i` of stream `k` is coordinate
+/// `COUNT·i + k`).
+pub fn camera_stream_offset_coordinates() -> [usize; 2] {
+    let k = crate::sampling::Stream::Camera as usize;
+    [k, crate::sampling::Stream::COUNT + k]
 }
 
 /// Where a shift puts the camera sample of a state whose sub-pixel offset
