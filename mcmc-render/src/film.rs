@@ -376,6 +376,22 @@ impl Film {
         if !l.is_finite() || !p.is_finite() {
             return;
         }
+        let (x0, y0, w) = (self.x0, self.y0, self.w);
+        let mut splats = std::mem::take(&mut self.splats);
+        self.splat_weights(p, |x, y, wt| {
+            let px = &mut splats[((y - y0) * w + (x - x0)) as usize];
+            px[0] += wt * l.r;
+            px[1] += wt * l.g;
+            px[2] += wt * l.b;
+        });
+        self.splats = splats;
+    }
+
+    /// The weights `f(x_j − p)/Z_j` with which a splat at raster position
+    /// `p` reaches the pixels of this film: `visit(column, row, weight)`
+    /// for each pixel with a nonzero weight (stratified MCMC spreads its
+    /// per-tile estimates with them, `crate::smcmc::FilterSplat`).
+    pub fn splat_weights(&self, p: Vec2, mut visit: impl FnMut(u32, u32, f32)) {
         let Some((x0, x1, y0, y1)) = self.footprint(p) else {
             return;
         };
@@ -392,16 +408,12 @@ impl Film {
                 continue;
             }
             let wy = wy / z;
-            let row = ((y0 + ky as u32 - self.y0) * self.w + (x0 - self.x0)) as usize;
             for (kx, &wx) in wx.iter().take(nx).enumerate() {
                 let w = wy * wx;
                 if w == 0.0 {
                     continue;
                 }
-                let px = &mut self.splats[row + kx];
-                px[0] += w * l.r;
-                px[1] += w * l.g;
-                px[2] += w * l.b;
+                visit(x0 + kx as u32, y0 + ky as u32, w);
             }
         }
     }

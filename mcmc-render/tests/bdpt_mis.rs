@@ -18,7 +18,10 @@
 
 use glam::Vec2;
 use mcmc_render::bsdf::TransportMode;
-use mcmc_render::integrators::bdpt::{MisHeuristic, generate_camera_subpath, mis_weight};
+use mcmc_render::integrators::bdpt::{
+    MisHeuristic, generate_camera_subpath, mis_weight, mis_weight_among, mis_weight_selected,
+};
+use mcmc_render::integrators::path_vertex::SceneBsdfs;
 use mcmc_render::integrators::path_vertex::{Vertex, VertexKind};
 use mcmc_render::sampling::{IndependentSource, RandomSource};
 use mcmc_render::scene::Scene;
@@ -95,6 +98,82 @@ fn mis_weights_with_an_environment_at_infinity() {
     );
 }
 
+/// One-sample MIS with technique selection, as the MMLT shifts of
+/// stratified MCMC use it (spec seed003 §11.3): technique `s` of the path
+/// (light vertices) is picked with `c(s) ∝ (s + 1)³` among the techniques
+/// with `t ≥ 2` camera vertices, and `mis_weight_selected` must equal
+/// `(c_s p_s)^β / Σ_{t' ≥ 2} (c_{s'} p_{s'})^β` (`p^β` given) and sum to
+/// one over those techniques. Returns 1 when the control caught a path of
+/// three or more such techniques: the weight without the selection pmf
+/// (`mis_weight_among`, also over `t ≥ 2`) differs from the definition by
+/// more than 1% for some technique (the caller requires many such paths).
+fn check_selected_weights(
+    scene: &Scene,
+    x: &[Vertex],
+    y: &[Vertex],
+    p_beta: &[f64],
+    beta: i32,
+    heuristic: MisHeuristic,
+    errs: &mut Vec<f64>,
+) -> usize {
+    let n = x.len();
+    // Techniques s = 0..n−2 (t = n − s ≥ 2); s = n − 1 is light tracing.
+    let mut select: Vec<f32> = (0..n)
+        .map(|s| {
+            if s + 2 <= n {
+                ((s + 1) as f32).powi(3)
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let total: f32 = select.iter().sum();
+    select.iter_mut().for_each(|c| *c /= total);
+    let q: Vec<f64> = (0..n)
+        .map(|s| (select[s] as f64).powi(beta) * p_beta[s])
+        .collect();
+    let q_total: f64 = q.iter().sum();
+    let (mut sum, mut control_off) = (0.0f64, false);
+    for s in 0..n - 1 {
+        let t = n - s;
+        let sampled = (s == 1).then_some(&y[0]);
+        let w = mis_weight_selected(
+            scene,
+            &SceneBsdfs,
+            0,
+            &x[..t],
+            &y[..s],
+            s,
+            t,
+            sampled,
+            heuristic,
+            2,
+            &select,
+        ) as f64;
+        let expected = q[s] / q_total;
+        errs.push((w - expected).abs() / expected.max(1e-3));
+        sum += w;
+        let plain = mis_weight_among(
+            scene,
+            &SceneBsdfs,
+            0,
+            &x[..t],
+            &y[..s],
+            s,
+            t,
+            sampled,
+            heuristic,
+            2,
+        ) as f64;
+        control_off |= (plain - expected).abs() > 0.01 * expected.max(1e-3);
+    }
+    assert!(
+        (sum - 1.0).abs() < 1e-3,
+        "n {n} {heuristic:?}: selected weights sum to {sum}"
+    );
+    usize::from(n >= 4 && control_off)
+}
+
 /// Checks every technique's weight of camera-walk paths that end on an
 /// emitter; returns the number of paths checked by vertex count.
 fn check_mis_weights(scene: &Scene) -> [usize; 9] {
@@ -103,6 +182,7 @@ fn check_mis_weights(scene: &Scene) -> [usize; 9] {
     let mut checked = 0usize;
     let mut by_len = [0usize; 9];
     let mut errs: Vec<f64> = Vec::new();
+    let mut selected = 0usize;
     for _ in 0..100_000 {
         let u = src.next_2d();
         let raster = Vec2::new(u.0 * 64.0, u.1 * 64.0);
@@ -144,6 +224,7 @@ fn check_mis_weights(scene: &Scene) -> [usize; 9] {
                     (sum - 1.0).abs() < 1e-3,
                     "n {n} {heuristic:?}: weights sum to {sum}"
                 );
+                selected += check_selected_weights(scene, x, &y, &p, beta, heuristic, &mut errs);
             }
             checked += 1;
             by_len[n] += 1;
@@ -168,5 +249,12 @@ fn check_mis_weights(scene: &Scene) -> [usize; 9] {
     assert!(q(1.0) < 5e-3, "largest relative error {}", q(1.0));
     // Enough paths for the test to mean something (lengths: the callers).
     assert!(checked > 500, "only {checked} paths");
+    // The control (weights without the selection pmf) must be told apart
+    // from the definition on many paths.
+    eprintln!("selection control caught {selected} path checks");
+    assert!(
+        selected > 200,
+        "the control was caught on only {selected} paths"
+    );
     by_len
 }

@@ -617,6 +617,46 @@ pub fn mis_weight_among<B: ConnectionBsdfs>(
     heuristic: MisHeuristic,
     min_camera: usize,
 ) -> f32 {
+    mis_weight_selected(
+        scene,
+        bsdfs,
+        level,
+        camera,
+        light,
+        s,
+        t,
+        sampled,
+        heuristic,
+        min_camera,
+        &[],
+    )
+}
+
+/// [`mis_weight_among`] for one-sample MIS with technique selection
+/// (spec seed003 §1, §11.3): technique `(s', t')` of the path's length is
+/// picked with probability `select[s']`, so its density is
+/// `select[s'] · p_{s',t'}` in every ratio (`r_i · select[s_i]/select[s]`).
+/// `select` is indexed by the number of light vertices and covers every
+/// technique of the path's length (`s + t` entries); a zero entry leaves
+/// the technique out. An empty `select` means 1 for every technique (the
+/// same bits as [`mis_weight_among`] always had).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub fn mis_weight_selected<B: ConnectionBsdfs>(
+    scene: &Scene,
+    bsdfs: &B,
+    level: usize,
+    camera: &[Vertex],
+    light: &[Vertex],
+    s: usize,
+    t: usize,
+    sampled: Option<&Vertex>,
+    heuristic: MisHeuristic,
+    min_camera: usize,
+    select: &[f32],
+) -> f32 {
+    // The selection ratio of technique `s'` to this one (1 without selection).
+    let ratio = |s_other: usize| select[s_other] / select[s];
     if s + t == 2 {
         return 1.0;
     }
@@ -679,7 +719,11 @@ pub fn mis_weight_among<B: ConnectionBsdfs>(
         };
         ri *= remap0(rev) / remap0(fwd);
         if i >= min_camera && !delta && !camera[i - 1].delta {
-            sum += power(ri);
+            sum += power(if select.is_empty() {
+                ri
+            } else {
+                ri * ratio(s + t - i)
+            });
         }
     }
     // Techniques with fewer light vertices.
@@ -701,7 +745,7 @@ pub fn mis_weight_among<B: ConnectionBsdfs>(
             v.is_delta_light(scene)
         };
         if !delta && !delta_prev {
-            sum += power(ri);
+            sum += power(if select.is_empty() { ri } else { ri * ratio(i) });
         }
     }
     let w = 1.0 / (1.0 + sum);

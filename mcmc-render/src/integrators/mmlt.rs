@@ -92,12 +92,9 @@ impl IntegratorSettings for Mmlt {
             .chain
             .chain_settings(self.mutation.mutation().map_err(RenderError::Invalid)?, run);
         let result = render_family(scene, self.depths(), &settings, stop, observer)?;
-        Ok(markov::report::rendered(
-            &result,
-            DumpSampler::Mmlt,
-            self.depth.limit(),
-            true,
-        ))
+        let rendered =
+            markov::report::rendered(&result, DumpSampler::Mmlt, self.depth.limit(), true);
+        Ok(markov::report::with_sample_counts(&result, rendered))
     }
 }
 

@@ -92,7 +92,8 @@ impl IntegratorSettings for Pssmlt {
                 )
             }
         };
-        Ok(markov::report::rendered(&result, sampler, max_depth, false))
+        let rendered = markov::report::rendered(&result, sampler, max_depth, false);
+        Ok(markov::report::with_sample_counts(&result, rendered))
     }
 }
 

@@ -1,5 +1,5 @@
 //! Stratified MCMC (Gruson, West and Hachisuka 2020; spec seed003 §8) with
-//! the random replay and BDPT shifts (`shift`).
+//! the random replay, BDPT and MMLT shifts (`shift`).
 //!
 //! - **Chains**: one per pixel `s`, over primary sample space, targeting
 //!   the tile's summed luminance `π̃_s` ([`crate::smcmc::TileTarget`]);
@@ -38,6 +38,7 @@
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
 use crate::integrators::bdpt::{Bdpt, MisHeuristic};
+use crate::integrators::mmlt::MAX_DEPTH as MMLT_MAX_DEPTH;
 use crate::integrators::pt::PathTracer;
 use crate::observer::Observer;
 use crate::pss::{LARGE_STEP_COMPONENT, Mutation, MutationParams};
@@ -45,9 +46,12 @@ use crate::scene::Scene;
 use crate::settings::check;
 use crate::smcmc::bdpt_shift::BdptShift;
 use crate::smcmc::global_init::{GlobalInit, Visits};
+use crate::smcmc::mmlt_shift::MmltShift;
 use crate::smcmc::random_replay::RandomReplay;
+use crate::smcmc::rbdpt_shift::RbdptShift;
 use crate::smcmc::{
-    TileShape, TileShift, TileSums, TileTarget, TileValues, Tiling, accumulate, develop,
+    FilterSplat, TileShape, TileShift, TileSums, TileTarget, TileValues, Tiling, accumulate,
+    develop,
 };
 use mcmc_core::chain::Chain;
 use mcmc_core::kernel::Mixture;
@@ -70,6 +74,34 @@ crate::choice! {
         Rr = "rr",
         /// BDPT with one light subpath shared by the tile, t ≥ 2, MIS renormalised.
         Bdpt = "bdpt",
+        /// MMLT shift, uniform technique pmf.
+        Ummlt = "ummlt",
+        /// MMLT shift, technique pmf ∝ s + 1.
+        Lmmlt = "lmmlt",
+        /// MMLT shift, technique pmf ∝ (s + 1)².
+        Qmmlt = "qmmlt",
+        /// MMLT shift, technique pmf ∝ (s + 1)³.
+        Cmmlt = "cmmlt",
+        /// Random-strategy BDPT: the bdpt shift with one uniform technique per path length.
+        Rbdpt = "rbdpt",
+    }
+}
+
+impl SmcmcShift {
+    /// The exponent `n` of an MMLT shift's technique pmf `∝ (s + 1)^n`.
+    pub fn technique_exponent(self) -> Option<u32> {
+        match self {
+            SmcmcShift::Ummlt => Some(0),
+            SmcmcShift::Lmmlt => Some(1),
+            SmcmcShift::Qmmlt => Some(2),
+            SmcmcShift::Cmmlt => Some(3),
+            SmcmcShift::Rr | SmcmcShift::Bdpt | SmcmcShift::Rbdpt => None,
+        }
+    }
+
+    /// Whether the shift needs a finite `max_depth` (it draws per length).
+    pub fn needs_finite_depth(self) -> bool {
+        self.technique_exponent().is_some() || self == SmcmcShift::Rbdpt
     }
 }
 
@@ -86,7 +118,7 @@ crate::choice! {
 crate::settings! {
     /// Stratified MCMC settings (defaults from spec seed003 §13).
     pub struct Smcmc {
-        /// Shift operator: rr (random replay over pt) or bdpt (shared light subpath, t ≥ 2).
+        /// Shift operator: rr (random replay over pt), bdpt (shared light subpath, t ≥ 2), the MMLT shifts ummlt, lmmlt, qmmlt, cmmlt (one uniform length, one technique ∝ (s+1)^n, n = 0..3), or rbdpt (bdpt with one uniform technique per length).
         pub shift: SmcmcShift = SmcmcShift::Rr;
         /// Tile shape: plus (the five-pixel t shape) or square (3×3).
         pub tile: TileShape = TileShape::Plus;
@@ -121,9 +153,15 @@ crate::settings! {
 
 impl IntegratorSettings for Smcmc {
     const NAME: &'static str = "smcmc";
-    const DESCRIPTION: &'static str = "Stratified MCMC (Gruson et al. 2020): one chain per pixel on a tile, random replay or BDPT shift, tile exchange and alignment.";
+    const DESCRIPTION: &'static str = "Stratified MCMC (Gruson et al. 2020): one chain per pixel on a tile, random replay, BDPT, rBDPT or MMLT shifts, tile exchange and alignment.";
 
     fn validate(&self) -> Result<(), String> {
+        if self.shift.needs_finite_depth() && !(1..=MMLT_MAX_DEPTH).contains(&self.depth.limit()) {
+            return Err(format!(
+                "smcmc: shift={} needs a finite max_depth from 1 to {MMLT_MAX_DEPTH} (give --max-depth)",
+                self.shift.name()
+            ));
+        }
         self.mutation.mutation().map(|_| ())
     }
 
@@ -144,16 +182,23 @@ impl IntegratorSettings for Smcmc {
             max_depth: self.depth.limit(),
             rr_depth: self.depth.rr_depth,
         };
+        let bdpt = Bdpt {
+            max_depth: pt.max_depth,
+            rr_depth: pt.rr_depth,
+            heuristic: MisHeuristic::Power,
+        };
+        IntegratorSettings::validate(self).map_err(RenderError::Invalid)?;
+        if let Some(exponent) = self.shift.technique_exponent() {
+            let shift = MmltShift { bdpt, exponent };
+            return self.run(scene, &shift, &mutation, run, stop, observer);
+        }
+        let bdpt = BdptShift { bdpt };
         match self.shift {
             SmcmcShift::Rr => self.run(scene, &RandomReplay { pt }, &mutation, run, stop, observer),
-            SmcmcShift::Bdpt => {
-                let bdpt = Bdpt {
-                    max_depth: pt.max_depth,
-                    rr_depth: pt.rr_depth,
-                    heuristic: MisHeuristic::Power,
-                };
-                self.run(scene, &BdptShift { bdpt }, &mutation, run, stop, observer)
+            SmcmcShift::Rbdpt => {
+                self.run(scene, &RbdptShift { bdpt }, &mutation, run, stop, observer)
             }
+            _ => self.run(scene, &bdpt, &mutation, run, stop, observer),
         }
     }
 }
@@ -202,6 +247,8 @@ struct Sampler<'a, S> {
     shift: &'a S,
     tiling: Tiling,
     mutation: Mutation,
+    /// The scene's filter, unless it is the box.
+    filter: Option<FilterSplat>,
 }
 
 impl<S: TileShift> Sampler<'_, S> {
@@ -226,6 +273,13 @@ impl<S: TileShift> Sampler<'_, S> {
             stream_rng(tile.seed, 0),
         )
         .expect("a state with light starts a chain")
+    }
+
+    /// Adds the mean-value splat `weight · f_q(values)` to tile `s`'s sums.
+    fn splat(&self, s: usize, sums: &mut TileSums, values: &TileValues, weight: f64) {
+        let pixels = self.tiling.slot_pixels(s);
+        let slots = self.tiling.slots();
+        sums.splat(values, weight, &pixels[..slots], self.filter.as_ref());
     }
 
     /// The next uniform draw of `tile`, evaluated, counted in its
@@ -260,7 +314,7 @@ impl<S: TileShift> Sampler<'_, S> {
             seed: splitmix64(seed ^ splitmix64(TILE_STREAM + s as u64)),
             draws: 0,
             steps: 0,
-            sums: TileSums::default(),
+            sums: TileSums::new(self.filter.as_ref(), self.tiling.slots()),
         };
         if let Some(v) = visits {
             for (_, p) in self.tiling.pixels(s) {
@@ -334,15 +388,12 @@ impl<S: TileShift> Sampler<'_, S> {
                     }
                 }
                 if a > 0.0 {
-                    accumulate(&mut sums.g, &p.payload, a / p.payload.total);
+                    self.splat(s, sums, &p.payload, a / p.payload.total);
                 }
             }
             if a < 1.0 {
-                accumulate(
-                    &mut sums.g,
-                    &tr.current.payload,
-                    (1.0 - a) / tr.current.payload.total,
-                );
+                let current = &tr.current.payload;
+                self.splat(s, sums, current, (1.0 - a) / current.total);
             }
             sums.samples += 1;
         });
@@ -365,19 +416,16 @@ impl<S: TileShift> Sampler<'_, S> {
                     xb.log_density,
                 );
                 let (r, accepted) = accept_probability(log_r, ca.rng_mut());
-                for (sums, current, swapped) in [
-                    (&mut a.sums, ca.current(), &xa),
-                    (&mut b.sums, cb.current(), &xb),
+                for (tile, sums, current, swapped) in [
+                    (s, &mut a.sums, ca.current(), &xa),
+                    (t, &mut b.sums, cb.current(), &xb),
                 ] {
                     if r > 0.0 {
-                        accumulate(&mut sums.g, &swapped.payload, r / swapped.payload.total);
+                        self.splat(tile, sums, &swapped.payload, r / swapped.payload.total);
                     }
                     if r < 1.0 {
-                        accumulate(
-                            &mut sums.g,
-                            &current.payload,
-                            (1.0 - r) / current.payload.total,
-                        );
+                        let current = &current.payload;
+                        self.splat(tile, sums, current, (1.0 - r) / current.total);
                     }
                     sums.samples += 1;
                 }
@@ -504,6 +552,7 @@ impl Smcmc {
             shift,
             tiling,
             mutation: *mutation,
+            filter: FilterSplat::new(scene),
         };
         // Checked before every tile step, exchange pair and start-up
         // candidate, so a stop or the end of the time budget is seen within
@@ -529,7 +578,13 @@ impl Smcmc {
         let start_seconds = start.elapsed().as_secs_f64();
         let develop_now = |tiles: &[Tile]| {
             let sums: Vec<TileSums> = tiles.iter().map(|t| t.sums.clone()).collect();
-            develop(&sampler.tiling, &sums, self.alpha, self.solver_iterations)
+            develop(
+                &sampler.tiling,
+                &sums,
+                self.alpha,
+                self.solver_iterations,
+                sampler.filter.as_ref(),
+            )
         };
 
         let planned = self.iterations(run);

@@ -262,6 +262,41 @@ pub(crate) struct TransitionCounts {
     pub per_depth: Vec<DepthAcceptance>,
     /// The coordinates of the first NaN/inf proposal.
     pub first_nonfinite: Option<Vec<f64>>,
+    /// Per pixel (row-major, `width` wide), the chain samples that fell
+    /// there with their expected-value weights (`a` for a proposal,
+    /// `1 − a` for the current state), a state's pixel being its first
+    /// splat's: the sample-count image that shows how unevenly a global
+    /// chain spends its samples (spec seed003 §8.1, Fig. 3.8).
+    pub samples: Vec<f32>,
+    /// Width of the `samples` image.
+    pub width: u32,
+}
+
+impl TransitionCounts {
+    /// Empty counts with a `width × height` sample-count image.
+    pub fn new(width: u32, height: u32) -> Self {
+        TransitionCounts {
+            samples: vec![0.0; width as usize * height as usize],
+            width,
+            ..Default::default()
+        }
+    }
+
+    /// Counts weight `a` of a sample whose first splat is at `s`.
+    fn count_sample(&mut self, s: &PathSample, a: f64) {
+        let Some(sp) = s.splats.first() else {
+            return;
+        };
+        let w = self.width as usize;
+        if a > 0.0 && sp.p.x >= 0.0 && sp.p.y >= 0.0 && w > 0 {
+            let (x, y) = (sp.p.x as usize, sp.p.y as usize);
+            if x < w
+                && let Some(c) = self.samples.get_mut(y * w + x)
+            {
+                *c += a as f32;
+            }
+        }
+    }
 }
 
 /// Where one member's transitions go: its film (`None` for a member whose
@@ -300,6 +335,7 @@ pub(crate) fn observe<F: ChainFamily>(
             }
             counts.per_depth[d].proposed += 1;
             counts.per_depth[d].accepted += u64::from(t.accepted);
+            counts.count_sample(&y.payload, t.alpha);
             if let Some(film) = sink.film.as_deref_mut() {
                 film_state(family, film, &y.payload, w, t.alpha, independent);
             }
@@ -309,6 +345,7 @@ pub(crate) fn observe<F: ChainFamily>(
     if let Some(film) = sink.film.as_deref_mut() {
         film_state(family, film, &t.current.payload, w, 1.0 - t.alpha, false);
     }
+    counts.count_sample(&t.current.payload, 1.0 - t.alpha);
     // Ratio of the next member's density to this one's, at both states.
     let next = w.member + 1;
     if next < family.members()

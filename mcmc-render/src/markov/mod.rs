@@ -609,9 +609,27 @@ pub struct MltResult {
     pub seconds: f64,
     /// Stopped by Ctrl-C or the time budget before the requested mutations.
     pub interrupted: bool,
+    /// Per pixel, the chain samples that fell there (expected-value
+    /// weights, all members), row-major.
+    pub sample_counts: Vec<f64>,
 }
 
 impl MltResult {
+    /// The sample-count image as an RGB layer (`<out>.samples.exr`) and
+    /// its max/median ratio (NaN when the median is 0).
+    pub fn sample_count_layer(&self) -> (Vec<Rgb>, f64) {
+        let layer = self
+            .sample_counts
+            .iter()
+            .map(|&c| Rgb::splat(c as f32))
+            .collect();
+        let mut sorted = self.sample_counts.clone();
+        sorted.sort_by(f64::total_cmp);
+        let median = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+        let max = sorted.last().copied().unwrap_or(0.0);
+        (layer, if median > 0.0 { max / median } else { f64::NAN })
+    }
+
     /// The developed image, row-major: the sum of the members' images.
     pub fn image(&self) -> Vec<Rgb> {
         sum_images(self.families.iter().map(FamilyResult::image))
@@ -980,6 +998,12 @@ pub fn run<F: ChainFamily>(
         }
     }
     let first_nonfinite = tasks.iter().find_map(|t| t.counts.first_nonfinite.clone());
+    let mut sample_counts = vec![0.0f64; pixels as usize];
+    for t in &tasks {
+        for (c, &v) in sample_counts.iter_mut().zip(&t.counts.samples) {
+            *c += f64::from(v);
+        }
+    }
     let running_b = (
         families.iter().map(|f| f.running_b.0).sum(),
         quadrature(families.iter().map(|f| f.running_b.1)),
@@ -1016,6 +1040,7 @@ pub fn run<F: ChainFamily>(
         bootstrap_seconds,
         seconds: start.elapsed().as_secs_f64(),
         interrupted,
+        sample_counts,
     })
 }
 

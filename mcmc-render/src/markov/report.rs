@@ -114,3 +114,15 @@ pub fn rendered(
         ),
     }
 }
+
+/// Adds `result`'s sample-count image to `rendered` as the `samples` layer
+/// (`<out>.samples.exr`, the image `smcmc` writes too) and its max/median
+/// ratio to the statistics (`samples_per_pixel_max_over_median`).
+pub fn with_sample_counts(result: &MltResult, mut rendered: Rendered) -> Rendered {
+    let (layer, ratio) = result.sample_count_layer();
+    rendered.layers.push(("samples".into(), layer));
+    rendered
+        .statistics
+        .insert("samples_per_pixel_max_over_median".into(), json!(ratio));
+    rendered
+}

@@ -138,6 +138,7 @@ impl<'f, F: ChainFamily> Task<'f, F> {
         units: Units<'f, F>,
     ) -> Self {
         let n = members.len();
+        let probe = film();
         Task {
             films: members
                 .iter()
@@ -147,7 +148,7 @@ impl<'f, F: ChainFamily> Task<'f, F> {
             running: vec![RunningNormalization::new(); n],
             mutations: vec![0; n],
             ratios: vec![RatioSum::default(); n],
-            counts: TransitionCounts::default(),
+            counts: TransitionCounts::new(probe.width, probe.height),
             units,
         }
     }

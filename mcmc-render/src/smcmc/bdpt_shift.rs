@@ -35,7 +35,7 @@ use std::cell::RefCell;
 
 thread_local! {
     /// Per-thread subpath storage.
-    static BUFFERS: RefCell<SubpathBuffers> = RefCell::new(SubpathBuffers::default());
+    pub(super) static BUFFERS: RefCell<SubpathBuffers> = RefCell::new(SubpathBuffers::default());
 }
 
 /// The BDPT shift over `bdpt`'s depth limits and MIS heuristic.
@@ -46,16 +46,17 @@ pub struct BdptShift {
 }
 
 impl BdptShift {
-    /// The raster position of `point` placed by `place` and the
-    /// renormalised BDPT sum there, with the light subpath in
-    /// `buffers.light`.
-    fn pixel(
+    /// The camera subpath of `point` placed by `place` (random replay of
+    /// the camera stream) in `buffers.camera`: its raster position, its
+    /// vertex count and the source, switched to the connection stream's
+    /// start.
+    pub(super) fn camera_subpath<'a>(
         &self,
         scene: &Scene,
-        point: &TorusPoint,
+        point: &'a TorusPoint,
         place: Placement,
         buffers: &mut SubpathBuffers,
-    ) -> (Vec2, Rgb) {
+    ) -> (Vec2, usize, PssSource<'a>) {
         let mut source = PssSource::new(point, Stream::COUNT);
         source.set_stream(Stream::Camera);
         let (ox, oy) = source.next_2d();
@@ -69,39 +70,67 @@ impl BdptShift {
             &mut buffers.camera,
         );
         source.set_stream(Stream::Connection);
+        (raster, nc, source)
+    }
+
+    /// Technique `(s, t)` on the subpaths in `buffers` with its MIS weight
+    /// renormalised over the techniques with `t ≥ 2` (black when it carries
+    /// nothing).
+    pub(super) fn renormalised(
+        &self,
+        scene: &Scene,
+        buffers: &SubpathBuffers,
+        s: usize,
+        t: usize,
+        source: &mut PssSource<'_>,
+    ) -> Rgb {
+        let Some(c) = connect(
+            scene,
+            &buffers.camera,
+            &buffers.light,
+            s,
+            t,
+            source,
+            self.bdpt.heuristic,
+        ) else {
+            return Rgb::BLACK;
+        };
+        if c.weight <= 0.0 {
+            return Rgb::BLACK;
+        }
+        let w = mis_weight_among(
+            scene,
+            &SceneBsdfs,
+            0,
+            &buffers.camera,
+            &buffers.light,
+            s,
+            t,
+            c.sampled.as_ref(),
+            self.bdpt.heuristic,
+            2,
+        );
+        c.l * (w / c.weight)
+    }
+
+    /// The raster position of `point` placed by `place` and the
+    /// renormalised BDPT sum there, with the light subpath in
+    /// `buffers.light`.
+    fn pixel(
+        &self,
+        scene: &Scene,
+        point: &TorusPoint,
+        place: Placement,
+        buffers: &mut SubpathBuffers,
+    ) -> (Vec2, Rgb) {
+        let (raster, nc, mut source) = self.camera_subpath(scene, point, place, buffers);
         let nl = buffers.light.len();
         let max_depth = self.bdpt.max_depth as usize;
         let mut l = Rgb::BLACK;
         for t in 2..=nc {
             for s in 0..=nl {
-                if s + t - 1 > max_depth {
-                    continue;
-                }
-                let Some(c) = connect(
-                    scene,
-                    &buffers.camera,
-                    &buffers.light,
-                    s,
-                    t,
-                    &mut source,
-                    self.bdpt.heuristic,
-                ) else {
-                    continue;
-                };
-                if c.weight > 0.0 {
-                    let w = mis_weight_among(
-                        scene,
-                        &SceneBsdfs,
-                        0,
-                        &buffers.camera,
-                        &buffers.light,
-                        s,
-                        t,
-                        c.sampled.as_ref(),
-                        self.bdpt.heuristic,
-                        2,
-                    );
-                    l += c.l * (w / c.weight);
+                if s + t - 1 <= max_depth {
+                    l += self.renormalised(scene, buffers, s, t, &mut source);
                 }
             }
         }
@@ -109,7 +138,12 @@ impl BdptShift {
     }
 
     /// Traces the light subpath of `point` into `buffers.light`.
-    fn light_subpath(&self, scene: &Scene, point: &TorusPoint, buffers: &mut SubpathBuffers) {
+    pub(super) fn light_subpath(
+        &self,
+        scene: &Scene,
+        point: &TorusPoint,
+        buffers: &mut SubpathBuffers,
+    ) {
         let mut source = PssSource::new(point, Stream::COUNT);
         source.set_stream(Stream::Light);
         generate_light_subpath(
@@ -153,9 +187,6 @@ impl TileShift for BdptShift {
     }
 
     fn offset_coordinates(&self) -> [usize; 2] {
-        // The camera stream's first two numbers (PssSource interleaves the
-        // streams: number i of stream k is coordinate COUNT·i + k).
-        let k = Stream::Camera as usize;
-        [k, Stream::COUNT + k]
+        super::camera_stream_offset_coordinates()
     }
 }

@@ -48,6 +48,9 @@ pub struct TileValues {
     pub f: [Rgb; MAX_TILE_PIXELS],
     /// `Σ_q lum f_q`.
     pub total: f64,
+    /// The state's sub-pixel offset `(o_x, o_y)`: slot `q`'s path goes
+    /// through raster position `q + o` (where a non-box filter spreads it).
+    pub offset: [f32; 2],
 }
 
 /// The tiles of an image: one per pixel, row-major, each made of the
