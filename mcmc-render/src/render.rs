@@ -206,7 +206,9 @@ pub fn render(
         {
             break;
         }
-        if stop.load(Ordering::Relaxed) || out_of_time() {
+        // On a cluster every rank must stop before the same pass.
+        let stopping = stop.load(Ordering::Relaxed) || out_of_time();
+        if cluster.map_or(stopping, |c| c.any(stopping)) {
             interrupted = target.is_none_or(|t| spp_done < t);
             break;
         }

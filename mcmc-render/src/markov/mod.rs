@@ -939,8 +939,26 @@ pub fn run<F: ChainFamily>(
     let stopped = || stop.load(Ordering::Relaxed) || out_of_time();
     let mut interrupted = false;
     let mut last_preview = Instant::now();
-    while !tasks.iter().all(Task::done) {
-        if stopped() || !work::run_round(&mut tasks, family, &weights, &stopped, observer) {
+    loop {
+        // On a cluster every rank leaves the loop in the same round: when
+        // all ranks' tasks are done, or when any rank was stopped.
+        let (local_done, stop_now) = (tasks.iter().all(Task::done), stopped());
+        let (all_done, stop_now) = match cluster {
+            Some(c) => (!c.any(!local_done), c.any(stop_now)),
+            None => (local_done, stop_now),
+        };
+        if all_done {
+            break;
+        }
+        if stop_now {
+            interrupted = true;
+            break;
+        }
+        // A round cut short by the stop flag is seen at the loop's top.
+        if !local_done
+            && !work::run_round(&mut tasks, family, &weights, &stopped, observer)
+            && cluster.is_none()
+        {
             interrupted = true;
             break;
         }
