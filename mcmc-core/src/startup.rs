@@ -241,6 +241,21 @@ impl RunningNormalization {
         Self::default()
     }
 
+    /// The estimate's state `(count, ln Σ w, ln Σ w²)`, bit-exactly, for
+    /// sending it to another process.
+    pub fn parts(&self) -> (u64, f64, f64) {
+        (self.count, self.log_sum, self.log_sum_sq)
+    }
+
+    /// The estimate with the state [`RunningNormalization::parts`] gave.
+    pub fn from_parts((count, log_sum, log_sum_sq): (u64, f64, f64)) -> Self {
+        RunningNormalization {
+            count,
+            log_sum,
+            log_sum_sq,
+        }
+    }
+
     /// Adds one independent sample with `ln π(u) − ln p(u)` (NaN is ignored
     /// and counted as zero).
     pub fn add(&mut self, log_weight: f64) {

@@ -267,6 +267,42 @@ impl Film {
         Film::sub(width, height, x0, y0, x1 - x0, y1 - y0, filter)
     }
 
+    /// The accumulators (camera samples `Σ f·L, Σ f`; splats), as a
+    /// distributed run sends them ([`crate::cluster`]).
+    pub fn accumulators(&self) -> (&[[f32; 4]], &[[f32; 3]]) {
+        (&self.samples, &self.splats)
+    }
+
+    /// The film `(width, height, x0, y0, w, h)` with the given
+    /// accumulators (from [`Film::accumulators`]; `samples` empty for a
+    /// splat-only film), checked against its size.
+    pub fn from_accumulators(
+        [width, height, x0, y0, w, h]: [u32; 6],
+        filter: Arc<Filter>,
+        samples: Vec<[f32; 4]>,
+        splats: Vec<[f32; 3]>,
+    ) -> Result<Film, String> {
+        let n = w as usize * h as usize;
+        if splats.len() != n || !(samples.is_empty() || samples.len() == n) {
+            return Err(format!(
+                "a {w}×{h} film cannot hold {} samples and {} splats",
+                samples.len(),
+                splats.len()
+            ));
+        }
+        Ok(Film {
+            width,
+            height,
+            x0,
+            y0,
+            w,
+            h,
+            filter,
+            samples,
+            splats,
+        })
+    }
+
     /// Zeroes the accumulators.
     pub fn clear(&mut self) {
         self.samples.iter_mut().for_each(|p| *p = [0.0; 4]);

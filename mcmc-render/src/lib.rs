@@ -36,8 +36,11 @@
 pub mod bsdf;
 pub mod camera;
 pub mod cli;
+pub mod cluster;
 pub mod color;
 pub mod compare;
+#[cfg(feature = "mpi")]
+pub mod distributed;
 pub mod distribution;
 pub mod environment;
 pub mod film;

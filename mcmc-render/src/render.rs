@@ -10,7 +10,14 @@
 //!
 //! Stopping (Ctrl-C or the time budget) discards the pass in flight, so the
 //! result always holds whole passes and is normalised by what it holds.
+//!
+//! Distributed runs ([`crate::cluster`]): every rank runs every pass but
+//! renders only the units [`owns`] deals it; rank 0 gathers the pass's unit
+//! films and adds them in unit order, as one process does, so the image is
+//! bit-identical for any number of ranks. A pass stopped on any rank is
+//! discarded on all of them.
 
+use crate::cluster::{Parcel, owns};
 use crate::film::{Film, Filter};
 use crate::integrators::{Integrator, Rendered, RunSettings, SampleDomain, SampleStats};
 use crate::observer::Observer;
@@ -58,6 +65,9 @@ pub struct RenderResult {
     pub interrupted: bool,
     /// Sampler counters.
     pub stats: SampleStats,
+    /// This rank's share of a distributed run: work units rendered and
+    /// seconds spent rendering them (zeros without a cluster).
+    pub rank_work: (u64, f64),
 }
 
 impl RenderResult {
@@ -103,6 +113,45 @@ pub(crate) fn image_tiles(width: u32, height: u32) -> Vec<(u32, u32, u32, u32)> 
         .collect()
 }
 
+/// Adds a pass's unit films into `film` in unit order and returns their
+/// counters: this process's units, or on a cluster every rank's on rank 0
+/// (the other ranks keep nothing).
+fn reduce_pass<'a>(
+    film: &mut Film,
+    units: impl Iterator<Item = (usize, &'a Film, SampleStats)>,
+    filter: &Arc<Filter>,
+) -> Vec<SampleStats> {
+    let Some(cluster) = crate::cluster::current() else {
+        return units
+            .map(|(_, f, st)| {
+                film.add_film(f);
+                st
+            })
+            .collect();
+    };
+    let parcels = units
+        .map(|(unit, f, st)| Parcel {
+            unit,
+            films: vec![Some(f.clone())],
+            numbers: Vec::new(),
+            counts: vec![st.nonfinite],
+        })
+        .collect();
+    let Some(all) = cluster.gather(parcels, filter) else {
+        return Vec::new();
+    };
+    all.iter()
+        .map(|p| {
+            if let Some(f) = &p.films[0] {
+                film.add_film(f);
+            }
+            SampleStats {
+                nonfinite: p.counts[0],
+            }
+        })
+        .collect()
+}
+
 /// Renders `scene` with `integrator`. `stop` aborts (the pass in flight is discarded).
 pub fn render(
     scene: &Scene,
@@ -129,8 +178,13 @@ pub fn render(
     let mut interrupted = false;
     let mut pass = 0u64;
     let out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
+    let cluster = crate::cluster::current();
+    let mine = |unit: usize| owns(cluster, unit);
 
     let tiles = image_tiles(width, height);
+    let units = if splats { LIGHT_CHUNKS } else { tiles.len() };
+    let my_units = (0..units).filter(|&i| mine(i)).count() as u64;
+    let mut rank_work = (0u64, 0.0f64);
     let mut light_films: Vec<Film> = if splats {
         (0..LIGHT_CHUNKS)
             .map(|_| {
@@ -152,7 +206,9 @@ pub fn render(
         {
             break;
         }
-        if stop.load(Ordering::Relaxed) || out_of_time() {
+        // On a cluster every rank must stop before the same pass.
+        let stopping = stop.load(Ordering::Relaxed) || out_of_time();
+        if cluster.map_or(stopping, |c| c.any(stopping)) {
             interrupted = target.is_none_or(|t| spp_done < t);
             break;
         }
@@ -168,17 +224,29 @@ pub fn render(
             aborted.load(Ordering::Relaxed)
         };
         let seed = settings.seed;
+        let pass_start = Instant::now();
+        let busy = std::cell::Cell::new(0.0);
+        // Called once the local units are done: the time they took, and
+        // whether any rank stopped (then every rank discards the pass).
+        let pass_aborted = |aborted: &AtomicBool| {
+            busy.set(pass_start.elapsed().as_secs_f64());
+            let local = aborted.load(Ordering::Relaxed);
+            let any = cluster.map_or(local, |c| c.any(local));
+            aborted.store(any, Ordering::Relaxed);
+            any
+        };
         let pass_stats: Vec<SampleStats> = match domain {
             SampleDomain::Pixels => {
-                let results: Vec<(Film, SampleStats)> = tiles
+                let results: Vec<(usize, Film, SampleStats)> = tiles
                     .par_iter()
                     .enumerate()
+                    .filter(|&(i, _)| mine(i))
                     .map(|(i, &(x0, y0, x1, y1))| {
                         let mut tile =
                             Film::for_tile(width, height, x0, y0, x1, y1, filter.clone());
                         let mut st = SampleStats::default();
                         if check_abort() {
-                            return (tile, st);
+                            return (i, tile, st);
                         }
                         let mut src = unit_source(seed, pass, i as u64);
                         integrator.render_pixels(
@@ -190,19 +258,17 @@ pub fn render(
                             &mut st,
                         );
                         observer.progress(((x1 - x0) * (y1 - y0)) as u64 * spp as u64);
-                        (tile, st)
+                        (i, tile, st)
                     })
                     .collect();
-                if aborted.load(Ordering::Relaxed) {
+                if pass_aborted(&aborted) {
                     Vec::new()
                 } else {
-                    results
-                        .into_iter()
-                        .map(|(tile, st)| {
-                            film.add_film(&tile);
-                            st
-                        })
-                        .collect()
+                    reduce_pass(
+                        &mut film,
+                        results.iter().map(|(i, t, st)| (*i, t, *st)),
+                        &filter,
+                    )
                 }
             }
             SampleDomain::PixelsWithSplats => {
@@ -214,6 +280,9 @@ pub fn render(
                     .map(|(i, f)| {
                         f.clear();
                         let mut st = SampleStats::default();
+                        if !mine(i) {
+                            return st;
+                        }
                         let mut src = unit_source(seed, pass, i as u64);
                         for y in (i as u32..height).step_by(LIGHT_CHUNKS) {
                             if check_abort() {
@@ -229,13 +298,17 @@ pub fn render(
                         st
                     })
                     .collect();
-                if aborted.load(Ordering::Relaxed) {
+                if pass_aborted(&aborted) {
                     Vec::new()
                 } else {
-                    for f in &light_films {
-                        film.add_film(f);
-                    }
-                    results
+                    let units = light_films.iter().zip(results).enumerate();
+                    reduce_pass(
+                        &mut film,
+                        units
+                            .filter(|(i, _)| mine(*i))
+                            .map(|(i, (f, st))| (i, f, st)),
+                        &filter,
+                    )
                 }
             }
             SampleDomain::LightPaths => {
@@ -248,6 +321,9 @@ pub fn render(
                     .map(|(i, f)| {
                         f.clear();
                         let mut st = SampleStats::default();
+                        if !mine(i) {
+                            return st;
+                        }
                         let n = per + u64::from((i as u64) < extra);
                         let mut src = unit_source(seed, pass, i as u64);
                         let mut done = 0u64;
@@ -265,13 +341,17 @@ pub fn render(
                         st
                     })
                     .collect();
-                if aborted.load(Ordering::Relaxed) {
+                if pass_aborted(&aborted) {
                     Vec::new()
                 } else {
-                    for f in &light_films {
-                        film.add_film(f);
-                    }
-                    results
+                    let units = light_films.iter().zip(results).enumerate();
+                    reduce_pass(
+                        &mut film,
+                        units
+                            .filter(|(i, _)| mine(*i))
+                            .map(|(i, (f, st))| (i, f, st)),
+                        &filter,
+                    )
                 }
             }
         };
@@ -279,6 +359,8 @@ pub fn render(
             interrupted = true;
             break;
         }
+        rank_work.0 += my_units;
+        rank_work.1 += busy.get();
         for st in &pass_stats {
             stats.merge(st);
         }
@@ -296,6 +378,7 @@ pub fn render(
         seconds: start.elapsed().as_secs_f64(),
         interrupted,
         stats,
+        rank_work,
     }
 }
 
@@ -328,6 +411,10 @@ pub fn run_per_pixel(
         "bvh_build_seconds": scene.geometry.build_time.as_secs_f64(),
         "triangles": scene.geometry.triangles,
     });
+    let statistics = crate::cluster::with_ranks(
+        statistics,
+        serde_json::json!({"units": r.rank_work.0, "busy_seconds": r.rank_work.1, "seconds": r.seconds}),
+    );
     Rendered {
         image: r.image(),
         seconds: r.seconds,

@@ -107,11 +107,7 @@ pub(crate) fn exchange_pair(
 }
 
 /// Every rank's `value`, in rank order.
-pub(crate) fn all_gather_u64(
-    comm: &SimpleCommunicator,
-    traffic: &mut Traffic,
-    value: u64,
-) -> Vec<u64> {
+pub fn all_gather_u64(comm: &SimpleCommunicator, traffic: &mut Traffic, value: u64) -> Vec<u64> {
     let mut out = vec![0u64; comm.size() as usize];
     comm.all_gather_into(&value, &mut out[..]);
     traffic.collectives += 1;
@@ -120,7 +116,7 @@ pub(crate) fn all_gather_u64(
 
 /// Gathers every rank's byte block on rank 0, in rank order (`None` on the
 /// other ranks).
-pub(crate) fn gather_bytes(
+pub fn gather_bytes(
     comm: &SimpleCommunicator,
     traffic: &mut Traffic,
     bytes: &[u8],
@@ -150,7 +146,7 @@ pub(crate) fn gather_bytes(
 }
 
 /// FNV-1a, 64 bits: a fingerprint, not a cryptographic hash.
-pub(crate) fn fnv1a(bytes: &[u8], mut h: u64) -> u64 {
+pub fn fnv1a(bytes: &[u8], mut h: u64) -> u64 {
     for &b in bytes {
         h ^= b as u64;
         h = h.wrapping_mul(0x0100_0000_01b3);
@@ -159,7 +155,7 @@ pub(crate) fn fnv1a(bytes: &[u8], mut h: u64) -> u64 {
 }
 
 /// Start value of [`fnv1a`].
-pub(crate) const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+pub const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
 
 /// A fingerprint of the running executable (0 when it cannot be read), so
 /// that ranks started from different builds refuse to run together.
@@ -178,7 +174,7 @@ pub(crate) fn binary_fingerprint() -> u64 {
 /// of its executable); every rank gets every report, so all of them return
 /// the same error instead of some waiting forever for a partner that gave
 /// up. `local` is this rank's set-up result, `what` names the inputs.
-pub(crate) fn agree<T>(
+pub fn agree<T>(
     comm: &SimpleCommunicator,
     traffic: &mut Traffic,
     what: &str,

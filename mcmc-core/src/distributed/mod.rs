@@ -36,7 +36,7 @@ mod replica;
 mod wire;
 
 pub use chains::run_chains_distributed;
-pub use comm::{Traffic, share};
+pub use comm::{FNV_OFFSET, Traffic, agree, all_gather_u64, fnv1a, gather_bytes, share};
 pub use mpi;
 pub use replica::{DistributedReplicaExchange, DistributedSchedule};
 pub use wire::{Wire, decode, encode};

@@ -109,19 +109,56 @@ pub fn run(args: RenderArgs) -> Result<(), Failure> {
         let scene = Scene::load(&args.scene, &defines).map_err(|e| e.to_string())?;
         return print_replay(&scene, file);
     }
-    check_writable(&args.out, "exr")?;
-    let scene = Scene::load(&args.scene, &defines).map_err(|e| e.to_string())?;
-    // The per-pixel driver's film, its light-path films and the image.
-    let (w, h) = (scene.film.width, scene.film.height);
-    crate::resources::check_memory(
-        &format!("film {w}×{h}"),
-        crate::resources::film_bytes(w, h, 10),
-    )?;
-    let integrator = registry::configure(
-        scene.integrator_element.as_ref(),
-        args.integrator.as_deref(),
-        &args.params.assignments()?,
-    )?;
+    // Under `mpirun` (feature `mpi`) every rank sets up alone, then all
+    // agree (`distributed::agree_on_inputs`) before any renders.
+    #[cfg(feature = "mpi")]
+    let session = crate::distributed::start()?;
+    let setup = || -> Result<_, String> {
+        if crate::cluster::is_root() {
+            check_writable(&args.out, "exr")?;
+        }
+        let scene = Scene::load(&args.scene, &defines).map_err(|e| e.to_string())?;
+        // The per-pixel driver's film, its light-path films and the image.
+        let (w, h) = (scene.film.width, scene.film.height);
+        crate::resources::check_memory(
+            &format!("film {w}×{h}"),
+            crate::resources::film_bytes(w, h, 10),
+        )?;
+        let integrator = registry::configure(
+            scene.integrator_element.as_ref(),
+            args.integrator.as_deref(),
+            &args.params.assignments()?,
+        )?;
+        Ok((scene, integrator))
+    };
+    #[cfg(not(feature = "mpi"))]
+    let (scene, integrator) = setup()?;
+    #[cfg(feature = "mpi")]
+    let (scene, integrator) = {
+        let inputs = setup().map(|(scene, integ)| {
+            let parts = vec![
+                std::fs::read_to_string(&args.scene).unwrap_or_default(),
+                // Sorted: a hash map's order differs between processes.
+                format!(
+                    "{:?}",
+                    defines.iter().collect::<std::collections::BTreeMap<_, _>>()
+                ),
+                integ.name().to_string(),
+                Value::Object(integ.settings_json()).to_string(),
+                format!("{spp:?} {time_budget:?} {}", args.seed),
+            ];
+            ((scene, integ), parts)
+        });
+        match crate::distributed::agree_on_inputs(inputs) {
+            Ok(v) => v,
+            // Rank 0 reports another rank's failure; that rank reports its own.
+            Err((_, false)) if !crate::cluster::is_root() => {
+                drop(session);
+                std::process::exit(1);
+            }
+            Err((e, _)) => return Err(e.into()),
+        }
+    };
     Ok(render_job(&Job {
         scene: &scene,
         scene_name: &args.scene.display().to_string(),
@@ -147,16 +184,25 @@ fn render_job(job: &Job<'_>) -> Result<(), String> {
     let scene = job.scene;
     let (w, h) = (scene.film.width, scene.film.height);
     let png = job.out.with_extension("png");
-    let observer = CliObserver::new(
+    let cli_observer = CliObserver::new(
         job.integrator.planned_samples(scene, &job.run),
         job.run.time_budget,
         job.quiet,
         png.clone(),
         (w, h),
     );
-    let result = pool.install(|| job.integrator.render(scene, &job.run, &STOP, &observer));
-    observer.finish();
+    // In a distributed run only rank 0 shows progress and writes files.
+    let root = crate::cluster::is_root();
+    let observer: &dyn crate::observer::Observer = match root {
+        true => &cli_observer,
+        false => &crate::observer::NoObserver,
+    };
+    let result = pool.install(|| job.integrator.render(scene, &job.run, &STOP, observer));
+    cli_observer.finish();
     let rendered = result.map_err(|e| e.to_string())?;
+    if !root {
+        return Ok(());
+    }
     write_exr(job.out, w, h, &rendered.image)?;
     write_png(&png, w, h, &rendered.image)?;
     for (name, image) in &rendered.layers {
@@ -198,6 +244,7 @@ fn sidecar(job: &Job<'_>, r: &Rendered, dump: Option<String>) -> Value {
         json!(job.run.time_budget.map(|b| b.as_secs_f64())),
     );
     m.insert("interrupted".into(), json!(r.interrupted));
+    m.insert("image_hash".into(), json!(image_hash(&r.image)));
     m.extend(r.statistics.clone());
     m.insert("nonfinite_dump".into(), json!(dump));
     m.insert(
@@ -205,6 +252,20 @@ fn sidecar(job: &Job<'_>, r: &Rendered, dump: Option<String>) -> Value {
         Value::Object(job.integrator.settings_json()),
     );
     Value::Object(m)
+}
+
+/// A hash of the image's bits (hex), to check that two runs made the same
+/// image (the EXR files of equal images can differ: blocks are compressed
+/// in parallel and written in the order they finish).
+fn image_hash(image: &[crate::color::Rgb]) -> String {
+    use std::hash::{DefaultHasher, Hasher};
+    let mut h = DefaultHasher::new();
+    for p in image {
+        for c in [p.r, p.g, p.b] {
+            h.write_u32(c.to_bits());
+        }
+    }
+    format!("{:016x}", h.finish())
 }
 
 /// Re-traces a dump and prints what its path contributes.

@@ -102,8 +102,8 @@ pub(crate) struct MemberTotals<'a> {
 /// Expected-value sums of `q_{d+1}(x)/q_d(x)` over member `d`'s states.
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct RatioSum {
-    weight: f64,
-    sum: f64,
+    pub(crate) weight: f64,
+    pub(crate) sum: f64,
 }
 
 impl RatioSum {
@@ -256,7 +256,7 @@ fn film_state<F: ChainFamily>(
 }
 
 /// What the transitions of a work unit's chains count, whatever their member.
-#[derive(Default)]
+#[derive(Clone, Default)]
 pub(crate) struct TransitionCounts {
     /// Proposals and acceptances per path depth.
     pub per_depth: Vec<DepthAcceptance>,

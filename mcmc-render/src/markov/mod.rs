@@ -47,7 +47,13 @@
 //! task order, the bootstrap is evaluated in parallel but collected in
 //! candidate order, and every chain draws from its own stream, so one seed
 //! gives a bit-identical image for any number of threads.
+//!
+//! On a cluster ([`crate::cluster`], `mpirun` with the feature `mpi`) the
+//! tasks are dealt out to the ranks and reduced on rank 0 in the same task
+//! order, so the image is also bit-identical for any number of ranks (see
+//! [`distribute`]).
 
+mod distribute;
 pub mod estimator;
 pub mod report;
 mod startup;
@@ -496,22 +502,27 @@ impl ExchangeSummary {
         self.sweeps += stats.sweeps;
         self.round_trips += set.index_process().total_round_trips();
         for (i, j, p) in stats.attempted_pairs() {
-            let n = p.attempted as f64;
-            match self.pairs.iter_mut().find(|q| (q.i, q.j) == (i, j)) {
-                Some(q) => {
-                    let total = q.attempted as f64 + n;
-                    q.mean_alpha = (q.mean_alpha * q.attempted as f64 + p.sum_alpha) / total;
-                    q.attempted += p.attempted;
-                    q.accepted += p.accepted;
-                }
-                None => self.pairs.push(ExchangePair {
-                    i,
-                    j,
-                    attempted: p.attempted,
-                    accepted: p.accepted,
-                    mean_alpha: p.sum_alpha / n,
-                }),
+            self.add_pair(ExchangePair {
+                i,
+                j,
+                attempted: p.attempted,
+                accepted: p.accepted,
+                mean_alpha: p.sum_alpha / p.attempted as f64,
+            });
+        }
+    }
+
+    /// Adds the counts of one pair of levels.
+    fn add_pair(&mut self, p: ExchangePair) {
+        match self.pairs.iter_mut().find(|q| (q.i, q.j) == (p.i, p.j)) {
+            Some(q) => {
+                let total = q.attempted as f64 + p.attempted as f64;
+                q.mean_alpha =
+                    (q.mean_alpha * q.attempted as f64 + p.mean_alpha * p.attempted as f64) / total;
+                q.attempted += p.attempted;
+                q.accepted += p.accepted;
             }
+            None => self.pairs.push(p),
         }
         self.pairs.sort_by_key(|q| (q.i, q.j));
     }
@@ -612,6 +623,9 @@ pub struct MltResult {
     /// Per pixel, the chain samples that fell there (expected-value
     /// weights, all members), row-major.
     pub sample_counts: Vec<f64>,
+    /// In a distributed run, every rank's share and statistics (rank 0;
+    /// empty otherwise).
+    pub ranks: Vec<serde_json::Value>,
 }
 
 impl MltResult {
@@ -927,6 +941,18 @@ pub fn run<F: ChainFamily>(
     } else {
         chain_tasks(family, settings, &starts, total, &new_film)?
     };
+    // On a cluster this rank runs only the tasks dealt to it.
+    let cluster = crate::cluster::current();
+    let task_ids: Vec<usize> = (0..tasks.len())
+        .filter(|&t| crate::cluster::owns(cluster, t))
+        .collect();
+    if cluster.is_some() {
+        let mut t = 0;
+        tasks.retain(|_| {
+            t += 1;
+            crate::cluster::owns(cluster, t - 1)
+        });
+    }
 
     let p_independent = family.independent_probability(&settings.mutation);
     let b_hat: Arc<[f64]> = bootstrap_b.iter().map(|b| b.0).collect();
@@ -940,7 +966,7 @@ pub fn run<F: ChainFamily>(
         .collect();
     let image_weights: Vec<f64> = (0..members).map(|d| family.image_weight(d)).collect();
     // Snapshots and the final image gather the same per-member films.
-    let gather = |tasks: &[Task<F>]| {
+    let gather = |tasks: &[distribute::TaskSums]| {
         let mut totals = MemberTotals {
             films: (0..members).map(|_| new_film()).collect(),
             running: boot_running.clone(),
@@ -967,14 +993,32 @@ pub fn run<F: ChainFamily>(
     let stopped = || stop.load(Ordering::Relaxed) || out_of_time();
     let mut interrupted = false;
     let mut last_preview = Instant::now();
-    while !tasks.iter().all(Task::done) {
-        if stopped() || !work::run_round(&mut tasks, family, &weights, &stopped, observer) {
+    loop {
+        // On a cluster every rank leaves the loop in the same round: when
+        // all ranks' tasks are done, or when any rank was stopped.
+        let (local_done, stop_now) = (tasks.iter().all(Task::done), stopped());
+        let (all_done, stop_now) = match cluster {
+            Some(c) => (!c.any(!local_done), c.any(stop_now)),
+            None => (local_done, stop_now),
+        };
+        if all_done {
+            break;
+        }
+        if stop_now {
+            interrupted = true;
+            break;
+        }
+        // A round cut short by the stop flag is seen at the loop's top.
+        if !local_done
+            && !work::run_round(&mut tasks, family, &weights, &stopped, observer)
+            && cluster.is_none()
+        {
             interrupted = true;
             break;
         }
         if last_preview.elapsed() >= settings.preview_every {
             last_preview = Instant::now();
-            let families = gather(&tasks);
+            let families = gather(&local_sums(&tasks));
             let mutations = families.iter().map(|f| f.mutations).sum();
             observer.snapshot(
                 &|| sum_images(families.iter().map(FamilyResult::image)),
@@ -983,12 +1027,36 @@ pub fn run<F: ChainFamily>(
         }
     }
 
-    let families = gather(&tasks);
-    let mutations: u64 = families.iter().map(|f| f.mutations).sum();
     let mut member_stats: Vec<Option<ChainStatistics>> = vec![None; members];
     let mut exchange_summary = None;
     for t in &tasks {
         t.collect_statistics(&mut member_stats, &mut exchange_summary);
+    }
+    // Rank 0 of a cluster reduces every rank's tasks; the others keep
+    // their own (their results are not written).
+    let all_sums = cluster.and_then(|c| distribute::gather_tasks(c, &tasks, &task_ids, &filter));
+    let sums: Vec<distribute::TaskSums> = match all_sums {
+        Some(all) => all,
+        None => local_sums(&tasks),
+    };
+    let families = gather(&sums);
+    let mutations: u64 = families.iter().map(|f| f.mutations).sum();
+    let mut ranks = Vec::new();
+    if let Some(c) = cluster {
+        let local_mutations = tasks.iter().flat_map(|t| &t.mutations).sum();
+        let report = distribute::rank_report(
+            &member_stats,
+            &exchange_summary,
+            tasks.len(),
+            local_mutations,
+            start.elapsed().as_secs_f64(),
+        );
+        let report = crate::cluster::with_ranks(serde_json::json!({}), report);
+        if let Some(all) = report.get("ranks").and_then(|r| r.as_array()) {
+            (member_stats, exchange_summary) = distribute::merge_reports(all, members);
+            ranks = all.clone();
+        }
+        debug_assert!(c.rank() != 0 || !ranks.is_empty());
     }
     let mut chain_stats: Option<ChainStatistics> = None;
     for s in member_stats.iter().flatten() {
@@ -997,9 +1065,9 @@ pub fn run<F: ChainFamily>(
             None => chain_stats = Some(s.clone()),
         }
     }
-    let first_nonfinite = tasks.iter().find_map(|t| t.counts.first_nonfinite.clone());
+    let first_nonfinite = sums.iter().find_map(|t| t.counts.first_nonfinite.clone());
     let mut sample_counts = vec![0.0f64; pixels as usize];
-    for t in &tasks {
+    for t in &sums {
         for (c, &v) in sample_counts.iter_mut().zip(&t.counts.samples) {
             *c += f64::from(v);
         }
@@ -1015,7 +1083,7 @@ pub fn run<F: ChainFamily>(
                 .iter()
                 .map(|f| f.image_weight * f.scale_standard_error),
         ),
-        per_depth: work::per_depth(&tasks),
+        per_depth: work::per_depth(sums.iter().map(|t| &*t.counts)),
         families,
         mutations,
         mutations_per_pixel: mutations as f64 / pixels as f64,
@@ -1041,7 +1109,13 @@ pub fn run<F: ChainFamily>(
         seconds: start.elapsed().as_secs_f64(),
         interrupted,
         sample_counts,
+        ranks,
     })
+}
+
+/// The sums of this process's tasks, borrowed.
+fn local_sums<'a, F: ChainFamily>(tasks: &'a [Task<'_, F>]) -> Vec<distribute::TaskSums<'a>> {
+    tasks.iter().map(distribute::TaskSums::of).collect()
 }
 
 /// Bytes per bootstrap candidate and member (its log weight, the

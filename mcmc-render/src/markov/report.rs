@@ -86,6 +86,9 @@ pub fn rendered(
     if let Some(annealing) = &result.annealing {
         statistics.insert("annealing".into(), json!(annealing));
     }
+    if !result.ranks.is_empty() {
+        statistics.insert("ranks".into(), json!(result.ranks));
+    }
     Rendered {
         image: result.image(),
         seconds: result.seconds,

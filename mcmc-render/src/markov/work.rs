@@ -338,10 +338,12 @@ where
 }
 
 /// Per-depth acceptance summed over tasks.
-pub(crate) fn per_depth<F: ChainFamily>(tasks: &[Task<'_, F>]) -> Vec<DepthAcceptance> {
+pub(crate) fn per_depth<'a>(
+    tasks: impl Iterator<Item = &'a TransitionCounts>,
+) -> Vec<DepthAcceptance> {
     let mut out: Vec<DepthAcceptance> = Vec::new();
     for t in tasks {
-        let d = &t.counts.per_depth;
+        let d = &t.per_depth;
         if out.len() < d.len() {
             out.resize(d.len(), DepthAcceptance::default());
         }

@@ -1,0 +1,340 @@
+//! The Markov-chain driver on a cluster ([`crate::cluster`]): every rank
+//! builds the same tasks (same start-up, same chain streams), runs the
+//! tasks [`crate::cluster::owns`] deals it, and sends each task's sums —
+//! films, running normalisations, mutations, ratio sums, per-depth counts
+//! — to rank 0, which adds them in task order exactly as one process does.
+//! The image and the pooled normalisation `b` are therefore bit-identical
+//! for any number of ranks. Chain and exchange statistics travel as JSON,
+//! one report per rank, and are merged in rank order (their counters are
+//! exact; the sums of acceptance probabilities may differ from a single
+//! process in the last bits).
+
+use super::estimator::{DepthAcceptance, RatioSum, TransitionCounts};
+use super::work::Task;
+use super::{ChainFamily, ExchangePair, ExchangeSummary};
+use crate::cluster::{Cluster, Parcel};
+use crate::film::{Film, Filter};
+use mcmc_core::startup::RunningNormalization;
+use mcmc_core::stats::{ChainStatistics, ComponentStatistics};
+use serde_json::{Value, json};
+use std::borrow::Cow;
+use std::sync::Arc;
+
+/// What one task adds to the members' totals: borrowed from a local task
+/// or rebuilt from a parcel another rank sent.
+pub(crate) struct TaskSums<'a> {
+    pub members: Cow<'a, [usize]>,
+    pub films: Cow<'a, [Option<Film>]>,
+    pub running: Cow<'a, [RunningNormalization]>,
+    pub mutations: Cow<'a, [u64]>,
+    pub ratios: Cow<'a, [RatioSum]>,
+    pub counts: Cow<'a, TransitionCounts>,
+}
+
+impl<'a> TaskSums<'a> {
+    /// The sums of a local task.
+    pub fn of<F: ChainFamily>(t: &'a Task<'_, F>) -> Self {
+        TaskSums {
+            members: Cow::Borrowed(&t.members),
+            films: Cow::Borrowed(&t.films),
+            running: Cow::Borrowed(&t.running),
+            mutations: Cow::Borrowed(&t.mutations),
+            ratios: Cow::Borrowed(&t.ratios),
+            counts: Cow::Borrowed(&t.counts),
+        }
+    }
+
+    /// The parcel of task `unit` (counts: the member count, members,
+    /// mutations, running counts, per-depth pairs, the NaN coordinates'
+    /// length + 1 or 0, the sample-count image's length and width;
+    /// numbers: the running logs, the ratio sums, the NaN coordinates, the
+    /// sample counts).
+    fn parcel(&self, unit: usize) -> Parcel {
+        let n = self.members.len();
+        let mut counts = vec![n as u64];
+        counts.extend(self.members.iter().map(|&m| m as u64));
+        counts.extend(self.mutations.iter());
+        let mut numbers = Vec::with_capacity(4 * n);
+        for r in self.running.iter() {
+            let (count, log_sum, log_sum_sq) = r.parts();
+            counts.push(count);
+            numbers.extend([log_sum, log_sum_sq]);
+        }
+        for r in self.ratios.iter() {
+            numbers.extend([r.weight, r.sum]);
+        }
+        counts.push(self.counts.per_depth.len() as u64);
+        for d in &self.counts.per_depth {
+            counts.extend([d.proposed, d.accepted]);
+        }
+        match &self.counts.first_nonfinite {
+            Some(coords) => {
+                counts.push(coords.len() as u64 + 1);
+                numbers.extend(coords);
+            }
+            None => counts.push(0),
+        }
+        counts.extend([
+            self.counts.samples.len() as u64,
+            u64::from(self.counts.width),
+        ]);
+        numbers.extend(self.counts.samples.iter().map(|&v| f64::from(v)));
+        Parcel {
+            unit,
+            films: self.films.to_vec(),
+            numbers,
+            counts,
+        }
+    }
+
+    /// The sums a [`TaskSums::parcel`] carries.
+    fn from_parcel(p: Parcel) -> TaskSums<'static> {
+        let mut c = p.counts.into_iter();
+        let mut x = p.numbers.into_iter();
+        // Every rank runs the same binary (checked at start-up): a short
+        // parcel is a bug, not an input error.
+        let mut count = || c.next().expect("a task parcel's counts");
+        let n = count() as usize;
+        let members: Vec<usize> = (0..n).map(|_| count() as usize).collect();
+        let mutations: Vec<u64> = (0..n).map(|_| count()).collect();
+        let counts_of_running: Vec<u64> = (0..n).map(|_| count()).collect();
+        let depths = count() as usize;
+        let per_depth = (0..depths)
+            .map(|_| DepthAcceptance {
+                proposed: count(),
+                accepted: count(),
+            })
+            .collect();
+        let coords = count();
+        let samples_len = count() as usize;
+        let width = count() as u32;
+        let mut number = || x.next().expect("a task parcel's numbers");
+        let running = counts_of_running
+            .iter()
+            .map(|&k| RunningNormalization::from_parts((k, number(), number())))
+            .collect();
+        let ratios = (0..n)
+            .map(|_| RatioSum {
+                weight: number(),
+                sum: number(),
+            })
+            .collect();
+        let first_nonfinite = (coords > 0).then(|| (1..coords).map(|_| number()).collect());
+        // Counts are f32 sums: the f64 round trip is exact.
+        let samples = (0..samples_len).map(|_| number() as f32).collect();
+        TaskSums {
+            members: Cow::Owned(members),
+            films: Cow::Owned(p.films),
+            running: Cow::Owned(running),
+            mutations: Cow::Owned(mutations),
+            ratios: Cow::Owned(ratios),
+            counts: Cow::Owned(TransitionCounts {
+                per_depth,
+                first_nonfinite,
+                samples,
+                width,
+            }),
+        }
+    }
+}
+
+/// Every task's sums on rank 0, in task order (`ids[i]` is local task
+/// `i`'s index); `None` on the other ranks.
+pub(crate) fn gather_tasks<F: ChainFamily>(
+    cluster: &dyn Cluster,
+    tasks: &[Task<'_, F>],
+    ids: &[usize],
+    filter: &Arc<Filter>,
+) -> Option<Vec<TaskSums<'static>>> {
+    let parcels = tasks
+        .iter()
+        .zip(ids)
+        .map(|(t, &id)| TaskSums::of(t).parcel(id))
+        .collect();
+    let all = cluster.gather(parcels, filter)?;
+    Some(all.into_iter().map(TaskSums::from_parcel).collect())
+}
+
+/// This rank's chain and exchange statistics and its share of the work,
+/// as JSON (one entry of the sidecar's `"ranks"`).
+pub(crate) fn rank_report(
+    member_stats: &[Option<ChainStatistics>],
+    exchange: &Option<ExchangeSummary>,
+    tasks: usize,
+    mutations: u64,
+    seconds: f64,
+) -> Value {
+    let stats: Vec<Value> = member_stats
+        .iter()
+        .map(|s| match s {
+            None => Value::Null,
+            Some(s) => json!({
+                "steps": s.steps, "accepted": s.accepted, "evaluations": s.evaluations,
+                "invalid_density": s.invalid_density, "outside_support": s.outside_support,
+                "failed": s.failed,
+                "components": s.components.iter()
+                    .map(|c| json!([c.name, c.proposed, c.accepted, c.sum_alpha]))
+                    .collect::<Vec<_>>(),
+            }),
+        })
+        .collect();
+    json!({
+        "tasks": tasks,
+        "mutations": mutations,
+        "seconds": seconds,
+        "member_statistics": stats,
+        "exchange": exchange,
+    })
+}
+
+fn u(v: &Value) -> u64 {
+    v.as_u64().unwrap_or(0)
+}
+
+/// Merges the ranks' reports ([`rank_report`]) in rank order into
+/// per-member chain statistics and the exchange summary.
+pub(crate) fn merge_reports(
+    reports: &[Value],
+    members: usize,
+) -> (Vec<Option<ChainStatistics>>, Option<ExchangeSummary>) {
+    let mut stats: Vec<Option<ChainStatistics>> = vec![None; members];
+    let mut exchange: Option<ExchangeSummary> = None;
+    for r in reports {
+        for (m, s) in r["member_statistics"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .enumerate()
+        {
+            if s.is_null() || m >= members {
+                continue;
+            }
+            let components = s["components"].as_array().into_iter().flatten();
+            let cs = ChainStatistics {
+                steps: u(&s["steps"]),
+                accepted: u(&s["accepted"]),
+                evaluations: u(&s["evaluations"]),
+                invalid_density: u(&s["invalid_density"]),
+                outside_support: u(&s["outside_support"]),
+                failed: u(&s["failed"]),
+                components: components
+                    .map(|c| ComponentStatistics {
+                        name: c[0].as_str().unwrap_or_default().to_string(),
+                        proposed: u(&c[1]),
+                        accepted: u(&c[2]),
+                        sum_alpha: c[3].as_f64().unwrap_or(f64::NAN),
+                    })
+                    .collect(),
+            };
+            match stats[m].as_mut() {
+                Some(old) => old.merge(&cs),
+                None => stats[m] = Some(cs),
+            }
+        }
+        let e = &r["exchange"];
+        if e.is_object() {
+            let summary = exchange.get_or_insert_with(|| {
+                ExchangeSummary::new(e["name"].as_str().unwrap_or_default().into())
+            });
+            summary.sweeps += u(&e["sweeps"]);
+            summary.round_trips += u(&e["round_trips"]);
+            for p in e["pairs"].as_array().into_iter().flatten() {
+                let attempted = u(&p["attempted"]);
+                summary.add_pair(ExchangePair {
+                    i: u(&p["i"]) as usize,
+                    j: u(&p["j"]) as usize,
+                    attempted,
+                    accepted: u(&p["accepted"]),
+                    mean_alpha: p["mean_alpha"].as_f64().unwrap_or(f64::NAN),
+                });
+            }
+        }
+    }
+    (stats, exchange)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::FilterKind;
+
+    #[test]
+    fn task_sums_round_trip_through_a_parcel_bit_exactly() {
+        let filter = Arc::new(Filter::new(FilterKind::Box, 3, 2));
+        let mut film = Film::new(3, 2, filter.clone());
+        film.add_sample(
+            glam::Vec2::new(0.5, 0.5),
+            crate::color::Rgb::new(0.3, 0.0, 1e-40),
+        );
+        let mut running = RunningNormalization::new();
+        running.add(-1.25);
+        running.add(f64::NEG_INFINITY);
+        let sums = TaskSums {
+            members: Cow::Owned(vec![2, 3]),
+            films: Cow::Owned(vec![Some(film.clone()), None]),
+            running: Cow::Owned(vec![running.clone(), RunningNormalization::new()]),
+            mutations: Cow::Owned(vec![7, 0]),
+            ratios: Cow::Owned(vec![
+                RatioSum {
+                    weight: 0.5,
+                    sum: 0.1,
+                },
+                RatioSum::default(),
+            ]),
+            counts: Cow::Owned(TransitionCounts {
+                per_depth: vec![DepthAcceptance {
+                    proposed: 4,
+                    accepted: 1,
+                }],
+                first_nonfinite: Some(vec![0.25, f64::MIN_POSITIVE]),
+                samples: vec![0.75, 0.0, 1e-30],
+                width: 3,
+            }),
+        };
+        let back = TaskSums::from_parcel(sums.parcel(9));
+        assert_eq!(&*back.members, &[2, 3]);
+        assert_eq!(&*back.mutations, &[7, 0]);
+        let bits = |r: &RunningNormalization| {
+            let (c, a, b) = r.parts();
+            (c, a.to_bits(), b.to_bits())
+        };
+        assert_eq!(bits(&back.running[0]), bits(&running));
+        assert_eq!(bits(&back.running[1]), bits(&RunningNormalization::new()));
+        assert_eq!((back.ratios[0].weight, back.ratios[0].sum), (0.5, 0.1));
+        assert_eq!(
+            back.counts.per_depth,
+            vec![DepthAcceptance {
+                proposed: 4,
+                accepted: 1
+            }]
+        );
+        assert_eq!(
+            back.counts.first_nonfinite,
+            Some(vec![0.25, f64::MIN_POSITIVE])
+        );
+        assert_eq!(back.counts.samples, vec![0.75, 0.0, 1e-30]);
+        assert_eq!(back.counts.width, 3);
+        assert!(back.films[1].is_none());
+        assert_eq!(
+            back.films[0].as_ref().unwrap().accumulators().0,
+            film.accumulators().0
+        );
+    }
+
+    #[test]
+    fn rank_reports_merge_into_summed_counters() {
+        let mut cs = ChainStatistics::new(vec!["small".into()]);
+        cs.steps = 10;
+        cs.accepted = 4;
+        cs.components[0].proposed = 10;
+        cs.components[0].accepted = 4;
+        cs.components[0].sum_alpha = 4.5;
+        let a = rank_report(&[Some(cs.clone()), None], &None, 2, 10, 1.0);
+        let b = rank_report(&[Some(cs), None], &None, 1, 10, 1.0);
+        let (stats, exchange) = merge_reports(&[a, b], 2);
+        let s = stats[0].as_ref().unwrap();
+        assert_eq!((s.steps, s.accepted, s.components[0].proposed), (20, 8, 20));
+        assert_eq!(s.components[0].sum_alpha, 9.0);
+        assert!(stats[1].is_none() && exchange.is_none());
+    }
+}
