@@ -220,7 +220,18 @@ pub fn partial_mis(scene: &Scene, path: &[Vertex], f: &MisFactors, out: &mut Vec
     for i in 1..path.len() {
         let prev = out[i - 1];
         let q = if i >= 2 && path[i - 1].delta {
-            PartialMis { d_vcm: 0.0, ..prev }
+            // No technique connects or merges at a specular vertex; the
+            // other terms carry over with the specular lobe's densities
+            // taken as solid-angle density 1 each way, as BDPT's
+            // `after_specular` takes them.
+            let fwd = f.m(path[i - 1].convert_density(1.0, &path[i]));
+            let rev = f.m(path[i - 1].convert_density(1.0, &path[i - 2]));
+            let k = if fwd > 0.0 { rev / fwd } else { 0.0 };
+            PartialMis {
+                d_vcm: 0.0,
+                d_vc: prev.d_vc * k,
+                d_vm: prev.d_vm * k,
+            }
         } else {
             let inv = if path[i].pdf_fwd > 0.0 {
                 1.0 / f.m(path[i].pdf_fwd)
