@@ -80,6 +80,19 @@ fn technique_pdf(x: &[Vertex], y: &[Vertex], s: usize) -> f64 {
     pl * pc
 }
 
+/// `mis_weight` of technique `(s, n − s)` of the path `x` (camera first)
+/// whose light subpath is `y`, with the sampled endpoint a one-vertex
+/// subpath has (`y[0]` for `s = 1`, `x[0]` for `t = 1`).
+fn weight_of(scene: &Scene, x: &[Vertex], y: &[Vertex], s: usize, heuristic: MisHeuristic) -> f64 {
+    let t = x.len() - s;
+    let sampled = match (s, t) {
+        (1, _) => Some(&y[0]),
+        (_, 1) => Some(&x[0]),
+        _ => None,
+    };
+    mis_weight(scene, &x[..t], &y[..s], s, t, sampled, heuristic) as f64
+}
+
 #[test]
 fn mis_weights_match_the_definition_and_sum_to_one() {
     let by_len = check_mis_weights(&scene("cornell-glossy-glass.xml"));
@@ -171,13 +184,7 @@ fn mis_weights_through_specular_vertices_follow_veachs_definition() {
                 let mut sum = 0.0f64;
                 let mut control_off = false;
                 for s in (0..n).filter(|&s| valid(s)) {
-                    let t = n - s;
-                    let sampled = match (s, t) {
-                        (1, _) => Some(&y[0]),
-                        (_, 1) => Some(&x[0]),
-                        _ => None,
-                    };
-                    let w = mis_weight(&scene, &x[..t], &y[..s], s, t, sampled, heuristic) as f64;
+                    let w = weight_of(&scene, x, &y, s, heuristic);
                     let expected = pv[s] / tv;
                     errs.push((w - expected).abs() / expected.max(1e-3));
                     control_off |= (w - pp[s] / tp).abs() > 0.01 * (pp[s] / tp).max(1e-3);
@@ -328,15 +335,9 @@ fn check_mis_weights(scene: &Scene) -> [usize; 9] {
                 let p: Vec<f64> = (0..n).map(|s| technique_pdf(x, &y, s).powi(beta)).collect();
                 let total: f64 = p.iter().sum();
                 let mut sum = 0.0f64;
-                for s in 0..n {
-                    let t = n - s;
-                    let sampled = match (s, t) {
-                        (1, _) => Some(&y[0]),
-                        (_, 1) => Some(&x[0]),
-                        _ => None,
-                    };
-                    let w = mis_weight(scene, &x[..t], &y[..s], s, t, sampled, heuristic) as f64;
-                    let expected = p[s] / total;
+                for (s, &ps) in p.iter().enumerate() {
+                    let w = weight_of(scene, x, &y, s, heuristic);
+                    let expected = ps / total;
                     let err = (w - expected).abs() / expected.max(1e-3);
                     errs.push(err);
                     sum += w;
