@@ -20,6 +20,16 @@
 //! mismatched input); the run must then stop with one error on rank 0.
 //! `--die-rank R` makes rank `R` exit after the multi-chain part; `mpirun`
 //! must then stop the whole job with a non-zero status instead of hanging.
+//!
+//! Checkpoints: (3) each schedule's run is interrupted after 230 sweeps
+//! with a checkpoint written every 50 (the last 30 sweeps are lost, as in
+//! a kill), resumed from the checkpoint in a fresh ensemble and finished;
+//! the sweeps after the resume, the final levels and the pair counts must
+//! equal the single-process run's. `--checkpoint FILE` (with `--sweeps N`,
+//! `--every E`) runs only that: each schedule resumes from `FILE.<schedule>`
+//! if it exists, checkpoints every `E` sweeps and at the end compares with
+//! one process, so a run killed at any moment (`timeout -s TERM`) and
+//! started again, on any number of ranks, must still agree.
 
 use mcmc_core::distributed::mpi::topology::Communicator;
 use mcmc_core::distributed::{
@@ -31,6 +41,7 @@ use mcmc_core::replica::{
     betas_from_temperatures, geometric_temperatures, kernel_scales,
 };
 use mcmc_core::runner::run_chains;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 const SEED: u64 = 20;
@@ -110,12 +121,25 @@ fn single_process(schedule: DistributedSchedule, sweeps: usize, seed: u64) -> Re
     }
 }
 
+/// Checkpointing of a distributed run: resume from `path` when it exists,
+/// write it after every `every` sweeps; `stop_after`: leave after that
+/// many sweeps, as if killed (the sweeps after the last checkpoint are lost).
+struct Checkpointing {
+    path: PathBuf,
+    every: usize,
+    stop_after: Option<usize>,
+}
+
+/// A distributed run: on rank 0 the sweep it started from (0, or where a
+/// checkpoint left off) and its record from there; `None` on the other
+/// ranks and when stopped early.
 fn distributed<C: Communicator>(
     world: &C,
     schedule: DistributedSchedule,
     sweeps: usize,
     t_max: f64,
-) -> std::result::Result<Option<Record>, DistributedError> {
+    checkpointing: Option<&Checkpointing>,
+) -> std::result::Result<Option<(usize, Record)>, DistributedError> {
     let (family, algorithms) = ensemble(t_max);
     let mut re = DistributedReplicaExchange::new(
         world,
@@ -126,8 +150,22 @@ fn distributed<C: Communicator>(
         SEED,
         temperature_fingerprint(t_max),
     )?;
+    let mut first = 0;
+    if let Some(c) = checkpointing
+        && re.resume(&c.path)?
+    {
+        first = re.sweeps() as usize;
+    }
     let mut draws = Vec::new();
-    for _ in 0..sweeps {
+    for sweep in first..sweeps {
+        if let Some(c) = checkpointing {
+            if c.stop_after == Some(sweep) {
+                return Ok(None);
+            }
+            if sweep > first && sweep % c.every == 0 {
+                re.checkpoint(&c.path)?;
+            }
+        }
         re.sweep();
         if let Some(s) = re.current(0) {
             draws.extend(bits(&s.state));
@@ -148,12 +186,42 @@ fn distributed<C: Communicator>(
         .iter()
         .map(|p| (p.attempted, p.accepted, p.sum_alpha.to_bits()))
         .collect();
-    Ok(Some(Record {
-        draws,
-        finals,
-        pairs,
-    }))
+    Ok(Some((
+        first,
+        Record {
+            draws,
+            finals,
+            pairs,
+        },
+    )))
 }
+
+/// The mismatches of a resumed run (from sweep `first`) against one process.
+fn compare_resumed(
+    schedule: DistributedSchedule,
+    sweeps: usize,
+    first: usize,
+    dist: &Record,
+) -> Vec<String> {
+    let single = single_process(schedule, sweeps, SEED);
+    let mut out = Vec::new();
+    for (what, ok) in [
+        (
+            "level-0 draws after the resume",
+            dist.draws[..] == single.draws[2 * first..],
+        ),
+        ("final levels", dist.finals == single.finals),
+        ("pair statistics", dist.pairs == single.pairs),
+    ] {
+        if !ok {
+            out.push(format!("{schedule:?} resumed at sweep {first}: {what}"));
+        }
+    }
+    out
+}
+
+/// Sweeps of the in-process interrupt-and-resume check.
+const SWEEPS_RESUMED: usize = 400;
 
 /// The temperatures' bits, hashed: the input every rank must share that the
 /// densities at the start cannot show (they are all 0 at a mode's centre).
@@ -187,6 +255,12 @@ fn main() -> ExitCode {
             .map(|v| v.parse::<usize>().expect("a number after the flag"))
     };
     let sweeps = flag("--sweeps").unwrap_or(400);
+    let every = flag("--every").unwrap_or(50).max(1);
+    let checkpoint_file = args
+        .iter()
+        .position(|a| a == "--checkpoint")
+        .and_then(|i| args.get(i + 1))
+        .map(PathBuf::from);
     let corrupt = flag("--corrupt-rank");
     let die = flag("--die-rank");
     let Some(universe) = mpi::initialize() else {
@@ -196,6 +270,10 @@ fn main() -> ExitCode {
     let world = universe.world();
     let (rank, size) = (world.rank() as usize, world.size() as usize);
     let mut mismatches = Vec::new();
+
+    if let Some(file) = checkpoint_file {
+        return resume_only(&world, &file, sweeps, every);
+    }
 
     // (1) Independent chains.
     const CHAINS: usize = 10;
@@ -224,14 +302,14 @@ fn main() -> ExitCode {
     // (2) Replica exchange, both schedules.
     for schedule in [DistributedSchedule::EvenOdd, DistributedSchedule::Neighbour] {
         let t_max = if corrupt == Some(rank) { 60.0 } else { 50.0 };
-        match distributed(&world, schedule, sweeps, t_max) {
+        match distributed(&world, schedule, sweeps, t_max, None) {
             Err(e) => {
                 if rank == 0 {
                     eprintln!("mpi_determinism: error: {e}");
                 }
                 return ExitCode::from(2);
             }
-            Ok(Some(dist)) => {
+            Ok(Some((_, dist))) => {
                 let single = single_process(schedule, sweeps, SEED);
                 // Control: another seed must give other draws, or the
                 // comparison could not tell anything apart.
@@ -263,12 +341,65 @@ fn main() -> ExitCode {
             Ok(None) => {}
         }
     }
+
+    // (3) Interrupted after 230 sweeps (checkpoints every 50), resumed.
+    for schedule in [DistributedSchedule::EvenOdd, DistributedSchedule::Neighbour] {
+        // Only rank 0 reads and writes the file.
+        let path = std::env::temp_dir().join(format!(
+            "mpi_determinism_{schedule:?}_{}.ckpt",
+            std::process::id()
+        ));
+        let _ = std::fs::remove_file(&path);
+        let mut c = Checkpointing {
+            path,
+            every: 50,
+            stop_after: Some(230),
+        };
+        let run = |c: &Checkpointing| distributed(&world, schedule, SWEEPS_RESUMED, 50.0, Some(c));
+        let resumed = run(&c).and_then(|_| {
+            c.stop_after = None;
+            run(&c)
+        });
+        let _ = std::fs::remove_file(&c.path);
+        match resumed {
+            Err(e) => {
+                if rank == 0 {
+                    eprintln!("mpi_determinism: error: {e}");
+                }
+                return ExitCode::from(2);
+            }
+            Ok(Some((first, dist))) => {
+                if first != 200 {
+                    mismatches.push(format!("{schedule:?}: resumed at sweep {first}, not 200"));
+                }
+                mismatches.extend(compare_resumed(schedule, SWEEPS_RESUMED, first, &dist));
+            }
+            Ok(None) => {}
+        }
+    }
+    report(
+        rank,
+        size,
+        sweeps,
+        mismatches,
+        "multi-chain and replica exchange (even-odd, neighbour",
+    )
+}
+
+/// Prints the outcome on rank 0; the exit status.
+fn report(
+    rank: usize,
+    size: usize,
+    sweeps: usize,
+    mismatches: Vec<String>,
+    what: &str,
+) -> ExitCode {
     if rank != 0 {
         return ExitCode::SUCCESS;
     }
     if mismatches.is_empty() {
         println!(
-            "mpi_determinism: {size} rank(s) x {} thread(s): multi-chain and replica exchange (even-odd, neighbour; {LEVELS} levels, {sweeps} sweeps) bit-identical to one process",
+            "mpi_determinism: {size} rank(s) x {} thread(s): {what}; {LEVELS} levels, {sweeps} sweeps) bit-identical to one process",
             rayon::current_num_threads()
         );
         ExitCode::SUCCESS
@@ -279,4 +410,40 @@ fn main() -> ExitCode {
         );
         ExitCode::from(1)
     }
+}
+
+/// `--checkpoint FILE`: both schedules, each resumed from `FILE.<schedule>`
+/// when it exists, checkpointed every `every` sweeps, compared at the end.
+fn resume_only<C: Communicator>(world: &C, file: &Path, sweeps: usize, every: usize) -> ExitCode {
+    let rank = world.rank() as usize;
+    let mut mismatches = Vec::new();
+    for schedule in [DistributedSchedule::EvenOdd, DistributedSchedule::Neighbour] {
+        let mut path = file.as_os_str().to_owned();
+        path.push(format!(".{schedule:?}"));
+        let c = Checkpointing {
+            path: path.into(),
+            every,
+            stop_after: None,
+        };
+        match distributed(world, schedule, sweeps, 50.0, Some(&c)) {
+            Err(e) => {
+                if rank == 0 {
+                    eprintln!("mpi_determinism: error: {e}");
+                }
+                return ExitCode::from(2);
+            }
+            Ok(Some((first, dist))) => {
+                eprintln!("mpi_determinism: {schedule:?} started at sweep {first}");
+                mismatches.extend(compare_resumed(schedule, sweeps, first, &dist));
+            }
+            Ok(None) => {}
+        }
+    }
+    report(
+        rank,
+        world.size() as usize,
+        sweeps,
+        mismatches,
+        "checkpointed replica exchange (even-odd, neighbour",
+    )
 }

@@ -44,6 +44,11 @@ pub trait Cluster: Send + Sync {
     fn any(&self, flag: bool) -> bool;
     /// Payload bytes this rank has sent so far.
     fn bytes_sent(&self) -> u64;
+    /// Rank 0's `values` on every rank (the others' are ignored).
+    fn broadcast_u64s(&self, values: Vec<u64>) -> Vec<u64>;
+    /// Every rank's `values` (bit-exactly), concatenated in rank order, on
+    /// every rank.
+    fn all_gather_f64s(&self, values: Vec<f64>) -> Vec<f64>;
 }
 
 static CLUSTER: OnceLock<&'static dyn Cluster> = OnceLock::new();
@@ -65,6 +70,47 @@ pub fn current() -> Option<&'static dyn Cluster> {
 /// without a cluster.
 pub fn owns(cluster: Option<&dyn Cluster>, unit: usize) -> bool {
     cluster.is_none_or(|c| unit % c.size() == c.rank())
+}
+
+/// A unit's reduced counters: its parcel's `numbers` and `counts`.
+pub type Counters = (Vec<f64>, Vec<u64>);
+
+/// Adds the work units' films into `film` in unit order and returns their
+/// counters in the same order: this process's units, or on a cluster
+/// every rank's, on rank 0 (the other ranks add nothing and get an empty
+/// list). Collective on a cluster: every rank calls it.
+pub fn reduce_units<'a>(
+    film: &mut Film,
+    units: impl Iterator<Item = (usize, &'a Film, Counters)>,
+    filter: &Arc<Filter>,
+) -> Vec<Counters> {
+    let Some(cluster) = current() else {
+        return units
+            .map(|(_, f, counters)| {
+                film.add_film(f);
+                counters
+            })
+            .collect();
+    };
+    let parcels = units
+        .map(|(unit, f, (numbers, counts))| Parcel {
+            unit,
+            films: vec![Some(f.clone())],
+            numbers,
+            counts,
+        })
+        .collect();
+    let Some(all) = cluster.gather(parcels, filter) else {
+        return Vec::new();
+    };
+    all.into_iter()
+        .map(|p| {
+            if let Some(f) = &p.films[0] {
+                film.add_film(f);
+            }
+            (p.numbers, p.counts)
+        })
+        .collect()
 }
 
 /// Whether this process writes the outputs: rank 0, or the only process.
@@ -114,6 +160,12 @@ mod tests {
         }
         fn bytes_sent(&self) -> u64 {
             0
+        }
+        fn broadcast_u64s(&self, values: Vec<u64>) -> Vec<u64> {
+            values
+        }
+        fn all_gather_f64s(&self, values: Vec<f64>) -> Vec<f64> {
+            values
         }
     }
 

@@ -8,7 +8,7 @@ use crate::film::{Film, Filter};
 use mcmc_core::distributed::mpi::environment::{Threading, Universe, initialize_with_threading};
 use mcmc_core::distributed::mpi::topology::{Communicator, SimpleCommunicator};
 use mcmc_core::distributed::{
-    DistributedError, FNV_OFFSET, Traffic, Wire, agree, all_gather_u64, decode, encode, fnv1a,
+    DistributedError, Traffic, Wire, agree, all_gather_u64, broadcast_bytes, decode, encode,
     gather_bytes,
 };
 use serde_json::Value;
@@ -85,7 +85,7 @@ pub fn start() -> Result<Session, String> {
 /// `own` is false on a rank that only learns of another rank's failure.
 pub fn agree_on_inputs<T>(local: Result<(T, Vec<String>), String>) -> Result<T, (String, bool)> {
     let cluster = MPI.get().expect("start() comes first");
-    let own_failure = local.is_err();
+    let own_failure = local.as_ref().err().cloned();
     let local = local
         .map(|(v, parts)| (v, fingerprint(&parts)))
         .map_err(|e| DistributedError::Rank {
@@ -94,20 +94,15 @@ pub fn agree_on_inputs<T>(local: Result<(T, Vec<String>), String>) -> Result<T, 
         });
     cluster
         .with(|comm, traffic| agree(comm, traffic, "scene, integrator settings or budget", local))
-        .map_err(|e| match (own_failure, e) {
-            // This rank's own set-up error: its message as it was.
-            (true, DistributedError::Rank { reason, .. }) => (reason, true),
-            (_, e) => (e.to_string(), false),
+        .map_err(|e| match own_failure {
+            // This rank's own set-up error: its message as it was (the
+            // agreement wraps it in "rank R failed: …").
+            Some(reason) => (reason, true),
+            None => (e.to_string(), false),
         })
 }
 
-/// FNV-1a over the described inputs (each part with its length, so that
-/// parts cannot run into each other).
-pub fn fingerprint(parts: &[String]) -> u64 {
-    parts.iter().fold(FNV_OFFSET, |h, p| {
-        fnv1a(p.as_bytes(), fnv1a(&(p.len() as u64).to_le_bytes(), h))
-    })
-}
+pub use crate::checkpoint::fingerprint;
 
 /// A film on the wire: `[width, height, x0, y0, w, h]`, then the sample
 /// accumulators (none for a splat-only film) and the splats, as f32 bits.
@@ -315,6 +310,25 @@ impl Cluster for MpiCluster {
     }
     fn bytes_sent(&self) -> u64 {
         self.with(|_, traffic| traffic.bytes)
+    }
+    fn broadcast_u64s(&self, values: Vec<u64>) -> Vec<u64> {
+        let bytes = self.with(|comm, traffic| broadcast_bytes(comm, traffic, &encode(&values)));
+        decode(&bytes).unwrap_or_else(|e| panic!("rank 0's numbers: {e}"))
+    }
+    fn all_gather_f64s(&self, values: Vec<f64>) -> Vec<f64> {
+        self.with(|comm, traffic| {
+            let all = gather_bytes(comm, traffic, &encode(&values)).map(|blocks| {
+                let mut all = Vec::new();
+                for b in blocks {
+                    all.extend(
+                        decode::<Vec<f64>>(&b).unwrap_or_else(|e| panic!("a rank's numbers: {e}")),
+                    );
+                }
+                encode(&all)
+            });
+            let bytes = broadcast_bytes(comm, traffic, &all.unwrap_or_default());
+            decode(&bytes).unwrap_or_else(|e| panic!("rank 0's numbers: {e}"))
+        })
     }
 }
 

@@ -35,6 +35,7 @@
 
 pub mod bsdf;
 pub mod camera;
+pub mod checkpoint;
 pub mod cli;
 pub mod cluster;
 pub mod color;

@@ -16,8 +16,13 @@
 //! films and adds them in unit order, as one process does, so the image is
 //! bit-identical for any number of ranks. A pass stopped on any rank is
 //! discarded on all of them.
+//!
+//! Checkpoints ([`crate::checkpoint`]): with one set, rank 0 saves the
+//! film and the pass count after every pass, and a run that finds one
+//! continues after its last pass, ending with the uninterrupted run's bits.
 
-use crate::cluster::{Parcel, owns};
+use crate::checkpoint::{Checkpoint, Progress};
+use crate::cluster::{Cluster, owns};
 use crate::film::{Film, Filter};
 use crate::integrators::{Integrator, Rendered, RunSettings, SampleDomain, SampleStats};
 use crate::observer::Observer;
@@ -68,6 +73,9 @@ pub struct RenderResult {
     /// This rank's share of a distributed run: work units rendered and
     /// seconds spent rendering them (zeros without a cluster).
     pub rank_work: (u64, f64),
+    /// With a checkpoint: samples per pixel it resumed from, and the first
+    /// error writing it (the run goes on without).
+    pub checkpoint: Option<(u64, Option<String>)>,
 }
 
 impl RenderResult {
@@ -114,42 +122,58 @@ pub(crate) fn image_tiles(width: u32, height: u32) -> Vec<(u32, u32, u32, u32)> 
 }
 
 /// Adds a pass's unit films into `film` in unit order and returns their
-/// counters: this process's units, or on a cluster every rank's on rank 0
-/// (the other ranks keep nothing).
+/// counters ([`crate::cluster::reduce_units`]: every rank's on rank 0).
 fn reduce_pass<'a>(
     film: &mut Film,
     units: impl Iterator<Item = (usize, &'a Film, SampleStats)>,
     filter: &Arc<Filter>,
 ) -> Vec<SampleStats> {
-    let Some(cluster) = crate::cluster::current() else {
-        return units
-            .map(|(_, f, st)| {
-                film.add_film(f);
-                st
-            })
-            .collect();
-    };
-    let parcels = units
-        .map(|(unit, f, st)| Parcel {
-            unit,
-            films: vec![Some(f.clone())],
-            numbers: Vec::new(),
-            counts: vec![st.nonfinite],
-        })
-        .collect();
-    let Some(all) = cluster.gather(parcels, filter) else {
-        return Vec::new();
-    };
-    all.iter()
-        .map(|p| {
-            if let Some(f) = &p.films[0] {
-                film.add_film(f);
-            }
-            SampleStats {
-                nonfinite: p.counts[0],
-            }
+    let units = units.map(|(i, f, st)| (i, f, (Vec::new(), vec![st.nonfinite])));
+    crate::cluster::reduce_units(film, units, filter)
+        .into_iter()
+        .map(|(_, counts)| SampleStats {
+            nonfinite: counts[0],
         })
         .collect()
+}
+
+/// A light-path pass's unit films (this rank's chunks) with their counters.
+fn light_units<'a>(
+    films: &'a [Film],
+    stats: Vec<SampleStats>,
+    cluster: Option<&dyn Cluster>,
+) -> Vec<(usize, &'a Film, SampleStats)> {
+    films
+        .iter()
+        .zip(stats)
+        .enumerate()
+        .filter(|(i, _)| owns(cluster, *i))
+        .map(|(i, (f, st))| (i, f, st))
+        .collect()
+}
+
+/// Where a checkpointed run starts: `(pass, spp done, non-finite count,
+/// film)` from rank 0's checkpoint, every rank told the counts (the film
+/// stays on rank 0, the only one that adds into it).
+fn resume_point(
+    checkpoint: &Checkpoint,
+    cluster: Option<&dyn Cluster>,
+    filter: &Arc<Filter>,
+) -> Option<(u64, u64, u64, Option<Film>)> {
+    let local = checkpoint.resume.as_ref().map(|p| {
+        let film = p
+            .film(filter.clone())
+            .expect("the command line checked the checkpoint against the scene");
+        (p.pass, p.spp_done, p.nonfinite, film)
+    });
+    let Some(c) = cluster else {
+        return local.map(|(a, b, n, f)| (a, b, n, Some(f)));
+    };
+    let counts = local.as_ref().map_or(vec![], |&(a, b, n, _)| vec![a, b, n]);
+    match c.broadcast_u64s(counts)[..] {
+        [pass, spp_done, nonfinite] => Some((pass, spp_done, nonfinite, local.map(|l| l.3))),
+        _ => None,
+    }
 }
 
 /// Renders `scene` with `integrator`. `stop` aborts (the pass in flight is discarded).
@@ -160,9 +184,23 @@ pub fn render(
     stop: &AtomicBool,
     observer: &dyn Observer,
 ) -> RenderResult {
+    render_checkpointed(scene, integrator, settings, None, stop, observer)
+}
+
+/// [`render`], saving its progress to `checkpoint` after every pass and
+/// continuing from the progress the checkpoint was loaded with.
+pub fn render_checkpointed(
+    scene: &Scene,
+    integrator: &dyn Integrator,
+    settings: &RenderSettings,
+    checkpoint: Option<&Checkpoint>,
+    stop: &AtomicBool,
+    observer: &dyn Observer,
+) -> RenderResult {
     let (width, height) = (scene.film.width, scene.film.height);
     let filter = Arc::new(Filter::new(scene.film.filter, width, height));
     let mut film = Film::new(width, height, filter.clone());
+    let cluster = crate::cluster::current();
     let start = Instant::now();
     let deadline = settings.time_budget.map(|b| start + b);
     let target = settings.spp.map(u64::from);
@@ -177,8 +215,18 @@ pub fn render(
     let mut stats = SampleStats::default();
     let mut interrupted = false;
     let mut pass = 0u64;
+    let mut checkpoint_state = None;
+    if let Some(c) = checkpoint {
+        let mut resumed_spp = 0;
+        if let Some((p, s, n, f)) = resume_point(c, cluster, &filter) {
+            (pass, spp_done, stats.nonfinite, resumed_spp) = (p, s, n, s);
+            if let Some(f) = f {
+                film = f;
+            }
+        }
+        checkpoint_state = Some((resumed_spp, None));
+    }
     let out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
-    let cluster = crate::cluster::current();
     let mine = |unit: usize| owns(cluster, unit);
 
     let tiles = image_tiles(width, height);
@@ -235,9 +283,12 @@ pub fn render(
             aborted.store(any, Ordering::Relaxed);
             any
         };
-        let pass_stats: Vec<SampleStats> = match domain {
+        // This rank's unit films of the pass (tiles are made per pass, the
+        // light-path films are reused).
+        let tile_films: Vec<(usize, Film, SampleStats)>;
+        let pass_units: Vec<(usize, &Film, SampleStats)> = match domain {
             SampleDomain::Pixels => {
-                let results: Vec<(usize, Film, SampleStats)> = tiles
+                tile_films = tiles
                     .par_iter()
                     .enumerate()
                     .filter(|&(i, _)| mine(i))
@@ -261,15 +312,7 @@ pub fn render(
                         (i, tile, st)
                     })
                     .collect();
-                if pass_aborted(&aborted) {
-                    Vec::new()
-                } else {
-                    reduce_pass(
-                        &mut film,
-                        results.iter().map(|(i, t, st)| (*i, t, *st)),
-                        &filter,
-                    )
-                }
+                tile_films.iter().map(|(i, t, st)| (*i, t, *st)).collect()
             }
             SampleDomain::PixelsWithSplats => {
                 // Splats land anywhere, so each chunk renders the rows
@@ -298,18 +341,7 @@ pub fn render(
                         st
                     })
                     .collect();
-                if pass_aborted(&aborted) {
-                    Vec::new()
-                } else {
-                    let units = light_films.iter().zip(results).enumerate();
-                    reduce_pass(
-                        &mut film,
-                        units
-                            .filter(|(i, _)| mine(*i))
-                            .map(|(i, (f, st))| (i, f, st)),
-                        &filter,
-                    )
-                }
+                light_units(&light_films, results, cluster)
             }
             SampleDomain::LightPaths => {
                 let paths = pixels * spp as u64;
@@ -341,24 +373,15 @@ pub fn render(
                         st
                     })
                     .collect();
-                if pass_aborted(&aborted) {
-                    Vec::new()
-                } else {
-                    let units = light_films.iter().zip(results).enumerate();
-                    reduce_pass(
-                        &mut film,
-                        units
-                            .filter(|(i, _)| mine(*i))
-                            .map(|(i, (f, st))| (i, f, st)),
-                        &filter,
-                    )
-                }
+                light_units(&light_films, results, cluster)
             }
         };
-        if aborted.load(Ordering::Relaxed) {
+        // Whole passes only: a pass stopped on any rank is discarded.
+        if pass_aborted(&aborted) {
             interrupted = true;
             break;
         }
+        let pass_stats = reduce_pass(&mut film, pass_units.into_iter(), &filter);
         rank_work.0 += my_units;
         rank_work.1 += busy.get();
         for st in &pass_stats {
@@ -366,6 +389,13 @@ pub fn render(
         }
         spp_done += spp as u64;
         pass += 1;
+        if let (Some(c), Some((_, error))) = (checkpoint, &mut checkpoint_state)
+            && crate::cluster::is_root()
+            && error.is_none()
+        {
+            let progress = Progress::of(pass, spp_done, stats.nonfinite, &film);
+            *error = crate::checkpoint::save(&c.path, c.fingerprint, &progress).err();
+        }
         let ppp = if splats { spp_done as f64 } else { 0.0 };
         observer.snapshot(&|| film.develop(ppp), spp_done * pixels);
     }
@@ -379,6 +409,7 @@ pub fn render(
         interrupted,
         stats,
         rank_work,
+        checkpoint: checkpoint_state,
     }
 }
 
@@ -398,7 +429,14 @@ pub fn run_per_pixel(
         time_budget: run.time_budget,
         seed: run.seed,
     };
-    let r = render(scene, integrator, &settings, stop, observer);
+    let r = render_checkpointed(
+        scene,
+        integrator,
+        &settings,
+        run.checkpoint.as_ref(),
+        stop,
+        observer,
+    );
     let samples_per_second = if r.seconds > 0.0 {
         r.samples as f64 / r.seconds
     } else {
@@ -411,6 +449,14 @@ pub fn run_per_pixel(
         "bvh_build_seconds": scene.geometry.build_time.as_secs_f64(),
         "triangles": scene.geometry.triangles,
     });
+    let mut statistics = statistics;
+    if let (Some(c), Some((resumed, error))) = (&run.checkpoint, &r.checkpoint) {
+        statistics["checkpoint"] = serde_json::json!({
+            "path": c.path.display().to_string(),
+            "resumed_from_spp": resumed,
+            "error": error,
+        });
+    }
     let statistics = crate::cluster::with_ranks(
         statistics,
         serde_json::json!({"units": r.rank_work.0, "busy_seconds": r.rank_work.1, "seconds": r.seconds}),

@@ -145,6 +145,25 @@ pub fn gather_bytes(
     }
 }
 
+/// Rank 0's `bytes` on every rank (collective; the other ranks pass
+/// anything, e.g. an empty slice): the length, then the bytes.
+pub fn broadcast_bytes(comm: &SimpleCommunicator, traffic: &mut Traffic, bytes: &[u8]) -> Vec<u8> {
+    let root = comm.process_at_rank(0);
+    let mut len = bytes.len() as u64;
+    root.broadcast_into(&mut len);
+    let mut buf = if comm.rank() == 0 {
+        bytes.to_vec()
+    } else {
+        vec![0u8; len as usize]
+    };
+    root.broadcast_into(&mut buf[..]);
+    traffic.collectives += 2;
+    if comm.rank() == 0 {
+        traffic.bytes += len * (comm.size() as u64 - 1);
+    }
+    buf
+}
+
 /// FNV-1a, 64 bits: a fingerprint, not a cryptographic hash.
 pub fn fnv1a(bytes: &[u8], mut h: u64) -> u64 {
     for &b in bytes {

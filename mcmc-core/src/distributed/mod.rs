@@ -31,12 +31,15 @@
 //! same [`DistributedError`] instead of waiting for each other.
 
 mod chains;
+mod checkpoint;
 mod comm;
 mod replica;
 mod wire;
 
 pub use chains::run_chains_distributed;
-pub use comm::{FNV_OFFSET, Traffic, agree, all_gather_u64, fnv1a, gather_bytes, share};
+pub use comm::{
+    FNV_OFFSET, Traffic, agree, all_gather_u64, broadcast_bytes, fnv1a, gather_bytes, share,
+};
 pub use mpi;
 pub use replica::{DistributedReplicaExchange, DistributedSchedule};
 pub use wire::{Wire, decode, encode};
@@ -70,4 +73,7 @@ pub enum DistributedError {
     /// A message could not be decoded.
     #[error("malformed message: {0}")]
     Wire(String),
+    /// A checkpoint could not be written, read or used.
+    #[error("checkpoint: {0}")]
+    Checkpoint(String),
 }

@@ -1,9 +1,12 @@
 //! Replica exchange with the levels spread over ranks.
 
 use super::DistributedError;
+use super::checkpoint::{
+    REPLICA_MAGIC, read_optional, rng_from_words, rng_words, write_atomically,
+};
 use super::comm::{
-    FNV_OFFSET, Traffic, agree, all_gather_u64, exchange_bytes, exchange_pair, fnv1a, gather_bytes,
-    receive_bytes, send_bytes, share, tag,
+    FNV_OFFSET, Traffic, agree, all_gather_u64, broadcast_bytes, exchange_bytes, exchange_pair,
+    fnv1a, gather_bytes, receive_bytes, send_bytes, share, tag,
 };
 use super::wire::{Wire, decode, encode};
 use crate::chain::{Algorithm, ChainState, Transition};
@@ -18,6 +21,7 @@ use mpi::topology::{Communicator, SimpleCommunicator};
 use rand::Rng;
 use rayon::prelude::*;
 use std::ops::Range;
+use std::path::Path;
 
 /// The exchange schedules that can be spread over ranks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -41,6 +45,20 @@ fn draws_uniform(log_alpha: f64) -> bool {
 
 /// A level's sample and the replica (travelling identity) it carries.
 type Parcel<S, P> = (Sample<S, P>, usize);
+
+/// A neighbour pair's `(attempted, (accepted, Σα))` on the wire.
+type PairCounts = (u64, (u64, f64));
+
+/// What a checkpoint holds for one level: its parcel and its stream's state.
+type LevelRecord<S, P> = (Parcel<S, P>, Vec<u64>);
+
+/// A checkpoint file: magic, set-up fingerprint, sweeps done, exchange
+/// stream position, every level's record in level order, the neighbour
+/// pairs' counts.
+type CheckpointFile<S, P> = (
+    u64,
+    (u64, (u64, (u64, (Vec<LevelRecord<S, P>>, Vec<PairCounts>)))),
+);
 
 /// Replica exchange whose levels live on several MPI ranks: rank `r` owns
 /// the contiguous block [`super::share`]`(M, K, r)` of levels, with their
@@ -69,6 +87,12 @@ pub struct DistributedReplicaExchange<S, F: ReplicaFamily<S>, A> {
     rng: ChainRng,
     drawn: u64,
     sweeps: u64,
+    seed: u64,
+    /// The set-up fingerprint the ranks agreed on (checked on resume).
+    fingerprint: u64,
+    /// On the top rank of a neighbour sweep: rank 0 sent the stream
+    /// position at the end of the last sweep.
+    position_pending: bool,
     /// Pairs whose swap this rank decided.
     stats: ReplicaStatistics,
     traffic: Traffic,
@@ -126,11 +150,11 @@ where
             }
             Ok((chains, fp))
         })();
-        let chains = agree(
+        let (chains, fingerprint) = agree(
             &comm,
             &mut traffic,
             "replica set-up (levels, seed, schedule, initial densities or input fingerprint)",
-            local,
+            local.map(|(c, fp)| ((c, fp), fp)),
         )?;
         let algorithms: Vec<A> = algorithms
             .into_iter()
@@ -155,6 +179,9 @@ where
             rng: stream_rng(seed, EXCHANGE_STREAM),
             drawn: 0,
             sweeps: 0,
+            seed,
+            fingerprint,
+            position_pending: false,
             stats: ReplicaStatistics::new(m, name),
             traffic,
         })
@@ -450,7 +477,8 @@ where
         }
         // The stream position reaches the top rank from rank 0, which
         // ended the previous sweep.
-        if self.rank == top && self.size > 1 && self.sweeps > 0 {
+        if self.rank == top && self.position_pending {
+            self.position_pending = false;
             let p: u64 = decode(&receive_bytes(&self.comm, 0, tag::POSITION))
                 .expect("stream position from rank 0");
             self.advance_to(p);
@@ -521,6 +549,9 @@ where
                 }
             }
         }
+        if self.rank == top && self.size > 1 {
+            self.position_pending = true;
+        }
         if self.rank == 0 && self.size > 1 {
             send_bytes(
                 &self.comm,
@@ -549,25 +580,186 @@ where
     /// on rank 0 (collective; `None` elsewhere). Each pair is decided, and
     /// counted, by exactly one rank.
     pub fn gather_pair_statistics(&mut self) -> Option<Vec<PairStatistics>> {
-        let m = self.levels();
-        let local: Vec<(u64, (u64, f64))> = (0..m.saturating_sub(1))
+        let local = self.local_pairs();
+        let blocks = gather_bytes(&self.comm, &mut self.traffic, &encode(&local))?;
+        let v: Vec<Vec<PairCounts>> = blocks
+            .iter()
+            .map(|b| decode(b).expect("statistics from a rank"))
+            .collect();
+        Some(pool_pairs(self.levels(), v))
+    }
+
+    /// This rank's counts of every neighbour pair (zero for the pairs other
+    /// ranks decide).
+    fn local_pairs(&self) -> Vec<PairCounts> {
+        (0..self.levels().saturating_sub(1))
             .map(|i| {
                 let p = self.stats.pair(i, i + 1);
                 (p.attempted, (p.accepted, p.sum_alpha))
             })
+            .collect()
+    }
+
+    /// Whether this rank decides (and counts) pair `(i, i+1)`: the lower
+    /// level's rank in an even–odd sweep, the upper one's in a neighbour
+    /// sweep (which runs downwards).
+    fn decides_pair(&self, i: usize) -> bool {
+        match self.schedule {
+            DistributedSchedule::EvenOdd => self.owned.contains(&i),
+            DistributedSchedule::Neighbour => self.owned.contains(&(i + 1)),
+        }
+    }
+
+    /// Writes the state of the run after the sweeps done so far to `path`
+    /// (collective; rank 0 writes, through a temporary file renamed over
+    /// `path`). Holds every level's sample, replica and random stream, the
+    /// exchange stream's position, the sweep count and the neighbour
+    /// pairs' swap counts, in level order: [`Self::resume`] can continue
+    /// it on any number of ranks. Not in it: the algorithms (their kernels
+    /// and any adaptation state: the caller re-creates them; resume is
+    /// bit-identical for kernels that do not adapt, or are frozen with
+    /// the same parameters) and the per-level chain statistics. Every rank
+    /// returns the same result.
+    pub fn checkpoint(&mut self, path: &Path) -> Result<(), DistributedError> {
+        let levels: Vec<LevelRecord<S, F::Payload>> = self
+            .owned
+            .clone()
+            .map(|l| {
+                (
+                    self.parcel(l),
+                    rng_words(&self.chains[l - self.owned.start].rng),
+                )
+            })
             .collect();
-        let blocks = gather_bytes(&self.comm, &mut self.traffic, &encode(&local))?;
-        let mut out = vec![PairStatistics::default(); m.saturating_sub(1)];
-        for b in blocks {
-            let v: Vec<(u64, (u64, f64))> = decode(&b).expect("statistics from a rank");
-            for (o, (att, (acc, sum))) in out.iter_mut().zip(v) {
-                if att > 0 {
-                    o.attempted += att;
-                    o.accepted += acc;
-                    o.sum_alpha += sum;
+        let local = encode(&(levels, self.local_pairs()));
+        let written = match gather_bytes(&self.comm, &mut self.traffic, &local) {
+            Some(blocks) => {
+                let mut all = Vec::with_capacity(self.levels());
+                let mut pairs = Vec::with_capacity(blocks.len());
+                for b in blocks {
+                    let (l, p): (Vec<LevelRecord<S, F::Payload>>, Vec<PairCounts>) =
+                        decode(&b).expect("a rank's checkpoint block");
+                    all.extend(l);
+                    pairs.push(p);
                 }
+                let pooled = pool_pairs(self.levels(), pairs)
+                    .iter()
+                    .map(|p| (p.attempted, (p.accepted, p.sum_alpha)))
+                    .collect();
+                // Rank 0 ends every sweep, so its stream position is the
+                // run's (in a neighbour sweep the others' may lag).
+                let file: CheckpointFile<S, F::Payload> = (
+                    REPLICA_MAGIC,
+                    (self.fingerprint, (self.sweeps, (self.drawn, (all, pooled)))),
+                );
+                write_atomically(path, &encode(&file))
+            }
+            None => Ok(()),
+        };
+        let failed = all_gather_u64(&self.comm, &mut self.traffic, written.is_err() as u64);
+        match written {
+            Err(e) => Err(DistributedError::Checkpoint(e)),
+            Ok(()) if failed[0] != 0 => Err(DistributedError::Checkpoint(
+                "rank 0 could not write the checkpoint (its error is printed there)".into(),
+            )),
+            Ok(()) => Ok(()),
+        }
+    }
+
+    /// Continues from the checkpoint at `path` (collective; call it right
+    /// after [`Self::new`], with the same inputs as the run that wrote it,
+    /// on any number of ranks). Returns `Ok(false)` and changes nothing
+    /// when there is no file, `Ok(true)` after restoring the run to the
+    /// sweep the checkpoint was written after: the sweeps that follow are
+    /// bit-identical to those of the run that was not interrupted.
+    /// Rank 0 reads the file and broadcasts it. A file written for other
+    /// inputs (levels, seed, schedule, initial densities, fingerprint) or
+    /// not a checkpoint is an error on every rank.
+    pub fn resume(&mut self, path: &Path) -> Result<bool, DistributedError> {
+        if self.sweeps != 0 {
+            return Err(DistributedError::Checkpoint(
+                "resume must come before the first sweep".into(),
+            ));
+        }
+        // Rank 0's file, prefixed by a status byte: 0 none, 1 unreadable, 2 read.
+        let (own_error, message) = if self.rank == 0 {
+            match read_optional(path) {
+                Ok(None) => (None, vec![0u8]),
+                Ok(Some(mut b)) => {
+                    b.insert(0, 2);
+                    (None, b)
+                }
+                Err(e) => (Some(e), vec![1u8]),
+            }
+        } else {
+            (None, Vec::new())
+        };
+        let message = broadcast_bytes(&self.comm, &mut self.traffic, &message);
+        match message.first() {
+            Some(0) => return Ok(false),
+            Some(2) => {}
+            _ => {
+                return Err(DistributedError::Checkpoint(own_error.unwrap_or_else(
+                    || "rank 0 could not read the checkpoint (its error is printed there)".into(),
+                )));
             }
         }
-        Some(out)
+        let not_ours =
+            |why: &str| DistributedError::Checkpoint(format!("{} {why}", path.display()));
+        let (magic, (fingerprint, (sweeps, (drawn, (levels, pairs))))): CheckpointFile<
+            S,
+            F::Payload,
+        > = decode(&message[1..]).map_err(|_| not_ours("is not a replica-exchange checkpoint"))?;
+        if magic != REPLICA_MAGIC {
+            return Err(not_ours("is not a replica-exchange checkpoint"));
+        }
+        if fingerprint != self.fingerprint
+            || levels.len() != self.levels()
+            || pairs.len() != self.levels().saturating_sub(1)
+        {
+            return Err(not_ours(
+                "was written by a run with other inputs (levels, seed, schedule, initial densities or input fingerprint)",
+            ));
+        }
+        for (level, ((sample, replica), words)) in levels.into_iter().enumerate() {
+            if let Some(l) = self.local(level) {
+                self.chains[l].current = sample;
+                self.chains[l].rng = rng_from_words(&words)?;
+                self.replicas[l] = replica;
+            }
+        }
+        for (i, (attempted, (accepted, sum_alpha))) in pairs.into_iter().enumerate() {
+            if self.decides_pair(i) {
+                let p = PairStatistics {
+                    attempted,
+                    accepted,
+                    sum_alpha,
+                };
+                self.stats.set_pair(i, i + 1, p);
+            }
+        }
+        self.rng = stream_rng(self.seed, EXCHANGE_STREAM);
+        self.drawn = 0;
+        self.advance_to(drawn);
+        self.sweeps = sweeps;
+        self.stats.sweeps = sweeps;
+        self.position_pending = false;
+        Ok(true)
     }
+}
+
+/// Every rank's pair counts pooled: each pair is counted by the one rank
+/// that decides it (the others send zeros).
+fn pool_pairs(levels: usize, blocks: Vec<Vec<PairCounts>>) -> Vec<PairStatistics> {
+    let mut out = vec![PairStatistics::default(); levels.saturating_sub(1)];
+    for v in blocks {
+        for (o, (att, (acc, sum))) in out.iter_mut().zip(v) {
+            if att > 0 {
+                o.attempted += att;
+                o.accepted += acc;
+                o.sum_alpha += sum;
+            }
+        }
+    }
+    out
 }

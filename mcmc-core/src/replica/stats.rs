@@ -210,6 +210,14 @@ impl ReplicaStatistics {
         }
     }
 
+    /// Sets the statistics of pair `(i, j)` (unordered), e.g. from a
+    /// checkpoint of a distributed run.
+    #[cfg(feature = "mpi")]
+    pub(crate) fn set_pair(&mut self, i: usize, j: usize, p: PairStatistics) {
+        let (a, b) = if i <= j { (i, j) } else { (j, i) };
+        self.pairs[a * self.levels + b] = p;
+    }
+
     /// Statistics of exchanges between levels `i` and `j` (unordered).
     pub fn pair(&self, i: usize, j: usize) -> PairStatistics {
         let (a, b) = if i <= j { (i, j) } else { (j, i) };

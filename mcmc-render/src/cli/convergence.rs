@@ -376,6 +376,7 @@ pub fn run(
             time_budget: Some(budget),
             seed,
             snapshot_every: Duration::from_secs_f64(step / 4.0),
+            checkpoint: None,
         };
         let r = integrator
             .render(scene, &run, stop, &rec)

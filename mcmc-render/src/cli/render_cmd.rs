@@ -13,6 +13,7 @@ use crate::scene::Scene;
 use clap::Args;
 use serde_json::{Map, Value, json};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Duration;
 
 /// The embedded default scene.
@@ -50,6 +51,10 @@ pub struct RenderArgs {
     /// Re-trace one primary-sample vector (a NaN/inf dump) and print it.
     #[arg(long, value_name = "FILE")]
     replay: Option<PathBuf>,
+    /// Save progress to FILE after every pass and, if FILE exists, continue
+    /// from it (pt, lt, bdpt; docs/distributed.md).
+    #[arg(long, value_name = "FILE")]
+    checkpoint: Option<PathBuf>,
     #[command(flatten)]
     params: ParamFlags,
 }
@@ -129,25 +134,26 @@ pub fn run(args: RenderArgs) -> Result<(), Failure> {
             args.integrator.as_deref(),
             &args.params.assignments()?,
         )?;
-        Ok((scene, integrator))
+        let checkpoint = match &args.checkpoint {
+            Some(path) => Some(open_checkpoint(
+                path,
+                &scene,
+                &args,
+                &defines,
+                integrator.as_ref(),
+            )?),
+            None => None,
+        };
+        Ok((scene, integrator, checkpoint))
     };
     #[cfg(not(feature = "mpi"))]
-    let (scene, integrator) = setup()?;
+    let (scene, integrator, checkpoint) = setup()?;
     #[cfg(feature = "mpi")]
-    let (scene, integrator) = {
-        let inputs = setup().map(|(scene, integ)| {
-            let parts = vec![
-                std::fs::read_to_string(&args.scene).unwrap_or_default(),
-                // Sorted: a hash map's order differs between processes.
-                format!(
-                    "{:?}",
-                    defines.iter().collect::<std::collections::BTreeMap<_, _>>()
-                ),
-                integ.name().to_string(),
-                Value::Object(integ.settings_json()).to_string(),
-                format!("{spp:?} {time_budget:?} {}", args.seed),
-            ];
-            ((scene, integ), parts)
+    let (scene, integrator, checkpoint) = {
+        let inputs = setup().map(|(scene, integ, checkpoint)| {
+            let mut parts = input_parts(&args, &defines, integ.as_ref());
+            parts.push(format!("{spp:?} {time_budget:?}"));
+            ((scene, integ, checkpoint), parts)
         });
         match crate::distributed::agree_on_inputs(inputs) {
             Ok(v) => v,
@@ -167,12 +173,65 @@ pub fn run(args: RenderArgs) -> Result<(), Failure> {
             spp,
             time_budget,
             seed: args.seed,
+            checkpoint,
             ..RunSettings::default()
         },
         threads,
         out: &args.out,
         quiet: args.quiet,
     })?)
+}
+
+/// What makes the image (scene file text, defines, integrator, its
+/// settings, seed), as text: what a checkpoint and the ranks of a
+/// distributed run must agree on.
+fn input_parts(
+    args: &RenderArgs,
+    defines: &std::collections::HashMap<String, String>,
+    integrator: &dyn Configured,
+) -> Vec<String> {
+    vec![
+        std::fs::read_to_string(&args.scene).unwrap_or_default(),
+        // Sorted: a hash map's order differs between processes.
+        format!(
+            "{:?}",
+            defines.iter().collect::<std::collections::BTreeMap<_, _>>()
+        ),
+        integrator.name().to_string(),
+        Value::Object(integrator.settings_json()).to_string(),
+        args.seed.to_string(),
+    ]
+}
+
+/// The checkpoint of `--checkpoint path`: for the per-pixel integrators
+/// only, tied to the scene text, defines, integrator, settings and seed;
+/// rank 0 loads the progress it holds, if any (one line when it belongs
+/// to another render).
+fn open_checkpoint(
+    path: &Path,
+    scene: &Scene,
+    args: &RenderArgs,
+    defines: &std::collections::HashMap<String, String>,
+    integrator: &dyn Configured,
+) -> Result<crate::checkpoint::Checkpoint, String> {
+    use crate::checkpoint::{Checkpoint, INTEGRATORS, fingerprint, load};
+    if !INTEGRATORS.contains(&integrator.name()) {
+        return Err(format!(
+            "--checkpoint: {} cannot be checkpointed yet (only {})",
+            integrator.name(),
+            INTEGRATORS.join(", ")
+        ));
+    }
+    let fingerprint = fingerprint(&input_parts(args, defines, integrator));
+    let resume = match crate::cluster::is_root() {
+        true => load(path, fingerprint, (scene.film.width, scene.film.height))?.map(Arc::new),
+        false => None,
+    };
+    Ok(Checkpoint {
+        path: path.to_path_buf(),
+        fingerprint,
+        resume,
+    })
 }
 
 fn render_job(job: &Job<'_>) -> Result<(), String> {
@@ -202,6 +261,13 @@ fn render_job(job: &Job<'_>) -> Result<(), String> {
     let rendered = result.map_err(|e| e.to_string())?;
     if !root {
         return Ok(());
+    }
+    if let Some(e) = rendered
+        .statistics
+        .get("checkpoint")
+        .and_then(|c| c["error"].as_str())
+    {
+        err!("warning: the checkpoint was not saved: {e}");
     }
     write_exr(job.out, w, h, &rendered.image)?;
     write_png(&png, w, h, &rendered.image)?;

@@ -345,6 +345,8 @@ fn fixed_spp(run: &RunSettings, spp: u32) -> RunSettings {
     RunSettings {
         spp: Some(spp),
         time_budget: None,
+        // The chains' run is not checkpointed; these passes are part of it.
+        checkpoint: None,
         ..run.clone()
     }
 }

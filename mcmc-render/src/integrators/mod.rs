@@ -95,6 +95,9 @@ pub struct RunSettings {
     /// Least time between two [`crate::observer::Observer::snapshot`]s of
     /// the Markov-chain driver (the per-pixel driver offers one per pass).
     pub snapshot_every: Duration,
+    /// Save progress to, and resume from, a checkpoint (the per-pixel
+    /// driver's integrators, [`crate::checkpoint::INTEGRATORS`]).
+    pub checkpoint: Option<crate::checkpoint::Checkpoint>,
 }
 
 impl RunSettings {
@@ -120,6 +123,7 @@ impl Default for RunSettings {
             time_budget: None,
             seed: 0,
             snapshot_every: Self::DEFAULT_SNAPSHOT_EVERY,
+            checkpoint: None,
         }
     }
 }

@@ -632,6 +632,23 @@ impl Tally {
         true
     }
 
+    /// The counters as a distributed run sends them.
+    fn to_counters(&self) -> crate::cluster::Counters {
+        (
+            self.energy.to_vec(),
+            vec![self.nonfinite, self.light_vertices],
+        )
+    }
+
+    /// The counters [`Self::to_counters`] sent.
+    fn from_counters((energy, counts): crate::cluster::Counters) -> Tally {
+        Tally {
+            energy: std::array::from_fn(|i| energy[i]),
+            nonfinite: counts[0],
+            light_vertices: counts[1],
+        }
+    }
+
     pub(crate) fn add(&mut self, o: &Tally) {
         for (a, b) in self.energy.iter_mut().zip(&o.energy) {
             *a += b;
@@ -917,8 +934,15 @@ impl Vcm {
         let mut tally = Tally::default();
         let mut iterations = 0u64;
         let mut interrupted = false;
+        // Distributed (`crate::cluster`): every rank traces every light
+        // subpath (the camera pass needs them all) but keeps the splats of
+        // its light units only, renders its tiles, and rank 0 adds the
+        // units' films in unit order (light units, then tiles), as here.
+        let cluster = crate::cluster::current();
+        let mut rank_units = 0u64;
         while target.is_none_or(|t| iterations < t) && self.max_depth > 0 {
-            if stop.load(Ordering::Relaxed) || out_of_time() {
+            let stopping = stop.load(Ordering::Relaxed) || out_of_time();
+            if cluster.map_or(stopping, |c| c.any(stopping)) {
                 interrupted = true;
                 break;
             }
@@ -965,7 +989,9 @@ impl Vcm {
                     unit_tally.light_vertices = store.len() as u64;
                 },
             );
-            if aborted.load(Ordering::Relaxed) {
+            // On a cluster the ranks agree after the camera pass (whose
+            // tiles then return at once).
+            if cluster.is_none() && aborted.load(Ordering::Relaxed) {
                 interrupted = true;
                 break;
             }
@@ -989,14 +1015,15 @@ impl Vcm {
 
             // Camera pass: tiles, camera subpath of pixel (x, y) paired
             // with light subpath y·width + x.
-            let results: Vec<(Film, Tally)> = tiles
+            let results: Vec<(usize, Film, Tally)> = tiles
                 .par_iter()
                 .enumerate()
+                .filter(|&(t, _)| crate::cluster::owns(cluster, t))
                 .map(|(t, &(x0, y0, x1, y1))| {
                     let mut tile = Film::for_tile(width, height, x0, y0, x1, y1, filter.clone());
                     let mut unit_tally = Tally::default();
                     if check_abort() {
-                        return (tile, unit_tally);
+                        return (t, tile, unit_tally);
                     }
                     let mut src = unit_source(run.seed, 2 * iterations + 1, t as u64);
                     BUFFERS.with_borrow_mut(|b| {
@@ -1019,20 +1046,29 @@ impl Vcm {
                         }
                     });
                     observer.progress(u64::from((x1 - x0) * (y1 - y0)));
-                    (tile, unit_tally)
+                    (t, tile, unit_tally)
                 })
                 .collect();
-            if aborted.load(Ordering::Relaxed) {
+            let local = aborted.load(Ordering::Relaxed);
+            if cluster.map_or(local, |c| c.any(local)) {
                 interrupted = true;
                 break;
             }
-            for (splats, _, _, unit_tally) in &units {
-                film.add_film(splats);
-                tally.add(unit_tally);
-            }
-            for (tile, unit_tally) in &results {
-                film.add_film(tile);
-                tally.add(unit_tally);
+            let light = units
+                .iter()
+                .enumerate()
+                .map(|(u, (f, _, _, ut))| (u, f, ut));
+            let camera = results.iter().map(|(t, f, ut)| (LIGHT_UNITS + t, f, ut));
+            let mine = light
+                .filter(|&(u, ..)| crate::cluster::owns(cluster, u))
+                .chain(camera)
+                .map(|(u, f, ut)| (u, f, ut.to_counters()));
+            rank_units += ((0..units.len())
+                .filter(|&u| crate::cluster::owns(cluster, u))
+                .count()
+                + results.len()) as u64;
+            for c in crate::cluster::reduce_units(&mut film, mine, &filter) {
+                tally.add(&Tally::from_counters(c));
             }
             iterations += 1;
             observer.snapshot(
@@ -1041,7 +1077,7 @@ impl Vcm {
             );
         }
         let seconds = start.elapsed().as_secs_f64();
-        self.report(
+        let mut rendered = self.report(
             &film,
             iterations,
             seconds,
@@ -1049,7 +1085,14 @@ impl Vcm {
             pixels,
             &tally,
             scene,
-        )
+        );
+        if let serde_json::Value::Object(m) = crate::cluster::with_ranks(
+            serde_json::Value::Object(std::mem::take(&mut rendered.statistics)),
+            serde_json::json!({"units": rank_units, "seconds": seconds}),
+        ) {
+            rendered.statistics = m;
+        }
+        rendered
     }
 
     /// The registry's result with the JSON statistics.

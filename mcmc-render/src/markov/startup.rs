@@ -13,18 +13,40 @@ use std::ops::Range;
 /// own streams and [`super::CANDIDATE_STREAM`]).
 pub(crate) const RESAMPLE_STREAM: u64 = 1 << 41;
 
+/// `f(i)` (`width` numbers each) for `i` in `0..n`, flattened in order
+/// and evaluated in parallel. On a cluster ([`crate::cluster`]) each rank
+/// evaluates a contiguous block of `i` and every rank gets them all: the
+/// start-up is split, not repeated, and every rank holds the same numbers
+/// (each depends on `i` alone) as one process.
+fn evaluate_split(n: usize, width: usize, f: impl Fn(usize) -> Vec<f64> + Sync) -> Vec<f64> {
+    let cluster = crate::cluster::current();
+    let (rank, size) = cluster.map_or((0, 1), |c| (c.rank(), c.size()));
+    let block = n * rank / size..n * (rank + 1) / size;
+    let local: Vec<f64> = block
+        .into_par_iter()
+        .flat_map_iter(|i| {
+            let v = f(i);
+            debug_assert_eq!(v.len(), width);
+            v
+        })
+        .collect();
+    match cluster {
+        Some(c) => c.all_gather_f64s(local),
+        None => local,
+    }
+}
+
 /// `ln I(x_j) − ln p₀(x_j)` of the `count` candidates of every member,
-/// evaluated in parallel and collected in order; candidate `j` belongs to
-/// member `j / count`.
+/// evaluated in parallel (on a cluster, split over the ranks) and
+/// collected in order; candidate `j` belongs to member `j / count`.
 pub(crate) fn candidate_log_weights<F: ChainFamily>(
     family: &F,
     count: usize,
     seed: u64,
 ) -> Vec<f64> {
-    (0..count * family.members())
-        .into_par_iter()
-        .map(|j| family.candidate_log_weight(j / count, &family.candidate(seed, j as u64)))
-        .collect()
+    evaluate_split(count * family.members(), 1, |j| {
+        vec![family.candidate_log_weight(j / count, &family.candidate(seed, j as u64))]
+    })
 }
 
 /// For a family whose members share one evaluation
@@ -44,21 +66,19 @@ pub(crate) fn shared_candidate_log_weights<F: ChainFamily>(
         .target(first)
         .evaluate(&family.candidate(seed, offset as u64));
     family.member_log_density(first, &probe.payload)?;
-    let per_candidate: Vec<Vec<f64>> = (0..count)
-        .into_par_iter()
-        .map(|i| {
-            let x = family.candidate(seed, (offset + i) as u64);
-            let e = family.target(first).evaluate(&x);
-            let reference = family.reference_log_density(&x);
-            group
-                .clone()
-                .map(|d| family.member_log_density(d, &e.payload).unwrap_or(f64::NAN) - reference)
-                .collect()
-        })
-        .collect();
+    let g = group.len();
+    let per_candidate = evaluate_split(count, g, |i| {
+        let x = family.candidate(seed, (offset + i) as u64);
+        let e = family.target(first).evaluate(&x);
+        let reference = family.reference_log_density(&x);
+        group
+            .clone()
+            .map(|d| family.member_log_density(d, &e.payload).unwrap_or(f64::NAN) - reference)
+            .collect()
+    });
     Some(
-        (0..group.len())
-            .map(|d| per_candidate.iter().map(|w| w[d]).collect())
+        (0..g)
+            .map(|d| per_candidate.iter().skip(d).step_by(g).copied().collect())
             .collect(),
     )
 }

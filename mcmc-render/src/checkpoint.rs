@@ -1,0 +1,225 @@
+//! Checkpoints of the per-pixel driver ([`crate::render::render`]: `pt`,
+//! `lt`, `bdpt`): after every whole pass the film's accumulators, the pass
+//! count and the samples done go to a file, so that a run stopped by a
+//! time limit, Ctrl-C or a lost process continues where it was and ends
+//! with the bits an uninterrupted run gives (the passes that follow draw
+//! from the same `(seed, pass, unit)` streams and add into the same
+//! accumulators in the same order). See `docs/distributed.md`.
+//!
+//! A checkpoint is tied to its inputs by a fingerprint of the scene file,
+//! the defines, the integrator with its settings and the seed (not the
+//! budget: a resumed run usually has another `--time`; for bit-identity it
+//! must have the same `--spp`). Only rank 0 of a distributed run writes
+//! and reads it; the other ranks learn where it left off from rank 0.
+
+use crate::film::{Film, Filter};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// The integrators whose runs can be checkpointed (those on the per-pixel
+/// driver).
+pub const INTEGRATORS: [&str; 3] = ["pt", "lt", "bdpt"];
+
+/// First bytes of a checkpoint file (format version 1).
+const MAGIC: &[u8; 8] = b"mcmcPX01";
+
+/// Where a render keeps its checkpoint, for which inputs, and the progress
+/// it resumes from.
+#[derive(Clone, Debug)]
+pub struct Checkpoint {
+    /// The checkpoint file (rewritten after every pass).
+    pub path: PathBuf,
+    /// [`fingerprint`] of the run's inputs.
+    pub fingerprint: u64,
+    /// What the file held when the run started (rank 0 only).
+    pub resume: Option<Arc<Progress>>,
+}
+
+/// A per-pixel render's progress: whole passes only.
+#[derive(Debug)]
+pub struct Progress {
+    /// Passes done.
+    pub pass: u64,
+    /// Samples per pixel done.
+    pub spp_done: u64,
+    /// Non-finite contributions dropped so far.
+    pub nonfinite: u64,
+    /// Image size.
+    pub size: (u32, u32),
+    /// The film's camera-sample accumulators (empty for splat-only films).
+    pub samples: Vec<[f32; 4]>,
+    /// Its splat accumulators.
+    pub splats: Vec<[f32; 3]>,
+}
+
+impl Progress {
+    /// The progress of a render: `film` after `pass` passes.
+    pub fn of(pass: u64, spp_done: u64, nonfinite: u64, film: &Film) -> Progress {
+        let (samples, splats) = film.accumulators();
+        Progress {
+            pass,
+            spp_done,
+            nonfinite,
+            size: (film.width, film.height),
+            samples: samples.to_vec(),
+            splats: splats.to_vec(),
+        }
+    }
+
+    /// The whole-image film these accumulators make.
+    pub fn film(&self, filter: Arc<Filter>) -> Result<Film, String> {
+        let (w, h) = self.size;
+        Film::from_accumulators(
+            [w, h, 0, 0, w, h],
+            filter,
+            self.samples.clone(),
+            self.splats.clone(),
+        )
+    }
+}
+
+/// FNV-1a over the described inputs (each part with its length, so that
+/// parts cannot run into each other).
+pub fn fingerprint(parts: &[String]) -> u64 {
+    let fnv = |bytes: &[u8], mut h: u64| {
+        for &b in bytes {
+            h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+        }
+        h
+    };
+    parts.iter().fold(0xcbf2_9ce4_8422_2325, |h, p| {
+        fnv(p.as_bytes(), fnv(&(p.len() as u64).to_le_bytes(), h))
+    })
+}
+
+/// Saves `progress` for the inputs `fingerprint` to `path` (atomically: a
+/// run killed while writing keeps the previous checkpoint).
+pub fn save(path: &Path, fingerprint: u64, progress: &Progress) -> Result<(), String> {
+    let mut out = Vec::with_capacity(64 + 16 * progress.samples.len() + 12 * progress.splats.len());
+    out.extend_from_slice(MAGIC);
+    let (w, h) = progress.size;
+    for v in [
+        fingerprint,
+        progress.pass,
+        progress.spp_done,
+        progress.nonfinite,
+        u64::from(w),
+        u64::from(h),
+        progress.samples.len() as u64,
+        progress.splats.len() as u64,
+    ] {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    for x in progress.samples.as_flattened() {
+        out.extend_from_slice(&x.to_bits().to_le_bytes());
+    }
+    for x in progress.splats.as_flattened() {
+        out.extend_from_slice(&x.to_bits().to_le_bytes());
+    }
+    crate::output::write_bytes(path, &out)
+}
+
+/// The progress saved at `path` for the inputs `fingerprint` and an image
+/// of `size`: `None` when there is no file; an error (one line) when it is
+/// not a checkpoint or belongs to another render.
+pub fn load(path: &Path, fingerprint: u64, size: (u32, u32)) -> Result<Option<Progress>, String> {
+    let bytes = match std::fs::read(path) {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(format!("cannot read checkpoint {}: {e}", path.display())),
+    };
+    let bad = |why: &str| format!("checkpoint {}: {why}", path.display());
+    let Some(body) = bytes.strip_prefix(MAGIC) else {
+        return Err(bad("not a checkpoint of mcmc-render's per-pixel driver"));
+    };
+    let word = |i: usize| {
+        body.get(8 * i..8 * i + 8)
+            .map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")))
+            .ok_or_else(|| bad("truncated"))
+    };
+    if word(0)? != fingerprint {
+        return Err(bad(
+            "written by another render (scene, defines, integrator, its settings or seed differ)",
+        ));
+    }
+    let (pass, spp_done, nonfinite) = (word(1)?, word(2)?, word(3)?);
+    let (w, h) = (word(4)?, word(5)?);
+    let (n_samples, n_splats) = (word(6)? as usize, word(7)? as usize);
+    if (w, h) != (u64::from(size.0), u64::from(size.1)) {
+        return Err(bad(&format!(
+            "holds a {w}×{h} image, the scene is {}×{}",
+            size.0, size.1
+        )));
+    }
+    let floats = &body[64.min(body.len())..];
+    if floats.len() != 4 * (4 * n_samples + 3 * n_splats) {
+        return Err(bad("truncated or padded"));
+    }
+    let f32s = |b: &[u8]| -> Vec<f32> {
+        b.chunks_exact(4)
+            .map(|c| f32::from_bits(u32::from_le_bytes(c.try_into().expect("4 bytes"))))
+            .collect()
+    };
+    let (s, p) = floats.split_at(16 * n_samples);
+    let samples = f32s(s)
+        .chunks_exact(4)
+        .map(|c| [c[0], c[1], c[2], c[3]])
+        .collect();
+    let splats = f32s(p)
+        .chunks_exact(3)
+        .map(|c| [c[0], c[1], c[2]])
+        .collect();
+    Ok(Some(Progress {
+        pass,
+        spp_done,
+        nonfinite,
+        size: (w as u32, h as u32),
+        samples,
+        splats,
+    }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::FilterKind;
+
+    #[test]
+    fn progress_round_trips_bit_exactly_and_foreign_files_are_refused() {
+        let dir = std::env::temp_dir().join(format!("mcmc-render-ckpt-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("run.ckpt");
+        let filter = Arc::new(Filter::new(FilterKind::Box, 4, 3));
+        let mut film = Film::new(4, 3, filter.clone());
+        film.add_sample(
+            glam::Vec2::new(1.5, 1.5),
+            crate::color::Rgb::new(0.1, -0.0, 3e-39),
+        );
+        assert!(load(&path, 7, (4, 3)).unwrap().is_none());
+        save(&path, 7, &Progress::of(3, 7, 2, &film)).unwrap();
+        let p = load(&path, 7, (4, 3)).unwrap().unwrap();
+        assert_eq!((p.pass, p.spp_done, p.nonfinite), (3, 7, 2));
+        let back = p.film(filter).unwrap();
+        let bits = |f: &Film| {
+            let (s, p) = f.accumulators();
+            let mut v: Vec<u32> = s.as_flattened().iter().map(|x| x.to_bits()).collect();
+            v.extend(p.as_flattened().iter().map(|x| x.to_bits()));
+            v
+        };
+        assert_eq!(bits(&back), bits(&film));
+        // Another render's file, another image size, a foreign file.
+        assert!(
+            load(&path, 8, (4, 3))
+                .unwrap_err()
+                .contains("another render")
+        );
+        assert!(load(&path, 7, (4, 4)).unwrap_err().contains("4×3"));
+        std::fs::write(&path, b"not a checkpoint").unwrap();
+        assert!(
+            load(&path, 7, (4, 3))
+                .unwrap_err()
+                .contains("not a checkpoint")
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

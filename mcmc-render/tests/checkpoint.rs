@@ -1,0 +1,125 @@
+//! Checkpoint and resume of the per-pixel driver (`pt`, `lt`, `bdpt`; the
+//! three kinds of pass: tiles, light-path chunks, both): a render stopped
+//! after a few passes and resumed from its checkpoint ends with exactly
+//! the bits of the uninterrupted render. The command line's `--checkpoint`
+//! and the distributed case (stopped on some number of ranks, resumed on
+//! another) are checked by `.ci/run`.
+//!
+//! Control: resuming from the saved film but restarting the pass count at
+//! 0 (so the later passes reuse the first passes' random streams) must not
+//! give the uninterrupted image, or the comparison could not tell.
+
+mod common;
+
+use common::{bdpt_of, lt_of, pt_of, repo_scene};
+use mcmc_render::checkpoint::{Checkpoint, load};
+use mcmc_render::color::Rgb;
+use mcmc_render::integrators::Integrator;
+use mcmc_render::observer::{NoObserver, Observer};
+use mcmc_render::render::{RenderSettings, render, render_checkpointed};
+use mcmc_render::scene::Scene;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+
+/// Samples per pixel: passes of 1, 2, 4 and 3 (light paths: capped at 4).
+const SPP: u32 = 10;
+
+/// Sets `stop` at the `after`-th snapshot (end of a pass): the next pass
+/// does not start, as with Ctrl-C or a time limit between passes.
+struct StopAfter<'a> {
+    stop: &'a AtomicBool,
+    after: u32,
+    seen: AtomicU32,
+}
+
+impl Observer for StopAfter<'_> {
+    fn snapshot(&self, _image: &dyn Fn() -> Vec<Rgb>, _samples: u64) {
+        if self.seen.fetch_add(1, Ordering::SeqCst) + 1 == self.after {
+            self.stop.store(true, Ordering::SeqCst);
+        }
+    }
+}
+
+fn bits(img: &[Rgb]) -> Vec<u32> {
+    img.iter()
+        .flat_map(|c| [c.r.to_bits(), c.g.to_bits(), c.b.to_bits()])
+        .collect()
+}
+
+/// The interrupted-and-resumed image, the uninterrupted one and the
+/// control's (resumed with the pass count reset).
+fn images(scene: &Scene, integ: &dyn Integrator, name: &str) -> [Vec<u32>; 3] {
+    let settings = RenderSettings {
+        spp: Some(SPP),
+        time_budget: None,
+        seed: 11,
+    };
+    let path = std::env::temp_dir().join(format!(
+        "mcmc-render-checkpoint-{name}-{}.ckpt",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_file(&path);
+    let size = (scene.film.width, scene.film.height);
+    let fresh = Checkpoint {
+        path: path.clone(),
+        fingerprint: 42,
+        resume: None,
+    };
+    // Stopped after two passes (1 + 2 spp).
+    let stop = AtomicBool::new(false);
+    let observer = StopAfter {
+        stop: &stop,
+        after: 2,
+        seen: AtomicU32::new(0),
+    };
+    let first = render_checkpointed(scene, integ, &settings, Some(&fresh), &stop, &observer);
+    assert!(first.interrupted, "{name}: the first run was not stopped");
+    assert_eq!(first.spp_done, 3, "{name}");
+    let progress = load(&path, 42, size).unwrap().expect("a checkpoint");
+    assert_eq!((progress.pass, progress.spp_done), (2, 3), "{name}");
+    // The control's copy (the resumed run rewrites the file as it goes).
+    let mut restarted = load(&path, 42, size).unwrap().expect("a checkpoint");
+    restarted.pass = 0;
+    let resume = |progress| Checkpoint {
+        resume: Some(Arc::new(progress)),
+        ..fresh.clone()
+    };
+    let go = AtomicBool::new(false);
+    let resumed = render_checkpointed(
+        scene,
+        integ,
+        &settings,
+        Some(&resume(progress)),
+        &go,
+        &NoObserver,
+    );
+    assert!(!resumed.interrupted, "{name}");
+    assert_eq!(resumed.spp_done, SPP as u64, "{name}");
+    assert_eq!(resumed.checkpoint, Some((3, None)), "{name}");
+    let whole = render(scene, integ, &settings, &go, &NoObserver);
+    // Control: the same film, but the later passes start over at pass 0.
+    let control = render_checkpointed(
+        scene,
+        integ,
+        &settings,
+        Some(&resume(restarted)),
+        &go,
+        &NoObserver,
+    );
+    std::fs::remove_file(&path).unwrap();
+    [resumed.image(), whole.image(), control.image()].map(|i| bits(&i))
+}
+
+#[test]
+fn a_stopped_render_resumed_from_its_checkpoint_ends_bit_identical() {
+    let scene = repo_scene("cornell-box.xml", 40);
+    for (name, integ) in [
+        ("pt", Box::new(pt_of(&scene)) as Box<dyn Integrator>),
+        ("lt", Box::new(lt_of(&scene))),
+        ("bdpt", Box::new(bdpt_of(&scene))),
+    ] {
+        let [resumed, whole, control] = images(&scene, integ.as_ref(), name);
+        assert!(resumed == whole, "{name}: resumed image differs");
+        assert!(control != whole, "{name}: control agreed");
+    }
+}
