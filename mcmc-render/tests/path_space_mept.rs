@@ -329,7 +329,7 @@ fn the_bdpt_startup_estimates_the_bootstraps_b() {
 /// the chains' does), never below `specular_samples`; without one, or
 /// with a share of 0, it stays at `specular_samples` (session 12: at a
 /// fixed 16 spp the pass was all of `mept`'s flat RMSE on caustic-sds).
-/// The run is not reported as interrupted by the pass's deadline.
+/// The pass is not reported as interrupted by its own deadline.
 #[test]
 fn the_specular_pass_takes_its_share_of_a_time_budget() {
     let scene = repo_scene_tilted("cornell-glossy-glass.xml", RES, DEPTH);
@@ -353,8 +353,14 @@ fn the_specular_pass_takes_its_share_of_a_time_budget() {
         let out = integ
             .render(&scene, &run, &AtomicBool::new(false), &NoObserver)
             .expect("mept runs");
-        assert!(!out.interrupted, "the pass's deadline counted as a stop");
-        out.statistics["specular_pass"]["samples_per_pixel"]
+        // The chains may run out of the budget on a loaded machine; the
+        // pass's own deadline is not a stop.
+        let pass = &out.statistics["specular_pass"];
+        assert_eq!(
+            pass["interrupted"], false,
+            "the pass's deadline counted as a stop"
+        );
+        pass["samples_per_pixel"]
             .as_u64()
             .expect("specular_pass statistics")
     };
