@@ -101,6 +101,12 @@ fn mept_is_mlt_with_the_manifold_perturbation_on() {
     assert_eq!(m.lens_perturbation, 0.0);
     assert_eq!(Mept::default().mlt.chain.bootstrap, 200_000);
     assert!(Mept::default().mlt.bdpt_startup);
+    // The draws' b alone (session 12): the running estimate merges the
+    // heavy-tailed independent proposals.
+    assert_eq!(
+        Mept::default().mlt.chain.normalization,
+        Normalization::Bootstrap
+    );
     assert!(!mcmc_render::integrators::mlt::Mlt::default().bdpt_startup);
     // Perturbation sizes: both ends or neither, 0 < min < max.
     let sized = registry::configure(
@@ -315,5 +321,61 @@ fn the_bdpt_startup_estimates_the_bootstraps_b() {
     assert!(
         (b_wrong - b_boot).abs() > 4.0 * sigma_wrong,
         "the control without MIS weights passed"
+    );
+}
+
+/// With a time budget the specular-chain pass runs for
+/// `specular_time_share` of it (so its noise falls with the budget, as
+/// the chains' does), never below `specular_samples`; without one, or
+/// with a share of 0, it stays at `specular_samples` (session 12: at a
+/// fixed 16 spp the pass was all of `mept`'s flat RMSE on caustic-sds).
+/// The pass is not reported as interrupted by its own deadline.
+#[test]
+fn the_specular_pass_takes_its_share_of_a_time_budget() {
+    let scene = repo_scene_tilted("cornell-glossy-glass.xml", RES, DEPTH);
+    let pass_spp = |share: &str, budget: Option<f64>| -> u64 {
+        let integ = registry::configure(
+            None,
+            Some("mept"),
+            &[
+                ("bootstrap".into(), "2000".into()),
+                ("chains".into(), "64".into()),
+                ("mutations_per_pixel".into(), "8".into()),
+                ("specular_time_share".into(), share.into()),
+            ],
+        )
+        .expect("mept");
+        let run = RunSettings {
+            seed: 7,
+            time_budget: budget.map(std::time::Duration::from_secs_f64),
+            ..RunSettings::default()
+        };
+        let out = integ
+            .render(&scene, &run, &AtomicBool::new(false), &NoObserver)
+            .expect("mept runs");
+        // The chains may run out of the budget on a loaded machine; the
+        // pass's own deadline is not a stop.
+        let pass = &out.statistics["specular_pass"];
+        assert_eq!(
+            pass["interrupted"], false,
+            "the pass's deadline counted as a stop"
+        );
+        pass["samples_per_pixel"]
+            .as_u64()
+            .expect("specular_pass statistics")
+    };
+    // 0.3 of 1 s on a 16×16 image: thousands of samples per pixel.
+    let timed = pass_spp("0.3", Some(1.0));
+    assert!(timed > 16, "the pass kept 16 spp in its 0.3 s: {timed}");
+    assert_eq!(pass_spp("0.3", None), 16, "no budget: specular_samples");
+    assert_eq!(pass_spp("0", Some(1.0)), 16, "share 0: specular_samples");
+    assert!(
+        registry::configure(
+            None,
+            Some("mept"),
+            &[("specular_time_share".into(), "1".into())]
+        )
+        .is_err(),
+        "a share of 1 leaves the chains no time"
     );
 }
