@@ -742,8 +742,9 @@ fn the_guided_shift_is_the_guided_tracer_at_the_shifted_pixel() {
 /// for a default test; `guided` without NEE is checked against PT in
 /// `tests/guided.rs`, and the shift adds to the tracer only the offset
 /// moved to the pixel (bit-identity test above). Control that must fail:
-/// the shift with `max_depth` one short (the longest paths dropped; it
-/// failed at z = −12, −8, −4.6).
+/// the shift with `max_depth` one short (the longest paths dropped), on
+/// 30 000 states: it fails at z = −8.1, −5.1, −2.5 (−12, −8, −4.6 on
+/// 60 000).
 #[test]
 fn the_guided_shift_matches_a_direct_sample_at_the_shifted_pixel() {
     let scene = cornell();
@@ -758,7 +759,7 @@ fn the_guided_shift_matches_a_direct_sample_at_the_shifted_pixel() {
     assert!(sigma.iter().all(|&s| s < 0.01), "guided: {sigma:?}");
     let mut short = shift;
     short.tracer.max_depth = DEPTH - 1;
-    // Half the states suffice for the control (z ≈ −12, −8, −4.6 at 60 000).
+    // Half the states suffice for the control (red fails at z ≈ −8).
     let (mc, sec) = tile_sums(scene, &short, 30_000, 46, &|_| 1.0);
     let (zc, _) = z_against_rr(mc, sec);
     eprintln!("  control (max_depth {}): z {zc:?}", DEPTH - 1);
