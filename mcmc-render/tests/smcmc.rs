@@ -23,8 +23,13 @@ use common::{MeanAgreement, image_mean, mc_reps, pt_of, repo_scene, repo_scene_t
 use mcmc_core::rng::{stream_rng, uniform};
 use mcmc_core::runner::with_threads;
 use mcmc_core::space::TorusPoint;
+use mcmc_render::bsdf::TransportMode;
 use mcmc_render::color::Rgb;
+use mcmc_render::guiding::{Mixture, SdTree};
+use mcmc_render::integrators::DepthParams;
 use mcmc_render::integrators::bdpt::Bdpt;
+use mcmc_render::integrators::guided::GuidedSettings;
+use mcmc_render::integrators::mcmc_pg::GuidedPss;
 use mcmc_render::integrators::registry;
 use mcmc_render::integrators::{Rendered, RunSettings};
 use mcmc_render::observer::NoObserver;
@@ -34,6 +39,7 @@ use mcmc_render::pss::PssTarget;
 use mcmc_render::sampling::Stream;
 use mcmc_render::scene::{FilterKind, Scene};
 use mcmc_render::smcmc::bdpt_shift::BdptShift;
+use mcmc_render::smcmc::guided_shift::GuidedShift;
 use mcmc_render::smcmc::mmlt_shift::MmltShift;
 use mcmc_render::smcmc::random_replay::RandomReplay;
 use mcmc_render::smcmc::rbdpt_shift::RbdptShift;
@@ -194,28 +200,46 @@ fn smcmc(scene: &Scene, sets: &[(&str, &str)], seed: u64) -> Rendered {
         .expect("renders")
 }
 
-/// PT replicates: 48 × 128 spp (measured SE of the mean 0.07–0.1% per
+/// PT replicates: 48 × 128 spp, seeds 1000–1047 (the images, for the
+/// I − R check).
+fn pt_images() -> &'static [Vec<Rgb>] {
+    static PT: OnceLock<Vec<Vec<Rgb>>> = OnceLock::new();
+    PT.get_or_init(|| {
+        let pt = pt_of(cornell());
+        (0..48)
+            .map(|s| common::render_image(cornell(), &pt, 128, 1000 + s))
+            .collect()
+    })
+}
+
+/// The PT replicates' image means (measured SE of the mean 0.07–0.1% per
 /// channel).
 fn pt_reference() -> &'static [[f64; 3]] {
     static PT: OnceLock<Vec<[f64; 3]>> = OnceLock::new();
-    PT.get_or_init(|| mc_reps(cornell(), &pt_of(cornell()), 128, 48, 1000))
+    PT.get_or_init(|| pt_images().iter().map(|i| image_mean(i)).collect())
 }
 
 /// SMCMC replicates: 20 runs of 256 iterations (256 mutations per pixel,
 /// five paths each, exchanges every other iteration); measured
 /// per-replicate spread 0.6% per channel, so SE ≈ 0.13% and, with PT's,
 /// σ ≈ 0.15%: 5σ < 1%.
-fn smcmc_reps() -> &'static [[f64; 3]] {
-    static SM: OnceLock<Vec<[f64; 3]>> = OnceLock::new();
+fn smcmc_images() -> &'static [Vec<Rgb>] {
+    static SM: OnceLock<Vec<Vec<Rgb>>> = OnceLock::new();
     SM.get_or_init(|| {
         (0..20)
             .map(|k| {
                 let r = smcmc(cornell(), &[("mutations_per_pixel", "256")], 500 + k);
                 assert_eq!(r.statistics["nonfinite_contributions"], 0);
-                image_mean(&r.image)
+                r.image
             })
             .collect()
     })
+}
+
+/// The SMCMC replicates' image means.
+fn smcmc_reps() -> &'static [[f64; 3]] {
+    static SM: OnceLock<Vec<[f64; 3]>> = OnceLock::new();
+    SM.get_or_init(|| smcmc_images().iter().map(|i| image_mean(i)).collect())
 }
 
 #[test]
@@ -617,4 +641,424 @@ fn smcmc_with_an_mmlt_shift_agrees_with_pt_on_the_cornell_box() {
     let biased: Vec<[f64; 3]> = reps.iter().map(|m| m.map(|v| v * 1.01)).collect();
     let b = MeanAgreement::new(pt_reference(), &biased);
     assert!(!b.failures(4.0, 0.01).is_empty(), "a 1% bias passed: {b:?}");
+}
+
+/// The guided tracer of the tilted box (its depth), with or without NEE.
+fn guided_settings(nee: bool) -> GuidedSettings {
+    GuidedSettings {
+        nee,
+        depth: DepthParams {
+            max_depth: i64::from(DEPTH),
+            rr_depth: cornell().integrator.rr_depth,
+        },
+        ..GuidedSettings::default()
+    }
+}
+
+/// An SD-tree trained on the tilted box by 31 spp of guided path tracing
+/// (iterations of 1, 2, 4, 8, 16 spp; every one records), as the guided
+/// shift trains it (`smcmc::guided_shift`).
+fn guided_tree() -> &'static SdTree {
+    static TREE: OnceLock<SdTree> = OnceLock::new();
+    TREE.get_or_init(|| {
+        let run = RunSettings {
+            spp: Some(31),
+            seed: 77,
+            ..Default::default()
+        };
+        let (_, tree) = guided_settings(false)
+            .render_and_train(cornell(), &run, &AtomicBool::new(false), &NoObserver, true)
+            .expect("trains");
+        tree
+    })
+}
+
+/// Random replay over the guided tracer is that tracer at the shifted
+/// pixel: the value at pixel `q` equals, bit for bit, `mcmc-pg`'s own
+/// primary-sample sampler (`GuidedPss`) given the same numbers with the
+/// raster position moved to `q` (so the shift's Jacobian in primary sample
+/// space is 1, as for random replay). Sensitivity: the neighbouring
+/// pixel's value differs for most states, and the tree is trained (some
+/// paths take tree directions, whose values differ from the BSDF-only
+/// tracer's).
+#[test]
+fn the_guided_shift_is_the_guided_tracer_at_the_shifted_pixel() {
+    let scene = cornell();
+    let tree = guided_tree();
+    let tracer = guided_settings(true).tracer();
+    let shift = GuidedShift { tracer, tree };
+    let direct = PssTarget {
+        scene,
+        sampler: GuidedPss::frozen(tracer, tree),
+    };
+    let untrained = SdTree::new(scene.geometry.bounds().expect("bounds"), 5);
+    let plain = GuidedShift {
+        tracer,
+        tree: &untrained,
+    };
+    let (mut lit, mut neighbour_differs, mut guided_differs) = (0, 0, 0);
+    for i in 0..400u64 {
+        let u = TorusPoint::fresh(stream_rng(13, i));
+        let q = ((i * 7 % RES as u64) as u32, (i * 13 % RES as u64) as u32);
+        let shifted = shift.trace(scene, &u, q);
+        let mut v = u.materialize();
+        let (ox, oy) = (v[0] as f32, v[1] as f32);
+        v[0] = (f64::from(q.0) + f64::from(ox)) / f64::from(RES);
+        v[1] = (f64::from(q.1) + f64::from(oy)) / f64::from(RES);
+        let path = direct.trace(&TorusPoint::from_values(&v, stream_rng(14, i)));
+        let l = path.payload.splats[0].l;
+        assert_eq!(
+            [l.r.to_bits(), l.g.to_bits(), l.b.to_bits()],
+            [
+                shifted.r.to_bits(),
+                shifted.g.to_bits(),
+                shifted.b.to_bits()
+            ],
+            "sample {i} at {q:?}"
+        );
+        lit += usize::from(!l.is_black());
+        let other = shift.trace(scene, &u, ((q.0 + 1) % RES, q.1));
+        neighbour_differs += usize::from(other != shifted);
+        guided_differs += usize::from(plain.trace(scene, &u, q) != shifted);
+    }
+    // Sensitivity (measured 177, 190, 190 of 400 on the tilted box).
+    eprintln!("lit {lit}, neighbour differs {neighbour_differs}, tree changes {guided_differs}");
+    assert!(lit > 100, "only {lit} of 400 samples carry light");
+    assert!(neighbour_differs > 100, "{neighbour_differs}");
+    assert!(
+        guided_differs > 100,
+        "the tree changed only {guided_differs} values"
+    );
+}
+
+/// The guided shift's values are direct samples at the shifted pixel in
+/// expectation (spec seed003 §11.4): its tile sums over uniform states
+/// against random replay's, as `the_mmlt_shifts_match_a_direct_sample_at_the_shifted_pixel`
+/// (its derivation: independent states, SE = sd/√n, 4σ), with next-event
+/// estimation (its MIS against the mixture density): 60 000 states,
+/// measured σ 0.74–0.81% of the mean (asserted < 1%), so a bias of ≈ 4%
+/// is resolved; the 1% check is the ignored Cornell agreement test below.
+/// Without NEE (the thesis's tracer) 100 000 states gave σ ≈ 4%, too coarse
+/// for a default test; `guided` without NEE is checked against PT in
+/// `tests/guided.rs`, and the shift adds to the tracer only the offset
+/// moved to the pixel (bit-identity test above). Control that must fail:
+/// the shift with `max_depth` one short (the longest paths dropped), on
+/// 30 000 states: it fails at z = −8.1, −5.1, −2.5 (−12, −8, −4.6 on
+/// 60 000).
+#[test]
+fn the_guided_shift_matches_a_direct_sample_at_the_shifted_pixel() {
+    let scene = cornell();
+    let shift = GuidedShift {
+        tracer: guided_settings(true).tracer(),
+        tree: guided_tree(),
+    };
+    let (m, se) = tile_sums(scene, &shift, 60_000, 46, &|_| 1.0);
+    let (z, sigma) = z_against_rr(m, se);
+    eprintln!("guided (nee): mean {m:?} se {se:?}, rel sigma {sigma:?}, z {z:?}");
+    assert!(z.iter().all(|z| z.abs() < 4.0), "guided: z {z:?}");
+    assert!(sigma.iter().all(|&s| s < 0.01), "guided: {sigma:?}");
+    let mut short = shift;
+    short.tracer.max_depth = DEPTH - 1;
+    // Half the states suffice for the control (red fails at z ≈ −8).
+    let (mc, sec) = tile_sums(scene, &short, 30_000, 46, &|_| 1.0);
+    let (zc, _) = z_against_rr(mc, sec);
+    eprintln!("  control (max_depth {}): z {zc:?}", DEPTH - 1);
+    assert!(zc.iter().any(|z| z.abs() > 4.0), "control passed: z {zc:?}");
+}
+
+/// The one-sample MIS of the guided shift's directions against its
+/// definition (spec seed003 §9, Eq. 2.137): at the first vertex of camera
+/// rays through every pixel of the tilted box (diffuse walls) where the
+/// trained tree is used, every direction the mixture samples (tree or
+/// BSDF) must report the density `q p_tree + (1 − q) p_bsdf` recomputed
+/// from the tree and the BSDF separately, so the balance weights
+/// `q p_tree/p + (1 − q) p_bsdf/p` of the two techniques sum to 1 (to
+/// 1e-4), and the weight `f |cos|/p`. In expectation the weight is then
+/// `∫ f |cos| dω`, the albedo, which the BSDF's own samples give exactly
+/// for a Lambertian wall (their weight is constant): the mean over
+/// 4000 mixture samples per vertex, pooled as `Σ (w − albedo)/albedo`,
+/// must be 0 within 4 standard errors (samples independent, n ≥ 10⁵: normal
+/// quantiles). Control that must fail: the weight with the BSDF's density
+/// alone, `f |cos|/p_bsdf` (the tree's technique not in the MIS
+/// denominator), which counts the tree's directions at the BSDF's rate.
+#[test]
+fn the_guided_directions_carry_the_balance_heuristic_of_tree_and_bsdf() {
+    let scene = cornell();
+    let tree = guided_tree();
+    let q = GuidedSettings::default().tree_probability as f32;
+    let (mut vertices, mut worst) = (0usize, 0.0f64);
+    let (mut dev, mut dev_sq, mut ctl, mut ctl_sq, mut n) = (0.0, 0.0, 0.0, 0.0, 0u64);
+    let mut src = stream_rng(48, 0);
+    for y in 0..RES {
+        for x in 0..RES {
+            let p = glam::Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+            let Some(its) = scene.intersect(&scene.camera.generate_ray(p)) else {
+                continue;
+            };
+            let sp = its.sp;
+            let bsdf = scene.bsdf_at(&sp);
+            let frame = scene.shading_frame(&sp);
+            let wo = frame.to_local(-scene.camera.generate_ray(p).d);
+            let mixture = Mixture::new(tree, sp.p, &bsdf, q);
+            if bsdf.is_delta() || mixture.tree_probability() == 0.0 {
+                continue;
+            }
+            let leaf = mixture.leaf().expect("a non-delta vertex has a leaf");
+            // The albedo: a BSDF sample's weight (constant for Lambertian;
+            // checked on a second sample).
+            let albedo = |u: f32| {
+                bsdf.sample(wo, u, (u, 0.37), TransportMode::Radiance)
+                    .map(|s| f64::from(s.weight.luminance()))
+            };
+            let (Some(a), Some(a2)) = (albedo(0.3), albedo(0.8)) else {
+                continue;
+            };
+            if a.is_nan() || a <= 0.0 || (a - a2).abs() > 1e-5 * a {
+                continue;
+            }
+            vertices += 1;
+            for _ in 0..4000 {
+                let mut r = || uniform(&mut src) as f32;
+                let (ug, ul, ud) = (r(), r(), (r(), r()));
+                let Some(s) = mixture.sample(&bsdf, &frame, wo, ug, ul, ud) else {
+                    // The tree proposed a direction the BSDF does not
+                    // scatter into: weight 0.
+                    n += 1;
+                    dev -= 1.0;
+                    dev_sq += 1.0;
+                    ctl -= 1.0;
+                    ctl_sq += 1.0;
+                    continue;
+                };
+                let (f, p_bsdf) = bsdf.eval_pdf(wo, s.wi, TransportMode::Radiance);
+                let p_tree = tree.pdf(leaf, s.wi_world);
+                let p = q * p_tree + (1.0 - q) * p_bsdf;
+                let sum = (q * p_tree + (1.0 - q) * p_bsdf) / s.pdf;
+                worst = worst
+                    .max(f64::from((s.pdf - p).abs() / p))
+                    .max(f64::from((sum - 1.0).abs()));
+                let w = f64::from(s.weight.luminance());
+                let expected = f64::from((f * (s.wi.z.abs() / p)).luminance());
+                worst = worst.max((w - expected).abs() / expected.max(1e-12));
+                let d = (w - a) / a;
+                n += 1;
+                dev += d;
+                dev_sq += d * d;
+                let c = (f64::from((f * s.wi.z.abs()).luminance()) / f64::from(p_bsdf) - a) / a;
+                ctl += c;
+                ctl_sq += c * c;
+            }
+        }
+    }
+    let z = |sum: f64, sq: f64| {
+        let m = sum / n as f64;
+        let var = (sq / n as f64 - m * m).max(0.0);
+        (m, m / (var / n as f64).sqrt())
+    };
+    let ((m, zm), (mc, zc)) = (z(dev, dev_sq), z(ctl, ctl_sq));
+    eprintln!(
+        "{vertices} vertices, {n} samples: worst relative mismatch {worst:e}; mean rel. deviation {m:+.5} (z {zm:+.2}); control {mc:+.4} (z {zc:+.1})"
+    );
+    assert!(vertices > 100, "only {vertices} guided vertices");
+    assert!(
+        worst < 1e-4,
+        "density or weight off the definition: {worst}"
+    );
+    assert!(zm.abs() < 4.0, "mixture weights biased: {m} (z {zm})");
+    assert!(zc.abs() > 4.0, "control passed: {mc} (z {zc})");
+}
+
+/// SMCMC with the guided shift against PT on the tilted box (Gaussian
+/// filter), image means as `smcmc_agrees_with_pt_on_the_cornell_box` (its
+/// tolerance derivation), with the ×1.01 control. `SMCMC_RUNS`,
+/// `SMCMC_ITERATIONS` and `SMCMC_NEE` (0/1) set the budget and the tracer:
+/// `cargo test -p mcmc-render --test smcmc guided_shift_agrees -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn smcmc_with_the_guided_shift_agrees_with_pt_on_the_cornell_box() {
+    let var = |name: &str, default: u64| {
+        std::env::var(name)
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(default)
+    };
+    let (runs, iterations) = (var("SMCMC_RUNS", 48), var("SMCMC_ITERATIONS", 256));
+    let nee = if var("SMCMC_NEE", 1) == 1 {
+        "true"
+    } else {
+        "false"
+    };
+    let iterations = iterations.to_string();
+    let sets = [
+        ("mutations_per_pixel", iterations.as_str()),
+        ("shift", "guided"),
+        ("guide_nee", nee),
+    ];
+    let reps: Vec<[f64; 3]> = (0..runs)
+        .map(|k| {
+            let r = smcmc(cornell(), &sets, 50_000 + k);
+            assert_eq!(r.statistics["nonfinite_contributions"], 0);
+            image_mean(&r.image)
+        })
+        .collect();
+    let a = MeanAgreement::new(pt_reference(), &reps);
+    eprintln!(
+        "smcmc guided (nee {nee}), {runs} x {iterations}: rel {:?}\n  {a:?}",
+        a.rel()
+    );
+    assert!(a.failures(4.0, 0.01).is_empty(), "disagrees with PT: {a:?}");
+    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
+    let biased: Vec<[f64; 3]> = reps.iter().map(|m| m.map(|v| v * 1.01)).collect();
+    let b = MeanAgreement::new(pt_reference(), &biased);
+    assert!(!b.failures(4.0, 0.01).is_empty(), "a 1% bias passed: {b:?}");
+}
+
+/// Per pixel and channel, the mean over replicate images and its standard
+/// error (sd/√K).
+fn pixel_mean_se(images: &[Vec<Rgb>]) -> Vec<([f64; 3], [f64; 3])> {
+    (0..images[0].len())
+        .map(|j| {
+            let xs: Vec<[f64; 3]> = images
+                .iter()
+                .map(|i| i[j].to_array().map(f64::from))
+                .collect();
+            common::mean_se(&xs)
+        })
+        .collect()
+}
+
+/// What the I − R check measures: the mean over pixels of `Ī − R̄` per
+/// channel (the thesis's histogram mean), relative to the reference's
+/// mean, and the per-pixel z-scores `(Ī_j − R̄_j)/√(se_I² + se_R²)`.
+struct IMinusR {
+    mean: [f64; 3],
+    rel: [f64; 3],
+    z: Vec<f64>,
+    /// Median over lit pixels and channels of `√(se_I² + se_R²)/R̄_j`.
+    median_rel_sigma: f64,
+}
+
+impl IMinusR {
+    fn new(test: &[Vec<Rgb>], reference: &[Vec<Rgb>]) -> IMinusR {
+        let (t, r) = (pixel_mean_se(test), pixel_mean_se(reference));
+        let n = t.len() as f64;
+        let mut mean = [0.0; 3];
+        let mut ref_mean = [0.0; 3];
+        let (mut z, mut rel_sigma) = (Vec::new(), Vec::new());
+        for ((tm, ts), (rm, rs)) in t.iter().zip(&r) {
+            for c in 0..3 {
+                mean[c] += (tm[c] - rm[c]) / n;
+                ref_mean[c] += rm[c] / n;
+                let se = ts[c].hypot(rs[c]);
+                if se > 0.0 {
+                    z.push((tm[c] - rm[c]) / se);
+                    rel_sigma.push(se / rm[c].abs().max(1e-12));
+                }
+            }
+        }
+        rel_sigma.sort_by(f64::total_cmp);
+        IMinusR {
+            mean,
+            rel: std::array::from_fn(|c| mean[c] / ref_mean[c]),
+            z,
+            median_rel_sigma: rel_sigma.get(rel_sigma.len() / 2).copied().unwrap_or(0.0),
+        }
+    }
+
+    /// Root mean square of the z-scores.
+    fn rms(&self) -> f64 {
+        (self.z.iter().map(|z| z * z).sum::<f64>() / self.z.len() as f64).sqrt()
+    }
+
+    /// Number of |z| > 4.
+    fn outliers(&self) -> usize {
+        self.z.iter().filter(|z| z.abs() > 4.0).count()
+    }
+}
+
+/// The thesis's unbiasedness check (spec seed003 §12.2, Fig. 4.2, 4.34):
+/// the histogram of `I − R` has zero mean, on a small scene (the 16×16
+/// tilted box), with `I` the 20 SMCMC-RR runs of the agreement test and
+/// `R` its 48 PT runs (per pixel: means over the replicates). Its mean per
+/// channel is the image-mean difference: asserted within 1% of the
+/// reference's mean (the agreement test adds the 4σ bound). What the
+/// per-pixel histogram adds is *local* bias that cancels in the mean (the
+/// thesis's biased render showed edge accumulation; a tile seam would show
+/// the same way): per pixel and channel
+/// `z_j = (Ī_j − R̄_j)/√(se_I² + se_R²)`, which for unbiased estimates
+/// follows roughly Student's t with 19 degrees of freedom (the SMCMC SE has
+/// K − 1 = 19): `P(|z| > 4) ≈ 8e-4`, ≈ 0.4 of the 528 lit values expected.
+/// Asserted: at most 4 beyond 4 (a Poisson(0.4) count exceeds 4 with
+/// probability < 1e-4; neighbouring pixels share chains, so the count is
+/// over-dispersed, hence the margin). Control that must fail: the same
+/// SMCMC images with a mean-preserving local bias of the thesis's kind,
+/// the pixels of the image border raised by 4 times the median relative
+/// σ of the per-pixel difference (the interior scaled down to keep each
+/// image's channel means). Measured and reported, not asserted: the RMS
+/// of the z values (≈ 1.06 for normal errors) and the same RMS between two
+/// halves of the SMCMC runs (no bias between them), which calibrates it for
+/// SMCMC's skewed per-pixel errors.
+#[test]
+fn the_i_minus_r_histogram_has_zero_mean_and_no_local_bias() {
+    let (test, reference) = (smcmc_images(), pt_images());
+    let check = IMinusR::new(test, reference);
+    let halves = IMinusR::new(&test[..10], &test[10..]);
+    eprintln!(
+        "I - R: mean {:?} (rel {:?}); per-pixel z: rms {:.3} (SMCMC half vs half: {:.3}), {} of {} beyond 4; median rel sigma {:.4}",
+        check.mean,
+        check.rel,
+        check.rms(),
+        halves.rms(),
+        check.outliers(),
+        check.z.len(),
+        check.median_rel_sigma
+    );
+    assert!(check.rel.iter().all(|r| r.abs() < 0.01), "{:?}", check.rel);
+    assert!(check.outliers() <= 4, "{} |z| > 4", check.outliers());
+
+    // Control: border pixels raised by 4 median σ, the interior scaled so
+    // each channel's image mean is unchanged.
+    let raise = 1.0 + 4.0 * check.median_rel_sigma;
+    let border = |j: usize| {
+        let (x, y) = (j as u32 % RES, j as u32 / RES);
+        x == 0 || y == 0 || x == RES - 1 || y == RES - 1
+    };
+    let biased: Vec<Vec<Rgb>> = test
+        .iter()
+        .map(|img| {
+            let total = image_mean(img);
+            let mut edge = [0.0; 3];
+            for (_, c) in img.iter().enumerate().filter(|(j, _)| border(*j)) {
+                for (e, v) in edge.iter_mut().zip(c.to_array()) {
+                    *e += f64::from(v) / img.len() as f64;
+                }
+            }
+            let inner: [f64; 3] =
+                std::array::from_fn(|c| (total[c] - raise * edge[c]) / (total[c] - edge[c]));
+            img.iter()
+                .enumerate()
+                .map(|(j, c)| {
+                    let k = if border(j) { [raise; 3] } else { inner };
+                    Rgb::new(c.r * k[0] as f32, c.g * k[1] as f32, c.b * k[2] as f32)
+                })
+                .collect()
+        })
+        .collect();
+    let control = IMinusR::new(&biased, reference);
+    eprintln!(
+        "control (border x{raise:.3}, mean kept): rel {:?}; rms {:.3}, {} beyond 4",
+        control.rel,
+        control.rms(),
+        control.outliers()
+    );
+    assert!(
+        control.rel.iter().all(|r| r.abs() < 0.01),
+        "{:?}",
+        control.rel
+    );
+    assert!(
+        control.outliers() > 4,
+        "a local bias passed: {}",
+        control.outliers()
+    );
 }

@@ -216,7 +216,7 @@ impl PssPathSampler for GuidedPss<'_> {
 
 /// Forwards progress but no snapshots: training images are not MCMC-PG's
 /// image, so `convergence` must not record them.
-struct ProgressOnly<'a>(&'a dyn Observer);
+pub(crate) struct ProgressOnly<'a>(pub(crate) &'a dyn Observer);
 
 impl Observer for ProgressOnly<'_> {
     fn progress(&self, n: u64) {

@@ -1,5 +1,5 @@
 //! Stratified MCMC (Gruson, West and Hachisuka 2020; spec seed003 §8) with
-//! the random replay, BDPT and MMLT shifts (`shift`).
+//! the random replay, BDPT, rBDPT, MMLT and guided shifts (`shift`).
 //!
 //! - **Chains**: one per pixel `s`, over primary sample space, targeting
 //!   the tile's summed luminance `π̃_s` ([`crate::smcmc::TileTarget`]);
@@ -38,6 +38,8 @@
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
 use crate::integrators::bdpt::{Bdpt, MisHeuristic};
+use crate::integrators::guided::GuidedSettings;
+use crate::integrators::mcmc_pg::ProgressOnly;
 use crate::integrators::mmlt::MAX_DEPTH as MMLT_MAX_DEPTH;
 use crate::integrators::pt::PathTracer;
 use crate::observer::Observer;
@@ -46,6 +48,7 @@ use crate::scene::Scene;
 use crate::settings::check;
 use crate::smcmc::bdpt_shift::BdptShift;
 use crate::smcmc::global_init::{GlobalInit, Visits};
+use crate::smcmc::guided_shift::GuidedShift;
 use crate::smcmc::mmlt_shift::MmltShift;
 use crate::smcmc::random_replay::RandomReplay;
 use crate::smcmc::rbdpt_shift::RbdptShift;
@@ -84,6 +87,8 @@ crate::choice! {
         Cmmlt = "cmmlt",
         /// Random-strategy BDPT: the bdpt shift with one uniform technique per path length.
         Rbdpt = "rbdpt",
+        /// Random replay over the guided path tracer with an SD-tree trained first (SMCMC-PG).
+        Guided = "guided",
     }
 }
 
@@ -95,7 +100,7 @@ impl SmcmcShift {
             SmcmcShift::Lmmlt => Some(1),
             SmcmcShift::Qmmlt => Some(2),
             SmcmcShift::Cmmlt => Some(3),
-            SmcmcShift::Rr | SmcmcShift::Bdpt | SmcmcShift::Rbdpt => None,
+            SmcmcShift::Rr | SmcmcShift::Bdpt | SmcmcShift::Rbdpt | SmcmcShift::Guided => None,
         }
     }
 
@@ -118,7 +123,7 @@ crate::choice! {
 crate::settings! {
     /// Stratified MCMC settings (defaults from spec seed003 §13).
     pub struct Smcmc {
-        /// Shift operator: rr (random replay over pt), bdpt (shared light subpath, t ≥ 2), the MMLT shifts ummlt, lmmlt, qmmlt, cmmlt (one uniform length, one technique ∝ (s+1)^n, n = 0..3), or rbdpt (bdpt with one uniform technique per length).
+        /// Shift operator: rr (random replay over pt), bdpt (shared light subpath, t ≥ 2), the MMLT shifts ummlt, lmmlt, qmmlt, cmmlt (one uniform length, one technique ∝ (s+1)^n, n = 0..3), rbdpt (bdpt with one uniform technique per length), or guided (random replay over the guided tracer, SD-tree trained first).
         pub shift: SmcmcShift = SmcmcShift::Rr;
         /// Tile shape: plus (the five-pixel t shape) or square (3×3).
         pub tile: TileShape = TileShape::Plus;
@@ -140,6 +145,10 @@ crate::settings! {
         pub init_bootstrap: usize = 10000, check check::count;
         /// Global start-up: global mutations per pixel (all chains together).
         pub init_mutations: f64 = 4.0, check check::positive;
+        /// Guided shift: share of the budget (iterations as samples per pixel, or time) spent training the SD-tree by guided path tracing, in (0, 1).
+        pub guide_share: f64 = 0.125, check check_guide_share;
+        /// Guided shift: next-event estimation in the guided tracer (the thesis's has none).
+        pub guide_nee: bool = false;
         /// Iterations, each one mutation of every tile (auto: 100, or until the time budget is spent).
         pub mutations_per_pixel: Option<u64> = None, check check::auto_or_at_least_one;
         flatten {
@@ -153,7 +162,7 @@ crate::settings! {
 
 impl IntegratorSettings for Smcmc {
     const NAME: &'static str = "smcmc";
-    const DESCRIPTION: &'static str = "Stratified MCMC (Gruson et al. 2020): one chain per pixel on a tile, random replay, BDPT, rBDPT or MMLT shifts, tile exchange and alignment.";
+    const DESCRIPTION: &'static str = "Stratified MCMC (Gruson et al. 2020): one chain per pixel on a tile, random replay, BDPT, rBDPT, MMLT or guided shifts, tile exchange and alignment.";
 
     fn validate(&self) -> Result<(), String> {
         if self.shift.needs_finite_depth() && !(1..=MMLT_MAX_DEPTH).contains(&self.depth.limit()) {
@@ -192,6 +201,9 @@ impl IntegratorSettings for Smcmc {
             let shift = MmltShift { bdpt, exponent };
             return self.run(scene, &shift, &mutation, run, stop, observer);
         }
+        if self.shift == SmcmcShift::Guided {
+            return self.render_guided(scene, &mutation, run, stop, observer);
+        }
         let bdpt = BdptShift { bdpt };
         match self.shift {
             SmcmcShift::Rr => self.run(scene, &RandomReplay { pt }, &mutation, run, stop, observer),
@@ -200,6 +212,15 @@ impl IntegratorSettings for Smcmc {
             }
             _ => self.run(scene, &bdpt, &mutation, run, stop, observer),
         }
+    }
+}
+
+/// `share ∈ (0, 1)`.
+fn check_guide_share(v: &f64) -> Result<(), String> {
+    if *v > 0.0 && *v < 1.0 {
+        Ok(())
+    } else {
+        Err("must lie in (0, 1)".into())
     }
 }
 
@@ -535,6 +556,77 @@ impl Smcmc {
         }
     }
 
+    /// The guided shift: the SD-tree is trained by the `guided` integrator
+    /// on its doubling schedule with `guide_share` of the budget (of the
+    /// iterations, as samples per pixel; or of the time), every training
+    /// iteration recording (the last included), then frozen for the tile
+    /// chains, which get the rest of the time (all the iterations).
+    fn render_guided(
+        &self,
+        scene: &Scene,
+        mutation: &Mutation,
+        run: &RunSettings,
+        stop: &AtomicBool,
+        observer: &dyn Observer,
+    ) -> Result<Rendered, RenderError> {
+        let start = Instant::now();
+        let guiding = GuidedSettings {
+            nee: self.guide_nee,
+            depth: self.depth.clone(),
+            ..GuidedSettings::default()
+        };
+        let train_run = match self.iterations(run) {
+            Some(m) => RunSettings {
+                spp: Some(
+                    ((m as f64 * self.guide_share).round() as u64).clamp(1, u64::from(u32::MAX))
+                        as u32,
+                ),
+                time_budget: None,
+                ..run.clone()
+            },
+            None => RunSettings {
+                spp: None,
+                time_budget: run.time_budget.map(|b| b.mul_f64(self.guide_share)),
+                ..run.clone()
+            },
+        };
+        let (trained, tree) =
+            guiding.render_and_train(scene, &train_run, stop, &ProgressOnly(observer), true)?;
+        let training_seconds = start.elapsed().as_secs_f64();
+        let chains_run = RunSettings {
+            time_budget: run.time_budget.map(|b| {
+                b.saturating_sub(start.elapsed())
+                    .max(std::time::Duration::from_millis(1))
+            }),
+            ..run.clone()
+        };
+        let shift = GuidedShift {
+            tracer: guiding.tracer(),
+            tree: &tree,
+        };
+        let mut rendered = self.run(scene, &shift, mutation, &chains_run, stop, observer)?;
+        let stat = |key: &str| trained.statistics.get(key).cloned().unwrap_or(Value::Null);
+        rendered.statistics.insert(
+            "guiding".into(),
+            json!({
+                "nee": self.guide_nee,
+                "training_seconds": training_seconds,
+                "training_spp_per_iteration": stat("spp_per_iteration"),
+                "training_seconds_per_iteration": stat("seconds_per_iteration"),
+                "tree_memory_bytes": tree.size().bytes,
+                "tree": tree.size(),
+            }),
+        );
+        rendered.seconds += training_seconds;
+        rendered.interrupted |= trained.interrupted && stop.load(Ordering::Relaxed);
+        rendered.summary = format!(
+            "{}; SD-tree trained in {training_seconds:.2} s ({:.1} MB)",
+            rendered.summary,
+            tree.size().bytes as f64 / 1e6
+        );
+        Ok(rendered)
+    }
+
     fn run<S: TileShift>(
         &self,
         scene: &Scene,
@@ -592,7 +684,11 @@ impl Smcmc {
         let mut rounds = 0u64;
         let mut exchange = ExchangeCounts::default();
         let mut last_preview = Instant::now();
+        // Wall-clock seconds in tile steps, exchange rounds and snapshots
+        // (the observer's develop and whatever it does with the image).
+        let mut profile = [0.0f64; 3];
         while planned.is_none_or(|m| iterations < m) && !halt() {
+            let t0 = Instant::now();
             tiles.par_iter_mut().enumerate().for_each(|(s, tile)| {
                 if !halt() {
                     sampler.step(s, tile);
@@ -600,20 +696,27 @@ impl Smcmc {
                 }
             });
             iterations += 1;
+            let t1 = Instant::now();
+            profile[0] += (t1 - t0).as_secs_f64();
             if self.exchange && iterations.is_multiple_of(u64::from(self.exchange_every)) {
                 exchange += sampler.exchange_round(&mut tiles, rounds, &halt);
                 rounds += 1;
             }
+            let t2 = Instant::now();
+            profile[1] += (t2 - t1).as_secs_f64();
             if last_preview.elapsed() >= run.snapshot_every && !halt() {
                 last_preview = Instant::now();
                 let done = tiles.iter().map(|t| t.steps).sum();
                 observer.snapshot(&|| develop_now(&tiles).image, done);
+                profile[2] += t2.elapsed().as_secs_f64();
             }
         }
+        let develop_start = Instant::now();
         // Every tile steps once per iteration (a tile not started draws),
         // so a tile short of the plan means the run was stopped.
         let interrupted = planned.is_none_or(|m| tiles.iter().any(|t| t.steps < m));
         let developed = develop_now(&tiles);
+        let develop_seconds = develop_start.elapsed().as_secs_f64();
         let mutations: u64 = tiles.iter().map(|t| t.steps).sum();
         let seconds = start.elapsed().as_secs_f64();
 
@@ -681,6 +784,13 @@ impl Smcmc {
                 "residual": developed.alignment.residual,
             },
             "large_step_samples": large_samples,
+            "seconds_in": {
+                "start": start_seconds,
+                "steps": profile[0],
+                "exchange": profile[1],
+                "snapshots": profile[2],
+                "final_develop": develop_seconds,
+            },
             "samples_per_pixel_max_over_median": if median > 0.0 { max / median } else { f64::NAN },
             "nonfinite_contributions": cs.invalid_density,
         });

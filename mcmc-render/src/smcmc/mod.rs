@@ -2,7 +2,8 @@
 //! it (spec `seed003-smcmc.md` §8, §11): one Markov chain per pixel,
 //! confined to a tile around it ([`tile`]); shift operators that evaluate
 //! every pixel of the tile from one primary-sample state ([`TileShift`]:
-//! [`random_replay`], [`bdpt_shift`], [`rbdpt_shift`], [`mmlt_shift`]); per-tile estimates aligned by a least-squares solve
+//! [`random_replay`], [`bdpt_shift`], [`rbdpt_shift`], [`mmlt_shift`],
+//! [`guided_shift`]); per-tile estimates aligned by a least-squares solve
 //! ([`solver`]). The driver, with tile replica exchange and the
 //! statistics, is `crate::integrators::smcmc`.
 //!
@@ -43,6 +44,7 @@
 
 pub mod bdpt_shift;
 pub mod global_init;
+pub mod guided_shift;
 pub mod mmlt_shift;
 pub mod random_replay;
 pub mod rbdpt_shift;

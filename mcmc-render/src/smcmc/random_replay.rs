@@ -15,6 +15,7 @@
 
 use super::{Placement, TileShift};
 use crate::color::Rgb;
+use crate::geometry::Ray;
 use crate::integrators::pt::PathTracer;
 use crate::pss::PssSource;
 use crate::sampling::RandomSource;
@@ -37,16 +38,32 @@ impl RandomReplay {
 
     /// The raster position of `point` placed by `place`, and `f` of its path.
     fn trace_at(&self, scene: &Scene, point: &TorusPoint, place: Placement) -> (Vec2, Rgb) {
-        let mut source = PssSource::new(point, 1);
-        let (ox, oy) = source.next_2d();
-        let p = place.raster(ox, oy);
-        let ray = if scene.camera.has_lens() {
-            scene.camera.generate_ray_lens(p, source.next_2d())
-        } else {
-            scene.camera.generate_ray(p)
-        };
-        (p, self.pt.li(scene, ray, &mut source))
+        replay(scene, point, place, |ray, source| {
+            self.pt.li(scene, ray, source)
+        })
     }
+}
+
+/// Random replay of a one-stream unidirectional tracer `li`: the state's
+/// first two numbers are the sub-pixel offset, placed by `place`, then the
+/// lens sample if the camera has one, then `li` reads the rest. Returns the
+/// raster position and `f` of the path (the guided shift replays the
+/// guided tracer the same way).
+pub fn replay(
+    scene: &Scene,
+    point: &TorusPoint,
+    place: Placement,
+    li: impl FnOnce(Ray, &mut PssSource<'_>) -> Rgb,
+) -> (Vec2, Rgb) {
+    let mut source = PssSource::new(point, 1);
+    let (ox, oy) = source.next_2d();
+    let p = place.raster(ox, oy);
+    let ray = if scene.camera.has_lens() {
+        scene.camera.generate_ray_lens(p, source.next_2d())
+    } else {
+        scene.camera.generate_ray(p)
+    };
+    (p, li(ray, &mut source))
 }
 
 impl TileShift for RandomReplay {

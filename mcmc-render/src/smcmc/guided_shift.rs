@@ -1,0 +1,86 @@
+//! The guided shift (SMCMC-PG, spec seed003 §11.4): random replay over the
+//! guided path tracer ([`GuidedPathTracer`]) with an SD-tree that stays
+//! fixed while the chains run.
+//!
+//! Every pixel `q` of a tile reads the same primary-sample vector `u`, its
+//! sub-pixel offset moved to `q`, and the guided tracer maps the rest of
+//! `u` to a path: at each non-specular vertex one number picks the tree
+//! (probability `q_T`, 0.5) or the BSDF, and the direction's weight is
+//! `f |cos| / (q_T p_tree + (1 − q_T) p_bsdf)`, the one-sample balance
+//! heuristic of the two techniques (`guiding::Mixture`). As for random
+//! replay, the Jacobian of the shift in primary sample space is 1: the
+//! value at `q` is exactly what the guided tracer returns for a camera
+//! sample at that raster position driven by the same numbers
+//! (`tests/smcmc.rs` checks it bit for bit against `mcmc-pg`'s primary-sample
+//! sampler, and the tile sums against random replay's in mean).
+//!
+//! **Training.** The thesis's Alg. 10 trains the trees from the tile
+//! chains' own proposals between iterations of doubling length. Here the
+//! tree is trained first by guided path tracing (the pre-trained variant
+//! of MCMC-PG, Alg. 8: a share of the budget, `guide_share`) and then
+//! frozen, so each tile keeps one target for the whole run. Alg. 10's
+//! changing target would need the tiles restarted (or their start-up bias
+//! accepted) at every tree update, and its records follow the chains, not
+//! the guided sampler (spec §14.15).
+//!
+//! Coordinate layout: as [`super::random_replay`] (one stream; 0 and 1 the
+//! offset, the lens, then 8 numbers per scattering vertex as
+//! `integrators::guided` documents).
+
+use super::random_replay::replay;
+use super::{Placement, TileShift};
+use crate::color::Rgb;
+use crate::guiding::SdTree;
+use crate::integrators::guided::GuidedPathTracer;
+use crate::scene::Scene;
+use glam::Vec2;
+use mcmc_core::space::TorusPoint;
+
+/// Random replay over the guided path tracer with a frozen tree.
+#[derive(Clone, Copy, Debug)]
+pub struct GuidedShift<'t> {
+    /// The guided tracer replayed at every pixel.
+    pub tracer: GuidedPathTracer,
+    /// Its tree (only the sampling half is read).
+    pub tree: &'t SdTree,
+}
+
+impl GuidedShift<'_> {
+    /// `f` of the guided path of `point` through pixel `(x, y)`.
+    pub fn trace(&self, scene: &Scene, point: &TorusPoint, q: (u32, u32)) -> Rgb {
+        self.trace_at(scene, point, Placement::Pixel(q)).1
+    }
+
+    fn trace_at(&self, scene: &Scene, point: &TorusPoint, place: Placement) -> (Vec2, Rgb) {
+        replay(scene, point, place, |ray, source| {
+            self.tracer.li(scene, ray, source, self.tree, None)
+        })
+    }
+}
+
+impl TileShift for GuidedShift<'_> {
+    fn name(&self) -> &'static str {
+        "guided"
+    }
+
+    fn evaluate(
+        &self,
+        scene: &Scene,
+        point: &TorusPoint,
+        pixels: &[Option<(u32, u32)>],
+        out: &mut [Rgb],
+    ) {
+        for (q, o) in pixels.iter().zip(out.iter_mut()) {
+            *o = q.map_or(Rgb::BLACK, |q| self.trace(scene, point, q));
+        }
+    }
+
+    fn evaluate_film(&self, scene: &Scene, point: &TorusPoint) -> (Vec2, Rgb) {
+        let film = (scene.film.width, scene.film.height);
+        self.trace_at(scene, point, Placement::Film(film))
+    }
+
+    fn offset_coordinates(&self) -> [usize; 2] {
+        [0, 1]
+    }
+}
