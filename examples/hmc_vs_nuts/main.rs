@@ -81,6 +81,10 @@ struct Run {
     ess_per_gradient: f64,
     divergences: u64,
     step_size: f64,
+    /// Mean Metropolis–Hastings acceptance probability after warm-up, over
+    /// every step of every chain (ours only; what MALA's and HMC's step-size
+    /// adaptation aims at 0.574 and 0.8).
+    accept_mean: Option<f64>,
 }
 
 #[derive(Serialize)]
@@ -341,6 +345,7 @@ struct Counts {
     hessians: u64,
     divergences: u64,
     step: f64,
+    accept_mean: Option<f64>,
 }
 
 fn finish(target: &str, sampler: &str, seconds: f64, c: Counts, draws: &[Vec<Vec<f64>>]) -> Run {
@@ -364,6 +369,7 @@ fn finish(target: &str, sampler: &str, seconds: f64, c: Counts, draws: &[Vec<Vec
         ess_per_gradient: ess / c.gradients as f64,
         divergences: c.divergences,
         step_size: c.step,
+        accept_mean: c.accept_mean,
     }
 }
 
@@ -387,6 +393,7 @@ where
     let mut all = Vec::new();
     let (mut grads, mut hessians, mut divergences, mut step) = (0, 0, 0, 0.0);
     let mut sampling_grads = 0;
+    let (mut alpha_sum, mut alpha_steps) = (0.0, 0);
     for c in 0..o.chains {
         let mut chain = Chain::new(
             &t,
@@ -401,6 +408,12 @@ where
         chain.freeze();
         let warm_divergences = chain.algorithm().kernel().counts().divergences;
         let warm_gradients = chain.algorithm().kernel().counts().gradient_evaluations;
+        let alpha_of = |s: &mcmc_core::stats::ChainStatistics| {
+            s.components
+                .iter()
+                .fold((0.0, 0), |(a, n), c| (a + c.sum_alpha, n + c.proposed))
+        };
+        let warm_alpha = alpha_of(chain.stats());
         let mut draws = Vec::with_capacity(o.draws);
         for _ in 0..o.draws {
             for _ in 0..thin {
@@ -408,6 +421,9 @@ where
             }
             draws.push(chain.state().clone());
         }
+        let end_alpha = alpha_of(chain.stats());
+        alpha_sum += end_alpha.0 - warm_alpha.0;
+        alpha_steps += end_alpha.1 - warm_alpha.1;
         let k = chain.algorithm().kernel();
         grads += k.counts().gradient_evaluations + 1;
         sampling_grads += k.counts().gradient_evaluations - warm_gradients;
@@ -429,6 +445,7 @@ where
             hessians,
             divergences,
             step,
+            accept_mean: Some(alpha_sum / alpha_steps as f64),
         },
         &all,
     )
@@ -537,6 +554,7 @@ fn run_nuts<G: GradientTarget + Clone>(
             hessians: 0,
             divergences,
             step,
+            accept_mean: None,
         },
         &all,
     ))
@@ -594,6 +612,7 @@ fn main() {
         draws: o.draws,
         runs,
     };
+    warn_unconverged(&report.runs, &o);
     if o.json {
         println!(
             "{}",
@@ -602,7 +621,7 @@ fn main() {
         return;
     }
     println!(
-        "{:<40} {:<8} {:>8} {:>11} {:>11} {:>9} {:>7} {:>9} {:>10} {:>5} {:>8}",
+        "{:<40} {:<8} {:>8} {:>11} {:>11} {:>9} {:>7} {:>9} {:>10} {:>5} {:>8} {:>6}",
         "target",
         "sampler",
         "seconds",
@@ -613,11 +632,12 @@ fn main() {
         "ESS/s",
         "ESS/grad",
         "div",
-        "step"
+        "step",
+        "accept"
     );
     for r in &report.runs {
         println!(
-            "{:<40} {:<8} {:>8.3} {:>11} {:>11} {:>9.0} {:>7.3} {:>9.0} {:>10.5} {:>5} {:>8.4}",
+            "{:<40} {:<8} {:>8.3} {:>11} {:>11} {:>9.0} {:>7.3} {:>9.0} {:>10.5} {:>5} {:>8.4} {:>6}",
             r.target,
             r.sampler,
             r.seconds,
@@ -628,7 +648,31 @@ fn main() {
             r.ess_per_second,
             r.ess_per_gradient,
             r.divergences,
-            r.step_size
+            r.step_size,
+            r.accept_mean.map_or("–".into(), |a| format!("{a:.3}"))
+        );
+    }
+}
+
+/// One line on stderr for every run that has not converged (R-hat ≥ 1.01),
+/// naming its gradient budget: a sampler that needs many steps per
+/// independent draw (MALA in 100-d) fails by budget, not by adaptation.
+fn warn_unconverged(runs: &[Run], o: &Options) {
+    for r in runs
+        .iter()
+        .filter(|r| r.rhat_max >= 1.01 || r.rhat_max.is_nan())
+    {
+        let hint = if r.sampler == "mala" {
+            format!(
+                " (MALA at --mala-steps {} — raise it for a larger budget)",
+                o.mala_steps
+            )
+        } else {
+            String::new()
+        };
+        eprintln!(
+            "note: {} on {}: R-hat {:.3} ≥ 1.01 after {} gradients: not converged at this budget{hint}",
+            r.sampler, r.target, r.rhat_max, r.gradient_evaluations
         );
     }
 }

@@ -83,6 +83,7 @@ impl ChainStatistics {
     }
 
     /// Records one proposal made by `component`.
+    #[inline]
     pub fn record(&mut self, component: usize, alpha: f64, accepted: bool) {
         if let Some(c) = self.components.get_mut(component) {
             c.proposed += 1;
@@ -92,6 +93,7 @@ impl ChainStatistics {
     }
 
     /// Counts a proposal's density class.
+    #[inline]
     pub fn record_class(&mut self, class: DensityClass) {
         match class {
             DensityClass::Finite => {}

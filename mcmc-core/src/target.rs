@@ -16,6 +16,7 @@ pub struct Evaluation<P> {
 
 impl<P> Evaluation<P> {
     /// An evaluation with a payload.
+    #[inline]
     pub fn new(log_density: f64, payload: P) -> Self {
         Evaluation {
             log_density,
@@ -31,6 +32,7 @@ impl<P> Evaluation<P> {
 
 impl Evaluation<()> {
     /// An evaluation without payload.
+    #[inline]
     pub fn density(log_density: f64) -> Self {
         Evaluation {
             log_density,

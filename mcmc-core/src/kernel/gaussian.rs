@@ -89,6 +89,7 @@ impl GaussianRandomWalk {
     }
 
     /// Writes `current + step` into `out`.
+    #[inline]
     pub(crate) fn step_into(&mut self, current: &[f64], out: &mut Vec<f64>, rng: &mut ChainRng) {
         // One pass that copies and perturbs, into a buffer that already
         // has the right length after the first step (no memcpy call and no
@@ -105,13 +106,7 @@ impl GaussianRandomWalk {
                     *o = c + s * standard_normal(rng);
                 }
             }
-            Shape::Full { lower, .. } => {
-                out.copy_from_slice(current);
-                self.z.clear();
-                self.z
-                    .extend((0..current.len()).map(|_| standard_normal(rng)));
-                add_lower_times(lower, &self.z, out);
-            }
+            Shape::Full { lower, .. } => full_step_into(lower, &mut self.z, current, out, rng),
         }
     }
 
@@ -142,6 +137,23 @@ impl GaussianRandomWalk {
             }
         }
     }
+}
+
+/// `out = current + L z` for the full shape; out of line, so that
+/// [`GaussianRandomWalk::step_into`] stays small enough to be inlined
+/// into the step for the isotropic and diagonal shapes (it was not, in a
+/// build without link-time optimisation).
+fn full_step_into(
+    lower: &[f64],
+    z: &mut Vec<f64>,
+    current: &[f64],
+    out: &mut [f64],
+    rng: &mut ChainRng,
+) {
+    out.copy_from_slice(current);
+    z.clear();
+    z.extend((0..current.len()).map(|_| standard_normal(rng)));
+    add_lower_times(lower, z, out);
 }
 
 impl<P> Kernel<Vec<f64>, P> for GaussianRandomWalk {

@@ -51,11 +51,13 @@ pub struct Proposal {
 
 impl Proposal {
     /// A proposal from a symmetric kernel.
+    #[inline]
     pub fn symmetric(component: usize) -> Self {
         Proposal::with_ratio(0.0, component)
     }
 
     /// A proposal with the given `ln q(y→x) − ln q(x→y)`.
+    #[inline]
     pub fn with_ratio(log_q_ratio: f64, component: usize) -> Self {
         Proposal {
             log_q_ratio,
@@ -66,6 +68,7 @@ impl Proposal {
     }
 
     /// A failed proposal: rejected without evaluating the target.
+    #[inline]
     pub fn failed(component: usize) -> Self {
         Proposal {
             log_q_ratio: f64::NEG_INFINITY,
