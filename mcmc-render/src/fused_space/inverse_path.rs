@@ -83,15 +83,22 @@ pub fn trace<'s>(scene: &'s Scene, depth: &MmltDepth, state: &mut FusedState<'s>
     let traced = BUFFERS.with_borrow_mut(|b| {
         let (c, splat) = depth.sample_technique(scene, &mut source, b)?;
         let (s, t) = (c.s, c.t);
-        let mut light: Vec<Vertex> = b.light[..s].to_vec();
-        let mut camera: Vec<Vertex> = b.camera[..t].to_vec();
-        if s == 1 {
-            light[0] = c.sampled?;
+        // The connection's sampled endpoint replaces the one-vertex
+        // subpath's vertex; the vertices go straight into the path's
+        // storage (no per-trace allocation).
+        let first_light = if s == 1 { Some(c.sampled?) } else { None };
+        let last_camera = if t == 1 { Some(c.sampled?) } else { None };
+        let path = &mut state.path;
+        path.vertices.extend_from_slice(&b.light[..s]);
+        if let Some(v) = first_light {
+            path.vertices[0] = v;
         }
-        if t == 1 {
-            camera[0] = c.sampled?;
+        path.vertices.extend(b.camera[..t].iter().rev().copied());
+        if let Some(v) = last_camera {
+            *path.vertices.last_mut().expect("t = 1 vertex") = v;
         }
-        state.path.assign_subpaths(&light, &camera);
+        path.normalize_ends();
+        path.evaluate();
         Some((s, t, splat))
     });
     let Some((s, t, splat)) = traced else {

@@ -186,6 +186,16 @@ impl<'s> FusedKernel<'s> {
         component: usize,
     ) -> Proposal {
         proposal.state.point = point;
+        self.finish_in_place(proposal, log_q_ratio, component)
+    }
+
+    /// Traces the point already in `proposal` and writes the state.
+    fn finish_in_place(
+        &self,
+        proposal: &mut Sample<FusedState<'s>, PathSample>,
+        log_q_ratio: f64,
+        component: usize,
+    ) -> Proposal {
         trace(self.scene, &self.depth, &mut proposal.state);
         proposal.log_density = proposal.state.log_density;
         proposal.payload.clone_from(&proposal.state.sample);
@@ -215,8 +225,11 @@ impl<'s> FusedKernel<'s> {
         if p.failed {
             return p;
         }
-        let point = std::mem::replace(&mut prop.state, TorusPoint::fresh(child_rng(rng)));
-        self.finish(point, proposal, p.log_q_ratio, p.component)
+        // Swap rather than move the point out: the proposal's old point
+        // becomes the mixture's next scratch, so neither allocates again
+        // (the next small or large step overwrites all of it).
+        std::mem::swap(&mut prop.state, &mut proposal.state.point);
+        self.finish_in_place(proposal, p.log_q_ratio, p.component)
     }
 
     fn propose_technique(

@@ -33,7 +33,7 @@ pub mod technique;
 
 use crate::markov::{ChainFamily, MltError};
 use crate::path_space::{Path, PathMutations};
-use crate::pss::{MmltDepth, Mutation, PathSample, bootstrap_point};
+use crate::pss::{MmltDepth, Mutation, PathSample, PssTarget, bootstrap_point};
 use crate::scene::Scene;
 use inverse_path::{empty_sample, trace};
 pub use kernel::{FusedCounters, FusedKernel};
@@ -84,6 +84,14 @@ impl<'s> FusedState<'s> {
 /// MMLT's target of one depth, read from a state's cache when the state
 /// was traced for this depth (every state the kernel proposes is), traced
 /// otherwise (start-up candidates).
+///
+/// An untraced state is traced *in place*, as MMLT's target does: the
+/// coordinates the sampler reads are drawn into the state's own lazy
+/// point. Tracing a copy instead left a chain's start state without
+/// coordinates, so every small step from it drew all of them fresh (an
+/// independent proposal, rarely accepted from a bright start): chains
+/// stuck on caustic start paths, lower small-step acceptance than MMLT's
+/// and fireflies (`tests/fused_pss_moves.rs`).
 pub struct FusedTarget<'s> {
     /// The scene.
     pub scene: &'s Scene,
@@ -98,8 +106,11 @@ impl<'s> Target<FusedState<'s>> for FusedTarget<'s> {
         if state.depth == Some(self.depth.depth) {
             return Evaluation::new(state.log_density, state.sample.clone());
         }
-        let traced = FusedState::traced(self.scene, &self.depth, state.point.clone());
-        Evaluation::new(traced.log_density, traced.sample)
+        PssTarget {
+            scene: self.scene,
+            sampler: self.depth,
+        }
+        .trace(&state.point)
     }
 }
 
