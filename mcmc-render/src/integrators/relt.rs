@@ -92,7 +92,7 @@ crate::settings! {
         /// Metropolis–Hastings steps per particle and replica in the annealing.
         pub annealing_sweeps: usize = 1;
         /// Uniform draws screened for L0 paths to start the specific replica (0: no search; docs/relt.md).
-        pub l0_search: usize = 1_000_000;
+        pub l0_search: usize = 4_000_000;
         flatten {
             /// Path depth.
             pub depth: DepthParams = DepthParams::default();
