@@ -210,14 +210,25 @@ pub struct MmltDepth {
 impl MmltDepth {
     /// The techniques `(s, t)` of this depth, in order of increasing `s`.
     pub fn techniques(&self) -> Vec<(usize, usize)> {
+        self.technique_iter().collect()
+    }
+
+    /// The techniques of [`MmltDepth::techniques`] without collecting them
+    /// (every sample and every fused path-space move asks for them; a
+    /// vector per call was a measurable share of their cost).
+    pub fn technique_iter(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
         let d = self.depth;
         (0..=d)
-            .map(|s| (s, d + 1 - s))
+            .map(move |s| (s, d + 1 - s))
             .filter(|&(s, t)| t >= 1 && !(s == 1 && t == 1))
             .filter(|&(s, t)| {
                 t <= self.bdpt.max_camera_vertices() && s <= self.bdpt.max_light_vertices()
             })
-            .collect()
+    }
+
+    /// The number of techniques of this depth.
+    pub fn technique_count(&self) -> usize {
+        self.technique_iter().count()
     }
 }
 
@@ -256,14 +267,13 @@ impl MmltDepth {
         buffers: &mut SubpathBuffers,
         out: &mut [Option<Connection>],
     ) -> Option<(usize, Vec2)> {
-        let techniques = self.techniques();
-        if techniques.is_empty() {
+        let n = self.technique_count();
+        if n == 0 {
             return None;
         }
         source.set_stream(Stream::Connection);
-        let n = techniques.len();
         let k = ((source.next_1d() * n as f32) as usize).min(n - 1);
-        let (s, t) = techniques[k];
+        let (s, t) = self.technique_iter().nth(k)?;
         source.set_stream(Stream::Camera);
         let raster = raster_of(scene, source);
         let nc = generate_camera_subpath(scene, raster, source, t, None, &mut buffers.camera);

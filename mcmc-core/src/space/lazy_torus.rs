@@ -299,13 +299,23 @@ impl TorusPoint {
     /// A point with the given leading coordinates (each wrapped into
     /// `[0,1)`); later coordinates are uniform on first read.
     pub fn from_values(values: &[f64], rng: ChainRng) -> Self {
-        let p = TorusPoint::fresh(rng);
-        {
-            let mut c = p.inner.borrow_mut();
-            c.values = values.iter().map(|&v| wrap_unit(v)).collect();
-            c.updated_at = vec![0; values.len()];
-        }
+        let mut p = TorusPoint::fresh(rng.clone());
+        p.set_values(values, rng);
         p
+    }
+
+    /// Makes this point the one [`TorusPoint::from_values`] builds from
+    /// `values` and `rng`, reusing its allocation.
+    pub fn set_values(&mut self, values: &[f64], rng: ChainRng) {
+        let c = self.inner.get_mut();
+        c.values.clear();
+        c.values.extend(values.iter().map(|&v| wrap_unit(v)));
+        c.updated_at.clear();
+        c.updated_at.resize(values.len(), 0);
+        c.iteration = 0;
+        c.step = SmallStep::KELEMEN;
+        c.rng = rng;
+        c.uniform_after = None;
     }
 
     /// Coordinate `i`, brought up to date (created if it never was).

@@ -68,7 +68,9 @@ thread_local! {
 
 /// `P_t^{-1}`: traces `state.point` with MMLT's sampler of `depth`, and
 /// caches in `state` the path it builds (light to camera, the connection's
-/// sampled endpoint included), its technique and MMLT's splat and
+/// sampled endpoint included; its vertices only, not evaluated: call
+/// [`Path::evaluate`] for its densities and contribution), its technique
+/// and MMLT's splat and
 /// `ln π = ln lum(n · w · C)`. A sample that carries nothing leaves an empty
 /// path and `ln π = −∞`; a NaN or infinite one `ln π = NaN`.
 pub fn trace<'s>(scene: &'s Scene, depth: &MmltDepth, state: &mut FusedState<'s>) {
@@ -97,8 +99,10 @@ pub fn trace<'s>(scene: &'s Scene, depth: &MmltDepth, state: &mut FusedState<'s>
         if let Some(v) = last_camera {
             *path.vertices.last_mut().expect("t = 1 vertex") = v;
         }
+        // Only the vertices: a path-space move evaluates the path it
+        // starts from ([`Path::evaluate`]); primary-sample moves and
+        // round trips need only MMLT's splat.
         path.normalize_ends();
-        path.evaluate();
         Some((s, t, splat))
     });
     let Some((s, t, splat)) = traced else {
@@ -121,9 +125,23 @@ pub fn trace<'s>(scene: &'s Scene, depth: &MmltDepth, state: &mut FusedState<'s>
 #[derive(Default)]
 struct Numbers {
     streams: [Vec<Option<f64>>; Stream::COUNT],
+    /// The interleaved coordinates being assembled (kept for its allocation).
+    values: Vec<f64>,
+}
+
+thread_local! {
+    /// The inverse's scratch numbers (an inversion per accepted path-space
+    /// move allocated them anew each time).
+    static NUMBERS: RefCell<Numbers> = RefCell::new(Numbers::default());
 }
 
 impl Numbers {
+    fn clear(&mut self) {
+        for v in &mut self.streams {
+            v.clear();
+        }
+    }
+
     fn set(&mut self, stream: Stream, i: usize, u: f32) {
         let v = &mut self.streams[stream.index()];
         if v.len() <= i {
@@ -137,21 +155,21 @@ impl Numbers {
         self.set(stream, i + 1, u.1);
     }
 
-    /// The interleaved coordinates, fresh uniforms in the gaps; later
-    /// coordinates are uniform on first read.
-    fn into_point(self, rng: &mut ChainRng) -> TorusPoint {
+    /// Writes the interleaved coordinates into `point`, fresh uniforms in
+    /// the gaps; later coordinates are uniform on first read.
+    fn write_point(&mut self, rng: &mut ChainRng, point: &mut TorusPoint) {
         let m = Stream::COUNT;
         let len = self.streams.iter().map(Vec::len).max().unwrap_or(0);
-        let mut values = vec![0.0; m * len];
+        self.values.clear();
         for i in 0..len {
             for k in 0..m {
-                values[m * i + k] = match self.streams[k].get(i) {
+                self.values.push(match self.streams[k].get(i) {
                     Some(Some(u)) => *u,
                     _ => uniform(rng),
-                };
+                });
             }
         }
-        TorusPoint::from_values(&values, child_rng(rng))
+        point.set_values(&self.values, child_rng(rng));
     }
 }
 
@@ -202,30 +220,47 @@ fn invert_scattering(
     Ok(())
 }
 
-/// `P_t`: the multiplexed primary sample of `path` under technique `s`
-/// (light vertices) of `depth`, with fresh uniforms from `rng` where the
-/// sampler's map is many-to-one or ignores its numbers. The technique is
-/// not changed (spec seed001 §2.1).
+/// `P_t`: writes into `point` the multiplexed primary sample of `path`
+/// under technique `s` (light vertices) of `depth`, with fresh uniforms
+/// from `rng` where the sampler's map is many-to-one or ignores its
+/// numbers. The technique is not changed (spec seed001 §2.1). On failure
+/// `point` is left as it was.
 pub fn invert(
     scene: &Scene,
     depth: &MmltDepth,
     path: &Path<'_>,
     s: usize,
     rng: &mut ChainRng,
-) -> Result<TorusPoint, InverseFailure> {
+    point: &mut TorusPoint,
+) -> Result<(), InverseFailure> {
+    NUMBERS.with_borrow_mut(|numbers| {
+        numbers.clear();
+        invert_numbers(scene, depth, path, s, rng, numbers)?;
+        numbers.write_point(rng, point);
+        Ok(())
+    })
+}
+
+/// The numbers of [`invert`], stream by stream.
+fn invert_numbers(
+    scene: &Scene,
+    depth: &MmltDepth,
+    path: &Path<'_>,
+    s: usize,
+    rng: &mut ChainRng,
+    numbers: &mut Numbers,
+) -> Result<(), InverseFailure> {
     let vs = &path.vertices;
     let k = path.segments();
     if vs.len() < 2 || k != depth.depth || s > k {
         return Err(InverseFailure::Technique);
     }
     let t = k + 1 - s;
-    let techniques = depth.techniques();
-    let n = techniques.len();
-    let bin = techniques
-        .iter()
-        .position(|&st| st == (s, t))
+    let n = depth.technique_count();
+    let bin = depth
+        .technique_iter()
+        .position(|st| st == (s, t))
         .ok_or(InverseFailure::Technique)?;
-    let mut numbers = Numbers::default();
     let u_bin = in_interval(
         bin as f32 / n as f32,
         (bin + 1) as f32 / n as f32,
@@ -255,7 +290,7 @@ pub fn invert(
                 &vs[v + 1],
                 &vs[v - 1],
                 (Stream::Camera, base),
-                &mut numbers,
+                numbers,
                 rng,
             )?;
         }
@@ -303,13 +338,13 @@ pub fn invert(
                     &vs[j - 1],
                     &vs[j + 1],
                     (Stream::Light, 5 + 4 * (j - 1)),
-                    &mut numbers,
+                    numbers,
                     rng,
                 )?;
             }
         }
     }
-    Ok(numbers.into_point(rng))
+    Ok(())
 }
 
 /// Why a round trip failed.
@@ -334,7 +369,7 @@ pub fn round_trip<'s>(
     rng: &mut ChainRng,
     out: &mut FusedState<'s>,
 ) -> Result<(), RoundTripFailure> {
-    out.point = invert(scene, depth, path, s, rng).map_err(RoundTripFailure::Inverse)?;
+    invert(scene, depth, path, s, rng, &mut out.point).map_err(RoundTripFailure::Inverse)?;
     trace(scene, depth, out);
     let t = depth.depth + 1 - s;
     if out.technique != Some((s, t)) || !out.log_density.is_finite() {

@@ -268,32 +268,48 @@ impl<'s> FusedKernel<'s> {
         let x = if current.state.depth == Some(depth.depth) {
             &current.state
         } else {
-            traced = FusedState::traced(scene, &depth, current.state.point.clone());
+            let mut t = FusedState::untraced(scene, current.state.point.clone());
+            trace(scene, &depth, &mut t);
+            traced = t;
             &traced
         };
         let Some((s, _)) = x.technique else {
             return Proposal::failed(fail[3]);
         };
+        // Traces cache the path's vertices only; its densities and
+        // contribution are evaluated here, once per current path (a state
+        // sees several path-space proposals while it is current). The copy
+        // is reused while its vertices are the current path's: a content
+        // check, so nothing depends on how the driver moves states.
         let cur = self.path_cur.get_or_insert_with(|| Sample {
-            state: x.path.clone(),
-            log_density: x.path.log_density(),
+            state: Path::new(scene),
+            log_density: f64::NEG_INFINITY,
             payload: PathSample::default(),
         });
-        cur.state.clone_from(&x.path);
-        cur.log_density = x.path.log_density();
+        let same_path = cur.state.vertices.len() == x.path.vertices.len()
+            && !cur.state.vertices.is_empty()
+            && (cur.state.vertices.iter())
+                .zip(&x.path.vertices)
+                .all(|(a, b)| a.p() == b.p() && a.light == b.light && a.kind == b.kind);
+        if !same_path {
+            cur.state.clone_from(&x.path);
+            cur.state.evaluate();
+            cur.log_density = cur.state.log_density();
+        }
         let prop = self.path_prop.get_or_insert_with(|| cur.clone());
         let p = self.path.propose(cur, prop, rng);
         if p.failed {
             return Proposal::failed(offset + p.component);
         }
+        let x_path = &cur.state;
         let y = &prop.state;
         let log_p_y = log_technique_density(y, s);
-        let log_p_x = log_technique_density(&x.path, s);
+        let log_p_x = log_technique_density(x_path, s);
         if !(log_p_y > f64::NEG_INFINITY) || !(log_p_x > f64::NEG_INFINITY) {
             return Proposal::failed(fail[0]);
         }
         // Stage 1 (module docs): Eq. 24 on the paths, nothing converted.
-        let log_pi_x = log_target(&depth, &x.path, s);
+        let log_pi_x = log_target(&depth, x_path, s);
         if !log_pi_x.is_finite() {
             return Proposal::failed(fail[4]);
         }
@@ -318,7 +334,7 @@ impl<'s> FusedKernel<'s> {
             Some(ok) => ok,
             None => {
                 let mut probe = FusedState::untraced(scene, TorusPoint::fresh(child_rng(rng)));
-                let ok = round_trip(scene, &depth, &x.path, s, rng, &mut probe).is_ok();
+                let ok = round_trip(scene, &depth, x_path, s, rng, &mut probe).is_ok();
                 self.counters.inversions.fetch_add(1, Ordering::Relaxed);
                 self.current_invertible = Some(ok);
                 ok

@@ -48,7 +48,8 @@ pub struct FusedState<'s> {
     /// The primary sample `[u, t]` (MMLT's coordinate layout).
     pub point: TorusPoint,
     /// `P_t^{-1}(u)`, light to camera (empty when `u` carries nothing or
-    /// was not traced).
+    /// was not traced). The kernel's traces store its vertices only;
+    /// [`FusedState::traced`] also evaluates it ([`Path::evaluate`]).
     pub path: Path<'s>,
     /// The depth the cache was traced for (`None`: not traced yet).
     pub depth: Option<usize>,
@@ -73,10 +74,12 @@ impl<'s> FusedState<'s> {
         }
     }
 
-    /// The state at `point` traced with `depth`'s sampler.
+    /// The state at `point` traced with `depth`'s sampler, its path
+    /// evaluated (densities and contribution).
     pub fn traced(scene: &'s Scene, depth: &MmltDepth, point: TorusPoint) -> Self {
         let mut s = FusedState::untraced(scene, point);
         trace(scene, depth, &mut s);
+        s.path.evaluate();
         s
     }
 }

@@ -89,7 +89,7 @@ pub fn log_target(depth: &MmltDepth, path: &Path<'_>, s: usize) -> f64 {
         return f64::NEG_INFINITY;
     }
     let t = k + 1 - s;
-    let n = depth.techniques().len();
+    let n = depth.technique_count();
     let vs = &path.vertices;
     let w = SUBPATHS.with_borrow_mut(|(light, camera)| {
         // BDPT's walks store no density for a vertex sampled from a Dirac
