@@ -63,7 +63,7 @@
 
 mod common;
 
-use common::load_str;
+use common::{load_str, pixel_solid_angle};
 use glam::{DVec3, Vec2, Vec3};
 use mcmc_core::kernel::Kernel;
 use mcmc_core::rng::{stream_rng, uniform};
@@ -198,18 +198,6 @@ fn log_jacobian(y: &Path) -> f64 {
     let cos_1 = y.vertices[1].sp.ng.as_dvec3().dot((m - y1) / d2).abs();
     let da_dr = d_omega * (d1 + d2).powi(2) / cos_1;
     (da_dr * d1 * d1 * d2 * d2 / ((d1 + d2).powi(2) * cos_m)).ln()
-}
-
-/// `|dω/dr|`: the solid angle per unit raster area of the camera's rays
-/// at `r`, by central differences of `Camera::generate_ray` (`h` = 0.25
-/// px; the map is smooth).
-fn pixel_solid_angle(scene: &Scene, r: Vec2) -> f64 {
-    let cam = &scene.camera;
-    let h = 0.25f32;
-    let dir = |r: Vec2| cam.generate_ray(r).d.normalize().as_dvec3();
-    let dx = (dir(r + Vec2::new(h, 0.0)) - dir(r - Vec2::new(h, 0.0))) / (2.0 * h as f64);
-    let dy = (dir(r + Vec2::new(0.0, h)) - dir(r - Vec2::new(0.0, h))) / (2.0 * h as f64);
-    dx.cross(dy).length()
 }
 
 /// `ln cos θ` at `y_1` towards the mirror.
