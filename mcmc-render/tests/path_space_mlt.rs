@@ -15,7 +15,9 @@
 
 mod common;
 
-use common::{Budget, MeanAgreement, Mlt, image_mean, mc_reps, mlt_reps, pt_of, repo_scene_tilted};
+use common::{
+    Budget, MeanAgreement, Mlt, image_mean, mc_reps, mean_se, mlt_reps, pt_of, repo_scene_tilted,
+};
 use mcmc_core::runner::with_threads;
 use mcmc_render::integrators::RunSettings;
 use mcmc_render::integrators::mlt::Mlt as MltSettings;
@@ -318,4 +320,52 @@ fn mlt_with_the_lens_perturbation_agrees_with_pt_on_the_cornell_box() {
     let biased: Vec<[f64; 3]> = reps.iter().map(|m| m.map(|v| v * 1.01)).collect();
     let b = MeanAgreement::new(pt_reference(), &biased);
     assert!(!b.failures(4.0, 0.01).is_empty(), "a 1% bias passed: {b:?}");
+}
+
+/// Sets the stop flag (Ctrl-C's) at the chains' first snapshot.
+struct StopAtFirstSnapshot<'a>(&'a AtomicBool);
+
+impl mcmc_render::observer::Observer for StopAtFirstSnapshot<'_> {
+    fn snapshot(&self, _image: &dyn Fn() -> Vec<mcmc_render::color::Rgb>, _samples: u64) {
+        self.0.store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
+/// A stop (Ctrl-C's flag, set at the first snapshot) ends `mlt` with the
+/// partial image, marked interrupted and normalised: its mean luminance
+/// is the bootstrap's `b` (plus the specular-chain pass) whatever share
+/// of the mutations ran, so it must be within 5% of PT's (100 000
+/// candidates: `b` spreads 1.2% between seeds, see `mlt_replicates`, so
+/// 5% is ≈ 4σ; luminance, because the split between the channels depends
+/// on where the few chains are after so few mutations). Control: fewer than half of the
+/// requested mutations may have run, so an image scaled by the share
+/// done (a partial image normalised by the full budget) would be off by
+/// more than 50%.
+#[test]
+fn a_stop_writes_the_normalised_partial_image() {
+    let stop = AtomicBool::new(false);
+    let mut mlt = MltSettings::default();
+    mlt.depth.max_depth = DEPTH as i64;
+    mlt.chain.bootstrap = 100_000;
+    mlt.chain.chains = 64;
+    mlt.chain.mutations_per_pixel = Some(4096);
+    let requested = 4096 * (RES * RES) as u64;
+    let run = RunSettings {
+        seed: 5,
+        snapshot_every: std::time::Duration::ZERO,
+        ..RunSettings::default()
+    };
+    let out = mlt
+        .render(cornell(), &run, &stop, &StopAtFirstSnapshot(&stop))
+        .expect("mlt runs");
+    assert!(out.interrupted, "not marked interrupted");
+    let done = out.statistics["mutations"].as_u64().expect("mutations");
+    eprintln!("{done} of {requested} mutations");
+    assert!(done > 0 && done < requested / 2, "{done} of {requested}");
+    let (pt, _) = mean_se(pt_reference());
+    let mean = image_mean(&out.image);
+    let lum = |m: [f64; 3]| 0.2126 * m[0] + 0.7152 * m[1] + 0.0722 * m[2];
+    let rel = lum(mean) / lum(pt) - 1.0;
+    eprintln!("partial image's mean luminance against PT's: {rel:+.4}");
+    assert!(rel.abs() < 0.05, "the partial image is off by {rel}");
 }

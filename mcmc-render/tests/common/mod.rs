@@ -569,3 +569,17 @@ pub fn chi_square_p_value(counts: &[u64], masses: &[f64], n: usize) -> f64 {
     eprintln!("chi2 = {chi2:.1}, dof = {dof}");
     ChiSquared::new(dof).unwrap().sf(chi2)
 }
+
+/// `|dω/dr|`: the solid angle per unit raster area of the camera's rays
+/// at `r`, by central differences of `Camera::generate_ray` (`h` = 0.25
+/// px; the map is smooth).
+pub fn pixel_solid_angle(scene: &Scene, r: glam::Vec2) -> f64 {
+    let cam = &scene.camera;
+    let h = 0.25f32;
+    let dir = |r: glam::Vec2| cam.generate_ray(r).d.normalize().as_dvec3();
+    let dx =
+        (dir(r + glam::Vec2::new(h, 0.0)) - dir(r - glam::Vec2::new(h, 0.0))) / (2.0 * h as f64);
+    let dy =
+        (dir(r + glam::Vec2::new(0.0, h)) - dir(r - glam::Vec2::new(0.0, h))) / (2.0 * h as f64);
+    dx.cross(dy).length()
+}
