@@ -27,16 +27,16 @@
 //! offset, the lens, then 8 numbers per scattering vertex as
 //! `integrators::guided` documents).
 
-use super::random_replay::replay;
-use super::{Placement, TileShift};
+use super::random_replay::ReplayTracer;
 use crate::color::Rgb;
+use crate::geometry::Ray;
 use crate::guiding::SdTree;
 use crate::integrators::guided::GuidedPathTracer;
+use crate::pss::PssSource;
 use crate::scene::Scene;
-use glam::Vec2;
-use mcmc_core::space::TorusPoint;
 
-/// Random replay over the guided path tracer with a frozen tree.
+/// Random replay over the guided path tracer with a frozen tree (its
+/// [`super::TileShift`] is random replay's, [`ReplayTracer`]).
 #[derive(Clone, Copy, Debug)]
 pub struct GuidedShift<'t> {
     /// The guided tracer replayed at every pixel.
@@ -45,42 +45,10 @@ pub struct GuidedShift<'t> {
     pub tree: &'t SdTree,
 }
 
-impl GuidedShift<'_> {
-    /// `f` of the guided path of `point` through pixel `(x, y)`.
-    pub fn trace(&self, scene: &Scene, point: &TorusPoint, q: (u32, u32)) -> Rgb {
-        self.trace_at(scene, point, Placement::Pixel(q)).1
-    }
+impl ReplayTracer for GuidedShift<'_> {
+    const NAME: &'static str = "guided";
 
-    fn trace_at(&self, scene: &Scene, point: &TorusPoint, place: Placement) -> (Vec2, Rgb) {
-        replay(scene, point, place, |ray, source| {
-            self.tracer.li(scene, ray, source, self.tree, None)
-        })
-    }
-}
-
-impl TileShift for GuidedShift<'_> {
-    fn name(&self) -> &'static str {
-        "guided"
-    }
-
-    fn evaluate(
-        &self,
-        scene: &Scene,
-        point: &TorusPoint,
-        pixels: &[Option<(u32, u32)>],
-        out: &mut [Rgb],
-    ) {
-        for (q, o) in pixels.iter().zip(out.iter_mut()) {
-            *o = q.map_or(Rgb::BLACK, |q| self.trace(scene, point, q));
-        }
-    }
-
-    fn evaluate_film(&self, scene: &Scene, point: &TorusPoint) -> (Vec2, Rgb) {
-        let film = (scene.film.width, scene.film.height);
-        self.trace_at(scene, point, Placement::Film(film))
-    }
-
-    fn offset_coordinates(&self) -> [usize; 2] {
-        [0, 1]
+    fn li(&self, scene: &Scene, ray: Ray, source: &mut PssSource<'_>) -> Rgb {
+        self.tracer.li(scene, ray, source, self.tree, None)
     }
 }

@@ -30,16 +30,35 @@ pub struct RandomReplay {
     pub pt: PathTracer,
 }
 
-impl RandomReplay {
+impl ReplayTracer for RandomReplay {
+    const NAME: &'static str = "rr";
+
+    fn li(&self, scene: &Scene, ray: Ray, source: &mut PssSource<'_>) -> Rgb {
+        self.pt.li(scene, ray, source)
+    }
+}
+
+/// A one-stream unidirectional tracer driven by random replay: every
+/// [`ReplayTracer`] is a [`TileShift`] (the path tracer here, the guided
+/// tracer in [`super::guided_shift`]), whose value at a pixel is the
+/// tracer's own sample at the state's offset moved into that pixel.
+pub trait ReplayTracer: Sync {
+    /// Short name of the shift (statistics).
+    const NAME: &'static str;
+
+    /// `f` of the path from camera ray `ray`, the rest of the state read
+    /// from `source`.
+    fn li(&self, scene: &Scene, ray: Ray, source: &mut PssSource<'_>) -> Rgb;
+
     /// `f` of the path of `point` through pixel `(x, y)`.
-    pub fn trace(&self, scene: &Scene, point: &TorusPoint, q: (u32, u32)) -> Rgb {
+    fn trace(&self, scene: &Scene, point: &TorusPoint, q: (u32, u32)) -> Rgb {
         self.trace_at(scene, point, Placement::Pixel(q)).1
     }
 
     /// The raster position of `point` placed by `place`, and `f` of its path.
     fn trace_at(&self, scene: &Scene, point: &TorusPoint, place: Placement) -> (Vec2, Rgb) {
         replay(scene, point, place, |ray, source| {
-            self.pt.li(scene, ray, source)
+            self.li(scene, ray, source)
         })
     }
 }
@@ -47,8 +66,7 @@ impl RandomReplay {
 /// Random replay of a one-stream unidirectional tracer `li`: the state's
 /// first two numbers are the sub-pixel offset, placed by `place`, then the
 /// lens sample if the camera has one, then `li` reads the rest. Returns the
-/// raster position and `f` of the path (the guided shift replays the
-/// guided tracer the same way).
+/// raster position and `f` of the path.
 pub fn replay(
     scene: &Scene,
     point: &TorusPoint,
@@ -66,9 +84,9 @@ pub fn replay(
     (p, li(ray, &mut source))
 }
 
-impl TileShift for RandomReplay {
+impl<T: ReplayTracer> TileShift for T {
     fn name(&self) -> &'static str {
-        "rr"
+        T::NAME
     }
 
     fn evaluate(
