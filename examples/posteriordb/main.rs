@@ -13,7 +13,7 @@
 //! sampler statistics as CmdStan CSV files and one `.npz`). Every posterior
 //! runs with the same settings (`NutsSettings::default()`). Warm-up:
 //! `--init-buffer N`, `--window N`, `--term-buffer N` (CmdStan's names;
-//! defaults 30 / 20 / 150), `--step-size continuous|restart` (restart is
+//! defaults 75 / 25 / 150), `--step-size continuous|restart` (restart is
 //! CmdStan's dual averaging, restarted at every metric update);
 //! `--init-radius r` (initial points uniform in `[−r, r]^d` on the
 //! unconstrained space, Stan's 2).
