@@ -11,8 +11,14 @@
 //! `--seed N` (1), `--adapt-delta δ` (0.8), `--posteriors a,b` (all),
 //! `--json`, `--out DIR` (also write each posterior's constrained draws and
 //! sampler statistics as CmdStan CSV files and one `.npz`). Every posterior
-//! runs with the same settings (Stan's defaults).
+//! runs with the same settings (`NutsSettings::default()`). Warm-up:
+//! `--init-buffer N`, `--window N`, `--term-buffer N` (CmdStan's names;
+//! defaults 75 / 25 / 150), `--step-size continuous|restart` (restart is
+//! CmdStan's dual averaging, restarted at every metric update);
+//! `--init-radius r` (initial points uniform in `[−r, r]^d` on the
+//! unconstrained space, Stan's 2).
 
+use mcmc_core::adaptation::StepSizeAdaptation;
 use mcmc_core::fit::NutsSettings;
 use mcmc_examples::posteriordb::{PosteriorReport, load, names, run, write_outputs};
 
@@ -47,6 +53,26 @@ fn parse() -> Result<Options, String> {
                     return Err("--adapt-delta must lie in (0, 1)".into());
                 }
             }
+            "--init-radius" => {
+                s.init_radius = number(&a, &value(&a)?)?;
+                if !(s.init_radius.is_finite() && s.init_radius >= 0.0) {
+                    return Err("--init-radius must be finite and non-negative".into());
+                }
+            }
+            "--init-buffer" => s.init_buffer = number(&a, &value(&a)?)?,
+            "--window" => s.window = number(&a, &value(&a)?)?,
+            "--term-buffer" => s.term_buffer = number(&a, &value(&a)?)?,
+            "--step-size" => {
+                s.step_size_adaptation = match value(&a)?.as_str() {
+                    "continuous" => StepSizeAdaptation::Continuous,
+                    "restart" => StepSizeAdaptation::Restart,
+                    other => {
+                        return Err(format!(
+                            "--step-size: `{other}` (expected continuous or restart)"
+                        ));
+                    }
+                }
+            }
             "--posteriors" => {
                 o.posteriors = value(&a)?.split(',').map(String::from).collect();
                 let known = names();
@@ -59,7 +85,7 @@ fn parse() -> Result<Options, String> {
             }
             other => {
                 return Err(format!(
-                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --adapt-delta δ, --posteriors a,b, --out DIR)"
+                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --adapt-delta δ, --init-radius r, --init-buffer N, --window N, --term-buffer N, --step-size continuous|restart, --posteriors a,b, --out DIR)"
                 ));
             }
         }
@@ -124,6 +150,21 @@ fn print_detail(r: &PosteriorReport) {
             q.z_sd,
             q.ess_bulk,
             q.rhat
+        );
+    }
+    for (c, ch) in r.chains.iter().enumerate() {
+        let metric: Vec<String> = ch
+            .inverse_metric_diagonal
+            .iter()
+            .map(|v| format!("{v:.3e}"))
+            .collect();
+        println!(
+            "  chain {c}: step {:.4}, accept_stat {:.3}, leapfrog/draw {:.1}, divergences {}, M⁻¹ diag [{}]",
+            ch.step_size,
+            ch.accept_stat_mean,
+            ch.leapfrog_mean,
+            ch.divergences,
+            metric.join(", ")
         );
     }
     println!();

@@ -216,6 +216,25 @@ pub struct PosteriorReport {
     pub seconds: f64,
     /// Per quantity.
     pub quantities: Vec<Comparison>,
+    /// Per chain: what the warm-up ended with and how sampling went.
+    pub chains: Vec<ChainReport>,
+}
+
+/// One chain's adapted step size, metric and sampling statistics: where
+/// divergences come from (one chain with a large step, or all chains).
+#[derive(Clone, Debug, Serialize)]
+pub struct ChainReport {
+    /// Step size after warm-up.
+    pub step_size: f64,
+    /// Diagonal of `M⁻¹` after warm-up, on the unconstrained coordinates.
+    pub inverse_metric_diagonal: Vec<f64>,
+    /// Divergent transitions after warm-up.
+    pub divergences: usize,
+    /// Mean `accept_stat` after warm-up (the adaptation's target is
+    /// `adapt_delta`).
+    pub accept_stat_mean: f64,
+    /// Mean leapfrog steps per draw after warm-up.
+    pub leapfrog_mean: f64,
 }
 
 /// Runs NUTS on `posterior` with `settings` and compares with the
@@ -268,6 +287,21 @@ pub fn run(
     for (c, draws) in fit.chains.iter_mut().zip(constrained) {
         c.draws = draws;
     }
+    let d = posterior.model.dim();
+    let chains = fit
+        .chains
+        .iter()
+        .map(|c| {
+            let n = c.statistics.len().max(1) as f64;
+            ChainReport {
+                step_size: c.step_size,
+                inverse_metric_diagonal: (0..d).map(|i| c.inverse_metric[i * d + i]).collect(),
+                divergences: c.divergences(),
+                accept_stat_mean: c.statistics.iter().map(|s| s.accept_stat).sum::<f64>() / n,
+                leapfrog_mean: c.leapfrog_steps() as f64 / n,
+            }
+        })
+        .collect();
     let report = PosteriorReport {
         posterior: posterior.name.to_string(),
         dim: posterior.model.dim(),
@@ -286,6 +320,7 @@ pub fn run(
             .fold(f64::NEG_INFINITY, f64::max),
         seconds,
         quantities,
+        chains,
     };
     Ok((report, fit))
 }

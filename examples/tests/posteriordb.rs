@@ -136,3 +136,36 @@ fn dropped_jacobian_fails_the_reference_check() {
     let (r, _) = run(&wrong, &settings).unwrap();
     assert!(r.max_abs_z > 4.0, "max |z| = {}", r.max_abs_z);
 }
+
+/// `arma-arma11` with Stan's initial points: on seeds 1 and 2 one chain
+/// starts in the explosive |θ| > 1 region. With the default warm-up
+/// (75 / 25 / 150) it is back in the posterior before its first metric
+/// window and no transition diverges; control: session 11's windows
+/// (30 / 20 / 150) estimate that chain's metric on its way back and leave
+/// it with hundreds of divergences (320 and 339, `docs/performance.md`,
+/// "arma-arma11: divergences and stuck chains"). Deterministic counts,
+/// fixed seeds.
+#[test]
+fn arma_default_warmup_avoids_the_late_chains_divergences() {
+    let p = load("arma-arma11").unwrap();
+    for seed in [1, 2] {
+        let default = NutsSettings {
+            seed,
+            ..Default::default()
+        };
+        let (r, _) = run(&p, &default).unwrap();
+        assert_eq!(r.divergences, 0, "seed {seed}: {:?}", r.chains);
+        assert!(r.rhat_max < 1.01, "seed {seed}: R-hat {}", r.rhat_max);
+        let early = NutsSettings {
+            init_buffer: 30,
+            window: 20,
+            ..default
+        };
+        let (r, _) = run(&p, &early).unwrap();
+        assert!(
+            r.divergences > 100,
+            "seed {seed}: {} divergences",
+            r.divergences
+        );
+    }
+}

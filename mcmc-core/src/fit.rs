@@ -21,10 +21,10 @@ use std::time::Instant;
 /// Settings of a multi-chain NUTS run; [`Default`] is CmdStan's defaults
 /// (4 chains, 1000 warm-up iterations, 1000 draws, `adapt_delta` 0.8,
 /// diagonal metric, maximum depth 10, initial step size 1, initial points
-/// uniform in `[−2, 2]^d`) except the warm-up: windows 30 / 20 / 150
+/// uniform in `[−2, 2]^d`) except the warm-up: windows 75 / 25 / 150
 /// (CmdStan: 75 / 25 / 50) and one dual-averaging run for the step size,
 /// chosen by measurement on the four targets of `examples/hmc_vs_nuts`
-/// (`docs/performance.md`).
+/// and on `arma-arma11` of `examples/posteriordb` (`docs/performance.md`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct NutsSettings {
     /// Number of chains.
@@ -55,13 +55,16 @@ pub struct NutsSettings {
     /// to reproduce CmdStan's runs.
     pub term_buffer: usize,
     /// Warm-up iterations before the first metric window, step size only
-    /// (CmdStan's `init_buffer` is 75; the default here is 30: an earlier
-    /// first metric estimate, which with the first window of 20 gave at
-    /// least nuts-rs's ESS per gradient on all four targets of
-    /// `examples/hmc_vs_nuts` over 8 seeds, `docs/performance.md`).
+    /// (CmdStan's `init_buffer`, 75, is the default). 30 (with `window`
+    /// 20) gained ≈ 6 % ESS per gradient on the non-centred eight schools
+    /// (about one standard error over 8 seeds) but on `arma-arma11` let a
+    /// chain that starts in the model's explosive region (|θ| > 1) estimate
+    /// its metric before it reached the posterior: 8 of 17 seeds ended
+    /// with one chain's metric 10²–10³× too wide and hundreds of
+    /// divergences, against 1 of 17 with 75 / 25 (`docs/performance.md`).
     pub init_buffer: usize,
     /// Length of the first metric window; later windows double (CmdStan's
-    /// `window` is 25; the default here is 20).
+    /// `window`, 25, is the default).
     pub window: usize,
     /// What the step size does at metric updates: `Continuous` (default,
     /// one dual-averaging run as nuts-rs) or `Restart` (CmdStan's).
@@ -81,8 +84,8 @@ impl Default for NutsSettings {
             initial_step_size: 1.0,
             init_radius: 2.0,
             term_buffer: 150,
-            init_buffer: 30,
-            window: 20,
+            init_buffer: 75,
+            window: 25,
             step_size_adaptation: StepSizeAdaptation::Continuous,
         }
     }
