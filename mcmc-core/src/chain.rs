@@ -183,6 +183,11 @@ impl<S, P, A: Algorithm<S, P>> Chain<S, P, A> {
         self.algorithm.freeze();
     }
 
+    /// The chain's random stream, to read its state (checkpoints).
+    pub fn rng(&self) -> &ChainRng {
+        &self.state.rng
+    }
+
     /// The chain's random stream.
     pub fn rng_mut(&mut self) -> &mut ChainRng {
         &mut self.state.rng

@@ -43,6 +43,35 @@ pub fn stream_rng(seed: u64, stream: u64) -> ChainRng {
     ChainRng::from_seed(bytes)
 }
 
+/// The four state words of a generator (for checkpoints: a run resumed
+/// with [`rng_from_words`] continues the stream exactly). `rand_xoshiro`
+/// offers its state only through serde, hence the JSON detour.
+pub fn rng_words(rng: &ChainRng) -> [u64; 4] {
+    let v = serde_json::to_value(rng).expect("a generator's state serialises");
+    let words: Vec<u64> = v["s"]
+        .as_array()
+        .expect("xoshiro256++ state is an array")
+        .iter()
+        .map(|w| w.as_u64().expect("state words are u64"))
+        .collect();
+    words.try_into().expect("xoshiro256++ has four state words")
+}
+
+/// The generator with state `words` (from [`rng_words`]); `None` for the
+/// all-zero state, which no generator reaches.
+pub fn rng_from_words(words: [u64; 4]) -> Option<ChainRng> {
+    if words.iter().all(|&w| w == 0) {
+        return None;
+    }
+    // `from_seed` reads the state words little-endian, exactly as given
+    // (only an all-zero seed is replaced, excluded above).
+    let mut seed = [0u8; 32];
+    for (chunk, w) in seed.chunks_exact_mut(8).zip(words) {
+        chunk.copy_from_slice(&w.to_le_bytes());
+    }
+    Some(ChainRng::from_seed(seed))
+}
+
 /// A generator for a sub-stream of an existing generator (e.g. the lazy
 /// coordinates of one proposal), seeded by one draw from `parent`.
 pub fn child_rng(parent: &mut ChainRng) -> ChainRng {

@@ -16,9 +16,13 @@ use crate::film::{Film, Filter};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-/// The integrators whose runs can be checkpointed (those on the per-pixel
-/// driver).
+/// The integrators whose runs can be checkpointed on the per-pixel driver.
 pub const INTEGRATORS: [&str; 3] = ["pt", "lt", "bdpt"];
+
+/// The integrators whose runs can be checkpointed on the Markov-chain
+/// driver (independent chains on primary sample space; see
+/// [`crate::markov::checkpoint`]).
+pub const CHAIN_INTEGRATORS: [&str; 2] = ["pssmlt", "mmlt"];
 
 /// First bytes of a checkpoint file (format version 1).
 const MAGIC: &[u8; 8] = b"mcmcPX01";
@@ -31,8 +35,12 @@ pub struct Checkpoint {
     pub path: PathBuf,
     /// [`fingerprint`] of the run's inputs.
     pub fingerprint: u64,
-    /// What the file held when the run started (rank 0 only).
+    /// What the file held when the run started (rank 0 only; per-pixel
+    /// driver).
     pub resume: Option<Arc<Progress>>,
+    /// What the file held when the run started (rank 0 only; Markov-chain
+    /// driver).
+    pub chains: Option<Arc<crate::markov::checkpoint::ChainProgress>>,
 }
 
 /// A per-pixel render's progress: whole passes only.

@@ -28,6 +28,108 @@ pub struct Parcel {
     pub counts: Vec<u64>,
 }
 
+impl Parcel {
+    /// Appends the parcel's bytes to `out` (little-endian: the unit, each
+    /// film as a presence flag, its `[width, height, x0, y0, w, h]` and
+    /// accumulators as f32 bits, then the numbers as f64 bits and the
+    /// counts, each list after its length), for checkpoint files.
+    pub fn encode(&self, out: &mut Vec<u8>) {
+        let word = |v: u64, out: &mut Vec<u8>| out.extend_from_slice(&v.to_le_bytes());
+        word(self.unit as u64, out);
+        word(self.films.len() as u64, out);
+        for film in &self.films {
+            let Some(f) = film else {
+                word(0, out);
+                continue;
+            };
+            word(1, out);
+            for d in [f.width, f.height, f.x0, f.y0, f.w, f.h] {
+                word(u64::from(d), out);
+            }
+            let (samples, splats) = f.accumulators();
+            for floats in [samples.as_flattened(), splats.as_flattened()] {
+                word(floats.len() as u64, out);
+                floats
+                    .iter()
+                    .for_each(|x| out.extend_from_slice(&x.to_bits().to_le_bytes()));
+            }
+        }
+        word(self.numbers.len() as u64, out);
+        self.numbers.iter().for_each(|x| word(x.to_bits(), out));
+        word(self.counts.len() as u64, out);
+        self.counts.iter().for_each(|&c| word(c, out));
+    }
+
+    /// The parcel [`Parcel::encode`] wrote at the front of `input`
+    /// (advanced past it), its films rebuilt with `filter`.
+    pub fn decode(input: &mut &[u8], filter: &Arc<Filter>) -> Result<Parcel, String> {
+        fn take<'a>(input: &mut &'a [u8], n: usize) -> Result<&'a [u8], String> {
+            if input.len() < n {
+                return Err("truncated".into());
+            }
+            let (head, rest) = input.split_at(n);
+            *input = rest;
+            Ok(head)
+        }
+        let word = |input: &mut &[u8]| -> Result<u64, String> {
+            Ok(u64::from_le_bytes(
+                take(input, 8)?.try_into().expect("8 bytes"),
+            ))
+        };
+        // A length that cannot fit in what is left is corrupt.
+        let len = |input: &mut &[u8], unit: usize| -> Result<usize, String> {
+            let n = word(input)?;
+            usize::try_from(n)
+                .ok()
+                .filter(|&n| n.saturating_mul(unit) <= input.len())
+                .ok_or_else(|| format!("a length of {n} overruns the data"))
+        };
+        let unit = word(input)? as usize;
+        let mut films = Vec::new();
+        for _ in 0..len(input, 8)? {
+            if word(input)? == 0 {
+                films.push(None);
+                continue;
+            }
+            let mut dims = [0u32; 6];
+            for d in &mut dims {
+                *d = u32::try_from(word(input)?).map_err(|_| "a film size overflows")?;
+            }
+            let mut floats = || -> Result<Vec<f32>, String> {
+                let n = len(input, 4)?;
+                Ok(take(input, 4 * n)?
+                    .chunks_exact(4)
+                    .map(|b| f32::from_bits(u32::from_le_bytes(b.try_into().expect("4 bytes"))))
+                    .collect())
+            };
+            let (samples, splats) = (floats()?, floats()?);
+            if samples.len() % 4 != 0 || splats.len() % 3 != 0 {
+                return Err("a film's accumulators are cut".into());
+            }
+            let samples = samples.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]);
+            let splats = splats.chunks_exact(3).map(|c| [c[0], c[1], c[2]]);
+            films.push(Some(Film::from_accumulators(
+                dims,
+                filter.clone(),
+                samples.collect(),
+                splats.collect(),
+            )?));
+        }
+        let numbers = (0..len(input, 8)?)
+            .map(|_| word(input).map(f64::from_bits))
+            .collect::<Result<_, _>>()?;
+        let counts = (0..len(input, 8)?)
+            .map(|_| word(input))
+            .collect::<Result<_, _>>()?;
+        Ok(Parcel {
+            unit,
+            films,
+            numbers,
+            counts,
+        })
+    }
+}
+
 /// The collective operations the drivers need. Every rank calls them in
 /// the same order.
 pub trait Cluster: Send + Sync {

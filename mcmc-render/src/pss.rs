@@ -484,6 +484,10 @@ impl<'a, F: PssPathSampler> ChainFamily for PssFamily<'a, F> {
     fn independent_probability(&self, mutation: &Mutation) -> f64 {
         mutation.large_step_probability
     }
+    fn checkpointable(&self, mutation: &Mutation) -> bool {
+        // The adaptive small step's kernel keeps its adaptation's state.
+        !matches!(mutation.small, SmallStepKind::Adaptive)
+    }
     crate::primary_sample_space_family!();
 }
 
@@ -508,6 +512,12 @@ macro_rules! primary_sample_space_family {
         }
         fn coordinates(&self, state: &Self::State) -> Option<Vec<f64>> {
             Some(state.materialize())
+        }
+        fn state_words(&self, state: &Self::State, out: &mut Vec<u64>) {
+            state.to_words(out);
+        }
+        fn state_from_words(&self, input: &mut &[u64]) -> Option<Self::State> {
+            <Self::State>::from_words(input)
         }
     };
 }

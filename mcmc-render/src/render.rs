@@ -123,7 +123,7 @@ pub(crate) fn image_tiles(width: u32, height: u32) -> Vec<(u32, u32, u32, u32)> 
 
 /// Adds a pass's unit films into `film` in unit order and returns their
 /// counters ([`crate::cluster::reduce_units`]: every rank's on rank 0).
-fn reduce_pass<'a>(
+pub(crate) fn reduce_pass<'a>(
     film: &mut Film,
     units: impl Iterator<Item = (usize, &'a Film, SampleStats)>,
     filter: &Arc<Filter>,

@@ -8,13 +8,21 @@
 //! Control: resuming from the saved film but restarting the pass count at
 //! 0 (so the later passes reuse the first passes' random streams) must not
 //! give the uninterrupted image, or the comparison could not tell.
+//!
+//! The Markov-chain driver (`pssmlt`, `mmlt`): a render stopped after two
+//! of its rounds and resumed ends with the uninterrupted render's bits,
+//! statistics included. Control: the same checkpoint with every chain's
+//! random stream put back to where it started (all other state kept) must
+//! differ.
 
 mod common;
 
 use common::{bdpt_of, lt_of, pt_of, repo_scene};
 use mcmc_render::checkpoint::{Checkpoint, load};
 use mcmc_render::color::Rgb;
-use mcmc_render::integrators::Integrator;
+use mcmc_render::integrators::registry;
+use mcmc_render::integrators::{Integrator, Rendered, RunSettings};
+use mcmc_render::markov::checkpoint::{ChainProgress, load as load_chains};
 use mcmc_render::observer::{NoObserver, Observer};
 use mcmc_render::render::{RenderSettings, render, render_checkpointed};
 use mcmc_render::scene::Scene;
@@ -64,6 +72,7 @@ fn images(scene: &Scene, integ: &dyn Integrator, name: &str) -> [Vec<u32>; 3] {
         path: path.clone(),
         fingerprint: 42,
         resume: None,
+        chains: None,
     };
     // Stopped after two passes (1 + 2 spp).
     let stop = AtomicBool::new(false);
@@ -121,5 +130,118 @@ fn a_stopped_render_resumed_from_its_checkpoint_ends_bit_identical() {
         let [resumed, whole, control] = images(&scene, integ.as_ref(), name);
         assert!(resumed == whole, "{name}: resumed image differs");
         assert!(control != whole, "{name}: control agreed");
+    }
+}
+
+/// A Markov render as the command line runs it, checkpointed at `path`;
+/// snapshots after every round (so `observer` can stop it between rounds).
+fn chains_render(
+    scene: &Scene,
+    name: &str,
+    path: &std::path::Path,
+    progress: Option<ChainProgress>,
+    stop: &AtomicBool,
+    observer: &dyn Observer,
+) -> Rendered {
+    // 40×40 × 24 mutations per pixel over 48 chains: 800 mutations a
+    // chain, i.e. rounds of 256, 256, 256 and 32.
+    let sets = [
+        ("bootstrap", "4000"),
+        ("chains", "48"),
+        ("mutations_per_pixel", "24"),
+        ("max_depth", "5"),
+    ];
+    let integ = registry::configure(
+        None,
+        Some(name),
+        &sets.map(|(k, v)| (k.to_string(), v.to_string())),
+    )
+    .expect(name);
+    let run = RunSettings {
+        seed: 5,
+        snapshot_every: std::time::Duration::ZERO,
+        checkpoint: Some(Checkpoint {
+            path: path.to_path_buf(),
+            fingerprint: 7,
+            resume: None,
+            chains: progress.map(Arc::new),
+        }),
+        ..RunSettings::default()
+    };
+    integ.render(scene, &run, stop, observer).expect(name)
+}
+
+#[test]
+fn a_stopped_markov_render_resumed_from_its_checkpoint_ends_bit_identical() {
+    let scene = repo_scene("cornell-box.xml", 40);
+    let (w, h) = (scene.film.width, scene.film.height);
+    let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
+    for name in ["pssmlt", "mmlt"] {
+        let path = std::env::temp_dir().join(format!(
+            "mcmc-render-checkpoint-{name}-{}.ckpt",
+            std::process::id()
+        ));
+        let _ = std::fs::remove_file(&path);
+        let load = || {
+            load_chains(&path, 7, (w, h), &filter)
+                .unwrap()
+                .expect("a checkpoint")
+        };
+        // Stopped after two whole rounds.
+        let stop = AtomicBool::new(false);
+        let observer = StopAfter {
+            stop: &stop,
+            after: 2,
+            seen: AtomicU32::new(0),
+        };
+        let first = chains_render(&scene, name, &path, None, &stop, &observer);
+        assert!(first.interrupted, "{name}: the first run was not stopped");
+        let saved = load();
+        assert_eq!(saved.mutations(), 48 * 512, "{name}: not two whole rounds");
+        // The control's copy: every chain's stream back at its start.
+        let mut restarted = load();
+        for (c, chain) in restarted
+            .tasks
+            .iter_mut()
+            .flat_map(|t| &mut t.chains)
+            .enumerate()
+        {
+            chain.rng = mcmc_core::rng::rng_words(&mcmc_core::rng::stream_rng(5, c as u64));
+        }
+        let go = AtomicBool::new(false);
+        let resumed = chains_render(&scene, name, &path, Some(saved), &go, &NoObserver);
+        assert!(!resumed.interrupted, "{name}");
+        assert_eq!(
+            resumed.statistics["checkpoint"]["resumed_from_mutations"],
+            48 * 512,
+            "{name}"
+        );
+        // The finished run's checkpoint holds all the work.
+        assert_eq!(load().mutations(), 40 * 40 * 24, "{name}");
+        let _ = std::fs::remove_file(&path);
+        let whole = chains_render(&scene, name, &path, None, &go, &NoObserver);
+        let _ = std::fs::remove_file(&path);
+        let control = chains_render(&scene, name, &path, Some(restarted), &go, &NoObserver);
+        std::fs::remove_file(&path).unwrap();
+        assert!(
+            bits(&resumed.image) == bits(&whole.image),
+            "{name}: resumed image differs"
+        );
+        for key in [
+            "mutations",
+            "acceptance",
+            "b_running",
+            "acceptance_per_depth",
+            "families",
+        ] {
+            assert_eq!(
+                resumed.statistics[key], whole.statistics[key],
+                "{name}: {key}"
+            );
+        }
+        assert!(
+            bits(&control.image) != bits(&whole.image),
+            "{name}: control agreed"
+        );
     }
 }

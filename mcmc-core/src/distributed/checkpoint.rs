@@ -8,38 +8,26 @@
 
 use super::DistributedError;
 use crate::rng::ChainRng;
-use rand::SeedableRng;
 use std::path::Path;
 
 /// First word of a replica-exchange checkpoint ("mcmcRE01").
 pub(crate) const REPLICA_MAGIC: u64 = u64::from_le_bytes(*b"mcmcRE01");
 
-/// The four state words of a generator. `rand_xoshiro` offers its state
-/// only through serde, hence the JSON detour.
+/// The four state words of a generator ([`crate::rng::rng_words`]).
 pub(crate) fn rng_words(rng: &ChainRng) -> Vec<u64> {
-    let v = serde_json::to_value(rng).expect("a generator's state serialises");
-    v["s"]
-        .as_array()
-        .expect("xoshiro256++ state is an array")
-        .iter()
-        .map(|w| w.as_u64().expect("state words are u64"))
-        .collect()
+    crate::rng::rng_words(rng).to_vec()
 }
 
 /// The generator with state `words` (from [`rng_words`]).
 pub(crate) fn rng_from_words(words: &[u64]) -> Result<ChainRng, DistributedError> {
-    if words.len() != 4 || words.iter().all(|&w| w == 0) {
-        return Err(DistributedError::Checkpoint(format!(
-            "a generator state must be 4 words, not all zero (got {words:?})"
-        )));
-    }
-    // `from_seed` reads the state words little-endian, exactly as given
-    // (only an all-zero seed is replaced, excluded above).
-    let mut seed = [0u8; 32];
-    for (chunk, w) in seed.chunks_exact_mut(8).zip(words) {
-        chunk.copy_from_slice(&w.to_le_bytes());
-    }
-    Ok(ChainRng::from_seed(seed))
+    <[u64; 4]>::try_from(words)
+        .ok()
+        .and_then(crate::rng::rng_from_words)
+        .ok_or_else(|| {
+            DistributedError::Checkpoint(format!(
+                "a generator state must be 4 words, not all zero (got {words:?})"
+            ))
+        })
 }
 
 /// Writes `bytes` to `path` through a temporary file renamed over it.

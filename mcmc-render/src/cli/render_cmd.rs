@@ -203,10 +203,11 @@ fn input_parts(
     ]
 }
 
-/// The checkpoint of `--checkpoint path`: for the per-pixel integrators
-/// only, tied to the scene text, defines, integrator, settings and seed;
-/// rank 0 loads the progress it holds, if any (one line when it belongs
-/// to another render).
+/// The checkpoint of `--checkpoint path`: for the integrators that can
+/// be checkpointed only (the per-pixel ones and some on the Markov-chain
+/// driver), tied to the scene text, defines, integrator, settings and
+/// seed; rank 0 loads the progress it holds, if any (one line when it
+/// belongs to another render).
 fn open_checkpoint(
     path: &Path,
     scene: &Scene,
@@ -214,24 +215,34 @@ fn open_checkpoint(
     defines: &std::collections::HashMap<String, String>,
     integrator: &dyn Configured,
 ) -> Result<crate::checkpoint::Checkpoint, String> {
-    use crate::checkpoint::{Checkpoint, INTEGRATORS, fingerprint, load};
-    if !INTEGRATORS.contains(&integrator.name()) {
+    use crate::checkpoint::{CHAIN_INTEGRATORS, Checkpoint, INTEGRATORS, fingerprint, load};
+    let name = integrator.name();
+    let chains = CHAIN_INTEGRATORS.contains(&name);
+    if !INTEGRATORS.contains(&name) && !chains {
         return Err(format!(
-            "--checkpoint: {} cannot be checkpointed yet (only {})",
-            integrator.name(),
-            INTEGRATORS.join(", ")
+            "--checkpoint: {name} cannot be checkpointed yet (only {}, {})",
+            INTEGRATORS.join(", "),
+            CHAIN_INTEGRATORS.join(", ")
         ));
     }
     let fingerprint = fingerprint(&input_parts(args, defines, integrator));
-    let resume = match crate::cluster::is_root() {
-        true => load(path, fingerprint, (scene.film.width, scene.film.height))?.map(Arc::new),
-        false => None,
-    };
-    Ok(Checkpoint {
+    let size = (scene.film.width, scene.film.height);
+    let mut checkpoint = Checkpoint {
         path: path.to_path_buf(),
         fingerprint,
-        resume,
-    })
+        resume: None,
+        chains: None,
+    };
+    if crate::cluster::is_root() {
+        if chains {
+            let filter = Arc::new(crate::film::Filter::new(scene.film.filter, size.0, size.1));
+            checkpoint.chains =
+                crate::markov::checkpoint::load(path, fingerprint, size, &filter)?.map(Arc::new);
+        } else {
+            checkpoint.resume = load(path, fingerprint, size)?.map(Arc::new);
+        }
+    }
+    Ok(checkpoint)
 }
 
 fn render_job(job: &Job<'_>) -> Result<(), String> {

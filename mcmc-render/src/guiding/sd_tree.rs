@@ -87,6 +87,32 @@ impl RecordBuffer {
     pub fn clear(&mut self) {
         self.records.clear();
     }
+
+    /// Appends the records to `out` as numbers (four per record, exact:
+    /// the leaf, the direction's square coordinates and the value), for
+    /// sending them to other processes.
+    pub fn to_f64s(&self, out: &mut Vec<f64>) {
+        for r in &self.records {
+            out.extend([f64::from(r.leaf), f64::from(r.p.0), f64::from(r.p.1)]);
+            out.push(f64::from(r.value));
+        }
+    }
+
+    /// The buffer of `n` records [`RecordBuffer::to_f64s`] wrote at the
+    /// front of `input` (advanced past them); `None` when too short.
+    pub fn from_f64s(input: &mut &[f64], n: usize) -> Option<RecordBuffer> {
+        let (head, rest) = input.split_at_checked(4 * n)?;
+        *input = rest;
+        let records = head
+            .chunks_exact(4)
+            .map(|r| Record {
+                leaf: r[0] as u32,
+                p: (r[1] as f32, r[2] as f32),
+                value: r[3] as f32,
+            })
+            .collect();
+        Some(RecordBuffer { records })
+    }
 }
 
 /// Sizes of an SD-tree, for statistics.
@@ -120,6 +146,39 @@ impl ExactRecords {
     /// Whether nothing was accumulated.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
+    }
+
+    /// Appends the sums to `out` as words (exact), for sending them to
+    /// other processes: the per-leaf counts after their number, then each
+    /// energy entry (leaf, node, low and high word) after theirs.
+    pub fn to_words(&self, out: &mut Vec<u64>) {
+        out.push(self.samples.len() as u64);
+        out.extend(&self.samples);
+        out.push(self.energy.len() as u64);
+        for (&(leaf, node), &e) in &self.energy {
+            out.extend([u64::from(leaf), u64::from(node), e as u64, (e >> 64) as u64]);
+        }
+    }
+
+    /// The sums [`ExactRecords::to_words`] wrote at the front of `input`
+    /// (advanced past them); `None` when the words are not such sums.
+    pub fn from_words(input: &mut &[u64]) -> Option<ExactRecords> {
+        let (&n, rest) = input.split_first()?;
+        let (samples, rest) = rest.split_at_checked(usize::try_from(n).ok()?)?;
+        let (&m, rest) = rest.split_first()?;
+        let (entries, rest) = rest.split_at_checked(usize::try_from(m).ok()?.checked_mul(4)?)?;
+        *input = rest;
+        let energy = entries
+            .chunks_exact(4)
+            .map(|e| {
+                let key = (u32::try_from(e[0]).ok()?, u32::try_from(e[1]).ok()?);
+                Some((key, u128::from(e[2]) | (u128::from(e[3]) << 64)))
+            })
+            .collect::<Option<_>>()?;
+        Some(ExactRecords {
+            samples: samples.to_vec(),
+            energy,
+        })
     }
 }
 

@@ -406,8 +406,10 @@ impl GuidedSettings {
         let mut stats = SampleStats::default();
         let mut interrupted = false;
         let mut nominal = 1u64;
+        let cluster = crate::cluster::current();
         for k in 1u32.. {
-            // Is this the last iteration, and how long is it?
+            // Is this the last iteration, and how long is it? (On a
+            // cluster rank 0's clock decides for every rank.)
             let (iteration_spp, last) = next_iteration(
                 budget_spp,
                 spp_done,
@@ -415,6 +417,7 @@ impl GuidedSettings {
                 deadline,
                 iterations.last().map(|it| it.seconds),
             );
+            let (iteration_spp, last) = agreed_iteration(iteration_spp, last);
             let iteration_start = Instant::now();
             let mut film = Film::new(width, height, filter.clone());
             let mut done = 0u64;
@@ -423,7 +426,8 @@ impl GuidedSettings {
                 if iteration_spp.is_some_and(|n| done >= n) {
                     break;
                 }
-                if stop.load(Ordering::Relaxed) || out_of_time() {
+                let halt = stop.load(Ordering::Relaxed) || out_of_time();
+                if cluster.map_or(halt, |c| c.any(halt)) {
                     interrupted = true;
                     break;
                 }
@@ -438,16 +442,18 @@ impl GuidedSettings {
                     aborted.load(Ordering::Relaxed)
                 };
                 let tree_ref = &tree;
-                let results: Vec<(Film, Option<Training>, SampleStats)> = tiles
+                // On a cluster this rank renders the tiles dealt to it.
+                let results: Vec<(usize, Film, Option<Training>, SampleStats)> = tiles
                     .par_iter()
                     .enumerate()
+                    .filter(|(i, _)| crate::cluster::owns(cluster, *i))
                     .map(|(i, &(x0, y0, x1, y1))| {
                         let mut tile =
                             Film::for_tile(width, height, x0, y0, x1, y1, filter.clone());
                         let mut st = SampleStats::default();
                         let mut training = record.then(Training::default);
                         if check_abort() {
-                            return (tile, training, st);
+                            return (i, tile, training, st);
                         }
                         let mut src = unit_source(run.seed, pass, i as u64);
                         tracer.render_tile(
@@ -461,22 +467,29 @@ impl GuidedSettings {
                             &mut st,
                         );
                         observer.progress(u64::from((x1 - x0) * (y1 - y0)) * u64::from(spp));
-                        (tile, training, st)
+                        (i, tile, training, st)
                     })
                     .collect();
-                if aborted.load(Ordering::Relaxed) {
+                let aborted = aborted.load(Ordering::Relaxed);
+                if cluster.map_or(aborted, |c| c.any(aborted)) {
                     interrupted = true;
                     break;
                 }
-                for (tile, _, st) in &results {
-                    film.add_film(tile);
+                // Tile films and counters in tile order (every rank's on
+                // rank 0); every rank merges every tile's records.
+                let units = results.iter().map(|(i, tile, _, st)| (*i, tile, *st));
+                for st in &crate::render::reduce_pass(&mut film, units, &filter) {
                     stats.merge(st);
                 }
                 if record {
-                    let buffers: Vec<&RecordBuffer> = results
+                    let local = results
                         .iter()
-                        .filter_map(|r| r.1.as_ref().map(|t| &t.records))
-                        .collect();
+                        .filter_map(|r| Some((r.0, &r.2.as_ref()?.records)));
+                    let gathered = cluster.map(|c| all_tile_records(c, local.clone()));
+                    let buffers: Vec<&RecordBuffer> = match &gathered {
+                        Some(all) => all.iter().collect(),
+                        None => local.map(|(_, b)| b).collect(),
+                    };
                     records += buffers.iter().map(|b| b.len() as u64).sum::<u64>();
                     tree.merge(buffers.iter().copied());
                 }
@@ -558,4 +571,43 @@ impl GuidedSettings {
         };
         Ok((rendered, tree))
     }
+}
+
+/// An iteration's length and whether it is the last ([`next_iteration`]),
+/// on a cluster rank 0's for every rank (with a time budget the ranks'
+/// clocks could disagree).
+pub(crate) fn agreed_iteration(length: Option<u64>, last: bool) -> (Option<u64>, bool) {
+    match crate::cluster::current() {
+        Some(c) => {
+            let agreed = c.broadcast_u64s(vec![length.unwrap_or(u64::MAX), u64::from(last)]);
+            ((agreed[0] != u64::MAX).then_some(agreed[0]), agreed[1] == 1)
+        }
+        None => (length, last),
+    }
+}
+
+/// Every rank's tile record buffers (`local`: this rank's, with their
+/// tile indices), in tile order, on every rank: bit-exact, so every rank
+/// merges the same records into its tree in the same order.
+fn all_tile_records<'a>(
+    cluster: &dyn crate::cluster::Cluster,
+    local: impl Iterator<Item = (usize, &'a RecordBuffer)>,
+) -> Vec<RecordBuffer> {
+    let mut numbers = Vec::new();
+    for (tile, buffer) in local {
+        numbers.extend([tile as f64, buffer.len() as f64]);
+        buffer.to_f64s(&mut numbers);
+    }
+    let all = cluster.all_gather_f64s(numbers);
+    let mut input = &all[..];
+    let mut tiles = Vec::new();
+    while let [tile, n, rest @ ..] = input {
+        input = rest;
+        // Every rank runs the same binary (checked at start-up): a short
+        // message is a bug, not an input error.
+        let buffer = RecordBuffer::from_f64s(&mut input, *n as usize).expect("a tile's records");
+        tiles.push((*tile as usize, buffer));
+    }
+    tiles.sort_by_key(|t| t.0);
+    tiles.into_iter().map(|t| t.1).collect()
 }

@@ -62,7 +62,7 @@
 //! Coordinates 0–1 the raster position (2–3 the lens of a thin-lens
 //! camera), then 8 per scattering vertex as [`super::guided`] documents.
 
-use super::guided::{GuidedPathTracer, GuidedSettings, Training, next_iteration};
+use super::guided::{GuidedPathTracer, GuidedSettings, Training, agreed_iteration, next_iteration};
 use super::registry::IntegratorSettings;
 use super::{RenderError, Rendered, RunSettings};
 use crate::guiding::{ExactRecords, SdTree};
@@ -395,6 +395,7 @@ impl McmcPg {
                 deadline,
                 phases.last().map(|p| p.seconds),
             );
+            let (mpp, last) = agreed_iteration(mpp, last);
             let iteration_start = Instant::now();
             let sink = (!last).then(RecordSink::new);
             let sampler = GuidedPss {
@@ -411,6 +412,12 @@ impl McmcPg {
             let interrupted = result.interrupted && !last;
             let parts: Vec<ExactRecords> =
                 sink.map(|s| s.into_parts().collect()).unwrap_or_default();
+            // On a cluster this rank's chains recorded only its share:
+            // every rank merges every rank's (exact sums: any order).
+            let parts = match crate::cluster::current() {
+                Some(c) if !last => all_exact_records(c, parts),
+                _ => parts,
+            };
             phases.push(PhaseStats {
                 iteration: k,
                 mutations_per_pixel: result.mutations_per_pixel,
@@ -519,4 +526,25 @@ impl IntegratorSettings for McmcPg {
         );
         Ok(rendered)
     }
+}
+
+/// Every rank's record sums, on every rank (bit-exact).
+fn all_exact_records(
+    cluster: &dyn crate::cluster::Cluster,
+    parts: Vec<ExactRecords>,
+) -> Vec<ExactRecords> {
+    let mut words = Vec::new();
+    parts.iter().for_each(|p| p.to_words(&mut words));
+    let all: Vec<u64> = cluster
+        .all_gather_f64s(words.into_iter().map(f64::from_bits).collect())
+        .into_iter()
+        .map(f64::to_bits)
+        .collect();
+    let mut input = &all[..];
+    let mut out = Vec::new();
+    while !input.is_empty() {
+        // Every rank runs the same binary: a short message is a bug.
+        out.push(ExactRecords::from_words(&mut input).expect("a rank's record sums"));
+    }
+    out
 }

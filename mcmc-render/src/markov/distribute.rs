@@ -49,7 +49,7 @@ impl<'a> TaskSums<'a> {
     /// length + 1 or 0, the sample-count image's length and width;
     /// numbers: the running logs, the ratio sums, the NaN coordinates, the
     /// sample counts).
-    fn parcel(&self, unit: usize) -> Parcel {
+    pub(crate) fn parcel(&self, unit: usize) -> Parcel {
         let n = self.members.len();
         let mut counts = vec![n as u64];
         counts.extend(self.members.iter().map(|&m| m as u64));
@@ -88,7 +88,7 @@ impl<'a> TaskSums<'a> {
     }
 
     /// The sums a [`TaskSums::parcel`] carries.
-    fn from_parcel(p: Parcel) -> TaskSums<'static> {
+    pub(crate) fn from_parcel(p: Parcel) -> TaskSums<'static> {
         let mut c = p.counts.into_iter();
         let mut x = p.numbers.into_iter();
         // Every rank runs the same binary (checked at start-up): a short

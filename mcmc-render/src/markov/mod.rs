@@ -53,6 +53,7 @@
 //! order, so the image is also bit-identical for any number of ranks (see
 //! [`distribute`]).
 
+pub mod checkpoint;
 mod distribute;
 pub mod estimator;
 pub mod report;
@@ -187,6 +188,7 @@ impl ChainParams {
             tasks: 16,
             preview_every: run.snapshot_every,
             depth_allocation_exponent: self.depth_allocation,
+            checkpoint: run.checkpoint.clone(),
         }
     }
 }
@@ -302,6 +304,22 @@ pub trait ChainFamily: Sync {
     /// are ordered easy to hard (RELT). `None` (the default): every member
     /// starts from its own bootstrap.
     fn annealing(&self) -> Option<Annealing> {
+        None
+    }
+    /// Whether runs of this family with `mutation` can be checkpointed
+    /// ([`checkpoint`]): its states encode exactly
+    /// ([`ChainFamily::state_words`]) and its kernels keep no state of
+    /// their own (no adaptation). Families with an exchange move are not
+    /// (their replica sets are not saved). Default: no.
+    fn checkpointable(&self, _mutation: &Self::Mutation) -> bool {
+        false
+    }
+    /// Appends `state`'s exact encoding to `out` without changing it (a
+    /// lazily grown state must not grow), for checkpoints.
+    fn state_words(&self, _state: &Self::State, _out: &mut Vec<u64>) {}
+    /// The state [`ChainFamily::state_words`] wrote at the front of
+    /// `input` (advanced past it); `None` when it is not one.
+    fn state_from_words(&self, _input: &mut &[u64]) -> Option<Self::State> {
         None
     }
     /// A member's own search of independent draws beyond the bootstrap
@@ -560,6 +578,9 @@ pub struct ChainSettings<M> {
     /// exponent: 1 (default) is pbrt-v4's share (what a single chain over
     /// all depths spends per depth); 0 gives every member the same number.
     pub depth_allocation_exponent: f64,
+    /// Save the tasks to, and resume them from, a checkpoint (families that
+    /// are [`ChainFamily::checkpointable`]).
+    pub checkpoint: Option<crate::checkpoint::Checkpoint>,
 }
 
 impl<M: Default> Default for ChainSettings<M> {
@@ -576,6 +597,7 @@ impl<M: Default> Default for ChainSettings<M> {
             tasks: 16,
             preview_every: RunSettings::DEFAULT_SNAPSHOT_EVERY,
             depth_allocation_exponent: 1.0,
+            checkpoint: None,
         }
     }
 }
@@ -626,6 +648,9 @@ pub struct MltResult {
     /// In a distributed run, every rank's share and statistics (rank 0;
     /// empty otherwise).
     pub ranks: Vec<serde_json::Value>,
+    /// With a checkpoint: the mutations it resumed from, and the first
+    /// error writing it, if any.
+    pub checkpoint: Option<(u64, Option<String>)>,
 }
 
 impl MltResult {
@@ -777,6 +802,14 @@ pub fn run<F: ChainFamily>(
         )));
     }
     family.kernel(&settings.mutation, 0)?;
+    if settings.checkpoint.is_some()
+        && (family.exchange_move().is_some() || !family.checkpointable(&settings.mutation))
+    {
+        return Err(MltError::Setting(format!(
+            "these chains cannot be checkpointed (only {}' independent chains without the adaptive small step)",
+            crate::checkpoint::CHAIN_INTEGRATORS.join("'s and ")
+        )));
+    }
     check_memory(scene, family, settings)?;
     let start = Instant::now();
     let deadline = settings.time_budget.map(|b| start + b);
@@ -943,6 +976,7 @@ pub fn run<F: ChainFamily>(
     };
     // On a cluster this rank runs only the tasks dealt to it.
     let cluster = crate::cluster::current();
+    let all_tasks = tasks.len();
     let task_ids: Vec<usize> = (0..tasks.len())
         .filter(|&t| crate::cluster::owns(cluster, t))
         .collect();
@@ -953,6 +987,19 @@ pub fn run<F: ChainFamily>(
             crate::cluster::owns(cluster, t - 1)
         });
     }
+
+    // A checkpoint's tasks replace the fresh ones (same inputs, same tasks).
+    let resumed = match &settings.checkpoint {
+        Some(ck) => checkpoint::resume(
+            family, ck, cluster, &mut tasks, &task_ids, all_tasks, &filter,
+        )
+        .map_err(|e| MltError::Setting(format!("checkpoint {}: {e}", ck.path.display())))?,
+        None => None,
+    };
+    if resumed.is_some() {
+        observer.progress(tasks.iter().flat_map(|t| &t.mutations).sum());
+    }
+    let mut checkpoint_error: Option<String> = None;
 
     let p_independent = family.independent_probability(&settings.mutation);
     let b_hat: Arc<[f64]> = bootstrap_b.iter().map(|b| b.0).collect();
@@ -993,6 +1040,12 @@ pub fn run<F: ChainFamily>(
     let stopped = || stop.load(Ordering::Relaxed) || out_of_time();
     let mut interrupted = false;
     let mut last_preview = Instant::now();
+    // Checkpoints: whole rounds only (a round cut short has some chains a
+    // round ahead of others, and the films' additions would come in
+    // another order); at the end, when stopped, and in between at most
+    // once per `CHECKPOINT_EVERY` and 20 writes' time (≤ 5% of the run).
+    let mut round_complete = false;
+    let (mut last_save, mut save_cost) = (Instant::now(), Duration::ZERO);
     loop {
         // On a cluster every rank leaves the loop in the same round: when
         // all ranks' tasks are done, or when any rank was stopped.
@@ -1001,6 +1054,21 @@ pub fn run<F: ChainFamily>(
             Some(c) => (!c.any(!local_done), c.any(stop_now)),
             None => (local_done, stop_now),
         };
+        if let Some(ck) = &settings.checkpoint {
+            let due = last_save.elapsed() >= CHECKPOINT_EVERY.max(20 * save_cost);
+            let (complete, due) = match cluster {
+                Some(c) => (!c.any(!round_complete), c.any(due && c.rank() == 0)),
+                None => (round_complete, due),
+            };
+            if complete && (due || all_done || stop_now) {
+                let t = Instant::now();
+                let saved = checkpoint::save_tasks(family, ck, cluster, &tasks, &task_ids, &filter);
+                if let Err(e) = saved {
+                    checkpoint_error.get_or_insert(e);
+                }
+                (last_save, save_cost) = (Instant::now(), t.elapsed());
+            }
+        }
         if all_done {
             break;
         }
@@ -1009,10 +1077,9 @@ pub fn run<F: ChainFamily>(
             break;
         }
         // A round cut short by the stop flag is seen at the loop's top.
-        if !local_done
-            && !work::run_round(&mut tasks, family, &weights, &stopped, observer)
-            && cluster.is_none()
-        {
+        round_complete =
+            local_done || work::run_round(&mut tasks, family, &weights, &stopped, observer);
+        if !round_complete && cluster.is_none() {
             interrupted = true;
             break;
         }
@@ -1110,8 +1177,16 @@ pub fn run<F: ChainFamily>(
         interrupted,
         sample_counts,
         ranks,
+        checkpoint: settings
+            .checkpoint
+            .as_ref()
+            .map(|_| (resumed.unwrap_or(0), checkpoint_error)),
     })
 }
+
+/// Least time between two checkpoints of a run (besides the one at its
+/// end or when it is stopped).
+const CHECKPOINT_EVERY: Duration = Duration::from_secs(1);
 
 /// The sums of this process's tasks, borrowed.
 fn local_sums<'a, F: ChainFamily>(tasks: &'a [Task<'_, F>]) -> Vec<distribute::TaskSums<'a>> {

@@ -89,6 +89,12 @@ pub fn rendered(
     if !result.ranks.is_empty() {
         statistics.insert("ranks".into(), json!(result.ranks));
     }
+    if let Some((resumed, error)) = &result.checkpoint {
+        statistics.insert(
+            "checkpoint".into(),
+            json!({"resumed_from_mutations": resumed, "error": error}),
+        );
+    }
     Rendered {
         image: result.image(),
         seconds: result.seconds,

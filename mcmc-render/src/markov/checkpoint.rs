@@ -1,0 +1,436 @@
+//! Checkpoints of the Markov-chain driver: between two whole rounds every
+//! task's films, running normalisations, counters and every chain's exact
+//! state (its current sample with its payload, its random stream, its
+//! statistics) go to a file, so that a run stopped by a time limit,
+//! Ctrl-C or a lost process continues where it was and ends with the bits
+//! of the uninterrupted run: the restored chains draw the same numbers and
+//! splat into the same accumulators in the same order. See
+//! `docs/distributed.md`.
+//!
+//! The start-up (bootstrap, chain allocation, start states) is not in the
+//! file: it is a function of the inputs, which the file's fingerprint
+//! ties it to, and a resumed run makes it again before it restores the
+//! tasks. Families opt in with [`ChainFamily::checkpointable`]: states that
+//! encode exactly and kernels without state of their own (independent
+//! chains only, not replica sets). Only rank 0 of a distributed run reads
+//! and writes the file; it broadcasts what it read.
+
+use super::ChainFamily;
+use super::distribute::TaskSums;
+use super::work::{Task, Units};
+use crate::cluster::Parcel;
+use crate::color::Rgb;
+use crate::film::Filter;
+use crate::pss::{PathSample, Splat};
+use mcmc_core::rng::{rng_from_words, rng_words};
+use mcmc_core::stats::ChainStatistics;
+use std::path::Path;
+use std::sync::Arc;
+
+/// First bytes of a Markov-chain checkpoint file (format version 1).
+const MAGIC: &[u8; 8] = b"mcmcMC01";
+
+/// One chain as saved.
+#[derive(Clone, Debug)]
+pub struct ChainRecord {
+    /// Its current state, as the family encodes it
+    /// ([`ChainFamily::state_words`]).
+    pub state: Vec<u64>,
+    /// `ln π` of the current state.
+    pub log_density: f64,
+    /// The current state's payload.
+    pub payload: PathSample,
+    /// The chain's random stream ([`mcmc_core::rng::rng_words`]).
+    pub rng: [u64; 4],
+    /// Its statistics (the component names are the kernel's).
+    pub stats: ChainStatistics,
+}
+
+/// One task as saved: what it adds to the image (its films, running
+/// normalisations, mutation counts, ratio sums, per-depth counts, as the
+/// distributed reduction sends them) and its chains in order.
+#[derive(Clone, Debug)]
+pub struct TaskRecord {
+    /// The task's sums (the parcel a cluster's reduction sends).
+    pub sums: Parcel,
+    /// Its chains.
+    pub chains: Vec<ChainRecord>,
+}
+
+/// A Markov-chain render's progress: every task, in task order.
+#[derive(Clone, Debug)]
+pub struct ChainProgress {
+    /// The tasks.
+    pub tasks: Vec<TaskRecord>,
+}
+
+impl ChainProgress {
+    /// Mutations done, all tasks.
+    pub fn mutations(&self) -> u64 {
+        self.tasks
+            .iter()
+            .map(|t| sums_of(&t.sums).mutations.iter().sum::<u64>())
+            .sum()
+    }
+
+    /// The progress as bytes (the body of a checkpoint file).
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut out = (self.tasks.len() as u64).to_le_bytes().to_vec();
+        for t in &self.tasks {
+            parcel_of(t).encode(&mut out);
+        }
+        out
+    }
+
+    /// The progress [`ChainProgress::to_bytes`] wrote, films rebuilt with
+    /// `filter`.
+    pub fn from_bytes(mut bytes: &[u8], filter: &Arc<Filter>) -> Result<ChainProgress, String> {
+        let n = bytes
+            .split_first_chunk::<8>()
+            .map(|(n, rest)| {
+                bytes = rest;
+                u64::from_le_bytes(*n)
+            })
+            .ok_or("truncated")?;
+        let tasks = (0..n)
+            .map(|_| record_of(Parcel::decode(&mut bytes, filter)?))
+            .collect::<Result<_, String>>()?;
+        if !bytes.is_empty() {
+            return Err(format!("{} bytes after the last task", bytes.len()));
+        }
+        Ok(ChainProgress { tasks })
+    }
+}
+
+/// Saves `progress` for the inputs `fingerprint` to `path` (atomically: a
+/// run killed while writing keeps the previous checkpoint).
+pub fn save(path: &Path, fingerprint: u64, progress: &ChainProgress) -> Result<(), String> {
+    let mut out = MAGIC.to_vec();
+    out.extend_from_slice(&fingerprint.to_le_bytes());
+    out.extend(progress.to_bytes());
+    crate::output::write_bytes(path, &out)
+}
+
+/// The progress saved at `path` for the inputs `fingerprint` and an image
+/// of `size` (films rebuilt with `filter`): `None` when there is no file;
+/// an error (one line) when it is not a Markov-chain checkpoint or belongs
+/// to another render.
+pub fn load(
+    path: &Path,
+    fingerprint: u64,
+    size: (u32, u32),
+    filter: &Arc<Filter>,
+) -> Result<Option<ChainProgress>, String> {
+    let bytes = match std::fs::read(path) {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(format!("cannot read checkpoint {}: {e}", path.display())),
+    };
+    let bad = |why: &str| format!("checkpoint {}: {why}", path.display());
+    let Some(body) = bytes.strip_prefix(MAGIC) else {
+        return Err(bad("not a checkpoint of mcmc-render's Markov-chain driver"));
+    };
+    let Some((fp, body)) = body.split_first_chunk::<8>() else {
+        return Err(bad("truncated"));
+    };
+    if u64::from_le_bytes(*fp) != fingerprint {
+        return Err(bad(
+            "written by another render (scene, defines, integrator, its settings or seed differ)",
+        ));
+    }
+    let progress = ChainProgress::from_bytes(body, filter).map_err(|e| bad(&e))?;
+    for f in progress
+        .tasks
+        .iter()
+        .flat_map(|t| t.sums.films.iter().flatten())
+    {
+        if (f.width, f.height) != size {
+            return Err(bad(&format!(
+                "holds a {}×{} image, the scene is {}×{}",
+                f.width, f.height, size.0, size.1
+            )));
+        }
+    }
+    Ok(Some(progress))
+}
+
+/// The record of a local task (`id`: its index among all tasks).
+pub(crate) fn record_of_task<F: ChainFamily>(
+    family: &F,
+    task: &Task<'_, F>,
+    id: usize,
+) -> TaskRecord {
+    let Units::Chains(chains) = &task.units else {
+        unreachable!("the driver refuses checkpoints of replica sets");
+    };
+    TaskRecord {
+        sums: TaskSums::of(task).parcel(id),
+        chains: chains
+            .iter()
+            .map(|slot| {
+                let current = slot.chain.current();
+                let mut state = Vec::new();
+                family.state_words(&current.state, &mut state);
+                ChainRecord {
+                    state,
+                    log_density: current.log_density,
+                    payload: current.payload.clone(),
+                    rng: rng_words(slot.chain.rng()),
+                    stats: slot.chain.stats().clone(),
+                }
+            })
+            .collect(),
+    }
+}
+
+/// Puts `record` back into `task` (built afresh by the driver from the
+/// same inputs): its sums, and every chain's state, stream and
+/// statistics; a chain's remaining budget is what the fresh task gave it
+/// less the mutations it had done.
+pub(crate) fn restore_task<F: ChainFamily>(
+    family: &F,
+    task: &mut Task<'_, F>,
+    record: &TaskRecord,
+) -> Result<(), String> {
+    let sums = sums_of(&record.sums);
+    let Units::Chains(chains) = &mut task.units else {
+        return Err("the checkpoint holds chains, the run replica sets".into());
+    };
+    if *sums.members != task.members || record.chains.len() != chains.len() {
+        return Err(format!(
+            "a task of {} chains of members {:?} does not fit the run's task of {} chains of members {:?}",
+            record.chains.len(),
+            sums.members,
+            chains.len(),
+            task.members
+        ));
+    }
+    for (slot, saved) in chains.iter_mut().zip(&record.chains) {
+        let mut words = &saved.state[..];
+        let state = family
+            .state_from_words(&mut words)
+            .filter(|_| words.is_empty())
+            .ok_or("a chain's state does not decode")?;
+        let parts = slot.chain.parts_mut();
+        if parts.stats.components.len() != saved.stats.components.len() {
+            return Err("a chain's kernel has other components".into());
+        }
+        parts.current.state = state;
+        parts.current.log_density = saved.log_density;
+        parts.current.payload = saved.payload.clone();
+        parts.rng = rng_from_words(saved.rng).ok_or("a chain's stream is all zero")?;
+        let mut stats = saved.stats.clone();
+        for (k, old) in stats.components.iter_mut().zip(&parts.stats.components) {
+            k.name.clone_from(&old.name);
+        }
+        parts.stats = stats;
+        slot.remaining = slot.remaining.map(|r| r.saturating_sub(saved.stats.steps));
+    }
+    task.films = sums.films.into_owned();
+    task.running = sums.running.into_owned();
+    task.mutations = sums.mutations.into_owned();
+    task.ratios = sums.ratios.into_owned();
+    task.counts = sums.counts.into_owned();
+    Ok(())
+}
+
+/// A record's sums as the reduction reads them.
+fn sums_of(parcel: &Parcel) -> TaskSums<'static> {
+    TaskSums::from_parcel(parcel.clone())
+}
+
+/// A record as one parcel: its sums' films and numbers; counts: the
+/// sums' count, the sums' counts, then the chains' words.
+pub(crate) fn parcel_of(record: &TaskRecord) -> Parcel {
+    let mut counts = vec![record.sums.counts.len() as u64];
+    counts.extend(&record.sums.counts);
+    counts.push(record.chains.len() as u64);
+    for c in &record.chains {
+        counts.push(c.state.len() as u64);
+        counts.extend(&c.state);
+        counts.push(c.log_density.to_bits());
+        counts.extend([u64::from(c.payload.depth), c.payload.splats.len() as u64]);
+        for s in &c.payload.splats {
+            let floats = [s.p.x, s.p.y, s.l.r, s.l.g, s.l.b];
+            counts.extend(floats.map(|x| u64::from(x.to_bits())));
+            counts.push(u64::from(s.class));
+        }
+        counts.extend(c.rng);
+        let st = &c.stats;
+        counts.extend([
+            st.steps,
+            st.accepted,
+            st.evaluations,
+            st.invalid_density,
+            st.outside_support,
+            st.failed,
+            st.components.len() as u64,
+        ]);
+        for k in &st.components {
+            counts.extend([k.proposed, k.accepted, k.sum_alpha.to_bits()]);
+        }
+    }
+    Parcel {
+        unit: record.sums.unit,
+        films: record.sums.films.clone(),
+        numbers: record.sums.numbers.clone(),
+        counts,
+    }
+}
+
+/// The record [`parcel_of`] made.
+pub(crate) fn record_of(p: Parcel) -> Result<TaskRecord, String> {
+    let mut words = &p.counts[..];
+    let mut next = || -> Result<u64, String> {
+        let (&w, rest) = words.split_first().ok_or("a task's record is cut")?;
+        words = rest;
+        Ok(w)
+    };
+    let f32_of = |w: u64| f32::from_bits(w as u32);
+    let n = next()?;
+    let sums_counts = (0..n).map(|_| next()).collect::<Result<Vec<_>, _>>()?;
+    let mut chains = Vec::new();
+    for _ in 0..next()? {
+        let state = (0..next()?).map(|_| next()).collect::<Result<_, _>>()?;
+        let log_density = f64::from_bits(next()?);
+        let depth = next()? as u32;
+        let splats = (0..next()?)
+            .map(|_| {
+                let [x, y, r, g, b, class] = [next()?, next()?, next()?, next()?, next()?, next()?];
+                Ok(Splat {
+                    p: glam::Vec2::new(f32_of(x), f32_of(y)),
+                    l: Rgb::new(f32_of(r), f32_of(g), f32_of(b)),
+                    class: class as u8,
+                })
+            })
+            .collect::<Result<_, String>>()?;
+        let rng = [next()?, next()?, next()?, next()?];
+        let mut stats = ChainStatistics::new(Vec::new());
+        [
+            stats.steps,
+            stats.accepted,
+            stats.evaluations,
+            stats.invalid_density,
+            stats.outside_support,
+            stats.failed,
+        ] = [next()?, next()?, next()?, next()?, next()?, next()?];
+        for _ in 0..next()? {
+            stats
+                .components
+                .push(mcmc_core::stats::ComponentStatistics {
+                    // The kernel's names, put back by `restore_task`.
+                    name: String::new(),
+                    proposed: next()?,
+                    accepted: next()?,
+                    sum_alpha: f64::from_bits(next()?),
+                });
+        }
+        chains.push(ChainRecord {
+            state,
+            log_density,
+            payload: PathSample { splats, depth },
+            rng,
+            stats,
+        });
+    }
+    if !words.is_empty() {
+        return Err("a task's record has trailing words".into());
+    }
+    Ok(TaskRecord {
+        sums: Parcel {
+            counts: sums_counts,
+            ..p
+        },
+        chains,
+    })
+}
+
+/// Restores this process's `tasks` (`ids[i]`: local task `i`'s index
+/// among `all` tasks) from the progress `checkpoint` was opened with, read
+/// by rank 0 and broadcast to the others. Returns the mutations the run
+/// resumed from (`None`: nothing to resume, a fresh start). Collective on
+/// a cluster.
+pub(crate) fn resume<F: ChainFamily>(
+    family: &F,
+    checkpoint: &crate::checkpoint::Checkpoint,
+    cluster: Option<&dyn crate::cluster::Cluster>,
+    tasks: &mut [Task<'_, F>],
+    ids: &[usize],
+    all: usize,
+    filter: &Arc<Filter>,
+) -> Result<Option<u64>, String> {
+    let progress = match cluster {
+        None => checkpoint.chains.clone(),
+        Some(c) => {
+            // Bytes as words: the byte count, then 8 bytes a word.
+            let words = match (&checkpoint.chains, c.rank()) {
+                (Some(p), 0) => {
+                    let bytes = p.to_bytes();
+                    let mut w = vec![bytes.len() as u64];
+                    w.extend(bytes.chunks(8).map(|b| {
+                        let mut word = [0u8; 8];
+                        word[..b.len()].copy_from_slice(b);
+                        u64::from_le_bytes(word)
+                    }));
+                    w
+                }
+                _ => Vec::new(),
+            };
+            let words = c.broadcast_u64s(words);
+            match words.split_first() {
+                None => None,
+                Some(_) if c.rank() == 0 => checkpoint.chains.clone(),
+                Some((&n, rest)) => {
+                    let mut bytes: Vec<u8> = rest.iter().flat_map(|w| w.to_le_bytes()).collect();
+                    bytes.truncate(n as usize);
+                    Some(Arc::new(ChainProgress::from_bytes(&bytes, filter)?))
+                }
+            }
+        }
+    };
+    let Some(progress) = progress else {
+        return Ok(None);
+    };
+    if progress.tasks.len() != all {
+        return Err(format!(
+            "the checkpoint holds {} tasks, the run has {all}",
+            progress.tasks.len()
+        ));
+    }
+    for (task, &id) in tasks.iter_mut().zip(ids) {
+        restore_task(family, task, &progress.tasks[id])?;
+    }
+    Ok(Some(progress.mutations()))
+}
+
+/// Saves every task (this process's `tasks`, `ids` as for [`resume`]) to
+/// `checkpoint`'s file: rank 0 gathers the others' records and writes.
+/// Collective on a cluster.
+pub(crate) fn save_tasks<F: ChainFamily>(
+    family: &F,
+    checkpoint: &crate::checkpoint::Checkpoint,
+    cluster: Option<&dyn crate::cluster::Cluster>,
+    tasks: &[Task<'_, F>],
+    ids: &[usize],
+    filter: &Arc<Filter>,
+) -> Result<(), String> {
+    let records = tasks
+        .iter()
+        .zip(ids)
+        .map(|(t, &id)| record_of_task(family, t, id));
+    let tasks = match cluster {
+        None => records.collect(),
+        Some(c) => {
+            let parcels = records.map(|r| parcel_of(&r)).collect();
+            match c.gather(parcels, filter) {
+                Some(all) => all.into_iter().map(record_of).collect::<Result<_, _>>()?,
+                None => return Ok(()),
+            }
+        }
+    };
+    save(
+        &checkpoint.path,
+        checkpoint.fingerprint,
+        &ChainProgress { tasks },
+    )
+}
