@@ -108,6 +108,42 @@ fn an_output_named_like_its_sidecars_is_refused() {
     assert_clean_failure(&out, &["c.png", "must end in .csv"]);
 }
 
+/// `--checkpoint` naming one of the render's outputs (the image, its
+/// preview, sidecar, layers or NaN dump) is refused: the outputs written
+/// at the end would overwrite the checkpoint, or the checkpoint an earlier
+/// image. Control: a name of its own renders and leaves a checkpoint.
+#[test]
+fn a_checkpoint_named_like_an_output_is_refused() {
+    let dir = setup("limits-checkpoint");
+    for name in [
+        "x.exr",
+        "x.png",
+        "x.json",
+        "./x.nonfinite.pss",
+        "x.albedo.exr",
+    ] {
+        let args = ["render", "s.xml", "--out", "x.exr", "--checkpoint", name];
+        let out = run(&[&args[..], &["--spp", "1", "--quiet"]].concat(), &dir);
+        assert_clean_failure(&out, &[name, "is the path of an output", "x.ckpt"]);
+        assert!(!dir.join("x.exr").exists(), "{name}: rendered");
+    }
+    let args = [
+        "render",
+        "s.xml",
+        "--out",
+        "x.exr",
+        "--checkpoint",
+        "x.ckpt",
+    ];
+    let out = run(&[&args[..], &["--spp", "1", "--quiet"]].concat(), &dir);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(dir.join("x.exr").exists() && dir.join("x.ckpt").exists());
+}
+
 #[test]
 fn memory_beyond_the_machine_is_refused_before_allocating() {
     let dir = setup("limits-memory");
