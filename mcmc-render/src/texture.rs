@@ -148,7 +148,19 @@ fn decode_linear<R: std::io::BufRead + std::io::Seek>(
     reader: image::ImageReader<R>,
     raw: bool,
 ) -> Result<(u32, u32, Vec<Rgb>), String> {
-    use image::{DynamicImage as D, ImageDecoder};
+    use image::{DynamicImage as D, ImageDecoder, ImageFormat};
+    // The `image` crate sizes an EXR by its display window but decodes its
+    // data window: a data window of 4·10^9 columns behind a 64×32 display
+    // window passed its limit, then the `exr` crate allocated 32 GB for one
+    // block and aborted (the `texture` target's finding). The data windows
+    // are checked first, as `compare`'s EXR reader checks them.
+    let reader = if reader.format() == Some(ImageFormat::OpenExr) {
+        let mut inner = reader.into_inner();
+        crate::image_io::check_exr_headers(&mut inner)?;
+        image::ImageReader::with_format(inner, ImageFormat::OpenExr)
+    } else {
+        reader
+    };
     let mut decoder = reader.into_decoder().map_err(|e| e.to_string())?;
     let (width, height) = decoder.dimensions();
     let decoded = decoder.total_bytes();

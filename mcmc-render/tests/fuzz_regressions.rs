@@ -531,3 +531,24 @@ fn checkpoints_whose_counts_do_not_fit_the_image_are_refused() {
     assert!(load(&file, 7, (4, 3)).unwrap().is_some());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The `texture` target's finding (`tests/data/fuzz/texture-crash-*.exr`,
+/// `scenes/textures/sky.exr` with its data window's `xMax` mutated to
+/// −83886017 behind the 64×32 display window): the `image` crate sized the
+/// image by its display window, passed its 512 MiB limit, and the `exr`
+/// crate then allocated 32 GB for one PIZ block and aborted. EXR textures'
+/// headers are now checked as `compare`'s EXR reader checks them.
+#[test]
+fn texture_exr_whose_data_window_exceeds_the_file_is_refused() {
+    use mcmc_render::texture::linear_from_bytes;
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz");
+    let bytes = std::fs::read(dir.join("texture-crash-24add2.exr")).unwrap();
+    for format in [None, Some(image::ImageFormat::OpenExr)] {
+        let b = bytes.clone();
+        let err = within(20, "texture exr", move || {
+            linear_from_bytes(&b, format, false).map(|_| ())
+        })
+        .expect_err("the mutated EXR was accepted");
+        assert_clean_err(&err, "more than a file of 7627 bytes can hold");
+    }
+}
