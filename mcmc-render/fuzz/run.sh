@@ -6,10 +6,13 @@
 # committed seed corpus. Build first (once for all targets):
 #   cargo +nightly fuzz build -s none --debug-assertions
 # Usage (from mcmc-render/): fuzz/run.sh TARGET [SECONDS]
+# FUZZ_BIN_DIR=DIR runs DIR/TARGET instead of the build's binary (a copy,
+# so that a rebuild during a run does not swap the binary that libFuzzer's
+# fork mode re-executes for every job).
 set -e
 target=$1
 seconds=${2:-600}
-bin=fuzz/target/x86_64-unknown-linux-gnu/release/$target
+bin=${FUZZ_BIN_DIR:-fuzz/target/x86_64-unknown-linux-gnu/release}/$target
 mkdir -p fuzz/corpus/$target fuzz/artifacts/$target
 exec nice -n 10 "$bin" fuzz/corpus/$target fuzz/seeds/$target \
     -fork=1 -ignore_crashes=1 -ignore_timeouts=1 -ignore_ooms=1 \

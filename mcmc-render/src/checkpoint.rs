@@ -127,15 +127,55 @@ pub fn save(path: &Path, fingerprint: u64, progress: &Progress) -> Result<(), St
     crate::output::write_bytes(path, &out)
 }
 
+/// Bytes of a checkpoint of a `size` image: the magic, eight words, and
+/// 4 + 3 `f32` accumulators per pixel.
+fn file_bytes(size: (u32, u32)) -> u128 {
+    let pixels = u128::from(size.0) * u128::from(size.1);
+    (MAGIC.len() + 64) as u128 + 28 * pixels
+}
+
+/// The largest count a checkpoint may hold (samples done in all, and
+/// non-finite samples dropped): 2^53, the largest integer the JSON
+/// sidecar's readers hold exactly. A real run stays far below.
+const MAX_COUNT: u64 = 1 << 53;
+
 /// The progress saved at `path` for the inputs `fingerprint` and an image
 /// of `size`: `None` when there is no file; an error (one line) when it is
-/// not a checkpoint or belongs to another render.
+/// not a checkpoint or belongs to another render. A path that is not a
+/// regular file, or a file longer than a checkpoint of `size`, is refused
+/// before it is read.
 pub fn load(path: &Path, fingerprint: u64, size: (u32, u32)) -> Result<Option<Progress>, String> {
-    let bytes = match std::fs::read(path) {
-        Ok(b) => b,
+    let len = match std::fs::metadata(path) {
+        Ok(m) => m.len(),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(e) => return Err(format!("cannot read checkpoint {}: {e}", path.display())),
     };
+    crate::resources::regular_file(path).map_err(|e| format!("checkpoint: {e}"))?;
+    let expected = file_bytes(size);
+    if u128::from(len) > expected {
+        return Err(format!(
+            "checkpoint {}: {len} bytes, more than the {expected} of a checkpoint of a {}×{} image",
+            path.display(),
+            size.0,
+            size.1
+        ));
+    }
+    let bytes = std::fs::read(path)
+        .map_err(|e| format!("cannot read checkpoint {}: {e}", path.display()))?;
+    progress_from_bytes(&bytes, path, fingerprint, size).map(Some)
+}
+
+/// The progress a checkpoint's bytes hold, checked as [`load`] checks a
+/// file (`path` names it in messages): the fingerprint, the image size,
+/// one sample and one splat accumulator per pixel, every accumulator
+/// finite, at most one pass per sample per pixel and counts within
+/// [`MAX_COUNT`]. What it returns makes a film ([`Progress::film`]).
+pub fn progress_from_bytes(
+    bytes: &[u8],
+    path: &Path,
+    fingerprint: u64,
+    size: (u32, u32),
+) -> Result<Progress, String> {
     let bad = |why: &str| format!("checkpoint {}: {why}", path.display());
     let Some(body) = bytes.strip_prefix(MAGIC) else {
         return Err(bad("not a checkpoint of mcmc-render's per-pixel driver"));
@@ -152,39 +192,56 @@ pub fn load(path: &Path, fingerprint: u64, size: (u32, u32)) -> Result<Option<Pr
     }
     let (pass, spp_done, nonfinite) = (word(1)?, word(2)?, word(3)?);
     let (w, h) = (word(4)?, word(5)?);
-    let (n_samples, n_splats) = (word(6)? as usize, word(7)? as usize);
+    let (n_samples, n_splats) = (word(6)?, word(7)?);
     if (w, h) != (u64::from(size.0), u64::from(size.1)) {
         return Err(bad(&format!(
             "holds a {w}×{h} image, the scene is {}×{}",
             size.0, size.1
         )));
     }
+    // Both accumulators of the whole-image film, one per pixel each.
+    let pixels = w * h;
+    if (n_samples, n_splats) != (pixels, pixels) {
+        return Err(bad(&format!(
+            "holds {n_samples} sample and {n_splats} splat accumulators, a {w}×{h} image has {pixels} of each"
+        )));
+    }
     let floats = &body[64.min(body.len())..];
-    if floats.len() != 4 * (4 * n_samples + 3 * n_splats) {
+    if floats.len() as u128 != file_bytes(size) - 72 {
         return Err(bad("truncated or padded"));
+    }
+    let samples_done = u128::from(spp_done) * u128::from(pixels);
+    if pass > spp_done || samples_done > u128::from(MAX_COUNT) || nonfinite > MAX_COUNT {
+        return Err(bad(&format!(
+            "impossible counts: {pass} passes, {spp_done} samples per pixel, {nonfinite} non-finite samples (at most one pass per sample per pixel, at most 2^53 samples)"
+        )));
     }
     let f32s = |b: &[u8]| -> Vec<f32> {
         b.chunks_exact(4)
             .map(|c| f32::from_bits(u32::from_le_bytes(c.try_into().expect("4 bytes"))))
             .collect()
     };
-    let (s, p) = floats.split_at(16 * n_samples);
-    let samples = f32s(s)
+    let values = f32s(floats);
+    if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+        return Err(bad(&format!(
+            "accumulator {i} is {} (a render keeps them finite)",
+            values[i]
+        )));
+    }
+    let (s, p) = values.split_at(4 * pixels as usize);
+    let samples = s
         .chunks_exact(4)
         .map(|c| [c[0], c[1], c[2], c[3]])
         .collect();
-    let splats = f32s(p)
-        .chunks_exact(3)
-        .map(|c| [c[0], c[1], c[2]])
-        .collect();
-    Ok(Some(Progress {
+    let splats = p.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    Ok(Progress {
         pass,
         spp_done,
         nonfinite,
-        size: (w as u32, h as u32),
+        size,
         samples,
         splats,
-    }))
+    })
 }
 
 #[cfg(test)]

@@ -37,31 +37,41 @@ pub fn exr_from_bytes(bytes: &[u8], path: &Path) -> Result<(u32, u32, Vec<Rgb>),
 /// claiming more is a lie (the fuzzer's 1.6 KB file claimed 309 GB).
 const EXR_MAX_INFLATION: u128 = 4096;
 
-fn exr_from_reader(
-    mut input: impl std::io::Read + std::io::Seek + Send,
-    path: &Path,
-) -> Result<(u32, u32, Vec<Rgb>), String> {
-    use exr::prelude::{ReadChannels, ReadLayers};
+/// Checks every header of the EXR in `input` before anything is decoded:
+/// each layer's data window, as `f32` RGB pixels, must fit in what the
+/// file's length can hold ([`EXR_MAX_INFLATION`]) and in the memory
+/// available. Leaves `input` at its start. The error names no file.
+pub(crate) fn check_exr_headers(
+    input: &mut (impl std::io::Read + std::io::Seek),
+) -> Result<(), String> {
     use std::io::SeekFrom;
-    let cannot = |e: &dyn std::fmt::Display| format!("cannot read {}: {e}", path.display());
-    // Nothing is allocated on the header's word: its sizes are checked
-    // against the file's length and the memory available first.
-    let file_bytes = input.seek(SeekFrom::End(0)).map_err(|e| cannot(&e))?;
-    input.seek(SeekFrom::Start(0)).map_err(|e| cannot(&e))?;
+    let file_bytes = input.seek(SeekFrom::End(0)).map_err(|e| e.to_string())?;
+    input.seek(SeekFrom::Start(0)).map_err(|e| e.to_string())?;
     let meta =
-        exr::meta::MetaData::read_from_unbuffered(&mut input, false).map_err(|e| cannot(&e))?;
-    input.seek(SeekFrom::Start(0)).map_err(|e| cannot(&e))?;
+        exr::meta::MetaData::read_from_unbuffered(&mut *input, false).map_err(|e| e.to_string())?;
+    input.seek(SeekFrom::Start(0)).map_err(|e| e.to_string())?;
     for header in meta.headers.iter() {
         let (w, h) = (header.layer_size.width(), header.layer_size.height());
         let bytes = w as u128 * h as u128 * std::mem::size_of::<Rgb>() as u128;
         if bytes > EXR_MAX_INFLATION * u128::from(file_bytes) {
             return Err(format!(
-                "cannot read {}: the header claims {w}×{h} pixels ({bytes} bytes), more than a file of {file_bytes} bytes can hold",
-                path.display()
+                "the header claims {w}×{h} pixels ({bytes} bytes), more than a file of {file_bytes} bytes can hold"
             ));
         }
-        crate::resources::check_memory(&format!("image {w}×{h}"), bytes).map_err(|e| cannot(&e))?;
+        crate::resources::check_memory(&format!("image {w}×{h}"), bytes)?;
     }
+    Ok(())
+}
+
+fn exr_from_reader(
+    mut input: impl std::io::Read + std::io::Seek + Send,
+    path: &Path,
+) -> Result<(u32, u32, Vec<Rgb>), String> {
+    use exr::prelude::{ReadChannels, ReadLayers};
+    let cannot = |e: &dyn std::fmt::Display| format!("cannot read {}: {e}", path.display());
+    // Nothing is allocated on the header's word: its sizes are checked
+    // against the file's length and the memory available first.
+    check_exr_headers(&mut input).map_err(|e| cannot(&e))?;
     let image = exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()

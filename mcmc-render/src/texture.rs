@@ -113,14 +113,66 @@ impl Bitmap {
 /// PNG, JPEG, TGA and BMP are sRGB-decoded unless `raw` (as Mitsuba does);
 /// EXR and HDR are taken as linear. NaN or infinite texels are refused.
 /// The error names no file (the caller does).
+/// A path that is not a regular file (a FIFO would block, a device never
+/// end) is refused before it is opened.
 pub fn read_linear(path: &Path, raw: bool) -> Result<(u32, u32, Vec<Rgb>), String> {
-    use image::DynamicImage as D;
-    let image = image::ImageReader::open(path)
+    crate::resources::regular_file(path)?;
+    let reader = image::ImageReader::open(path)
         .map_err(|e| e.to_string())?
         .with_guessed_format()
-        .map_err(|e| e.to_string())?
-        .decode()
         .map_err(|e| e.to_string())?;
+    decode_linear(reader, raw)
+}
+
+/// Reads an image held in memory, as [`read_linear`] reads a file: the
+/// format is `format`, or guessed from the first bytes when `None` (a file
+/// also falls back on its extension, which bytes do not have).
+pub fn linear_from_bytes(
+    bytes: &[u8],
+    format: Option<image::ImageFormat>,
+    raw: bool,
+) -> Result<(u32, u32, Vec<Rgb>), String> {
+    let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes));
+    match format {
+        Some(f) => reader.set_format(f),
+        None => reader = reader.with_guessed_format().map_err(|e| e.to_string())?,
+    }
+    decode_linear(reader, raw)
+}
+
+/// Decodes an image as linear RGB texels. Nothing is allocated on the
+/// header's word: the decoded image must fit the `image` crate's default
+/// limit (512 MiB) and, with the texels made from it (12 bytes each, up to
+/// 12 times the decoded bytes of a grey 8-bit image), the memory available.
+fn decode_linear<R: std::io::BufRead + std::io::Seek>(
+    reader: image::ImageReader<R>,
+    raw: bool,
+) -> Result<(u32, u32, Vec<Rgb>), String> {
+    use image::{DynamicImage as D, ImageDecoder, ImageFormat};
+    // The `image` crate sizes an EXR by its display window but decodes its
+    // data window: a data window of 4·10^9 columns behind a 64×32 display
+    // window passed its limit, then the `exr` crate allocated 32 GB for one
+    // block and aborted (the `texture` target's finding). The data windows
+    // are checked first, as `compare`'s EXR reader checks them.
+    let reader = if reader.format() == Some(ImageFormat::OpenExr) {
+        let mut inner = reader.into_inner();
+        crate::image_io::check_exr_headers(&mut inner)?;
+        image::ImageReader::with_format(inner, ImageFormat::OpenExr)
+    } else {
+        reader
+    };
+    let mut decoder = reader.into_decoder().map_err(|e| e.to_string())?;
+    let (width, height) = decoder.dimensions();
+    let decoded = decoder.total_bytes();
+    let mut limits = image::Limits::default();
+    limits.reserve(decoded).map_err(|e| e.to_string())?;
+    decoder.set_limits(limits).map_err(|e| e.to_string())?;
+    let texels = u128::from(width) * u128::from(height) * std::mem::size_of::<Rgb>() as u128;
+    crate::resources::check_memory(
+        &format!("image {width}×{height}"),
+        u128::from(decoded) + texels,
+    )?;
+    let image = D::from_decoder(decoder).map_err(|e| e.to_string())?;
     let (width, height) = (image.width(), image.height());
     // 8-bit values through a table (exact, and 256 powers instead of
     // one per channel of every texel).

@@ -132,3 +132,40 @@ fn malformed_ply_files_are_one_line_naming_the_file() {
     );
     assert!(run_ok(&["info", "s.xml"], &dir).contains("1 ply"));
 }
+
+/// Texture images (`bitmap`, and the `envmap` emitter that reads the same
+/// formats) and `--checkpoint` files: a FIFO or a device is refused before
+/// it is opened. Before the bitmap check a FIFO named `tex.png` blocked
+/// the scene load forever; `--checkpoint /dev/zero` read until memory ran
+/// out.
+#[cfg(unix)]
+#[test]
+fn texture_and_checkpoint_paths_that_are_not_files_are_refused() {
+    let dir = scratch("inputs-texture-checkpoint");
+    mkfifo(&dir.join("tex.png"));
+    mkfifo(&dir.join("sky.exr"));
+    let bitmap = floor_scene(8, 6).replace(
+        "<shape type=\"rectangle\"><bsdf type=\"diffuse\"/></shape>",
+        "<shape type=\"rectangle\"><bsdf type=\"diffuse\"><texture type=\"bitmap\" \
+         name=\"reflectance\"><string name=\"filename\" value=\"tex.png\"/></texture>\
+         </bsdf></shape>",
+    );
+    write(&dir, "bitmap.xml", &bitmap);
+    let out = run_bounded(&["info", "bitmap.xml"], &dir);
+    assert_clean_failure(&out, &["tex.png is a FIFO"]);
+    let envmap = floor_scene(8, 6).replace(
+        "</scene>",
+        "<emitter type=\"envmap\"><string name=\"filename\" value=\"sky.exr\"/></emitter>\n</scene>",
+    );
+    write(&dir, "envmap.xml", &envmap);
+    let out = run_bounded(&["info", "envmap.xml"], &dir);
+    assert_clean_failure(&out, &["sky.exr is a FIFO"]);
+    write(&dir, "s.xml", &floor_scene(8, 6));
+    mkfifo(&dir.join("run.ckpt"));
+    for (ckpt, what) in [("run.ckpt", "a FIFO"), ("/dev/zero", "a device")] {
+        let args = ["render", "s.xml", "--spp", "1", "--checkpoint", ckpt];
+        let out = run_bounded(&[&args[..], &["--quiet"]].concat(), &dir);
+        assert_clean_failure(&out, &[ckpt, what]);
+        assert!(!dir.join("render.exr").exists());
+    }
+}

@@ -108,6 +108,42 @@ fn an_output_named_like_its_sidecars_is_refused() {
     assert_clean_failure(&out, &["c.png", "must end in .csv"]);
 }
 
+/// `--checkpoint` naming one of the render's outputs (the image, its
+/// preview, sidecar, layers or NaN dump) is refused: the outputs written
+/// at the end would overwrite the checkpoint, or the checkpoint an earlier
+/// image. Control: a name of its own renders and leaves a checkpoint.
+#[test]
+fn a_checkpoint_named_like_an_output_is_refused() {
+    let dir = setup("limits-checkpoint");
+    for name in [
+        "x.exr",
+        "x.png",
+        "x.json",
+        "./x.nonfinite.pss",
+        "x.albedo.exr",
+    ] {
+        let args = ["render", "s.xml", "--out", "x.exr", "--checkpoint", name];
+        let out = run(&[&args[..], &["--spp", "1", "--quiet"]].concat(), &dir);
+        assert_clean_failure(&out, &[name, "is the path of an output", "x.ckpt"]);
+        assert!(!dir.join("x.exr").exists(), "{name}: rendered");
+    }
+    let args = [
+        "render",
+        "s.xml",
+        "--out",
+        "x.exr",
+        "--checkpoint",
+        "x.ckpt",
+    ];
+    let out = run(&[&args[..], &["--spp", "1", "--quiet"]].concat(), &dir);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(dir.join("x.exr").exists() && dir.join("x.ckpt").exists());
+}
+
 #[test]
 fn memory_beyond_the_machine_is_refused_before_allocating() {
     let dir = setup("limits-memory");
@@ -142,6 +178,59 @@ fn memory_beyond_the_machine_is_refused_before_allocating() {
         &dir,
     );
     assert_clean_failure(&out, &["10000000000 chains", "needs", "available"]);
+    // RELT's population annealing: 10^15 particles aborted on a 16 PB
+    // allocation ("memory allocation of 16000000000000000 bytes failed").
+    let out = run(
+        &[
+            "render",
+            "s.xml",
+            "--integrator",
+            "relt",
+            "--set",
+            "annealing_particles=1000000000000000",
+            "--quiet",
+        ],
+        &dir,
+    );
+    assert_clean_failure(
+        &out,
+        &["1000000000000000 annealing particles", "needs", "available"],
+    );
+    // mept's BDPT start-up (10^15 draws: a 32 PB allocation), smcmc's
+    // global start-up (10^15 states: 8 PB), erpt's luminance estimate
+    // (8 PB) and mcmc-vcm's units and candidates aborted the same way.
+    for (integrator, setting, extra, needle) in [
+        (
+            "mept",
+            "bootstrap",
+            "max_depth=5",
+            "a BDPT start-up of 1000000000000000 draws",
+        ),
+        (
+            "smcmc",
+            "init_bootstrap",
+            "init=global",
+            "1000000000000000 bootstrap states",
+        ),
+        (
+            "erpt",
+            "luminance_samples",
+            "max_depth=5",
+            "1000000000000000 luminance samples",
+        ),
+        ("mcmc-vcm", "units", "max_depth=5", "1000000000000000 units"),
+        (
+            "mcmc-vcm",
+            "candidates",
+            "max_depth=5",
+            "1000000000000000 candidates",
+        ),
+    ] {
+        let set = format!("{setting}=1000000000000000");
+        let args = ["render", "s.xml", "--integrator", integrator, "--set", &set];
+        let out = run(&[&args[..], &["--set", extra, "--quiet"]].concat(), &dir);
+        assert_clean_failure(&out, &[needle, "needs", "available"]);
+    }
     write(&dir, "huge.xml", &floor_scene(65536, 65536));
     let out = run(&["render", "huge.xml", "--quiet"], &dir);
     assert_clean_failure(&out, &["film 65536×65536 needs", "available"]);

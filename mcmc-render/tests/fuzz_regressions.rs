@@ -362,3 +362,193 @@ fn obj_every_kind_of_bad_face_index_is_one_line_naming_line_and_value() {
         assert!(e.contains(needle), "{e:?} lacks {needle:?}");
     }
 }
+
+/// The texture reader's in-memory entry point (the `texture` target's)
+/// reads what the file reader reads, by content or by the format given.
+#[test]
+fn texture_reader_in_memory_reads_what_the_file_reader_reads() {
+    use mcmc_render::texture::{linear_from_bytes, read_linear};
+    let textures = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/textures");
+    for (name, format) in [
+        ("grid.png", image::ImageFormat::Png),
+        ("sky.exr", image::ImageFormat::OpenExr),
+    ] {
+        let path = textures.join(name);
+        let bytes = std::fs::read(&path).unwrap();
+        let from_file = read_linear(&path, false).unwrap();
+        assert_eq!(linear_from_bytes(&bytes, None, false).unwrap(), from_file);
+        assert_eq!(
+            linear_from_bytes(&bytes, Some(format), false).unwrap(),
+            from_file
+        );
+    }
+}
+
+/// A texture image whose header claims more than the `image` crate's
+/// 512 MiB limit (a PNG claiming 100000×100000 grey pixels, 10 GB, in 57
+/// bytes) is one line, nothing allocated; one claiming less but with no
+/// pixel data is one line too.
+#[test]
+fn texture_headers_claiming_huge_images_are_one_line() {
+    use mcmc_render::texture::linear_from_bytes;
+    // Signature, IHDR (width, height, 8-bit grey), CRC, empty IDAT, IEND.
+    let png = |w: u32, h: u32| {
+        let mut ihdr = b"IHDR".to_vec();
+        ihdr.extend_from_slice(&w.to_be_bytes());
+        ihdr.extend_from_slice(&h.to_be_bytes());
+        ihdr.extend_from_slice(&[8, 0, 0, 0, 0]);
+        let mut f = b"\x89PNG\r\n\x1a\n".to_vec();
+        f.extend_from_slice(&13u32.to_be_bytes());
+        f.extend_from_slice(&ihdr);
+        f.extend_from_slice(&crc32(&ihdr).to_be_bytes());
+        for chunk in [&b"IDAT"[..], b"IEND"] {
+            f.extend_from_slice(&0u32.to_be_bytes());
+            f.extend_from_slice(chunk);
+            f.extend_from_slice(&crc32(chunk).to_be_bytes());
+        }
+        f
+    };
+    for (w, h, needle) in [(100_000, 100_000, "limit"), (64, 64, "")] {
+        let bytes = png(w, h);
+        let err = within(20, "png", move || {
+            linear_from_bytes(&bytes, None, false).map(|_| ())
+        })
+        .expect_err("an image without pixels was accepted");
+        assert_clean_err(&err, needle);
+    }
+}
+
+/// CRC-32 (PNG's chunk checksum), bit by bit.
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut c = !0u32;
+    for &b in bytes {
+        c ^= u32::from(b);
+        for _ in 0..8 {
+            c = if c & 1 != 0 {
+                (c >> 1) ^ 0xEDB8_8320
+            } else {
+                c >> 1
+            };
+        }
+    }
+    !c
+}
+
+/// A checkpoint's bytes: magic, the eight words, then `floats`.
+fn checkpoint_bytes(words: [u64; 8], floats: &[f32]) -> Vec<u8> {
+    let mut b = b"mcmcPX01".to_vec();
+    for w in words {
+        b.extend_from_slice(&w.to_le_bytes());
+    }
+    for f in floats {
+        b.extend_from_slice(&f.to_le_bytes());
+    }
+    b
+}
+
+/// Checkpoints (`render --checkpoint`) whose words disagree with their
+/// image: `load` accepted any counts whose floats filled the file, so a
+/// file with 0 sample and 12 splat accumulators for a 4×3 image loaded and
+/// then panicked the render (`expect("the command line checked the
+/// checkpoint")`), a count of 2^62 accumulators overflowed `4 * n` (a
+/// panic with overflow checks), NaN accumulators resumed into a NaN image
+/// and a pass count above the samples done, or counts past 2^64 samples,
+/// overflowed the render's counters. Each is one line now, naming the file;
+/// a consistent file still loads and resumes.
+#[test]
+fn checkpoints_whose_counts_do_not_fit_the_image_are_refused() {
+    use mcmc_render::checkpoint::{load, progress_from_bytes};
+    let path = Path::new("x.ckpt");
+    let ok = [7, 2, 3, 0, 4, 3, 12, 12];
+    let floats = vec![0.5f32; 12 * 7];
+    let good = progress_from_bytes(&checkpoint_bytes(ok, &floats), path, 7, (4, 3)).unwrap();
+    assert_eq!((good.pass, good.spp_done, good.samples.len()), (2, 3, 12));
+    let mut nan = floats.clone();
+    nan[50] = f32::NAN;
+    for (words, floats, needle) in [
+        (
+            [7, 2, 3, 0, 4, 3, 0, 12],
+            &floats[..36],
+            "0 sample and 12 splat",
+        ),
+        (
+            [7, 2, 3, 0, 4, 3, 12, 0],
+            &floats[..48],
+            "12 sample and 0 splat",
+        ),
+        (
+            [7, 2, 3, 0, 4, 3, 1 << 62, 12],
+            &floats[..],
+            "4611686018427387904 sample",
+        ),
+        (
+            [7, 2, 3, 0, 4, 3, 12, 12],
+            &nan[..],
+            "accumulator 50 is NaN",
+        ),
+        (
+            [7, 9, 3, 0, 4, 3, 12, 12],
+            &floats[..],
+            "impossible counts: 9 passes",
+        ),
+        (
+            [7, 2, u64::MAX, 0, 4, 3, 12, 12],
+            &floats[..],
+            "impossible counts",
+        ),
+        (
+            [7, 2, 3, u64::MAX, 4, 3, 12, 12],
+            &floats[..],
+            "impossible counts",
+        ),
+        (
+            [7, 2, 3, 0, 4, 3, 12, 12],
+            &floats[1..],
+            "truncated or padded",
+        ),
+    ] {
+        let bytes = checkpoint_bytes(words, floats);
+        let err = progress_from_bytes(&bytes, path, 7, (4, 3))
+            .err()
+            .unwrap_or_else(|| panic!("{words:?} was accepted"));
+        assert_clean_err(&err, "checkpoint x.ckpt: ");
+        assert_clean_err(&err, needle);
+    }
+    // A file longer than any checkpoint of the image is refused unread.
+    let dir = std::env::temp_dir().join(format!("mcmc-fuzz-ckpt-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("long.ckpt");
+    let mut long = checkpoint_bytes(ok, &floats);
+    long.push(0);
+    std::fs::write(&file, &long).unwrap();
+    let err = load(&file, 7, (4, 3)).unwrap_err();
+    assert_clean_err(
+        &err,
+        "409 bytes, more than the 408 of a checkpoint of a 4×3 image",
+    );
+    long.pop();
+    std::fs::write(&file, &long).unwrap();
+    assert!(load(&file, 7, (4, 3)).unwrap().is_some());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The `texture` target's finding (`tests/data/fuzz/texture-crash-*.exr`,
+/// `scenes/textures/sky.exr` with its data window's `xMax` mutated to
+/// −83886017 behind the 64×32 display window): the `image` crate sized the
+/// image by its display window, passed its 512 MiB limit, and the `exr`
+/// crate then allocated 32 GB for one PIZ block and aborted. EXR textures'
+/// headers are now checked as `compare`'s EXR reader checks them.
+#[test]
+fn texture_exr_whose_data_window_exceeds_the_file_is_refused() {
+    use mcmc_render::texture::linear_from_bytes;
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz");
+    let bytes = std::fs::read(dir.join("texture-crash-24add2.exr")).unwrap();
+    for format in [None, Some(image::ImageFormat::OpenExr)] {
+        let b = bytes.clone();
+        let err = within(20, "texture exr", move || {
+            linear_from_bytes(&b, format, false).map(|_| ())
+        })
+        .expect_err("the mutated EXR was accepted");
+        assert_clean_err(&err, "more than a file of 7627 bytes can hold");
+    }
+}

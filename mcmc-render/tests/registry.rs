@@ -171,6 +171,19 @@ fn every_bad_parameter_is_refused_in_one_line() {
         ("pt", "max_depth", "4294967296", "-1 (unbounded)"),
         ("pt", "rr_depth", "0", "at least 1"),
         ("pssmlt", "mutations_per_pixel", "0", "at least 1"),
+        // Were clamped to 2^32 − 1 silently (issue 23, class 1).
+        (
+            "mlt",
+            "direct_samples",
+            "4294967296",
+            "between 1 and 4294967295",
+        ),
+        (
+            "mlt",
+            "specular_samples",
+            "1000000000000000",
+            "between 1 and",
+        ),
     ] {
         let e = registry::configure(None, Some(name), &[(param.into(), value.into())])
             .err()

@@ -45,13 +45,24 @@ pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), String> 
     write().map_err(|e| format!("cannot write {}: {e}", path.display()))
 }
 
-/// The file at `path`, or `None` when there is none.
+/// The file at `path`, or `None` when there is none. A path that is not a
+/// regular file (a directory, FIFO or device) is refused before it is
+/// opened: a FIFO would block rank 0, `/dev/zero` would never end.
 pub(crate) fn read_optional(path: &Path) -> Result<Option<Vec<u8>>, String> {
-    match std::fs::read(path) {
-        Ok(b) => Ok(Some(b)),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
-        Err(e) => Err(format!("cannot read {}: {e}", path.display())),
+    match std::fs::metadata(path) {
+        Ok(m) if !m.is_file() => {
+            return Err(format!(
+                "cannot read {}: not a regular file (a directory, FIFO or device)",
+                path.display()
+            ));
+        }
+        Ok(_) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(format!("cannot read {}: {e}", path.display())),
     }
+    std::fs::read(path)
+        .map(Some)
+        .map_err(|e| format!("cannot read {}: {e}", path.display()))
 }
 
 #[cfg(test)]
@@ -90,6 +101,15 @@ mod tests {
         write_atomically(&p, b"second").unwrap();
         assert_eq!(read_optional(&p).unwrap().unwrap(), b"second");
         assert!(!dir.join("c.bin.tmp").exists());
+        // Not regular files: refused before they are opened (a FIFO
+        // blocked the read, `/dev/zero` never ended).
+        let fifo = dir.join("fifo");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        assert!(made.is_ok_and(|s| s.success()), "mkfifo failed");
+        for p in [fifo.as_path(), dir.as_path(), Path::new("/dev/zero")] {
+            let e = read_optional(p).unwrap_err();
+            assert!(e.contains("not a regular file"), "{e}");
+        }
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

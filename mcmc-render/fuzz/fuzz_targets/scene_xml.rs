@@ -19,6 +19,26 @@ const FILES: &[(&str, &[u8])] = &[
         include_bytes!("../../../scenes/meshes/sphere.obj"),
     ),
     (
+        "meshes/ring.obj",
+        include_bytes!("../../../scenes/meshes/ring.obj"),
+    ),
+    (
+        "meshes/smallvcm-green.obj",
+        include_bytes!("../../../scenes/meshes/smallvcm-green.obj"),
+    ),
+    (
+        "meshes/smallvcm-light.obj",
+        include_bytes!("../../../scenes/meshes/smallvcm-light.obj"),
+    ),
+    (
+        "meshes/smallvcm-red.obj",
+        include_bytes!("../../../scenes/meshes/smallvcm-red.obj"),
+    ),
+    (
+        "meshes/smallvcm-white.obj",
+        include_bytes!("../../../scenes/meshes/smallvcm-white.obj"),
+    ),
+    (
         "textures/grid.png",
         include_bytes!("../../../scenes/textures/grid.png"),
     ),

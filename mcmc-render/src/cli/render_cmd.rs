@@ -225,6 +225,13 @@ fn open_checkpoint(
             CHAIN_INTEGRATORS.join(", ")
         ));
     }
+    if let Some(output) = shares_an_output(path, &args.out) {
+        return Err(format!(
+            "--checkpoint {} is the path of an output ({output}); give it its own name, such as {}",
+            path.display(),
+            args.out.with_extension("ckpt").display()
+        ));
+    }
     let fingerprint = fingerprint(&input_parts(args, defines, integrator));
     let size = (scene.film.width, scene.film.height);
     let mut checkpoint = Checkpoint {
@@ -243,6 +250,33 @@ fn open_checkpoint(
         }
     }
     Ok(checkpoint)
+}
+
+/// Which of the outputs `render --out out` writes (the EXR, its PNG
+/// preview, JSON sidecar, `NAME.exr` layers and NaN dump, all named after
+/// `out`) `checkpoint` would overwrite, if any. Paths are compared made
+/// absolute (not resolving links).
+fn shares_an_output(checkpoint: &Path, out: &Path) -> Option<&'static str> {
+    let abs = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+    let (ck, out) = (abs(checkpoint), abs(out));
+    let named = [
+        ("the image", out.clone()),
+        ("the PNG preview", out.with_extension("png")),
+        ("the JSON sidecar", out.with_extension("json")),
+        ("the NaN dump", out.with_extension("nonfinite.pss")),
+    ];
+    if let Some((what, _)) = named.iter().find(|(_, p)| *p == ck) {
+        return Some(what);
+    }
+    // Layers: `stem.NAME.exr` beside the image.
+    let stem = out.file_stem()?.to_str()?;
+    let is_layer = ck.parent() == out.parent()
+        && ck.extension().is_some_and(|e| e == "exr")
+        && ck
+            .file_name()
+            .and_then(|n| n.to_str())
+            .is_some_and(|n| n.starts_with(&format!("{stem}.")));
+    is_layer.then_some("an image layer")
 }
 
 fn render_job(job: &Job<'_>) -> Result<(), String> {

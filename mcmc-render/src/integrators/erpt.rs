@@ -228,6 +228,13 @@ impl IntegratorSettings for Erpt {
         let time_up = || {
             stop.load(Ordering::Relaxed) || run.time_budget.is_some_and(|t| start.elapsed() >= t)
         };
+        // One luminance per walk is kept (10^15 walks aborted on an 8 PB
+        // allocation).
+        crate::resources::check_memory(
+            &format!("erpt: {} luminance samples", self.luminance_samples),
+            self.luminance_samples as u128 * 8,
+        )
+        .map_err(RenderError::Invalid)?;
         // L̄: mean pixel luminance from independent camera walks.
         let lum: Vec<f64> = run_chains(
             self.luminance_samples,

@@ -1287,6 +1287,20 @@ impl IntegratorSettings for McmcVcmSettings {
         stop: &AtomicBool,
         observer: &dyn Observer,
     ) -> Result<Rendered, RenderError> {
+        // Each unit keeps a camera image and a splat film; the pilot keeps
+        // every candidate (10^15 units or candidates aborted on
+        // allocations of 10^18 and 3·10^15 bytes).
+        let pixels = u128::from(scene.film.width) * u128::from(scene.film.height);
+        let unit = pixels * (std::mem::size_of::<Rgb>() as u128 + 12) + 256;
+        crate::resources::check_memory(
+            &format!(
+                "mcmc-vcm: {} units and {} candidates",
+                self.units, self.candidates
+            ),
+            self.units as u128 * unit
+                + self.candidates as u128 * std::mem::size_of::<Candidate>() as u128,
+        )
+        .map_err(RenderError::Invalid)?;
         Ok(self.integrator(scene).render(scene, run, stop, observer))
     }
 }

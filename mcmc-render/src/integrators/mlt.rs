@@ -164,12 +164,12 @@ impl Mlt {
 
     /// Samples per pixel of the direct-lighting pass, if it runs.
     pub fn direct_pass(&self) -> Option<u32> {
-        (self.direct_samples > 0).then(|| self.direct_samples.min(i64::from(u32::MAX)) as u32)
+        u32::try_from(self.direct_samples).ok()
     }
 
     /// Samples per pixel of the specular-chain pass, if it runs.
     pub fn specular_pass(&self) -> Option<u32> {
-        (self.specular_samples > 0).then(|| self.specular_samples.min(i64::from(u32::MAX)) as u32)
+        u32::try_from(self.specular_samples).ok()
     }
 
     /// Shortest path the chains sample: 3 segments with the direct pass.
@@ -187,12 +187,13 @@ fn time_share(v: &f64) -> Result<(), String> {
     }
 }
 
-/// `direct_samples`: -1 (off) or at least 1.
+/// `direct_samples`, `specular_samples`: -1 (off) or a sample count from 1
+/// to 2^32 − 1 (a larger one was clamped silently).
 fn direct_samples(v: &i64) -> Result<(), String> {
-    if *v == -1 || *v >= 1 {
+    if *v == -1 || (1..=i64::from(u32::MAX)).contains(v) {
         Ok(())
     } else {
-        Err("must be -1 (off) or at least 1".into())
+        Err(format!("must be -1 (off) or between 1 and {}", u32::MAX))
     }
 }
 
@@ -397,6 +398,11 @@ fn specular_chains_pass(
     (min_spp, r)
 }
 
+/// Bytes a BDPT start-up keeps per draw, at least: its entry (the weighted
+/// techniques' vector and the draw's total, 32 B), the total kept for `b̂`
+/// (8 B) and one weighted technique of the start states (16 B).
+const BDPT_STARTUP_BYTES_PER_DRAW: u128 = 56;
+
 /// `run` with a fixed `spp` per pixel and no time budget (the per-pixel
 /// passes beside the chains).
 fn fixed_spp(run: &RunSettings, spp: u32) -> RunSettings {
@@ -452,8 +458,17 @@ pub fn render_mlt(
     }
     let mut chain = settings.chain.chain_settings(settings.mutations(), run);
     if settings.bdpt_startup {
-        family = family.with_bdpt_startup(settings.chain.bootstrap as u64);
+        let draws = settings.chain.bootstrap as u64;
+        family = family.with_bdpt_startup(draws);
         if family.has_bdpt_startup() {
+            // The search keeps every draw's weights until it ends (the
+            // driver's estimate below then counts one candidate): 10^15
+            // draws aborted on a 32 PB allocation.
+            crate::resources::check_memory(
+                &format!("mlt: a BDPT start-up of {draws} draws"),
+                u128::from(draws) * BDPT_STARTUP_BYTES_PER_DRAW,
+            )
+            .map_err(MltError::Setting)?;
             // The family's search replaces the driver's bootstrap, which
             // still needs one candidate.
             chain.bootstrap = 1;

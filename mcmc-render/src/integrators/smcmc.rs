@@ -654,6 +654,21 @@ impl Smcmc {
         let halt = || {
             stop.load(Ordering::Relaxed) || run.time_budget.is_some_and(|b| start.elapsed() >= b)
         };
+        if self.init == SmcmcInit::Global {
+            // The global start-up keeps one weight per bootstrap state and
+            // one walk per chain (10^15 states aborted on an 8 PB
+            // allocation); a walk is sized like the Markov driver's chains.
+            let bytes = self.init_bootstrap as u128 * 8
+                + self.init_chains as u128 * crate::markov::BYTES_PER_CHAIN;
+            crate::resources::check_memory(
+                &format!(
+                    "smcmc: a global start-up of {} bootstrap states and {} chains",
+                    self.init_bootstrap, self.init_chains
+                ),
+                bytes,
+            )
+            .map_err(RenderError::Invalid)?;
+        }
         let visits = (self.init == SmcmcInit::Global).then(|| {
             GlobalInit {
                 chains: self.init_chains,

@@ -1197,7 +1197,12 @@ fn local_sums<'a, F: ChainFamily>(tasks: &'a [Task<'_, F>]) -> Vec<distribute::T
 /// bootstrap's sample and cumulative weight) and per chain (state, kernel,
 /// statistics; measured ≈ 1 KB for PSSMLT).
 const BYTES_PER_CANDIDATE: u128 = 48;
-const BYTES_PER_CHAIN: u128 = 2048;
+pub(crate) const BYTES_PER_CHAIN: u128 = 2048;
+/// Bytes per population-annealing particle and member (its state with the
+/// primary-sample coordinates, density and path sample; every member's
+/// population is kept for the report). An estimate of the same kind as
+/// [`BYTES_PER_CHAIN`].
+const BYTES_PER_PARTICLE: u128 = 1024;
 
 /// Refuses a run whose bootstrap, chains and films would not fit in the
 /// memory available.
@@ -1209,12 +1214,18 @@ fn check_memory<F: ChainFamily>(
     let members = family.members() as u128;
     let (w, h) = (scene.film.width, scene.film.height);
     let films = (settings.tasks as u64 + 2) * family.members() as u64;
+    let particles = family.annealing().map_or(0, |a| a.particles);
     let bytes = settings.bootstrap as u128 * members * BYTES_PER_CANDIDATE
         + settings.chains as u128 * BYTES_PER_CHAIN
+        + particles as u128 * members * BYTES_PER_PARTICLE
         + crate::resources::film_bytes(w, h, films);
+    let annealing = match particles {
+        0 => String::new(),
+        n => format!(" and {n} annealing particles × {members} members"),
+    };
     crate::resources::check_memory(
         &format!(
-            "a Markov-chain render of {w}×{h} with {} bootstrap candidates × {members} members and {} chains",
+            "a Markov-chain render of {w}×{h} with {} bootstrap candidates × {members} members and {} chains{annealing}",
             settings.bootstrap, settings.chains
         ),
         bytes,

@@ -709,12 +709,6 @@ impl Loader {
                 ));
             }
             let path = self.base_dir.join(&filename);
-            crate::resources::regular_file(&path).map_err(|e| {
-                err(
-                    &loc,
-                    format!("cannot load environment map \"{filename}\": {e}"),
-                )
-            })?;
             // Any format the bitmap texture reads; 8-bit images are
             // sRGB-decoded, as Mitsuba's envmap does.
             let (w, h, texels) = texture::read_linear(&path, false).map_err(|e| {
