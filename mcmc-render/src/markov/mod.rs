@@ -806,8 +806,8 @@ pub fn run<F: ChainFamily>(
         && (family.exchange_move().is_some() || !family.checkpointable(&settings.mutation))
     {
         return Err(MltError::Setting(format!(
-            "these chains cannot be checkpointed (only {}' independent chains without the adaptive small step)",
-            crate::checkpoint::CHAIN_INTEGRATORS.join("'s and ")
+            "these chains cannot be checkpointed (only the independent chains of {}, without the adaptive small step)",
+            crate::checkpoint::CHAIN_INTEGRATORS.join(" and ")
         )));
     }
     check_memory(scene, family, settings)?;
