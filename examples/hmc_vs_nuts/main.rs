@@ -45,6 +45,17 @@
 //! draw), so it runs `--mala-steps k` (default 20) steps per kept draw and
 //! `k × warmup` warm-up steps: with one gradient per step that is 40 000
 //! gradients per chain, about the budget of NUTS on the Gaussian.
+//!
+//! H²MC's Newton proposals hardly depend on the current state, so on the
+//! logistic regression its chain sticks wherever the local Gaussian has
+//! lighter tails than the posterior (acceptance ≈ 0.4, long rejection
+//! runs): it runs `--h2mc-steps k` steps per kept draw after its
+//! `warmup` steps at τ = 0.1 (a walk into the bulk whose length need not
+//! grow with `k`). The default is 10, but 1 on gaussian-100, where the
+//! Newton proposal is the target itself (acceptance 1.000) and a step
+//! costs a 100×100 eigendecomposition. Measured on logistic-25 (seeds
+//! 2026, 1, 2): R-hat 1.027 at k = 1 (seed 2026); 1.006, 1.010, 1.014 at
+//! k = 5; 1.003, 1.006, 1.006 at k = 10.
 
 // Shared with the `hmc` example, which also reads the true coefficients.
 #[allow(dead_code)]
@@ -105,6 +116,8 @@ struct Options {
     hmc_time: Option<f64>,
     h2mc_tau: f64,
     mala_steps: usize,
+    /// `None`: 1 on gaussian-100, 10 elsewhere.
+    h2mc_steps: Option<usize>,
     nuts_term_buffer: Option<usize>,
     nuts_init_buffer: Option<usize>,
     nuts_window: Option<usize>,
@@ -190,6 +203,7 @@ fn parse() -> Result<Options, String> {
         hmc_time: None,
         h2mc_tau: 1.0,
         mala_steps: 20,
+        h2mc_steps: None,
         nuts_term_buffer: None,
         nuts_init_buffer: None,
         nuts_window: None,
@@ -276,6 +290,13 @@ fn parse() -> Result<Options, String> {
                     .parse()
                     .map_err(|e| format!("--mala-steps: {e}"))?
             }
+            "--h2mc-steps" => {
+                o.h2mc_steps = Some(
+                    value("--h2mc-steps")?
+                        .parse()
+                        .map_err(|e| format!("--h2mc-steps: {e}"))?,
+                )
+            }
             "--h2mc-tau" => {
                 o.h2mc_tau = value("--h2mc-tau")?
                     .parse()
@@ -283,7 +304,7 @@ fn parse() -> Result<Options, String> {
             }
             other => {
                 return Err(format!(
-                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --hmc-time T, --h2mc-tau τ, --mala-steps k, --nuts-term-buffer N, --nuts-init-buffer N, --nuts-window N, --samplers a,b, --targets a,b)"
+                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --hmc-time T, --h2mc-tau τ, --h2mc-steps k, --mala-steps k, --nuts-term-buffer N, --nuts-init-buffer N, --nuts-window N, --samplers a,b, --targets a,b)"
                 ));
             }
         }
@@ -293,6 +314,9 @@ fn parse() -> Result<Options, String> {
     }
     if o.mala_steps == 0 {
         return Err("--mala-steps must be at least 1".into());
+    }
+    if o.h2mc_steps == Some(0) {
+        return Err("--h2mc-steps must be at least 1".into());
     }
     if o.chains == 0 || o.draws < 4 {
         return Err("need at least 1 chain and 4 draws".into());
@@ -373,14 +397,14 @@ fn finish(target: &str, sampler: &str, seconds: f64, c: Counts, draws: &[Vec<Vec
     }
 }
 
-/// Runs `o.chains` chains of the kernel `make()` builds: `o.warmup × thin`
+/// Runs `o.chains` chains of the kernel `make()` builds: `warmup_steps`
 /// warm-up steps, then `o.draws` draws each `thin` steps apart.
 fn run_ours<G, K>(
     target_name: &str,
     sampler: &str,
     g: &G,
     make: impl Fn() -> K,
-    thin: usize,
+    (warmup_steps, thin): (usize, usize),
     o: &Options,
 ) -> Run
 where
@@ -402,7 +426,7 @@ where
             stream_rng(o.seed, c as u64),
         )
         .expect("the initial point has a finite density");
-        for _ in 0..o.warmup * thin {
+        for _ in 0..warmup_steps {
             chain.step(&t);
         }
         chain.freeze();
@@ -667,6 +691,11 @@ fn warn_unconverged(runs: &[Run], o: &Options) {
                 " (MALA at --mala-steps {} — raise it for a larger budget)",
                 o.mala_steps
             )
+        } else if r.sampler == "h2mc" {
+            format!(
+                " (H²MC at --h2mc-steps {} — raise it for a larger budget)",
+                h2mc_steps(&r.target, o)
+            )
         } else {
             String::new()
         };
@@ -699,20 +728,34 @@ fn compare<G: GradientTarget + Clone>(name: &str, g: &G, time: f64, o: &Options)
             tb,
         );
         let make = || nuts(g.clone(), w, s.metric, schedule, s.step_size_adaptation);
-        runs.push(run_ours(name, "nuts", g, make, 1, o));
+        runs.push(run_ours(name, "nuts", g, make, (w, 1), o));
     }
     for (variant, metric, init, window, term, mode) in NUTS_VARIANTS {
         if on(variant) {
             let make = || nuts(g.clone(), w, metric, (init, window, term), mode);
-            runs.push(run_ours(name, variant, g, make, 1, o));
+            runs.push(run_ours(name, variant, g, make, (w, 1), o));
         }
     }
     if on("hmc") {
-        runs.push(run_ours(name, "hmc", g, || hmc(g.clone(), time, w), 1, o));
+        runs.push(run_ours(
+            name,
+            "hmc",
+            g,
+            || hmc(g.clone(), time, w),
+            (w, 1),
+            o,
+        ));
     }
     if on("mala") {
         let k = o.mala_steps;
-        runs.push(run_ours(name, "mala", g, || mala(g.clone(), w * k), k, o));
+        runs.push(run_ours(
+            name,
+            "mala",
+            g,
+            || mala(g.clone(), w * k),
+            (w * k, k),
+            o,
+        ));
     }
     if on("h2mc") {
         runs.push(run_ours(
@@ -720,7 +763,7 @@ fn compare<G: GradientTarget + Clone>(name: &str, g: &G, time: f64, o: &Options)
             "h2mc",
             g,
             || h2mc(g.clone(), o.h2mc_tau, w),
-            1,
+            (w, h2mc_steps(name, o)),
             o,
         ));
     }
@@ -760,6 +803,12 @@ fn hmc<G: GradientTarget>(g: G, time: f64, warmup: usize) -> Hmc<G> {
         .and_then(|h| h.with_jitter(0.2))
         .and_then(|h| h.with_warmup(warmup, 0.8, MetricAdaptation::Diagonal))
         .expect("valid settings")
+}
+
+/// H²MC's steps per kept draw on `target` (see the module comment).
+fn h2mc_steps(target: &str, o: &Options) -> usize {
+    o.h2mc_steps
+        .unwrap_or(if target == "gaussian-100" { 1 } else { 10 })
 }
 
 /// H²MC with `tau` (default 1: Newton proposals) after a warm-up of short
