@@ -12,7 +12,7 @@ use mcmc_core::target::Target;
 use mcmc_render::color::Rgb;
 use mcmc_render::integrators::bdpt::{Bdpt, MisHeuristic};
 use mcmc_render::integrators::registry::IntegratorSettings;
-use mcmc_render::integrators::relt::{Relt, ReltExchange, ReltFamily};
+use mcmc_render::integrators::relt::{Relt, ReltExchange, ReltFamily, ReltMisClasses};
 use mcmc_render::integrators::{Rendered, RunSettings};
 use mcmc_render::markov::ChainFamily;
 use mcmc_render::observer::NoObserver;
@@ -122,6 +122,9 @@ proptest! {
     /// filmed by the specific replica alone, with weight 1. A uniform
     /// replica drawing in a share of the sweeps only changes how the
     /// weight is split (each film is over its own draws): the sum stays 1.
+    /// With `mis_classes=per_class` a replica whose target lacks a class
+    /// films none of it (`L1`: the uniform replica alone, or with the full
+    /// one under `full_l1`), and the weights still sum to 1 over the rest.
     #[test]
     fn mis_weights_sum_to_one(
         v in prop::array::uniform6(0.0f64..10.0),
@@ -129,15 +132,20 @@ proptest! {
         beta in 1.0f64..3.0,
         luminance in any::<bool>(),
         uniform_share in 0.01f64..=1.0,
+        per_class in any::<bool>(),
+        full_l1 in any::<bool>(),
     ) {
         let scene = repo_scene("cornell-box.xml", 4);
         let settings = Relt {
             mis_power: beta,
             uniform_share,
             target: if luminance { ClassScalar::Luminance } else { ClassScalar::XyzSum },
+            mis_classes: if per_class { ReltMisClasses::PerClass } else { ReltMisClasses::All },
+            full_l1,
             ..Relt::default()
         };
         let family = family(&scene, &settings);
+        let replicas = settings.replicas();
         let x = payload(&v);
         let values = class_values(&x.splats, settings.target);
         prop_assume!(values[1..].iter().any(|&l| l > 0.0));
@@ -151,6 +159,24 @@ proptest! {
             let total: f64 = factors.iter().zip(&q).map(|(f, q)| f[c] * q).sum();
             prop_assert!((total - 1.0).abs() < 1e-12, "class {c}: Σw = {total}");
             prop_assert_eq!(specific, 0.0);
+            if per_class {
+                // Only the replicas whose target holds the class film it
+                // (the uniform replica's, `None`, holds every class).
+                for (k, r) in replicas.iter().enumerate() {
+                    let holds = r.weights.is_none_or(|d| d[c] > 0.0);
+                    prop_assert!(holds || factors[k][c] == 0.0, "{} films class {c}", r.name);
+                }
+            }
+        }
+        // L1: the uniform replica alone, or with the full one under
+        // full_l1 (whose weight is then > 0 wherever q_full > 0).
+        if per_class {
+            prop_assert_eq!(factors[2][1], 0.0);
+            if !full_l1 {
+                prop_assert_eq!(factors[1][1], 0.0);
+            } else if q[1] > 0.0 {
+                prop_assert!(factors[1][1] > 0.0);
+            }
         }
         if values[0] > 0.0 {
             prop_assert!((factors[3][0] * q[3] - 1.0).abs() < 1e-12);

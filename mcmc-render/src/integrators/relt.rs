@@ -18,7 +18,9 @@
 //!   over the other replicas with the start-up `b̂_k`
 //!   (`(q_k/b̂_k)^{β−1} / (b̂_k Σ_l (q_l/b̂_l)^β)` per state, times the
 //!   running `b_k`). Every uniform draw updates every replica's running
-//!   `b_k`.
+//!   `b_k`. `mis_classes=per_class` runs each class's sum only over the
+//!   replicas whose target holds the class (`L1`: the uniform replica,
+//!   and the full one under `full_l1`).
 //! - **Start-up**: one shared pool of uniform candidates gives every
 //!   replica's initial running `b_k`; population annealing (Algorithm 2,
 //!   `mcmc_core::replica::population_annealing`) from the uniform replica
@@ -66,6 +68,19 @@ crate::choice! {
     }
 }
 
+crate::choice! {
+    /// Which replicas share the MIS weights of a class (`L0` aside while
+    /// the specific replica runs: it films `L0` alone, §5.1.4).
+    pub enum ReltMisClasses {
+        /// Every class over all the other replicas (the paper's §5.1.4).
+        All = "all",
+        /// Each class over the replicas whose target holds it (the uniform
+        /// replica holds every class): `L1` is then filmed by the uniform
+        /// replica alone, or with the full one under `full_l1`.
+        PerClass = "per_class",
+    }
+}
+
 crate::settings! {
     /// RELT settings (defaults from spec seed002 §11).
     pub struct Relt {
@@ -87,6 +102,10 @@ crate::settings! {
         pub uniform_share: f64 = 1.0, check share;
         /// Exponent β ≥ 1 of the power heuristic over replicas (1: balance).
         pub mis_power: f64 = 1.0, check check::at_least_one;
+        /// Replicas a class's MIS weights run over: all, or per_class (only those whose target holds the class).
+        pub mis_classes: ReltMisClasses = ReltMisClasses::All;
+        /// Put L1 (implicit lighting without a specular vertex) into the full replica's target.
+        pub full_l1: bool = false;
         /// Particles of the population-annealing start-up (0: start every replica from its own bootstrap).
         pub annealing_particles: usize = 10_000;
         /// Metropolis–Hastings steps per particle and replica in the annealing.
@@ -136,6 +155,12 @@ impl Replica {
         }
     }
 
+    /// Whether the replica's target holds class `c` (the uniform replica's
+    /// holds every class).
+    fn holds(&self, c: usize) -> bool {
+        self.weights.is_none_or(|d| d[c] > 0.0)
+    }
+
     /// The replica's kernel configuration.
     fn mutation(&self) -> Mutation {
         let small = SmallStepKind::Kelemen {
@@ -161,7 +186,7 @@ impl Relt {
             },
             Replica {
                 name: "full",
-                weights: Some([1.0, 0.0, 1.0, 1.0, 1.0, 1.0]),
+                weights: Some([1.0, f64::from(u8::from(self.full_l1)), 1.0, 1.0, 1.0, 1.0]),
                 s2: self.s2_full,
                 share: 1.0,
             },
@@ -217,6 +242,8 @@ pub struct ReltFamily<'a> {
     scalar: ClassScalar,
     exchange: ReltExchange,
     mis_power: f64,
+    /// Which replicas share a class's MIS weights.
+    mis_classes: ReltMisClasses,
     /// Index of the specific replica, whose member alone films `L0`.
     specific: Option<usize>,
     /// A custom exchange move in place of `exchange`.
@@ -256,6 +283,7 @@ impl<'a> ReltFamily<'a> {
             scalar: settings.target,
             exchange: settings.exchange,
             mis_power: settings.mis_power,
+            mis_classes: settings.mis_classes,
             specific: replicas.iter().position(|r| r.name == "specific"),
             custom_exchange: None,
             annealing: (settings.annealing_particles > 0).then_some(Annealing {
@@ -390,18 +418,33 @@ impl<'a> ChainFamily for ReltFamily<'a> {
         // The power heuristic with sample counts: replica l draws in a
         // share f_l of the sweeps, so w_k = (f_k q_k/b̂_k)^β / Σ_l (f_l
         // q_l/b̂_l)^β, and the factor is w_k/q_k (its film is over its own
-        // mutations). With every f_l = 1 this is the paper's Eq. 22.
+        // mutations). With every f_l = 1 this is the paper's Eq. 22. The
+        // sum runs over the replicas that film the class: all but the
+        // specific one, or (`per_class`) those of them whose target holds
+        // it. Holding c, replica k has q_k > 0 wherever L_c > 0, so the
+        // weights still sum to 1 there; the uniform replica holds every
+        // class, so no sum is empty.
         let beta = self.mis_power;
         let f = |k: usize| self.targets[k].replica.share;
-        let denominator: f64 = (0..self.members())
-            .filter(|&l| Some(l) != self.specific)
-            .map(|l| (f(l) * q(l) / b_hat[l]).powf(beta))
-            .sum();
-        let factor = f(member) * (f(member) * q(member) / b_hat[member]).powf(beta - 1.0)
-            / (b_hat[member] * denominator);
-        w.fill(factor);
-        if self.specific.is_some() {
-            w[0] = 0.0;
+        let films = |k: usize, c: usize| {
+            Some(k) != self.specific
+                && (self.mis_classes == ReltMisClasses::All || self.targets[k].replica.holds(c))
+        };
+        let mut denominators = [0.0; PATH_CLASSES];
+        for l in (0..self.members()).filter(|&l| Some(l) != self.specific) {
+            let term = (f(l) * q(l) / b_hat[l]).powf(beta);
+            for (c, d) in denominators.iter_mut().enumerate() {
+                if films(l, c) {
+                    *d += term;
+                }
+            }
+        }
+        let own = f(member) * (f(member) * q(member) / b_hat[member]).powf(beta - 1.0);
+        for (c, w) in w.iter_mut().enumerate() {
+            // L0 is the specific replica's alone (§5.1.4).
+            if !(c == 0 && self.specific.is_some()) && films(member, c) {
+                *w = own / (b_hat[member] * denominators[c]);
+            }
         }
         Some(w)
     }
