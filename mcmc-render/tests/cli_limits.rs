@@ -5,7 +5,9 @@
 
 mod cli_support;
 
-use cli_support::{assert_clean_failure, floor_scene, run, scratch, write};
+use cli_support::{BIN, assert_clean_failure, floor_scene, json, run, scratch, write};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
 
 fn setup(name: &str) -> std::path::PathBuf {
     let dir = scratch(name);
@@ -269,4 +271,56 @@ fn an_include_graph_that_fans_out_is_refused() {
     }
     let out = run(&["render", "f0.xml", "--quiet"], &dir);
     assert_clean_failure(&out, &["more than 1000 <include>d files"]);
+}
+
+/// Work sized by a setting stops at `--time` (issue 23, item 3): `mlt`'s
+/// direct-lighting and specular-chain passes at 10^9 samples per pixel
+/// (hours on this film) end at the budget with the samples per pixel they
+/// finished, and the run writes its image.
+#[test]
+fn mlt_passes_sized_by_a_setting_stop_at_the_time_budget() {
+    let dir = setup("limits-mlt-passes");
+    let mut child = Command::new(BIN)
+        .args([
+            "render",
+            "s.xml",
+            "--integrator",
+            "mlt",
+            "--set",
+            "direct_samples=1000000000",
+            "--set",
+            "specular_samples=1000000000",
+            "--time",
+            "1",
+            "--quiet",
+        ])
+        .current_dir(&dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the binary runs");
+    // A watchdog, not a speed test: without the deadline the passes run
+    // for hours, so any bound far above the budget tells the two apart.
+    let start = Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().expect("wait") {
+            break status;
+        }
+        if start.elapsed() > Duration::from_secs(300) {
+            let _ = child.kill();
+            panic!("mlt ran 300 s past a 1 s budget");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut stderr).unwrap();
+    assert!(status.success(), "{stderr}");
+    let stats = json(&dir.join("render.json"));
+    for pass in ["direct_pass", "specular_pass"] {
+        let spp = stats[pass]["samples_per_pixel"]
+            .as_u64()
+            .unwrap_or_else(|| panic!("no {pass} in {stats}"));
+        assert!(spp < 1_000_000_000, "{pass}: {spp} spp");
+    }
+    assert!(dir.join("render.exr").is_file());
 }

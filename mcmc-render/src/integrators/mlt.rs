@@ -26,7 +26,9 @@
 //!   with `max_depth` 2 at `direct_samples` samples per pixel, the chains
 //!   keep to paths of three or more segments, and the two images are
 //!   summed. With a time budget the pass runs first and the chains get
-//!   the rest.
+//!   the rest; a pass the budget cuts short keeps the samples per pixel
+//!   it finished (reported in the statistics), so `--time` bounds the run
+//!   whatever `direct_samples` or `specular_samples` say.
 //! - **Specular-chain pass** (`specular_samples`, default 16 spp; not in
 //!   Mitsuba): the paths `L S* E` (emitters seen directly or through
 //!   Dirac vertices only) are path traced
@@ -228,6 +230,7 @@ impl IntegratorSettings for Mlt {
     ) -> Result<Rendered, RenderError> {
         IntegratorSettings::validate(self).map_err(RenderError::Invalid)?;
         let start = Instant::now();
+        let deadline = run.time_budget.map(|b| start + b);
         // A pass alone is not an estimate of the image: its snapshots are
         // not passed on; the chains' snapshots carry the passes' images.
         let quiet = WithPasses::progress_only(observer);
@@ -236,10 +239,14 @@ impl IntegratorSettings for Mlt {
                 max_depth: 2,
                 rr_depth: self.depth.rr_depth,
             };
-            (
-                spp,
-                crate::render::run_per_pixel(scene, &pt, &fixed_spp(run, spp), stop, &quiet),
-            )
+            let r = crate::render::run_per_pixel(
+                scene,
+                &pt,
+                &fixed_spp(run, spp, deadline),
+                stop,
+                &quiet,
+            );
+            pass_done(r, stop)
         });
         // The specular chains of the lengths the chains would sample
         // (the direct pass has those of one and two segments).
@@ -251,7 +258,7 @@ impl IntegratorSettings for Mlt {
             specular_chains_pass(
                 scene,
                 &pass,
-                run,
+                (run, deadline),
                 spp,
                 self.specular_time_share,
                 stop,
@@ -359,8 +366,9 @@ impl Observer for WithPasses<'_> {
 /// The specular-chain pass: with a time budget and a positive `share`,
 /// path tracing for `share` of the budget (passes of 1, 2, 4, … spp; the
 /// one cut by the deadline is discarded), else, or when that gave fewer
-/// than `min_spp`, `min_spp` samples per pixel. Returns the samples per
-/// pixel done and the image.
+/// than `min_spp`, `min_spp` samples per pixel (fewer if the run's
+/// `deadline` comes first). Returns the samples per pixel done and the
+/// image.
 ///
 /// Why the time share: at a fixed 16 spp the pass's noise on the emitters
 /// seen through glass and mirrors does not fall with the budget. On
@@ -370,7 +378,7 @@ impl Observer for WithPasses<'_> {
 fn specular_chains_pass(
     scene: &Scene,
     pass: &SpecularChains,
-    run: &RunSettings,
+    (run, deadline): (&RunSettings, Option<Instant>),
     min_spp: u32,
     share: f64,
     stop: &AtomicBool,
@@ -382,20 +390,30 @@ fn specular_chains_pass(
             time_budget: Some(budget.mul_f64(share)),
             ..run.clone()
         };
-        let mut r = crate::render::run_per_pixel(scene, pass, &timed, stop, observer);
-        // Ending at its share is the plan, not an interruption.
-        r.interrupted = stop.load(std::sync::atomic::Ordering::Relaxed);
-        let done = r
-            .statistics
-            .get("spp")
-            .and_then(|v| v.as_u64())
-            .unwrap_or(0);
-        if done >= u64::from(min_spp) {
-            return (done.min(u64::from(u32::MAX)) as u32, r);
+        let r = crate::render::run_per_pixel(scene, pass, &timed, stop, observer);
+        let (done, r) = pass_done(r, stop);
+        if done >= min_spp {
+            return (done, r);
         }
     }
-    let r = crate::render::run_per_pixel(scene, pass, &fixed_spp(run, min_spp), stop, observer);
-    (min_spp, r)
+    let fixed = fixed_spp(run, min_spp, deadline);
+    pass_done(
+        crate::render::run_per_pixel(scene, pass, &fixed, stop, observer),
+        stop,
+    )
+}
+
+/// The samples per pixel a per-pixel pass finished, and the pass marked
+/// interrupted only by a stop (Ctrl-C): ending at its time share or at the
+/// run's deadline is the plan.
+fn pass_done(mut r: Rendered, stop: &AtomicBool) -> (u32, Rendered) {
+    r.interrupted = stop.load(std::sync::atomic::Ordering::Relaxed);
+    let done = r
+        .statistics
+        .get("spp")
+        .and_then(|v| v.as_u64())
+        .unwrap_or(0);
+    (u32::try_from(done).unwrap_or(u32::MAX), r)
 }
 
 /// Bytes a BDPT start-up keeps per draw, at least: its entry (the weighted
@@ -403,12 +421,13 @@ fn specular_chains_pass(
 /// (8 B) and one weighted technique of the start states (16 B).
 const BDPT_STARTUP_BYTES_PER_DRAW: u128 = 56;
 
-/// `run` with a fixed `spp` per pixel and no time budget (the per-pixel
-/// passes beside the chains).
-fn fixed_spp(run: &RunSettings, spp: u32) -> RunSettings {
+/// `run` with a fixed `spp` per pixel (the per-pixel passes beside the
+/// chains), cut short at the run's `deadline`: without it a pass sized by
+/// a setting (10^15 spp) ran on past `--time`.
+fn fixed_spp(run: &RunSettings, spp: u32, deadline: Option<Instant>) -> RunSettings {
     RunSettings {
         spp: Some(spp),
-        time_budget: None,
+        time_budget: deadline.map(|d| d.saturating_duration_since(Instant::now())),
         // The chains' run is not checkpointed; these passes are part of it.
         checkpoint: None,
         ..run.clone()
