@@ -229,19 +229,15 @@ fn mlt_with_a_direct_pass_agrees_with_pt_on_the_cornell_box() {
     assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
 }
 
-#[test]
-fn independent_proposals_refine_the_normalisation() {
-    // With the independent proposal (weight 0.3 against the bidirectional
-    // mutation's 1: p = 0.23, ≈ 120 000 fresh paths per run besides the
-    // 100 000 candidates, 512 chains, 2048 mutations per pixel), the
-    // running normalisation's standard error must fall below the
-    // bootstrap's (√(100k/220k) ≈ 0.67 of it expected; asserted < 0.8),
-    // and the image must still agree with PT to 1% (32 replicates).
+/// `k` runs of `mlt` with the independent proposal (weight 0.3 against the
+/// bidirectional mutation's 1: p = 0.23, ≈ 120 000 fresh paths per run
+/// besides the 100 000 candidates, 512 chains, 2048 mutations per pixel):
+/// each run's running/bootstrap standard-error ratio and image mean.
+fn independent_proposal_runs(k: u64) -> (Vec<f64>, Vec<[f64; 3]>) {
     let scene = cornell();
     let family = PathFamily::new(scene, Some(DEPTH as usize));
     let stop = AtomicBool::new(false);
-    let mut ratios = Vec::new();
-    let reps: Vec<[f64; 3]> = (0..32)
+    (0..k)
         .map(|k| {
             let settings = ChainSettings {
                 mutation: PathMutations {
@@ -258,16 +254,42 @@ fn independent_proposals_refine_the_normalisation() {
             let r = mcmc_render::markov::run(scene, &family, &settings, &stop, &NoObserver)
                 .expect("mlt runs");
             assert_eq!(r.chain_stats.invalid_density, 0, "NaN/inf paths");
-            ratios.push(r.running_b.1 / r.bootstrap_b.1);
-            image_mean(&r.image())
+            (r.running_b.1 / r.bootstrap_b.1, image_mean(&r.image()))
         })
-        .collect();
+        .unzip()
+}
+
+/// The running normalisation's standard error must fall below the
+/// bootstrap's: √(100k/220k) ≈ 0.67 of it expected, asserted < 0.8. The
+/// ratio is a ratio of sample counts more than a random quantity, so four
+/// runs tell 0.67 from 1; the image's agreement with PT under the
+/// independent proposal needs 32 and is the ignored test below (its
+/// exactness is checked by default in `path_space_perturbations`'
+/// `independent_proposal_keeps_exact_start_states_exact`). Session 14: the
+/// 32-run version took 165 s of the default suite.
+#[test]
+fn independent_proposals_refine_the_normalisation() {
+    let (ratios, _) = independent_proposal_runs(4);
+    check_refined_normalisation(&ratios);
+}
+
+fn check_refined_normalisation(ratios: &[f64]) {
+    eprintln!("running/bootstrap standard error per run: {ratios:.3?}");
     let mean_ratio = ratios.iter().sum::<f64>() / ratios.len() as f64;
-    eprintln!("running/bootstrap standard error: {mean_ratio:.3}");
     assert!(
         mean_ratio < 0.8,
         "the running estimate did not improve: {mean_ratio}"
     );
+}
+
+/// The same runs agree with PT to 1% (32 replicates; 4σ and 1%, 5σ < 1%).
+/// About 3 minutes on the loaded machine: `cargo test -p mcmc-render
+/// --test path_space_mlt -- --ignored independent`.
+#[test]
+#[ignore]
+fn independent_proposals_agree_with_pt_on_the_cornell_box() {
+    let (ratios, reps) = independent_proposal_runs(32);
+    check_refined_normalisation(&ratios);
     let a = MeanAgreement::new(pt_reference(), &reps);
     eprintln!("mlt + independent: rel {:?}\n  {a:?}", a.rel());
     assert!(
