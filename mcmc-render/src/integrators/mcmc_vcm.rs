@@ -68,6 +68,23 @@
 //! fixed, so that every `C^Ω` of the render — and the running `b_con` — use
 //! the same weights.
 //!
+//! # Estimating `b_con` (`con_estimate`)
+//! `direct` (Eq. 6.4) is the mean of `lum C^Ω` over the independent light
+//! subpaths. Only the visible ones (`b_vis`, under 1% on an interior)
+//! carry it, so it is `b_vis` times the mean luminance of a few dozen
+//! visible subpaths per iteration. The visibility chain samples exactly
+//! the visible subpaths uniformly (`π_vis/b_vis`; it restarts in
+//! stationarity, uniformly among the visible candidates), thousands per
+//! iteration: `b_con = b_vis · E_vis[lum C^Ω]` (`visibility`), with the
+//! chain's mean taken from the expected value `(1 − α) lum(x) + α lum(y)`
+//! of each step. Both estimate the same constant; `combined` weighs them
+//! by their inverse squared standard errors (iteration batches). With
+//! `visibility` the denominator of Eq. 6.5 becomes
+//! `(n_vis π_vis + n_con lum/E_vis[lum]) / b_vis`: the image level then
+//! hangs on `b_vis` alone. Estimates use earlier iterations only (frozen
+//! per iteration as Eq. 6.4's); before the visibility chain has run, and
+//! for `combined` before two iterations, `direct` is used.
+//!
 //! Determinism: every random number comes from a stream keyed by the seed,
 //! the iteration and the unit (tile, candidate block, chain pair), and
 //! results are joined in unit order: one seed gives the same image on any
@@ -434,8 +451,39 @@ struct Normalisation {
     count: f64,
     vis: f64,
     con: f64,
-    /// (count, Σ π_vis, Σ π_con) per iteration.
-    batches: Vec<[f64; 3]>,
+    /// Visibility-chain steps.
+    chain_steps: f64,
+    /// Σ over those steps of the expected `lum C^Ω` of the next state.
+    chain_lum: f64,
+    /// (count, Σ π_vis, Σ π_con, chain steps, Σ chain lum) per iteration.
+    batches: Vec<[f64; 5]>,
+}
+
+/// The ratio `Σ num / Σ den` over `batches` (columns `num`, `den`) and its
+/// standard error, treating the batches (iterations) as independent
+/// (ratio estimator; NaN below two batches).
+fn batch_ratio(batches: &[[f64; 5]], num: usize, den: usize) -> (f64, f64) {
+    let (sn, sd) = batches
+        .iter()
+        .fold((0.0, 0.0), |(a, b), x| (a + x[num], b + x[den]));
+    let r = if sd > 0.0 { sn / sd } else { 0.0 };
+    let k = batches.len() as f64;
+    if batches.len() < 2 || !(sd > 0.0) {
+        return (r, f64::NAN);
+    }
+    let s: f64 = batches.iter().map(|x| (x[num] - r * x[den]).powi(2)).sum();
+    (r, (s * k / (k - 1.0)).sqrt() / sd)
+}
+
+/// Inverse-variance combination of two estimates of one quantity with
+/// standard errors `se_a`, `se_b`; the first alone unless both are
+/// positive and finite.
+fn inverse_variance(a: f64, se_a: f64, b: f64, se_b: f64) -> (f64, f64) {
+    if !(se_a > 0.0 && se_a.is_finite() && se_b > 0.0 && se_b.is_finite()) {
+        return (a, se_a);
+    }
+    let (wa, wb) = (se_a.powi(-2), se_b.powi(-2));
+    ((wa * a + wb * b) / (wa + wb), (wa + wb).sqrt().recip())
 }
 
 impl Normalisation {
@@ -447,10 +495,46 @@ impl Normalisation {
         }
     }
 
+    /// One visibility-chain step whose next state has expected luminance
+    /// `luminance`.
+    fn add_chain(&mut self, luminance: f64) {
+        self.chain_steps += 1.0;
+        self.chain_lum += luminance;
+    }
+
     fn merge(&mut self, o: &Normalisation) {
         self.count += o.count;
         self.vis += o.vis;
         self.con += o.con;
+        self.chain_steps += o.chain_steps;
+        self.chain_lum += o.chain_lum;
+    }
+
+    /// `b_con` by `how` with its standard error (NaN below two batches).
+    fn con(&self, how: ConEstimate) -> (f64, f64) {
+        let direct = (self.estimates().1, self.standard_errors().1);
+        if how == ConEstimate::Direct || !(self.chain_steps > 0.0) {
+            return direct;
+        }
+        let visibility = self.con_from_visibility();
+        match how {
+            ConEstimate::Visibility => visibility,
+            _ => inverse_variance(direct.0, direct.1, visibility.0, visibility.1),
+        }
+    }
+
+    /// `b_vis · E_vis[lum C^Ω]` and its standard error (the two factors'
+    /// relative errors added in quadrature: they come from different
+    /// light subpaths, though of the same camera subpaths).
+    fn con_from_visibility(&self) -> (f64, f64) {
+        let b_vis = self.estimates().0;
+        let se_vis = self.standard_errors().0;
+        let (m, se_m) = batch_ratio(&self.batches, 4, 3);
+        let b = b_vis * m;
+        (
+            b,
+            b * ((se_vis / b_vis).powi(2) + (se_m / m).powi(2)).sqrt(),
+        )
     }
 
     /// `(b_vis, b_con)` so far (zeros before any sample).
@@ -466,18 +550,10 @@ impl Normalisation {
     /// (ratio estimator; the samples of one iteration share its camera
     /// subpaths, so they are not independent); NaN below two batches.
     fn standard_errors(&self) -> (f64, f64) {
-        let k = self.batches.len();
-        if k < 2 {
-            return (f64::NAN, f64::NAN);
-        }
-        let (bv, bc) = self.estimates();
-        let (mut sv, mut sc) = (0.0, 0.0);
-        for [n, v, c] in &self.batches {
-            sv += (v - bv * n).powi(2);
-            sc += (c - bc * n).powi(2);
-        }
-        let scale = k as f64 / (k as f64 - 1.0) / (self.count * self.count);
-        ((sv * scale).sqrt(), (sc * scale).sqrt())
+        (
+            batch_ratio(&self.batches, 1, 0).1,
+            batch_ratio(&self.batches, 2, 0).1,
+        )
     }
 }
 
@@ -547,6 +623,8 @@ pub struct McmcVcm {
     /// Scale the light-subpath techniques' MIS densities by the chains'
     /// mixture density (§6.3.4).
     pub vis_pdf: bool,
+    /// How `b_con` is estimated (module docs).
+    pub con_estimate: ConEstimate,
 }
 
 impl McmcVcm {
@@ -726,7 +804,7 @@ impl McmcVcm {
             }
             norm.merge(&batch);
             let b = match self.normalisation {
-                NormalisationScope::Render => norm.estimates(),
+                NormalisationScope::Render => (norm.estimates().0, norm.con(self.con_estimate).0),
                 NormalisationScope::Iteration => batch.estimates(),
             };
             // The chains need a visible candidate to restart from.
@@ -754,7 +832,13 @@ impl McmcVcm {
                 batch.merge(&unit.norm);
                 unit.norm = Normalisation::default();
             }
-            norm.batches.push([batch.count, batch.vis, batch.con]);
+            norm.batches.push([
+                batch.count,
+                batch.vis,
+                batch.con,
+                batch.chain_steps,
+                batch.chain_lum,
+            ]);
             for ((&raster, &pt), &l) in pass.rasters.iter().zip(&pass.estimates).zip(&light) {
                 film.add_sample(raster, pt + l);
             }
@@ -1014,14 +1098,24 @@ impl McmcVcm {
                         }
                     };
                     splat(&t.current.payload, 1.0 - t.alpha);
+                    let lum = |c: &LightContribution| {
+                        if c.finite && c.luminance > 0.0 {
+                            c.luminance
+                        } else {
+                            0.0
+                        }
+                    };
+                    if kind == ChainKind::Visibility {
+                        // E_vis[lum C^Ω] for `con_estimate` (Rao–Blackwellised:
+                        // the expected luminance of the next state).
+                        let next = (1.0 - t.alpha) * lum(&t.current.payload)
+                            + t.proposal.map_or(0.0, |y| t.alpha * lum(&y.payload));
+                        norm.add_chain(next);
+                    }
                     if let Some(y) = t.proposal {
                         splat(&y.payload, t.alpha);
                         if t.component == large_component {
-                            norm.add(if y.payload.finite {
-                                y.payload.luminance
-                            } else {
-                                0.0
-                            });
+                            norm.add(lum(&y.payload));
                         }
                     }
                 },
@@ -1124,8 +1218,14 @@ impl McmcVcm {
                 );
             }
         }
-        let (b_vis, b_con) = norm.estimates();
-        let (se_vis, se_con) = norm.standard_errors();
+        let (b_vis, b_con_direct) = norm.estimates();
+        let (se_vis, se_con_direct) = norm.standard_errors();
+        let (b_con, se_con) = norm.con(self.con_estimate);
+        let (b_con_vis, se_con_vis) = if norm.chain_steps > 0.0 {
+            norm.con_from_visibility()
+        } else {
+            (f64::NAN, f64::NAN)
+        };
         let finite_or_null = |x: f64| {
             if x.is_finite() {
                 serde_json::json!(x)
@@ -1157,6 +1257,12 @@ impl McmcVcm {
             "b_vis_standard_error": finite_or_null(se_vis),
             "b_con": b_con,
             "b_con_standard_error": finite_or_null(se_con),
+            "con_estimate": self.con_estimate.name(),
+            "b_con_direct": b_con_direct,
+            "b_con_direct_standard_error": finite_or_null(se_con_direct),
+            "b_con_visibility": finite_or_null(b_con_vis),
+            "b_con_visibility_standard_error": finite_or_null(se_con_vis),
+            "visibility_chain_steps": norm.chain_steps,
             "normalisation_samples": norm.count,
             "light_density_scale": light_scale,
             "candidates": self.candidates,
@@ -1209,6 +1315,18 @@ crate::choice! {
     }
 }
 
+crate::choice! {
+    /// How the normalisation `b_con` is estimated (module docs).
+    pub enum ConEstimate {
+        /// The mean of lum C^Ω over the independent light subpaths (Eq. 6.4).
+        Direct = "direct",
+        /// b_vis times the visibility chain's mean of lum C^Ω.
+        Visibility = "visibility",
+        /// Both, weighted by their inverse squared standard errors.
+        Combined = "combined",
+    }
+}
+
 /// `target_acceptance` lies in (0, 1).
 fn check_acceptance(v: &f64) -> Result<(), String> {
     if *v > 0.0 && *v < 1.0 {
@@ -1235,6 +1353,8 @@ crate::settings! {
         pub normalisation: NormalisationScope = NormalisationScope::Render;
         /// Scale the light-subpath techniques' densities in the MIS weights by the chains' mixture density (the visibility chain's exact p/b_vis).
         pub vis_pdf: bool = true;
+        /// b_con from the independent light subpaths (direct, Eq. 6.4), from b_vis and the visibility chain's mean luminance (visibility), or both by inverse variance (combined).
+        pub con_estimate: ConEstimate = ConEstimate::Direct;
         flatten {
             /// VCM: mode, radius, reduction (alpha: 1 here, a fixed radius as the thesis runs), heuristic, depth.
             pub vcm: VcmSettings = VcmSettings {
@@ -1257,6 +1377,7 @@ impl McmcVcmSettings {
             units: self.units,
             normalisation: self.normalisation,
             vis_pdf: self.vis_pdf,
+            con_estimate: self.con_estimate,
         }
     }
 }
@@ -1272,6 +1393,14 @@ impl IntegratorSettings for McmcVcmSettings {
         if self.normalisation == NormalisationScope::Render && self.vcm.alpha < 1.0 {
             return Err(
                 "`normalisation = render` needs a fixed radius (`alpha = 1`): with radius reduction the targets change with each iteration; use `normalisation = iteration`".into(),
+            );
+        }
+        if self.con_estimate != ConEstimate::Direct
+            && (self.normalisation == NormalisationScope::Iteration
+                || self.light_chains != LightChains::Both)
+        {
+            return Err(
+                "`con_estimate` other than direct needs the visibility chain (`light_chains = both`) and `normalisation = render`".into(),
             );
         }
         if self.light_chains == LightChains::Contribution && !(self.large_step > 0.0) {
@@ -1302,5 +1431,31 @@ impl IntegratorSettings for McmcVcmSettings {
         )
         .map_err(RenderError::Invalid)?;
         Ok(self.integrator(scene).render(scene, run, stop, observer))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The batch ratio and its standard error against values worked by
+    /// hand: batches (num, den) = (1, 2), (3, 2): r = 4/4 = 1; residuals
+    /// −1, 1; s = 2; SE = √(2 · 2/1)/4 = 0.5.
+    #[test]
+    fn batch_ratio_matches_hand_values() {
+        let b = [[2.0, 1.0, 0.0, 0.0, 0.0], [2.0, 3.0, 0.0, 0.0, 0.0]];
+        let (r, se) = batch_ratio(&b, 1, 0);
+        assert_eq!(r, 1.0);
+        assert!((se - 0.5).abs() < 1e-12, "{se}");
+        assert!(batch_ratio(&b[..1], 1, 0).1.is_nan());
+    }
+
+    /// Inverse variance: SEs 1 and 2 give weights 4:1 (estimate
+    /// (4·1 + 1·6)/5 = 2, SE 1/√(1.25)); a missing SE keeps the first.
+    #[test]
+    fn inverse_variance_weights_by_squared_errors() {
+        let (c, se) = inverse_variance(1.0, 1.0, 6.0, 2.0);
+        assert!((c - 2.0).abs() < 1e-12 && (se - 1.25f64.sqrt().recip()).abs() < 1e-12);
+        assert_eq!(inverse_variance(1.0, f64::NAN, 6.0, 2.0).0, 1.0);
     }
 }
