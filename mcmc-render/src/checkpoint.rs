@@ -20,9 +20,9 @@ use std::sync::Arc;
 pub const INTEGRATORS: [&str; 3] = ["pt", "lt", "bdpt"];
 
 /// The integrators whose runs can be checkpointed on the Markov-chain
-/// driver (independent chains on primary sample space; see
-/// [`crate::markov::checkpoint`]).
-pub const CHAIN_INTEGRATORS: [&str; 2] = ["pssmlt", "mmlt"];
+/// driver (independent chains and replica sets on primary sample space;
+/// see [`crate::markov::checkpoint`]).
+pub const CHAIN_INTEGRATORS: [&str; 4] = ["pssmlt", "mmlt", "tempered-pssmlt", "tempered-mmlt"];
 
 /// First bytes of a checkpoint file (format version 1).
 const MAGIC: &[u8; 8] = b"mcmcPX01";

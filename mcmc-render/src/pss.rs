@@ -412,6 +412,14 @@ impl Default for Mutation {
 pub const LARGE_STEP_COMPONENT: usize = 1;
 
 impl Mutation {
+    /// Whether chains with this mutation can be checkpointed
+    /// ([`crate::markov::ChainFamily::checkpointable`]): its kernel keeps
+    /// no state, unless the small step is the adaptive one (its
+    /// adaptation's state is not saved).
+    pub fn checkpointable(&self) -> bool {
+        !matches!(self.small, SmallStepKind::Adaptive)
+    }
+
     /// Builds the `mcmc-core` kernel: component 0 is the small step,
     /// component [`LARGE_STEP_COMPONENT`] the large step.
     pub fn kernel<P: 'static>(&self) -> mcmc_core::Result<Mixture<TorusPoint, P>> {
@@ -485,8 +493,7 @@ impl<'a, F: PssPathSampler> ChainFamily for PssFamily<'a, F> {
         mutation.large_step_probability
     }
     fn checkpointable(&self, mutation: &Mutation) -> bool {
-        // The adaptive small step's kernel keeps its adaptation's state.
-        !matches!(mutation.small, SmallStepKind::Adaptive)
+        mutation.checkpointable()
     }
     crate::primary_sample_space_family!();
 }

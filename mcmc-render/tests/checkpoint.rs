@@ -9,8 +9,9 @@
 //! 0 (so the later passes reuse the first passes' random streams) must not
 //! give the uninterrupted image, or the comparison could not tell.
 //!
-//! The Markov-chain driver (`pssmlt`, `mmlt`): a render stopped after two
-//! of its rounds and resumed ends with the uninterrupted render's bits,
+//! The Markov-chain driver (`pssmlt`, `mmlt`, and the replica sets of
+//! `tempered-pssmlt` and `tempered-mmlt`): a render stopped after two of
+//! its rounds and resumed ends with the uninterrupted render's bits,
 //! statistics included. Control: the same checkpoint with every chain's
 //! random stream put back to where it started (all other state kept) must
 //! differ.
@@ -133,30 +134,21 @@ fn a_stopped_render_resumed_from_its_checkpoint_ends_bit_identical() {
     }
 }
 
-/// A Markov render as the command line runs it, checkpointed at `path`;
-/// snapshots after every round (so `observer` can stop it between rounds).
+/// A Markov render as the command line runs it, with `sets` (the driver's
+/// and the integrator's settings), checkpointed at `path`; snapshots after
+/// every round (so `observer` can stop it between rounds).
 fn chains_render(
     scene: &Scene,
-    name: &str,
+    (name, sets): (&str, &[(&str, &str)]),
     path: &std::path::Path,
     progress: Option<ChainProgress>,
     stop: &AtomicBool,
     observer: &dyn Observer,
 ) -> Rendered {
-    // 40×40 × 24 mutations per pixel over 48 chains: 800 mutations a
-    // chain, i.e. rounds of 256, 256, 256 and 32.
-    let sets = [
-        ("bootstrap", "4000"),
-        ("chains", "48"),
-        ("mutations_per_pixel", "24"),
-        ("max_depth", "5"),
-    ];
-    let integ = registry::configure(
-        None,
-        Some(name),
-        &sets.map(|(k, v)| (k.to_string(), v.to_string())),
-    )
-    .expect(name);
+    let sets: Vec<(String, String)> = (sets.iter())
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
+    let integ = registry::configure(None, Some(name), &sets).expect(name);
     let run = RunSettings {
         seed: 5,
         snapshot_every: std::time::Duration::ZERO,
@@ -171,77 +163,125 @@ fn chains_render(
     integ.render(scene, &run, stop, observer).expect(name)
 }
 
+/// `name` with `sets` on `scene`, stopped after two whole rounds (of
+/// `round` mutations in all) and resumed, against the uninterrupted
+/// render of `total` mutations: the image and the statistics must be
+/// equal bit for bit, and the control (the checkpoint with every chain's
+/// stream put back to its start) must differ.
+fn check_markov_resume(
+    scene: &Scene,
+    (name, sets): (&str, &[(&str, &str)]),
+    round: u64,
+    total: u64,
+) {
+    let (w, h) = (scene.film.width, scene.film.height);
+    let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
+    let path = std::env::temp_dir().join(format!(
+        "mcmc-render-checkpoint-{name}-{}.ckpt",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_file(&path);
+    let load = || {
+        load_chains(&path, 7, (w, h), &filter)
+            .unwrap()
+            .expect("a checkpoint")
+    };
+    let job = (name, sets);
+    // Stopped after two whole rounds.
+    let stop = AtomicBool::new(false);
+    let observer = StopAfter {
+        stop: &stop,
+        after: 2,
+        seen: AtomicU32::new(0),
+    };
+    let first = chains_render(scene, job, &path, None, &stop, &observer);
+    assert!(first.interrupted, "{name}: the first run was not stopped");
+    let saved = load();
+    assert_eq!(saved.mutations(), 2 * round, "{name}: not two whole rounds");
+    // The control's copy: every chain's stream back at its start.
+    let mut restarted = load();
+    for (c, chain) in restarted
+        .tasks
+        .iter_mut()
+        .flat_map(|t| &mut t.chains)
+        .enumerate()
+    {
+        chain.rng = mcmc_core::rng::rng_words(&mcmc_core::rng::stream_rng(5, c as u64));
+    }
+    let go = AtomicBool::new(false);
+    let resumed = chains_render(scene, job, &path, Some(saved), &go, &NoObserver);
+    assert!(!resumed.interrupted, "{name}");
+    assert_eq!(
+        resumed.statistics["checkpoint"]["resumed_from_mutations"],
+        2 * round,
+        "{name}"
+    );
+    // The finished run's checkpoint holds all the work.
+    assert_eq!(load().mutations(), total, "{name}");
+    let _ = std::fs::remove_file(&path);
+    let whole = chains_render(scene, job, &path, None, &go, &NoObserver);
+    let _ = std::fs::remove_file(&path);
+    let control = chains_render(scene, job, &path, Some(restarted), &go, &NoObserver);
+    std::fs::remove_file(&path).unwrap();
+    assert!(
+        bits(&resumed.image) == bits(&whole.image),
+        "{name}: resumed image differs"
+    );
+    for key in [
+        "mutations",
+        "acceptance",
+        "b_running",
+        "acceptance_per_depth",
+        "families",
+        "exchange",
+    ] {
+        assert_eq!(
+            resumed.statistics.get(key),
+            whole.statistics.get(key),
+            "{name}: {key}"
+        );
+    }
+    assert!(
+        bits(&control.image) != bits(&whole.image),
+        "{name}: control agreed"
+    );
+}
+
 #[test]
 fn a_stopped_markov_render_resumed_from_its_checkpoint_ends_bit_identical() {
     let scene = repo_scene("cornell-box.xml", 40);
-    let (w, h) = (scene.film.width, scene.film.height);
-    let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
+    // 40×40 × 24 mutations per pixel over 48 chains: 800 mutations a
+    // chain, i.e. rounds of 256, 256, 256 and 32.
+    let sets = [
+        ("bootstrap", "4000"),
+        ("chains", "48"),
+        ("mutations_per_pixel", "24"),
+        ("max_depth", "5"),
+    ];
     for name in ["pssmlt", "mmlt"] {
-        let path = std::env::temp_dir().join(format!(
-            "mcmc-render-checkpoint-{name}-{}.ckpt",
-            std::process::id()
-        ));
-        let _ = std::fs::remove_file(&path);
-        let load = || {
-            load_chains(&path, 7, (w, h), &filter)
-                .unwrap()
-                .expect("a checkpoint")
-        };
-        // Stopped after two whole rounds.
-        let stop = AtomicBool::new(false);
-        let observer = StopAfter {
-            stop: &stop,
-            after: 2,
-            seen: AtomicU32::new(0),
-        };
-        let first = chains_render(&scene, name, &path, None, &stop, &observer);
-        assert!(first.interrupted, "{name}: the first run was not stopped");
-        let saved = load();
-        assert_eq!(saved.mutations(), 48 * 512, "{name}: not two whole rounds");
-        // The control's copy: every chain's stream back at its start.
-        let mut restarted = load();
-        for (c, chain) in restarted
-            .tasks
-            .iter_mut()
-            .flat_map(|t| &mut t.chains)
-            .enumerate()
-        {
-            chain.rng = mcmc_core::rng::rng_words(&mcmc_core::rng::stream_rng(5, c as u64));
-        }
-        let go = AtomicBool::new(false);
-        let resumed = chains_render(&scene, name, &path, Some(saved), &go, &NoObserver);
-        assert!(!resumed.interrupted, "{name}");
-        assert_eq!(
-            resumed.statistics["checkpoint"]["resumed_from_mutations"],
-            48 * 512,
-            "{name}"
-        );
-        // The finished run's checkpoint holds all the work.
-        assert_eq!(load().mutations(), 40 * 40 * 24, "{name}");
-        let _ = std::fs::remove_file(&path);
-        let whole = chains_render(&scene, name, &path, None, &go, &NoObserver);
-        let _ = std::fs::remove_file(&path);
-        let control = chains_render(&scene, name, &path, Some(restarted), &go, &NoObserver);
-        std::fs::remove_file(&path).unwrap();
-        assert!(
-            bits(&resumed.image) == bits(&whole.image),
-            "{name}: resumed image differs"
-        );
-        for key in [
-            "mutations",
-            "acceptance",
-            "b_running",
-            "acceptance_per_depth",
-            "families",
-        ] {
-            assert_eq!(
-                resumed.statistics[key], whole.statistics[key],
-                "{name}: {key}"
-            );
-        }
-        assert!(
-            bits(&control.image) != bits(&whole.image),
-            "{name}: control agreed"
-        );
+        check_markov_resume(&scene, (name, &sets), 48 * 256, 40 * 40 * 24);
+    }
+}
+
+#[test]
+fn a_stopped_tempered_render_resumed_from_its_checkpoint_ends_bit_identical() {
+    let scene = repo_scene("cornell-box.xml", 24);
+    // 24×24 × 24 mutations per pixel over 16 chains, i.e. 4 replica sets
+    // of 4 levels: 864 sweeps a set, in rounds of 64 sweeps (256 / 4
+    // levels), so a round is 4 sets × 256 mutations. The even–odd move's
+    // sweep parity and the IS permutations' stream must carry over.
+    for (name, exchange) in [
+        ("tempered-pssmlt", "is_permutation"),
+        ("tempered-mmlt", "even_odd"),
+    ] {
+        let sets = [
+            ("bootstrap", "1000"),
+            ("chains", "16"),
+            ("mutations_per_pixel", "24"),
+            ("max_depth", "5"),
+            ("levels", "4"),
+            ("exchange", exchange),
+        ];
+        check_markov_resume(&scene, (name, &sets), 4 * 256, 24 * 24 * 24);
     }
 }

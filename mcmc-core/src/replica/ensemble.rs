@@ -13,6 +13,17 @@ use crate::stats::ChainStatistics;
 use crate::target::DensityClass;
 use rayon::prelude::*;
 
+/// What a [`ReplicaExchange`] carries from one sweep to the next besides
+/// its inputs ([`ReplicaExchange::progress`], [`ReplicaExchange::restore`]).
+#[derive(Clone, Debug)]
+pub struct ReplicaProgress<S, P> {
+    /// Every level's chain: its sample, random stream and statistics.
+    pub chains: Vec<ChainState<S, P>>,
+    /// The rest, as opaque words: the exchange stream, the index process,
+    /// the exchange statistics, the burn-in flag, the move's state.
+    pub words: Vec<u64>,
+}
+
 /// A sweep observer of level 0's transitions.
 pub type Observer<'a, S, P> = dyn FnMut(&Transition<'_, S, P>) + Send + 'a;
 
@@ -146,6 +157,68 @@ where
     /// Bytes held by the exchange move (stores, tables).
     pub fn exchange_memory_bytes(&self) -> usize {
         self.exchange.memory_bytes()
+    }
+
+    /// The run's progress, for a checkpoint: every level's chain (its
+    /// sample, stream and statistics) and, as words, the exchange stream,
+    /// the index process, the exchange statistics, the burn-in flag and
+    /// the move's own state. `None` when the move cannot be saved
+    /// ([`ExchangeMove::state_words`]). The algorithms are not in it:
+    /// kernels without adaptation (or frozen ones) are rebuilt by the
+    /// caller from the same inputs.
+    pub fn progress(&self) -> Option<ReplicaProgress<S, F::Payload>> {
+        let mut words = crate::rng::rng_words(&self.rng).to_vec();
+        self.index.to_words(&mut words);
+        self.stats.to_words(&mut words);
+        words.push(u64::from(self.frozen));
+        words.extend(self.exchange.state_words()?);
+        Some(ReplicaProgress {
+            chains: self.chains.clone(),
+            words,
+        })
+    }
+
+    /// Continues the run `progress` was taken from
+    /// ([`ReplicaExchange::progress`]) in this ensemble, built from the
+    /// same family, algorithms, move and seed: the following sweeps are
+    /// the saved run's, bit for bit. Refuses (and changes nothing) a
+    /// progress of another number of levels or one whose words do not
+    /// fit.
+    pub fn restore(&mut self, progress: ReplicaProgress<S, F::Payload>) -> Result<()> {
+        let m = self.levels();
+        let bad = |why: &str| invalid("progress", why.to_string());
+        if progress.chains.len() != m {
+            return Err(bad(&format!(
+                "holds {} levels, the ensemble has {m}",
+                progress.chains.len()
+            )));
+        }
+        let mut input = &progress.words[..];
+        let cut = || bad("its words are cut short or corrupt");
+        let rng = super::stats::take_words(&mut input, 4)
+            .and_then(|w| crate::rng::rng_from_words(w.try_into().ok()?))
+            .ok_or_else(cut)?;
+        let index = IndexProcess::from_words(m, &mut input).ok_or_else(cut)?;
+        let mut stats = self.stats.clone();
+        stats.read_words(&mut input).ok_or_else(cut)?;
+        let frozen = match super::stats::take_words(&mut input, 1) {
+            Some(&[f]) if f <= 1 => f == 1,
+            _ => return Err(cut()),
+        };
+        if frozen != self.frozen {
+            return Err(bad(
+                "it was saved after burn-in and the ensemble is not (or the reverse)",
+            ));
+        }
+        if !self.exchange.restore_words(input) {
+            return Err(bad("the exchange move's state does not fit this move"));
+        }
+        self.chains = progress.chains;
+        self.rng = rng;
+        self.index = index;
+        self.stats = stats;
+        self.cache.clear();
+        Ok(())
     }
 
     /// End of burn-in: freezes kernel adaptation and the move's energy
@@ -438,5 +511,103 @@ where
             chain.current = sample;
             Some((partner, alpha, true))
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kernel::GaussianRandomWalk;
+    use crate::mh::MetropolisHastings;
+    use crate::replica::{
+        EvenOdd, IsPermutation, NeighbourSwap, PowerFamily, betas_from_temperatures,
+        geometric_temperatures, kernel_scales,
+    };
+
+    type Payload = crate::replica::Tempered<()>;
+    type Move = Box<dyn ExchangeMove<Vec<f64>, Payload>>;
+    type Ensemble = ReplicaExchange<
+        Vec<f64>,
+        PowerFamily<fn(&[f64]) -> f64>,
+        MetropolisHastings<GaussianRandomWalk, Vec<f64>, Payload>,
+    >;
+
+    /// Two modes at ±4 on 4 levels up to T = 20, with `exchange`.
+    fn ensemble(exchange: fn() -> Move) -> Ensemble {
+        let ln_l: fn(&[f64]) -> f64 =
+            |x| crate::math::log_sum_exp2(-0.5 * (x[0] - 4.0).powi(2), -0.5 * (x[0] + 4.0).powi(2));
+        let temps = geometric_temperatures(4, 20.0).unwrap();
+        let family = PowerFamily::without_prior(ln_l, betas_from_temperatures(&temps)).unwrap();
+        let algorithms = kernel_scales(1.0, &temps)
+            .into_iter()
+            .map(|s| MetropolisHastings::new(GaussianRandomWalk::isotropic(s).unwrap()))
+            .collect();
+        ReplicaExchange::new(family, vec![vec![4.0]], algorithms, exchange(), 7).unwrap()
+    }
+
+    /// Every level's state, density and stream, the statistics and the
+    /// index process, exactly.
+    fn fingerprint(re: &Ensemble) -> (Vec<u64>, ReplicaStatistics, IndexProcess) {
+        let mut bits = Vec::new();
+        for c in &re.chains {
+            bits.extend(c.current.state.iter().map(|x| x.to_bits()));
+            bits.push(c.current.log_density.to_bits());
+            bits.extend(crate::rng::rng_words(&c.rng));
+            bits.extend([c.stats.steps, c.stats.accepted]);
+        }
+        (bits, re.stats.clone(), re.index.clone())
+    }
+
+    #[test]
+    fn a_restored_ensemble_continues_the_saved_run_bit_for_bit() {
+        let moves: [fn() -> Move; 3] = [
+            || Box::new(EvenOdd::new()),
+            || Box::new(NeighbourSwap::new()),
+            || Box::new(IsPermutation::new(4).unwrap()),
+        ];
+        for exchange in moves {
+            let mut whole = ensemble(exchange);
+            (0..300).for_each(|_| whole.sweep());
+            let mut first = ensemble(exchange);
+            // An odd count: the even–odd move's parity must carry over.
+            (0..151).for_each(|_| first.sweep());
+            let saved = first.progress().expect("these moves can be saved");
+            let mut resumed = ensemble(exchange);
+            resumed.restore(saved.clone()).unwrap();
+            (151..300).for_each(|_| resumed.sweep());
+            let name = whole.statistics().move_name.clone();
+            assert!(fingerprint(&resumed) == fingerprint(&whole), "{name}");
+            assert!(whole.statistics().overall_acceptance() > 0.0, "{name}");
+            // Control: the same progress with the exchange stream put back
+            // to its start must not give the same run.
+            let mut control = ensemble(exchange);
+            let mut restarted = saved;
+            let fresh = crate::rng::stream_rng(7, EXCHANGE_STREAM);
+            restarted.words[..4].copy_from_slice(&crate::rng::rng_words(&fresh));
+            control.restore(restarted).unwrap();
+            (151..300).for_each(|_| control.sweep());
+            assert!(
+                fingerprint(&control) != fingerprint(&whole),
+                "{name}: control agreed"
+            );
+        }
+    }
+
+    #[test]
+    fn a_progress_that_does_not_fit_is_refused_and_changes_nothing() {
+        let mut source = ensemble(|| Box::new(EvenOdd::new()));
+        (0..5).for_each(|_| source.sweep());
+        let saved = source.progress().unwrap();
+        let mut target = ensemble(|| Box::new(NeighbourSwap::new()));
+        let before = fingerprint(&target);
+        // The even–odd move's sweep counter does not fit the neighbour move.
+        assert!(target.restore(saved.clone()).is_err());
+        let mut cut = saved.clone();
+        cut.words.truncate(10);
+        assert!(target.restore(cut).is_err());
+        let mut short = saved;
+        short.chains.pop();
+        assert!(target.restore(short).is_err());
+        assert!(fingerprint(&target) == before);
     }
 }

@@ -47,4 +47,18 @@ impl<S, P: Clone> ExchangeMove<S, P> for EvenOdd {
         cx.stats().move_changes += changed as u64;
         self.sweep += 1;
     }
+
+    fn state_words(&self) -> Option<Vec<u64>> {
+        Some(vec![self.sweep])
+    }
+
+    fn restore_words(&mut self, words: &[u64]) -> bool {
+        match words {
+            &[sweep] => {
+                self.sweep = sweep;
+                true
+            }
+            _ => false,
+        }
+    }
 }

@@ -83,4 +83,20 @@ impl<S, P: Clone> ExchangeMove<S, P> for IsPermutation {
     fn memory_bytes(&self) -> usize {
         self.dp.memory_bytes()
     }
+
+    /// The failure count (the DP table, the matrix and the permutation are
+    /// rebuilt every sweep).
+    fn state_words(&self) -> Option<Vec<u64>> {
+        Some(vec![self.failures])
+    }
+
+    fn restore_words(&mut self, words: &[u64]) -> bool {
+        match words {
+            &[failures] => {
+                self.failures = failures;
+                true
+            }
+            _ => false,
+        }
+    }
 }

@@ -113,4 +113,13 @@ impl<S, P: Clone> ExchangeMove<S, P> for IsSwap {
             cx.swap(i, j);
         }
     }
+
+    /// Nothing carries over (the weights are rebuilt every attempt).
+    fn state_words(&self) -> Option<Vec<u64>> {
+        Some(Vec::new())
+    }
+
+    fn restore_words(&mut self, words: &[u64]) -> bool {
+        words.is_empty()
+    }
 }

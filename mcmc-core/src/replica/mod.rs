@@ -56,7 +56,7 @@ mod stats;
 
 pub use adaptive_equi_energy::AdaptiveEquiEnergy;
 pub use context::{ExchangeContext, swap_log_acceptance};
-pub use ensemble::{LevelObserver, ReplicaExchange};
+pub use ensemble::{LevelObserver, ReplicaExchange, ReplicaProgress};
 pub use equi_energy::{EquiEnergyMove, equi_energy_pair_probabilities};
 pub use equi_energy_sampler::{EquiEnergySampler, JumpRule};
 pub use even_odd::EvenOdd;
@@ -159,5 +159,20 @@ pub trait ExchangeMove<S, P>: Send + Sync {
     /// owned by the states themselves is not counted.
     fn memory_bytes(&self) -> usize {
         0
+    }
+
+    /// The move's own state that carries over from one sweep to the next
+    /// (a sweep counter, its counters), as words for a checkpoint
+    /// ([`ReplicaExchange::progress`]); scratch space rebuilt every sweep
+    /// is not part of it. `None` (the default): the move cannot be saved
+    /// (stores of past states, adapted energy levels).
+    fn state_words(&self) -> Option<Vec<u64>> {
+        None
+    }
+
+    /// Puts back what [`ExchangeMove::state_words`] gave; `false` when
+    /// the words do not fit this move.
+    fn restore_words(&mut self, _words: &[u64]) -> bool {
+        false
     }
 }

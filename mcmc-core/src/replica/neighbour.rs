@@ -33,4 +33,12 @@ impl<S, P: Clone> ExchangeMove<S, P> for NeighbourSwap {
             }
         }
     }
+
+    fn state_words(&self) -> Option<Vec<u64>> {
+        Some(Vec::new())
+    }
+
+    fn restore_words(&mut self, words: &[u64]) -> bool {
+        words.is_empty()
+    }
 }

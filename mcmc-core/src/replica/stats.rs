@@ -50,6 +50,41 @@ impl IndexProcess {
         }
     }
 
+    /// Appends the process to `out` (for checkpoints): per level the
+    /// replica there, per replica its phase and its round trips.
+    pub(crate) fn to_words(&self, out: &mut Vec<u64>) {
+        out.extend(self.replica_at_level.iter().map(|&r| r as u64));
+        out.extend(self.phase.iter().map(|&p| u64::from(p)));
+        out.extend(&self.round_trips);
+    }
+
+    /// The process of `levels` levels [`IndexProcess::to_words`] wrote at
+    /// the front of `input` (advanced past it); `None` when the words do
+    /// not describe one.
+    pub(crate) fn from_words(levels: usize, input: &mut &[u64]) -> Option<Self> {
+        let replica_at_level: Vec<usize> = take_words(input, levels)?
+            .iter()
+            .map(|&r| r as usize)
+            .collect();
+        let phase = take_words(input, levels)?
+            .iter()
+            .map(|&p| u8::try_from(p).ok().filter(|&p| p <= 2))
+            .collect::<Option<Vec<u8>>>()?;
+        let round_trips = take_words(input, levels)?.to_vec();
+        let mut level_of_replica = vec![usize::MAX; levels];
+        for (level, &r) in replica_at_level.iter().enumerate() {
+            // A permutation: every replica at exactly one level.
+            let slot = level_of_replica.get_mut(r).filter(|l| **l == usize::MAX)?;
+            *slot = level;
+        }
+        Some(IndexProcess {
+            replica_at_level,
+            level_of_replica,
+            phase,
+            round_trips,
+        })
+    }
+
     /// The replica at `level`.
     pub fn replica_at(&self, level: usize) -> usize {
         self.replica_at_level[level]
@@ -210,6 +245,63 @@ impl ReplicaStatistics {
         }
     }
 
+    /// Appends the counts to `out` (for checkpoints; the number of levels
+    /// and the move's name are the ensemble's, not saved): sweeps, every
+    /// pair's counts, the move counters, per level the changes and this
+    /// sweep's touches, the evaluations and the neighbour probes.
+    pub(crate) fn to_words(&self, out: &mut Vec<u64>) {
+        out.push(self.sweeps);
+        for p in &self.pairs {
+            out.extend([p.attempted, p.accepted, p.sum_alpha.to_bits()]);
+        }
+        out.extend([self.move_attempts, self.move_changes]);
+        out.extend(&self.changed);
+        out.extend(self.touched.iter().map(|&t| u64::from(t)));
+        out.push(self.evaluations);
+        out.extend(self.neighbour_probe_sums.iter().map(|s| s.to_bits()));
+        out.push(self.neighbour_probes);
+    }
+
+    /// Replaces the counts by those [`ReplicaStatistics::to_words`] wrote
+    /// at the front of `input` (advanced past it) for as many levels;
+    /// `None` (and no change) when the words are cut short.
+    pub(crate) fn read_words(&mut self, input: &mut &[u64]) -> Option<()> {
+        let m = self.levels;
+        let mut next = |n: usize| take_words(input, n);
+        let sweeps = next(1)?[0];
+        let pairs = next(3 * m * m)?
+            .chunks_exact(3)
+            .map(|p| PairStatistics {
+                attempted: p[0],
+                accepted: p[1],
+                sum_alpha: f64::from_bits(p[2]),
+            })
+            .collect();
+        let [move_attempts, move_changes] = next(2)?.try_into().ok()?;
+        let changed = next(m)?.to_vec();
+        let touched = next(m)?.iter().map(|&t| t != 0).collect();
+        let evaluations = next(1)?[0];
+        let sums = next(m.saturating_sub(1))?
+            .iter()
+            .map(|&s| f64::from_bits(s));
+        let neighbour_probe_sums = sums.collect();
+        let neighbour_probes = next(1)?[0];
+        *self = ReplicaStatistics {
+            levels: m,
+            move_name: std::mem::take(&mut self.move_name),
+            sweeps,
+            pairs,
+            move_attempts,
+            move_changes,
+            changed,
+            touched,
+            evaluations,
+            neighbour_probe_sums,
+            neighbour_probes,
+        };
+        Some(())
+    }
+
     /// Sets the statistics of pair `(i, j)` (unordered), e.g. from a
     /// checkpoint of a distributed run.
     #[cfg(feature = "mpi")]
@@ -334,6 +426,17 @@ impl IndexProcess {
             }
         }
     }
+}
+
+/// The first `n` words of `input` (which is advanced past them), `None`
+/// when it holds fewer.
+pub(crate) fn take_words<'a>(input: &mut &'a [u64], n: usize) -> Option<&'a [u64]> {
+    if input.len() < n {
+        return None;
+    }
+    let (head, rest) = input.split_at(n);
+    *input = rest;
+    Some(head)
 }
 
 #[cfg(test)]

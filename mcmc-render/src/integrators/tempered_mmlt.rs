@@ -134,6 +134,9 @@ impl<'a> ChainFamily for TemperedMmltFamily<'a> {
     fn independent_probability(&self, mutation: &Mutation) -> f64 {
         mutation.large_step_probability
     }
+    fn checkpointable(&self, mutation: &Mutation) -> bool {
+        mutation.checkpointable()
+    }
     crate::primary_sample_space_family!();
     fn exchange_move(&self) -> Option<Box<dyn ExchangeMove<TorusPoint, PathSample>>> {
         self.ladder.exchange.exchange_move(self.levels)

@@ -178,6 +178,13 @@ impl TemperedLadder {
             &dyn Observer,
         ) -> Result<Rendered, RenderError>,
     ) -> Result<Rendered, RenderError> {
+        // A checkpoint holds one run's chains; stages are several runs.
+        if self.regularization_stages > 1 && run.checkpoint.is_some() {
+            return Err(RenderError::Invalid(
+                "--checkpoint needs regularization_stages=1 (each stage is a run of its own)"
+                    .into(),
+            ));
+        }
         let pixels = u64::from(scene.film.width) * u64::from(scene.film.height);
         let mut rendered = render_in_stages(
             self.regularization_stages,
@@ -331,6 +338,9 @@ impl<'a> ChainFamily for TemperedFamily<'a> {
     }
     fn independent_probability(&self, mutation: &Mutation) -> f64 {
         mutation.large_step_probability
+    }
+    fn checkpointable(&self, mutation: &Mutation) -> bool {
+        mutation.checkpointable()
     }
     crate::primary_sample_space_family!();
     fn exchange_move(&self) -> Option<Box<dyn ExchangeMove<TorusPoint, PathSample>>> {

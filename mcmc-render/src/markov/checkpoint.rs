@@ -11,9 +11,12 @@
 //! file: it is a function of the inputs, which the file's fingerprint
 //! ties it to, and a resumed run makes it again before it restores the
 //! tasks. Families opt in with [`ChainFamily::checkpointable`]: states that
-//! encode exactly and kernels without state of their own (independent
-//! chains only, not replica sets). Only rank 0 of a distributed run reads
-//! and writes the file; it broadcasts what it read.
+//! encode exactly and kernels without state of their own; replica sets
+//! also need an exchange move that can be saved
+//! ([`mcmc_core::replica::ExchangeMove::state_words`]), and their records
+//! hold every level's chain and the set's own progress
+//! ([`mcmc_core::replica::ReplicaProgress`]). Only rank 0 of a distributed
+//! run reads and writes the file; it broadcasts what it read.
 
 use super::ChainFamily;
 use super::distribute::TaskSums;
@@ -22,13 +25,16 @@ use crate::cluster::Parcel;
 use crate::color::Rgb;
 use crate::film::Filter;
 use crate::pss::{PathSample, Splat};
-use mcmc_core::rng::{rng_from_words, rng_words};
+use mcmc_core::chain::ChainState;
+use mcmc_core::rng::{ChainRng, rng_from_words, rng_words};
+use mcmc_core::sample::Sample;
 use mcmc_core::stats::ChainStatistics;
 use std::path::Path;
 use std::sync::Arc;
 
-/// First bytes of a Markov-chain checkpoint file (format version 1).
-const MAGIC: &[u8; 8] = b"mcmcMC01";
+/// First bytes of a Markov-chain checkpoint file (format version 2:
+/// replica sets).
+const MAGIC: &[u8; 8] = b"mcmcMC02";
 
 /// One chain as saved.
 #[derive(Clone, Debug)]
@@ -46,15 +52,28 @@ pub struct ChainRecord {
     pub stats: ChainStatistics,
 }
 
+/// One replica set as saved, besides its levels' chains.
+#[derive(Clone, Debug)]
+pub struct SetRecord {
+    /// Sweeps done.
+    pub sweeps: u64,
+    /// The set's own progress ([`mcmc_core::replica::ReplicaProgress`]'s
+    /// words: exchange stream, index process, exchange statistics, move).
+    pub words: Vec<u64>,
+}
+
 /// One task as saved: what it adds to the image (its films, running
 /// normalisations, mutation counts, ratio sums, per-depth counts, as the
-/// distributed reduction sends them) and its chains in order.
+/// distributed reduction sends them) and its chains in order (of a task
+/// of replica sets: every set's levels, set after set).
 #[derive(Clone, Debug)]
 pub struct TaskRecord {
     /// The task's sums (the parcel a cluster's reduction sends).
     pub sums: Parcel,
     /// Its chains.
     pub chains: Vec<ChainRecord>,
+    /// Its replica sets (empty for a task of independent chains).
+    pub sets: Vec<SetRecord>,
 }
 
 /// A Markov-chain render's progress: every task, in task order.
@@ -154,77 +173,145 @@ pub fn load(
     Ok(Some(progress))
 }
 
+/// The record of a chain: its current sample, stream and statistics.
+fn chain_record<F: ChainFamily>(
+    family: &F,
+    current: &Sample<F::State, PathSample>,
+    rng: &ChainRng,
+    stats: &ChainStatistics,
+) -> ChainRecord {
+    let mut state = Vec::new();
+    family.state_words(&current.state, &mut state);
+    ChainRecord {
+        state,
+        log_density: current.log_density,
+        payload: current.payload.clone(),
+        rng: rng_words(rng),
+        stats: stats.clone(),
+    }
+}
+
 /// The record of a local task (`id`: its index among all tasks).
 pub(crate) fn record_of_task<F: ChainFamily>(
     family: &F,
     task: &Task<'_, F>,
     id: usize,
 ) -> TaskRecord {
-    let Units::Chains(chains) = &task.units else {
-        unreachable!("the driver refuses checkpoints of replica sets");
+    let (chains, sets) = match &task.units {
+        Units::Chains(chains) => {
+            let records = chains.iter().map(|slot| {
+                let c = &slot.chain;
+                chain_record(family, c.current(), c.rng(), c.stats())
+            });
+            (records.collect(), Vec::new())
+        }
+        Units::Replicas(slots) => {
+            let mut chains = Vec::new();
+            let mut sets = Vec::new();
+            for slot in slots {
+                let progress = slot
+                    .set
+                    .progress()
+                    .expect("the driver refuses checkpoints of moves that cannot be saved");
+                chains.extend(
+                    (progress.chains.iter())
+                        .map(|c| chain_record(family, &c.current, &c.rng, &c.stats)),
+                );
+                sets.push(SetRecord {
+                    sweeps: slot.sweeps,
+                    words: progress.words,
+                });
+            }
+            (chains, sets)
+        }
     };
     TaskRecord {
         sums: TaskSums::of(task).parcel(id),
-        chains: chains
-            .iter()
-            .map(|slot| {
-                let current = slot.chain.current();
-                let mut state = Vec::new();
-                family.state_words(&current.state, &mut state);
-                ChainRecord {
-                    state,
-                    log_density: current.log_density,
-                    payload: current.payload.clone(),
-                    rng: rng_words(slot.chain.rng()),
-                    stats: slot.chain.stats().clone(),
-                }
-            })
-            .collect(),
+        chains,
+        sets,
     }
+}
+
+/// Puts `saved` back into the chain `parts` (built afresh from the same
+/// inputs, whose kernel's component names it keeps).
+fn restore_chain<F: ChainFamily>(
+    family: &F,
+    parts: &mut ChainState<F::State, PathSample>,
+    saved: &ChainRecord,
+) -> Result<(), String> {
+    let mut words = &saved.state[..];
+    let state = family
+        .state_from_words(&mut words)
+        .filter(|_| words.is_empty())
+        .ok_or("a chain's state does not decode")?;
+    if parts.stats.components.len() != saved.stats.components.len() {
+        return Err("a chain's kernel has other components".into());
+    }
+    parts.current.state = state;
+    parts.current.log_density = saved.log_density;
+    parts.current.payload = saved.payload.clone();
+    parts.rng = rng_from_words(saved.rng).ok_or("a chain's stream is all zero")?;
+    let mut stats = saved.stats.clone();
+    for (k, old) in stats.components.iter_mut().zip(&parts.stats.components) {
+        k.name.clone_from(&old.name);
+    }
+    parts.stats = stats;
+    Ok(())
 }
 
 /// Puts `record` back into `task` (built afresh by the driver from the
 /// same inputs): its sums, and every chain's state, stream and
-/// statistics; a chain's remaining budget is what the fresh task gave it
-/// less the mutations it had done.
+/// statistics (and every replica set's own progress); a chain's (set's)
+/// remaining budget is what the fresh task gave it less the mutations
+/// (sweeps) it had done.
 pub(crate) fn restore_task<F: ChainFamily>(
     family: &F,
     task: &mut Task<'_, F>,
     record: &TaskRecord,
 ) -> Result<(), String> {
     let sums = sums_of(&record.sums);
-    let Units::Chains(chains) = &mut task.units else {
-        return Err("the checkpoint holds chains, the run replica sets".into());
-    };
-    if *sums.members != task.members || record.chains.len() != chains.len() {
-        return Err(format!(
-            "a task of {} chains of members {:?} does not fit the run's task of {} chains of members {:?}",
+    let misfit = |units: &str, n: usize| {
+        format!(
+            "a task of {} chains of members {:?} does not fit the run's task of {n} {units} of members {:?}",
             record.chains.len(),
             sums.members,
-            chains.len(),
             task.members
-        ));
-    }
-    for (slot, saved) in chains.iter_mut().zip(&record.chains) {
-        let mut words = &saved.state[..];
-        let state = family
-            .state_from_words(&mut words)
-            .filter(|_| words.is_empty())
-            .ok_or("a chain's state does not decode")?;
-        let parts = slot.chain.parts_mut();
-        if parts.stats.components.len() != saved.stats.components.len() {
-            return Err("a chain's kernel has other components".into());
+        )
+    };
+    match &mut task.units {
+        Units::Chains(chains) => {
+            if *sums.members != task.members
+                || record.chains.len() != chains.len()
+                || !record.sets.is_empty()
+            {
+                return Err(misfit("chains", chains.len()));
+            }
+            for (slot, saved) in chains.iter_mut().zip(&record.chains) {
+                restore_chain(family, slot.chain.parts_mut(), saved)?;
+                slot.remaining = slot.remaining.map(|r| r.saturating_sub(saved.stats.steps));
+            }
         }
-        parts.current.state = state;
-        parts.current.log_density = saved.log_density;
-        parts.current.payload = saved.payload.clone();
-        parts.rng = rng_from_words(saved.rng).ok_or("a chain's stream is all zero")?;
-        let mut stats = saved.stats.clone();
-        for (k, old) in stats.components.iter_mut().zip(&parts.stats.components) {
-            k.name.clone_from(&old.name);
+        Units::Replicas(slots) => {
+            let levels = task.members.len();
+            if *sums.members != task.members
+                || record.sets.len() != slots.len()
+                || record.chains.len() != slots.len() * levels
+            {
+                return Err(misfit("replica sets", slots.len()));
+            }
+            let saved_chains = record.chains.chunks_exact(levels);
+            for ((slot, set), saved) in slots.iter_mut().zip(&record.sets).zip(saved_chains) {
+                let mut progress =
+                    (slot.set.progress()).ok_or("the run's exchange move cannot be restored")?;
+                for (parts, saved) in progress.chains.iter_mut().zip(saved) {
+                    restore_chain(family, parts, saved)?;
+                }
+                progress.words.clone_from(&set.words);
+                slot.set.restore(progress).map_err(|e| e.to_string())?;
+                slot.sweeps = set.sweeps;
+                slot.remaining = slot.remaining.map(|r| r.saturating_sub(set.sweeps));
+            }
         }
-        parts.stats = stats;
-        slot.remaining = slot.remaining.map(|r| r.saturating_sub(saved.stats.steps));
     }
     task.films = sums.films.into_owned();
     task.running = sums.running.into_owned();
@@ -240,7 +327,8 @@ fn sums_of(parcel: &Parcel) -> TaskSums<'static> {
 }
 
 /// A record as one parcel: its sums' films and numbers; counts: the
-/// sums' count, the sums' counts, then the chains' words.
+/// sums' count, the sums' counts, then the chains' words, then the
+/// replica sets' (their count, then each set's sweeps and words).
 pub(crate) fn parcel_of(record: &TaskRecord) -> Parcel {
     let mut counts = vec![record.sums.counts.len() as u64];
     counts.extend(&record.sums.counts);
@@ -269,6 +357,11 @@ pub(crate) fn parcel_of(record: &TaskRecord) -> Parcel {
         for k in &st.components {
             counts.extend([k.proposed, k.accepted, k.sum_alpha.to_bits()]);
         }
+    }
+    counts.push(record.sets.len() as u64);
+    for set in &record.sets {
+        counts.extend([set.sweeps, set.words.len() as u64]);
+        counts.extend(&set.words);
     }
     Parcel {
         unit: record.sums.unit,
@@ -333,6 +426,12 @@ pub(crate) fn record_of(p: Parcel) -> Result<TaskRecord, String> {
             stats,
         });
     }
+    let mut sets = Vec::new();
+    for _ in 0..next()? {
+        let sweeps = next()?;
+        let words = (0..next()?).map(|_| next()).collect::<Result<_, _>>()?;
+        sets.push(SetRecord { sweeps, words });
+    }
     if !words.is_empty() {
         return Err("a task's record has trailing words".into());
     }
@@ -342,6 +441,7 @@ pub(crate) fn record_of(p: Parcel) -> Result<TaskRecord, String> {
             ..p
         },
         chains,
+        sets,
     })
 }
 

@@ -337,4 +337,94 @@ mod tests {
         assert_eq!(s.components[0].sum_alpha, 9.0);
         assert!(stats[1].is_none() && exchange.is_none());
     }
+
+    /// A path sampler that counts its traces (every evaluation of a state)
+    /// and splats one unit of light.
+    struct Counting<'a>(&'a std::sync::atomic::AtomicUsize);
+
+    impl crate::pss::PssPathSampler for Counting<'_> {
+        fn streams(&self) -> usize {
+            1
+        }
+        fn trace(
+            &self,
+            scene: &crate::scene::Scene,
+            source: &mut crate::pss::PssSource<'_>,
+            out: &mut Vec<crate::pss::Splat>,
+        ) -> u32 {
+            self.0.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+            let p = crate::pss::raster_of(scene, source);
+            out.push(crate::pss::Splat {
+                p,
+                l: crate::color::Rgb::new(1.0, 1.0, 1.0),
+                class: 0,
+            });
+            1
+        }
+    }
+
+    #[test]
+    fn a_rank_builds_and_evaluates_only_the_chains_of_its_tasks() {
+        use crate::integrators::RunSettings;
+        use crate::markov::work::Units;
+        use crate::markov::{ChainParams, chain_tasks};
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let text = r#"<scene version="3.0.0">
+            <sensor type="perspective"><film type="hdrfilm">
+                <integer name="width" value="4"/><integer name="height" value="4"/>
+            </film></sensor>
+            <shape type="rectangle"><emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>
+        </scene>"#;
+        let path = std::path::Path::new("s.xml");
+        let scene = crate::scene::Scene::load_str(text, path, std::path::Path::new("."))
+            .expect("test scene");
+        let traces = AtomicUsize::new(0);
+        let family = crate::pss::PssFamily::new(&scene, vec![Counting(&traces)]);
+        let mutation = crate::pss::MutationParams::default().mutation().unwrap();
+        let params = ChainParams {
+            chains: 37,
+            ..ChainParams::default()
+        };
+        let settings = params.chain_settings(mutation, &RunSettings::default());
+        let starts = vec![(0..37).map(|i| family.candidate(3, i)).collect::<Vec<_>>()];
+        let filter = Arc::new(Filter::new(FilterKind::Box, 4, 4));
+        let film = || Film::new(4, 4, filter.clone());
+        let build = |owned: &dyn Fn(usize) -> bool| {
+            let tasks = chain_tasks(&family, &settings, &starts, Some(5000), &film, owned);
+            (tasks.unwrap(), traces.swap(0, Ordering::SeqCst))
+        };
+        // What a chain is at the start: its density, stream and budget.
+        let chains = |task: &Task<'_, _>| -> Vec<(u64, [u64; 4], Option<u64>)> {
+            let Units::Chains(c) = &task.units else {
+                unreachable!("chain tasks")
+            };
+            c.iter()
+                .map(|s| {
+                    let rng = mcmc_core::rng::rng_words(s.chain.rng());
+                    (s.chain.current().log_density.to_bits(), rng, s.remaining)
+                })
+                .collect()
+        };
+        let (whole, whole_traces) = build(&|_| true);
+        assert_eq!(whole_traces, 37, "one evaluation per chain start");
+        for size in 1..5 {
+            let mut traced = 0;
+            for rank in 0..size {
+                let (tasks, n) = build(&|t| t % size == rank);
+                traced += n;
+                assert_eq!(tasks.len(), whole.len());
+                for (t, (task, one)) in tasks.iter().zip(&whole).enumerate() {
+                    let want = if t % size == rank {
+                        chains(one)
+                    } else {
+                        Vec::new()
+                    };
+                    assert_eq!(chains(task), want, "task {t} on rank {rank} of {size}");
+                }
+            }
+            // Each start once over all ranks (building every task on
+            // every rank, as before, traced `size` times as many).
+            assert_eq!(traced, whole_traces, "{size} ranks");
+        }
+    }
 }

@@ -309,8 +309,9 @@ pub trait ChainFamily: Sync {
     /// Whether runs of this family with `mutation` can be checkpointed
     /// ([`checkpoint`]): its states encode exactly
     /// ([`ChainFamily::state_words`]) and its kernels keep no state of
-    /// their own (no adaptation). Families with an exchange move are not
-    /// (their replica sets are not saved). Default: no.
+    /// their own (no adaptation). A family with an exchange move also
+    /// needs a move that can be saved (the driver checks
+    /// [`ExchangeMove::state_words`]). Default: no.
     fn checkpointable(&self, _mutation: &Self::Mutation) -> bool {
         false
     }
@@ -802,12 +803,19 @@ pub fn run<F: ChainFamily>(
         )));
     }
     family.kernel(&settings.mutation, 0)?;
+    // Replica sets are saved with their exchange move's state: a move
+    // with more (stores of past states) cannot be.
+    let unsaved_move = || {
+        family
+            .exchange_move()
+            .is_some_and(|m| m.state_words().is_none())
+    };
     if settings.checkpoint.is_some()
-        && (family.exchange_move().is_some() || !family.checkpointable(&settings.mutation))
+        && (unsaved_move() || !family.checkpointable(&settings.mutation))
     {
         return Err(MltError::Setting(format!(
-            "these chains cannot be checkpointed (only the independent chains of {}, without the adaptive small step)",
-            crate::checkpoint::CHAIN_INTEGRATORS.join(" and ")
+            "these chains cannot be checkpointed (only those of {}, without the adaptive small step)",
+            crate::checkpoint::CHAIN_INTEGRATORS.join(", ")
         )));
     }
     check_memory(scene, family, settings)?;
@@ -961,30 +969,39 @@ pub fn run<F: ChainFamily>(
     let total = settings.mutations_per_pixel.map(|m| m * pixels);
     let filter = Arc::new(Filter::new(scene.film.filter, width, height));
     let new_film = || Film::new(width, height, filter.clone());
-    let mut tasks = if exchange {
+    // On a cluster this rank runs only the tasks dealt to it, and builds
+    // only their chains: a chain's start is evaluated when it is built,
+    // and an evaluation may have effects beyond its value (`mcmc-pg`
+    // online records every traced path), which must happen once in all.
+    let cluster = crate::cluster::current();
+    let owned = |t: usize| crate::cluster::owns(cluster, t);
+    let tasks = if exchange {
         replica_tasks(
             family,
             settings,
-            &starts,
-            &groups,
-            &sets_of_group,
+            (&starts, &groups, &sets_of_group),
             total,
             &new_film,
-        )?
+            &owned,
+        )
     } else {
-        chain_tasks(family, settings, &starts, total, &new_film)?
+        chain_tasks(family, settings, &starts, total, &new_film, &owned)
     };
-    // On a cluster this rank runs only the tasks dealt to it.
-    let cluster = crate::cluster::current();
+    // A rank whose chains failed to start stops every rank (the others
+    // would wait for it in the first collective).
+    let mut tasks = match cluster {
+        Some(c) if c.any(tasks.is_err()) => tasks.and(Err(MltError::Setting(
+            "another rank's chains failed to start (its own error is printed by that rank)".into(),
+        )))?,
+        _ => tasks?,
+    };
     let all_tasks = tasks.len();
-    let task_ids: Vec<usize> = (0..tasks.len())
-        .filter(|&t| crate::cluster::owns(cluster, t))
-        .collect();
+    let task_ids: Vec<usize> = (0..tasks.len()).filter(|&t| owned(t)).collect();
     if cluster.is_some() {
         let mut t = 0;
         tasks.retain(|_| {
             t += 1;
-            crate::cluster::owns(cluster, t - 1)
+            owned(t - 1)
         });
     }
 
@@ -1241,13 +1258,16 @@ fn share(total: u64, n: usize, k: usize) -> u64 {
 }
 
 /// Independent chains, numbered member by member, grouped into tasks of
-/// one member each (about `settings.tasks` in all) in contiguous blocks.
+/// one member each (about `settings.tasks` in all) in contiguous blocks;
+/// only the tasks `owned` accepts (by index) get their chains, the others
+/// stay empty.
 fn chain_tasks<'f, F: ChainFamily>(
     family: &'f F,
     settings: &ChainSettings<F::Mutation>,
     starts: &[Vec<F::State>],
     total: Option<u64>,
     new_film: &dyn Fn() -> Film,
+    owned: &dyn Fn(usize) -> bool,
 ) -> Result<Vec<Task<'f, F>>, MltError> {
     let seed = settings.seed;
     let mut tasks: Vec<Task<F>> = Vec::new();
@@ -1268,19 +1288,22 @@ fn chain_tasks<'f, F: ChainFamily>(
             ));
         }
         for (i, start) in member_starts.iter().enumerate() {
-            let chain = Chain::new(
-                family.target(d),
-                start.clone(),
-                MetropolisHastings::new(family.kernel(&settings.mutation, d)?),
-                stream_rng(seed, c as u64),
-            )?;
-            let Units::Chains(chains) = &mut tasks[first + i * k / n].units else {
-                unreachable!("chain tasks hold chains");
-            };
-            chains.push(ChainSlot {
-                chain,
-                remaining: total.map(|t| share(t, settings.chains, c)),
-            });
+            let task = first + i * k / n;
+            if owned(task) {
+                let chain = Chain::new(
+                    family.target(d),
+                    start.clone(),
+                    MetropolisHastings::new(family.kernel(&settings.mutation, d)?),
+                    stream_rng(seed, c as u64),
+                )?;
+                let Units::Chains(chains) = &mut tasks[task].units else {
+                    unreachable!("chain tasks hold chains");
+                };
+                chains.push(ChainSlot {
+                    chain,
+                    remaining: total.map(|t| share(t, settings.chains, c)),
+                });
+            }
             c += 1;
         }
     }
@@ -1319,15 +1342,14 @@ fn checked_groups(
 /// numbered group after group, in about `settings.tasks` tasks of
 /// contiguous sets of one group each (tasks in proportion to the group's
 /// sets); the mutations are shared out as sweeps of one mutation per
-/// member of a set.
+/// member of a set. Only the tasks `owned` accepts get their sets.
 fn replica_tasks<'f, F: ChainFamily>(
     family: &'f F,
     settings: &ChainSettings<F::Mutation>,
-    starts: &[Vec<F::State>],
-    groups: &[Range<usize>],
-    sets_of_group: &[usize],
+    (starts, groups, sets_of_group): (&[Vec<F::State>], &[Range<usize>], &[usize]),
     total: Option<u64>,
     new_film: &dyn Fn() -> Film,
+    owned: &dyn Fn(usize) -> bool,
 ) -> Result<Vec<Task<'f, F>>, MltError> {
     let seed = settings.seed;
     let all_sets: usize = sets_of_group.iter().sum();
@@ -1366,6 +1388,11 @@ fn replica_tasks<'f, F: ChainFamily>(
             ));
         }
         for i in 0..sets {
+            let task = first_task + i * k / sets;
+            if !owned(task) {
+                set += 1;
+                continue;
+            }
             let initial = g.clone().map(|m| starts[m][i].clone()).collect();
             let algorithms = g
                 .clone()
@@ -1385,7 +1412,7 @@ fn replica_tasks<'f, F: ChainFamily>(
                 levels: g.len(),
             };
             let ensemble = ReplicaExchange::new(ladder, initial, algorithms, exchange, set_seed)?;
-            let Units::Replicas(slots) = &mut tasks[first_task + i * k / sets].units else {
+            let Units::Replicas(slots) = &mut tasks[task].units else {
                 unreachable!("replica tasks hold replica sets");
             };
             slots.push(ReplicaSlot {
