@@ -1337,6 +1337,10 @@ fn checked_groups(
     Ok(groups)
 }
 
+/// Where [`replica_tasks`]' sets start and how they are grouped: the start
+/// states per member, the members of each group, the sets of each group.
+type ReplicaLayout<'a, S> = (&'a [Vec<S>], &'a [Range<usize>], &'a [usize]);
+
 /// `sets_of_group[g]` replica sets for every group `g` (set `k` of a group
 /// starts its level `l`, member `m = g.start + l`, from `starts[m][k]`),
 /// numbered group after group, in about `settings.tasks` tasks of
@@ -1346,7 +1350,7 @@ fn checked_groups(
 fn replica_tasks<'f, F: ChainFamily>(
     family: &'f F,
     settings: &ChainSettings<F::Mutation>,
-    (starts, groups, sets_of_group): (&[Vec<F::State>], &[Range<usize>], &[usize]),
+    (starts, groups, sets_of_group): ReplicaLayout<'_, F::State>,
     total: Option<u64>,
     new_film: &dyn Fn() -> Film,
     owned: &dyn Fn(usize) -> bool,
@@ -1387,6 +1391,9 @@ fn replica_tasks<'f, F: ChainFamily>(
                 Units::Replicas(Vec::new()),
             ));
         }
+        // `i` numbers the set within its group: it picks the task and,
+        // per member, the start state (`starts[m][i]`).
+        #[allow(clippy::needless_range_loop)]
         for i in 0..sets {
             let task = first_task + i * k / sets;
             if !owned(task) {
