@@ -207,17 +207,19 @@ fn independent_light_subpaths_reproduce_vcm() {
 
 /// `b_con` from the visibility chain (`b_vis · E_vis[lum C^Ω]`) and from
 /// the independent light subpaths (Eq. 6.4) estimate the same constant:
-/// one 16×16 run of 64 iterations reports both with their standard errors
-/// (iteration batches, 63 dof); their difference must lie within 4σ of
-/// the combined error `σ = √(se_d² + se_v²)`, and the budget must resolve
-/// 5%: 5σ < 5% of `b_con`. Control: the visibility estimate ×1.05 must
-/// fail (a 5% bias, which 5σ < 5% makes detectable).
+/// one 16×16 run of 256 iterations reports both with their standard
+/// errors (iteration batches, 255 dof); their difference must lie within
+/// 4σ of the combined error `σ = √(se_d² + se_v²)`, and the budget must
+/// resolve 5%: 5σ < 5% of `b_con`. Control: the visibility estimate ×1.05
+/// must fail (a 5% bias, which 5σ < 5% makes detectable). Budget: 64
+/// iterations gave σ = 1.7% of `b_con` (5σ = 8.3%, session 14), so 256
+/// give ≈ 0.85% (5σ ≈ 4.2%); about 3 s.
 #[test]
 fn the_visibility_chain_estimates_b_con() {
     let scene = cornell_16();
     let mut s = settings(scene, LightChains::Both);
     s.con_estimate = ConEstimate::Combined;
-    let out = run(scene, &s, 64, 700);
+    let out = run(scene, &s, 256, 700);
     let stat = |k: &str| out.statistics[k].as_f64().expect(k);
     let (d, se_d) = (stat("b_con_direct"), stat("b_con_direct_standard_error"));
     let (v, se_v) = (
