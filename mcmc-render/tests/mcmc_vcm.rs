@@ -213,7 +213,7 @@ fn independent_light_subpaths_reproduce_vcm() {
 /// resolve 5%: 5σ < 5% of `b_con`. Control: the visibility estimate ×1.05
 /// must fail (a 5% bias, which 5σ < 5% makes detectable). Budget: 64
 /// iterations gave σ = 1.7% of `b_con` (5σ = 8.3%, session 14), so 256
-/// give ≈ 0.85% (5σ ≈ 4.2%); about 3 s.
+/// give 0.8% (5σ = 4.0%); under 1 s.
 #[test]
 fn the_visibility_chain_estimates_b_con() {
     let scene = cornell_16();
