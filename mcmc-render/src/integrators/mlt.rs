@@ -266,7 +266,7 @@ impl IntegratorSettings for Mlt {
             )
         });
         let chains_run = RunSettings {
-            time_budget: run.time_budget.map(|t| t.saturating_sub(start.elapsed())),
+            time_budget: time_left(deadline),
             ..run.clone()
         };
         let clock = ProposalClock::new();
@@ -421,13 +421,18 @@ fn pass_done(mut r: Rendered, stop: &AtomicBool) -> (u32, Rendered) {
 /// (8 B) and one weighted technique of the start states (16 B).
 const BDPT_STARTUP_BYTES_PER_DRAW: u128 = 56;
 
+/// The time from now to `deadline` (zero once it has passed).
+fn time_left(deadline: Option<Instant>) -> Option<std::time::Duration> {
+    deadline.map(|d| d.saturating_duration_since(Instant::now()))
+}
+
 /// `run` with a fixed `spp` per pixel (the per-pixel passes beside the
 /// chains), cut short at the run's `deadline`: without it a pass sized by
 /// a setting (10^15 spp) ran on past `--time`.
 fn fixed_spp(run: &RunSettings, spp: u32, deadline: Option<Instant>) -> RunSettings {
     RunSettings {
         spp: Some(spp),
-        time_budget: deadline.map(|d| d.saturating_duration_since(Instant::now())),
+        time_budget: time_left(deadline),
         // The chains' run is not checkpointed; these passes are part of it.
         checkpoint: None,
         ..run.clone()

@@ -177,6 +177,7 @@ impl Replica {
 impl Relt {
     /// The replicas, easy to hard (the specific one last, if on).
     pub fn replicas(&self) -> Vec<Replica> {
+        let full_l1 = if self.full_l1 { 1.0 } else { 0.0 };
         let mut r = vec![
             Replica {
                 name: "uniform",
@@ -186,7 +187,7 @@ impl Relt {
             },
             Replica {
                 name: "full",
-                weights: Some([1.0, f64::from(u8::from(self.full_l1)), 1.0, 1.0, 1.0, 1.0]),
+                weights: Some([1.0, full_l1, 1.0, 1.0, 1.0, 1.0]),
                 s2: self.s2_full,
                 share: 1.0,
             },
