@@ -40,7 +40,14 @@ fn a_time_budget_past_the_clocks_range_renders() {
         &["guided", "--spp", "1"],
         &[&["mcmc-pg", "--set", "bootstrap=10000"][..], &chains].concat(),
     ] {
-        let head = ["render", "s.xml", "--time", "1e19", "--quiet", "--integrator"];
+        let head = [
+            "render",
+            "s.xml",
+            "--time",
+            "1e19",
+            "--quiet",
+            "--integrator",
+        ];
         let out = run(&[&head[..], args].concat(), &dir);
         assert!(
             out.status.success(),
