@@ -40,6 +40,7 @@ pub mod cli;
 pub mod cluster;
 pub mod color;
 pub mod compare;
+pub mod deadline;
 #[cfg(feature = "mpi")]
 pub mod distributed;
 pub mod distribution;

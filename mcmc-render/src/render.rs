@@ -23,6 +23,7 @@
 
 use crate::checkpoint::{Checkpoint, Progress};
 use crate::cluster::{Cluster, owns};
+use crate::deadline::Deadline;
 use crate::film::{Film, Filter};
 use crate::integrators::{Integrator, Rendered, RunSettings, SampleDomain, SampleStats};
 use crate::observer::Observer;
@@ -202,7 +203,7 @@ pub fn render_checkpointed(
     let mut film = Film::new(width, height, filter.clone());
     let cluster = crate::cluster::current();
     let start = Instant::now();
-    let deadline = settings.time_budget.map(|b| start + b);
+    let deadline = Deadline::new(start, settings.time_budget);
     let target = settings.spp.map(u64::from);
     let pixels = width as u64 * height as u64;
     let domain = integrator.domain();
@@ -226,7 +227,7 @@ pub fn render_checkpointed(
         }
         checkpoint_state = Some((resumed_spp, None));
     }
-    let out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
+    let out_of_time = || deadline.passed();
     let mine = |unit: usize| owns(cluster, unit);
 
     let tiles = image_tiles(width, height);

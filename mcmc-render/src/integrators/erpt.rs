@@ -44,11 +44,16 @@
 //! Work units are bands of rows with their own streams, summed in order,
 //! so an image is bit-identical for any thread count; Ctrl-C and `--time`
 //! stop after the last complete pass (a pass interrupted midway is
-//! dropped).
+//! dropped; its mutations are reported as `dropped_pass_mutations`). They
+//! are checked before every chain step, and between blocks of the
+//! luminance estimate, which then uses the walks it took (reported as
+//! `luminance_samples`), so no setting (`chain_length` or
+//! `luminance_samples` of 10^15) keeps a run past `--time`.
 
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
 use crate::color::Rgb;
+use crate::deadline::Deadline;
 use crate::film::{Film, Filter};
 use crate::integrators::bdpt::generate_camera_subpath;
 use crate::integrators::path_vertex::{Vertex, VertexKind};
@@ -64,7 +69,7 @@ use mcmc_core::chain::{Algorithm, ChainState};
 use mcmc_core::kernel::Mixture;
 use mcmc_core::mh::MetropolisHastings;
 use mcmc_core::rng::{ChainRng, splitmix64, uniform};
-use mcmc_core::runner::run_chains;
+use mcmc_core::runner::{run_chain_range, run_chains};
 use mcmc_core::sample::Sample;
 use mcmc_core::stats::ChainStatistics;
 use serde_json::json;
@@ -225,21 +230,14 @@ impl IntegratorSettings for Erpt {
         let start = Instant::now();
         let (w, h) = (scene.film.width, scene.film.height);
         let vertices = self.walk_vertices();
-        let time_up = || {
-            stop.load(Ordering::Relaxed) || run.time_budget.is_some_and(|t| start.elapsed() >= t)
-        };
-        // One luminance per walk is kept (10^15 walks aborted on an 8 PB
-        // allocation).
-        crate::resources::check_memory(
-            &format!("erpt: {} luminance samples", self.luminance_samples),
-            self.luminance_samples as u128 * 8,
-        )
-        .map_err(RenderError::Invalid)?;
+        let deadline = Deadline::new(start, run.time_budget);
+        let time_up = || stop.load(Ordering::Relaxed) || deadline.passed();
         // L̄: mean pixel luminance from independent camera walks.
-        let lum: Vec<f64> = run_chains(
+        let lum = estimate_luminance(
             self.luminance_samples,
             splitmix64(run.seed ^ 0x4c55_4d49),
-            |_, mut rng| {
+            &time_up,
+            |mut rng| {
                 let (mut camera, mut light) = (Vec::new(), Vec::new());
                 let raster = in_pixel(
                     (uniform(&mut rng) * w as f64) as u32 % w,
@@ -252,10 +250,7 @@ impl IntegratorSettings for Erpt {
                     .sum()
             },
         );
-        let n = lum.len() as f64;
-        let mean_lum = lum.iter().sum::<f64>() / n;
-        let lum_se =
-            (lum.iter().map(|l| (l - mean_lum).powi(2)).sum::<f64>() / (n * (n - 1.0))).sqrt();
+        let mean_lum = lum.mean;
         let e_d = mean_lum / (self.chain_length as f64 * self.num_chains);
         let filter = Arc::new(Filter::new(scene.film.filter, w, h));
         let mut film = Film::new_splat_only(w, h, filter.clone());
@@ -266,6 +261,9 @@ impl IntegratorSettings for Erpt {
         let (mut passes, mut seeds_total, mut chains_total) = (0u64, 0u64, 0u64);
         let planned = run.spp.map(u64::from);
         let mut interrupted = false;
+        // Mutations of the pass the stop or the deadline cut (not in the
+        // image: a part of a pass is not an estimate).
+        let mut dropped_mutations = 0u64;
         while mean_lum > 0.0 && planned.is_none_or(|p| passes < p) {
             if time_up() {
                 // The time budget ends a run without a sample count as
@@ -318,6 +316,14 @@ impl IntegratorSettings for Erpt {
                                 };
                                 let film = &mut out.film;
                                 for _ in 0..self.chain_length {
+                                    // A chain of 10^15 steps never ended:
+                                    // the deadline drops the pass here as
+                                    // it does between rows.
+                                    if time_up() {
+                                        out.stats = chain.stats;
+                                        out.stopped = true;
+                                        return out;
+                                    }
                                     mh.step(&mut chain, &PathTarget::default(), &mut |t| {
                                         deposit(film, t.current, 1.0 - t.alpha, e_d);
                                         if let Some(y) = t.proposal {
@@ -334,6 +340,7 @@ impl IntegratorSettings for Erpt {
                 out
             });
             if bands.iter().any(|b| b.stopped) {
+                dropped_mutations = bands.iter().map(|b| b.stats.steps).sum();
                 interrupted = stop.load(Ordering::Relaxed) || planned.is_some();
                 break;
             }
@@ -360,8 +367,10 @@ impl IntegratorSettings for Erpt {
             "chains_per_pixel_per_pass": chains_total as f64 / (passes.max(1) as f64 * f64::from(w * h)),
             "mutations": stats.steps,
             "mutations_per_second": stats.steps as f64 / seconds,
+            "dropped_pass_mutations": dropped_mutations,
+            "luminance_samples": lum.walks,
             "mean_pixel_luminance": mean_lum,
-            "mean_pixel_luminance_standard_error": lum_se,
+            "mean_pixel_luminance_standard_error": lum.standard_error,
             "deposit_energy": e_d,
             "acceptance": stats.acceptance_rate(),
             "acceptance_per_component": stats.components.iter().map(|c| json!({
@@ -390,11 +399,70 @@ impl IntegratorSettings for Erpt {
             nonfinite_dump: None,
             layers: Vec::new(),
             summary: format!(
-                "{passes} passes, {chains_total} chains, {} mutations in {seconds:.2} s, e_d = {e_d:.3e}{}",
+                "{passes} passes, {chains_total} chains, {} mutations in {seconds:.2} s, e_d = {e_d:.3e}{}{}",
                 stats.steps,
+                if lum.walks < self.luminance_samples {
+                    format!(
+                        ", luminance estimate cut at {} of {} walks",
+                        lum.walks, self.luminance_samples
+                    )
+                } else {
+                    String::new()
+                },
                 if interrupted { ", stopped early" } else { "" }
             ),
         })
+    }
+}
+
+/// Camera walks per block of the luminance estimate: the stop flag and the
+/// deadline are checked between blocks.
+const LUMINANCE_BLOCK: usize = 1024;
+
+/// The estimate of the mean pixel luminance `L̄` that sets the deposited
+/// energy.
+struct LuminanceEstimate {
+    /// Camera walks taken (fewer than asked when the time ran out).
+    walks: usize,
+    /// Their mean luminance (0 without walks: no pass runs).
+    mean: f64,
+    /// The mean's standard error (NaN below two walks).
+    standard_error: f64,
+}
+
+/// `L̄` from up to `walks` independent camera walks, `walk(rng)` giving
+/// one walk's luminance, in blocks of [`LUMINANCE_BLOCK`] walks until
+/// `time_up()`. Nothing is kept per walk (10^15 walks aborted on an 8 PB
+/// allocation when the luminances were collected), and a cut estimate is
+/// the mean of the walks taken: `e_d` only sets how many chains start, and
+/// any `e_d > 0` leaves a pass unbiased (module docs). Each walk has its
+/// own stream (`run_chains`' streams of `seed`) and the sum runs in walk
+/// order, so the estimate does not depend on the thread count.
+fn estimate_luminance(
+    walks: usize,
+    seed: u64,
+    time_up: &dyn Fn() -> bool,
+    walk: impl Fn(ChainRng) -> f64 + Sync + Send,
+) -> LuminanceEstimate {
+    let (mut done, mut sum) = (0usize, 0.0f64);
+    // Welford's running mean and sum of squared deviations: the standard
+    // error without keeping the walks.
+    let (mut running_mean, mut squares) = (0.0f64, 0.0f64);
+    while done < walks && !time_up() {
+        let end = done + LUMINANCE_BLOCK.min(walks - done);
+        for l in run_chain_range(done..end, seed, |_, rng| walk(rng)) {
+            done += 1;
+            sum += l;
+            let delta = l - running_mean;
+            running_mean += delta / done as f64;
+            squares += delta * (l - running_mean);
+        }
+    }
+    let n = done as f64;
+    LuminanceEstimate {
+        walks: done,
+        mean: if done > 0 { sum / n } else { 0.0 },
+        standard_error: (squares / (n * (n - 1.0))).sqrt(),
     }
 }
 

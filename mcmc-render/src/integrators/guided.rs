@@ -50,6 +50,7 @@ use super::pt::{ScatterOrigin, camera_ray, emitter_hit, environment_hit, next_ev
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings, SampleStats, rr_probability};
 use crate::color::Rgb;
+use crate::deadline::Deadline;
 use crate::film::{Film, Filter};
 use crate::geometry::Ray;
 use crate::guiding::{LeafId, Mixture, RecordBuffer, SdTree};
@@ -307,7 +308,7 @@ pub fn next_iteration(
     budget: Option<u64>,
     done: u64,
     nominal: u64,
-    deadline: Option<Instant>,
+    deadline: Deadline,
     previous_seconds: Option<f64>,
 ) -> (Option<u64>, bool) {
     match budget {
@@ -320,9 +321,7 @@ pub fn next_iteration(
             }
         }
         None => {
-            let left = deadline.map_or(0.0, |d| {
-                d.saturating_duration_since(Instant::now()).as_secs_f64()
-            });
+            let left = deadline.time_left().map_or(0.0, |d| d.as_secs_f64());
             if previous_seconds.is_some_and(|t| 3.0 * 2.0 * t > left) {
                 (None, true)
             } else {
@@ -393,8 +392,8 @@ impl GuidedSettings {
         let mut tree = SdTree::new(bounds, self.initial_depth);
         let tracer = self.tracer();
         let budget_spp = run.samples_per_pixel(scene.sample_count).map(u64::from);
-        let deadline = run.time_budget.map(|b| start + b);
-        let out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
+        let deadline = Deadline::new(start, run.time_budget);
+        let out_of_time = || deadline.passed();
         let tiles = image_tiles(width, height);
         let training_pass_spp = (TRAINING_PASS_SAMPLES / pixels.max(1)).clamp(1, PASS_SPP);
 

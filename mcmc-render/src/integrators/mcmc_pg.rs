@@ -65,6 +65,7 @@
 use super::guided::{GuidedPathTracer, GuidedSettings, Training, agreed_iteration, next_iteration};
 use super::registry::IntegratorSettings;
 use super::{RenderError, Rendered, RunSettings};
+use crate::deadline::Deadline;
 use crate::guiding::{ExactRecords, SdTree};
 use crate::markov::{self, ChainParams, MltResult};
 use crate::observer::Observer;
@@ -273,7 +274,7 @@ impl McmcPg {
         &self,
         scene: &Scene,
         sampler: GuidedPss<'_>,
-        (mutations_per_pixel, deadline, seed): (Option<u64>, Option<Instant>, u64),
+        (mutations_per_pixel, deadline, seed): (Option<u64>, Deadline, u64),
         stop: &AtomicBool,
         observer: &dyn Observer,
     ) -> Result<MltResult, RenderError> {
@@ -286,10 +287,9 @@ impl McmcPg {
         settings.mutations_per_pixel = mutations_per_pixel;
         // At least a moment, so that a budget spent in training still
         // ends (the driver needs a budget).
-        settings.time_budget = deadline.map(|d| {
-            d.saturating_duration_since(Instant::now())
-                .max(Duration::from_millis(1))
-        });
+        settings.time_budget = deadline
+            .time_left()
+            .map(|left| left.max(Duration::from_millis(1)));
         Ok(super::pssmlt::render_pssmlt(
             scene, sampler, &settings, stop, observer,
         )?)
@@ -304,7 +304,7 @@ impl McmcPg {
         observer: &dyn Observer,
     ) -> Result<Outcome, RenderError> {
         let start = Instant::now();
-        let deadline = run.time_budget.map(|b| start + b);
+        let deadline = Deadline::new(start, run.time_budget);
         let budget = self.chain.mutations_per_pixel(run);
         let (train_run, chain_mpp) = match budget {
             Some(m) => {
@@ -378,7 +378,7 @@ impl McmcPg {
         observer: &dyn Observer,
     ) -> Result<Outcome, RenderError> {
         let start = Instant::now();
-        let deadline = run.time_budget.map(|b| start + b);
+        let deadline = Deadline::new(start, run.time_budget);
         let budget = self.chain.mutations_per_pixel(run);
         let tracer = self.guiding.tracer();
         let mut tree = self.new_tree(scene);

@@ -99,6 +99,7 @@ use super::vcm::{
 };
 use super::{RenderError, Rendered, RunSettings};
 use crate::color::Rgb;
+use crate::deadline::Deadline;
 use crate::film::{Film, Filter};
 use crate::hash_grid::HashGrid;
 use crate::observer::Observer;
@@ -711,12 +712,11 @@ impl McmcVcm {
         let filter = Arc::new(Filter::new(scene.film.filter, width, height));
         let mut film = Film::new(width, height, filter.clone());
         let start = Instant::now();
-        let deadline = run.time_budget.map(|b| start + b);
+        let deadline = Deadline::new(start, run.time_budget);
         let target = run.samples_per_pixel(scene.sample_count).map(u64::from);
-        let out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
         let aborted = AtomicBool::new(false);
         let abort = || {
-            if stop.load(Ordering::Relaxed) || out_of_time() {
+            if stop.load(Ordering::Relaxed) || deadline.passed() {
                 aborted.store(true, Ordering::Relaxed);
             }
             aborted.load(Ordering::Relaxed)
@@ -998,6 +998,12 @@ impl McmcVcm {
         iteration: u64,
         abort: &(dyn Fn() -> bool + Sync),
     ) {
+        // Checked before the restart too: a unit with no step of its own
+        // (units > pixels) never reached the check in its steps, and
+        // 10^6 such units' restarts kept a run long past `--time`.
+        if abort() {
+            return;
+        }
         let pixels = it.cameras.len();
         let kinds = self.kinds();
         let mut rng = stream_rng(seed, STREAM_STEPS ^ (iteration << 24) ^ p as u64);

@@ -45,6 +45,7 @@ use super::pt::PathTracer;
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
 use crate::color::Rgb;
+use crate::deadline::Deadline;
 use crate::markov::{self, ChainParams, MltError, MltResult};
 use crate::observer::Observer;
 use crate::path_space::family::PerturbationSizes;
@@ -230,7 +231,7 @@ impl IntegratorSettings for Mlt {
     ) -> Result<Rendered, RenderError> {
         IntegratorSettings::validate(self).map_err(RenderError::Invalid)?;
         let start = Instant::now();
-        let deadline = run.time_budget.map(|b| start + b);
+        let deadline = Deadline::new(start, run.time_budget);
         // A pass alone is not an estimate of the image: its snapshots are
         // not passed on; the chains' snapshots carry the passes' images.
         let quiet = WithPasses::progress_only(observer);
@@ -266,7 +267,7 @@ impl IntegratorSettings for Mlt {
             )
         });
         let chains_run = RunSettings {
-            time_budget: time_left(deadline),
+            time_budget: deadline.time_left(),
             ..run.clone()
         };
         let clock = ProposalClock::new();
@@ -378,7 +379,7 @@ impl Observer for WithPasses<'_> {
 fn specular_chains_pass(
     scene: &Scene,
     pass: &SpecularChains,
-    (run, deadline): (&RunSettings, Option<Instant>),
+    (run, deadline): (&RunSettings, Deadline),
     min_spp: u32,
     share: f64,
     stop: &AtomicBool,
@@ -421,18 +422,13 @@ fn pass_done(mut r: Rendered, stop: &AtomicBool) -> (u32, Rendered) {
 /// (8 B) and one weighted technique of the start states (16 B).
 const BDPT_STARTUP_BYTES_PER_DRAW: u128 = 56;
 
-/// The time from now to `deadline` (zero once it has passed).
-fn time_left(deadline: Option<Instant>) -> Option<std::time::Duration> {
-    deadline.map(|d| d.saturating_duration_since(Instant::now()))
-}
-
 /// `run` with a fixed `spp` per pixel (the per-pixel passes beside the
 /// chains), cut short at the run's `deadline`: without it a pass sized by
 /// a setting (10^15 spp) ran on past `--time`.
-fn fixed_spp(run: &RunSettings, spp: u32, deadline: Option<Instant>) -> RunSettings {
+fn fixed_spp(run: &RunSettings, spp: u32, deadline: Deadline) -> RunSettings {
     RunSettings {
         spp: Some(spp),
-        time_budget: time_left(deadline),
+        time_budget: deadline.time_left(),
         // The chains' run is not checkpointed; these passes are part of it.
         checkpoint: None,
         ..run.clone()

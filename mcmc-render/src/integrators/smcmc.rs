@@ -29,7 +29,11 @@
 //! - **Stopping**: the stop flag and the time budget are checked before
 //!   every tile step, exchange pair and start-up draw, so a run ends
 //!   mid-iteration with a valid image (each tile is normalised by its own
-//!   transition count).
+//!   transition count), and before every alignment sweep after the
+//!   default's [`DEFAULT_SOLVER_ITERATIONS`]: the statistics' `solver`
+//!   `iterations` against `planned_iterations` show a cut (fewer sweeps
+//!   leave more of the seams between tiles; the image-wide brightness is
+//!   where `b⁰` puts it either way: see [`crate::smcmc::solver`]).
 //! - **Determinism**: every tile owns its streams (seeded from the run's
 //!   seed and its index); tiles step in parallel, exchange pairs are
 //!   disjoint, and all sums are reduced in a fixed order, so a seed gives
@@ -37,6 +41,7 @@
 
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
+use crate::deadline::Deadline;
 use crate::integrators::bdpt::{Bdpt, MisHeuristic};
 use crate::integrators::guided::GuidedSettings;
 use crate::integrators::mcmc_pg::ProgressOnly;
@@ -120,6 +125,12 @@ crate::choice! {
     }
 }
 
+/// Jacobi sweeps of the tile alignment by default (the thesis's 200), and
+/// the sweeps a develop runs even past the run's end (stop flag or
+/// deadline), where it stops larger counts: what a run with the default
+/// always spent there.
+pub const DEFAULT_SOLVER_ITERATIONS: usize = 200;
+
 crate::settings! {
     /// Stratified MCMC settings (defaults from spec seed003 §13).
     pub struct Smcmc {
@@ -134,7 +145,7 @@ crate::settings! {
         /// Weight α of the large-step estimate in the tile alignment (Eq. 3.38).
         pub alpha: f64 = 0.05, check check::positive;
         /// Jacobi sweeps of the tile alignment (the thesis's 200).
-        pub solver_iterations: usize = 200;
+        pub solver_iterations: usize = DEFAULT_SOLVER_ITERATIONS;
         /// Uniform candidates per tile at start-up (the start state is resampled from them).
         pub init_candidates: usize = 16, check check::count;
         /// Start-up: naive (per-tile uniform candidates) or global (global chains; tiles they miss then draw init_candidates).
@@ -651,9 +662,8 @@ impl Smcmc {
         // one mutation's time, mid-iteration: each tile's histogram is
         // normalised by its own transition count, so tiles that took one
         // step fewer than their neighbours still give a valid estimate.
-        let halt = || {
-            stop.load(Ordering::Relaxed) || run.time_budget.is_some_and(|b| start.elapsed() >= b)
-        };
+        let deadline = Deadline::new(start, run.time_budget);
+        let halt = || stop.load(Ordering::Relaxed) || deadline.passed();
         if self.init == SmcmcInit::Global {
             // The global start-up keeps one weight per bootstrap state and
             // one walk per chain (10^15 states aborted on an 8 PB
@@ -685,11 +695,16 @@ impl Smcmc {
         let start_seconds = start.elapsed().as_secs_f64();
         let develop_now = |tiles: &[Tile]| {
             let sums: Vec<TileSums> = tiles.iter().map(|t| t.sums.clone()).collect();
+            // Past the run's end (stop flag or deadline) the sweeps stop
+            // after the default's count: 10^15 sweeps kept a run for ever
+            // past `--time`, and no run has fewer sweeps than before.
             develop(
                 &sampler.tiling,
                 &sums,
                 self.alpha,
-                self.solver_iterations,
+                (self.solver_iterations, &|i| {
+                    i < DEFAULT_SOLVER_ITERATIONS || !halt()
+                }),
                 sampler.filter.as_ref(),
             )
         };
@@ -795,6 +810,7 @@ impl Smcmc {
             "solver": {
                 "alpha": self.alpha,
                 "iterations": developed.alignment.iterations,
+                "planned_iterations": self.solver_iterations,
                 "initial_residual": developed.alignment.initial_residual,
                 "residual": developed.alignment.residual,
             },
@@ -821,10 +837,18 @@ impl Smcmc {
             nonfinite_dump: None,
             layers: vec![("samples".into(), developed.samples)],
             summary: format!(
-                "{iterations} iterations of {n} tiles ({mutations} mutations) in {seconds:.2} s, {:.1}% of tiles started, exchange rate {:.3}, solver residual {:.2e}{}",
+                "{iterations} iterations of {n} tiles ({mutations} mutations) in {seconds:.2} s, {:.1}% of tiles started, exchange rate {:.3}, solver residual {:.2e}{}{}",
                 100.0 * started as f64 / n as f64,
                 exchange.accepted as f64 / exchange.attempts.max(1) as f64,
                 developed.alignment.residual,
+                if developed.alignment.iterations < self.solver_iterations {
+                    format!(
+                        " (sweeps cut at {} of {})",
+                        developed.alignment.iterations, self.solver_iterations
+                    )
+                } else {
+                    String::new()
+                },
                 if interrupted { ", stopped early" } else { "" },
             ),
         })

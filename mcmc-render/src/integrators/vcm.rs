@@ -84,6 +84,7 @@ use super::{DepthParams, RenderError, Rendered, RunSettings};
 use crate::bsdf::TransportMode;
 use crate::bsdf::textured::BsdfAt;
 use crate::color::Rgb;
+use crate::deadline::Deadline;
 use crate::film::{Film, Filter};
 use crate::frame::Frame;
 use crate::hash_grid::HashGrid;
@@ -911,9 +912,9 @@ impl Vcm {
         let filter = Arc::new(Filter::new(scene.film.filter, width, height));
         let mut film = Film::new(width, height, filter.clone());
         let start = Instant::now();
-        let deadline = run.time_budget.map(|b| start + b);
+        let deadline = Deadline::new(start, run.time_budget);
         let target = run.samples_per_pixel(scene.sample_count).map(u64::from);
-        let out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
+        let out_of_time = || deadline.passed();
         let tiles: Vec<(u32, u32, u32, u32)> = (0..height.div_ceil(TILE))
             .flat_map(|ty| {
                 (0..width.div_ceil(TILE)).map(move |tx| {

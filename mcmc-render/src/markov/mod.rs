@@ -61,6 +61,7 @@ mod startup;
 mod work;
 
 use crate::color::Rgb;
+use crate::deadline::Deadline;
 use crate::film::{Film, Filter};
 use crate::integrators::RunSettings;
 use crate::observer::Observer;
@@ -820,8 +821,8 @@ pub fn run<F: ChainFamily>(
     }
     check_memory(scene, family, settings)?;
     let start = Instant::now();
-    let deadline = settings.time_budget.map(|b| start + b);
-    let out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
+    let deadline = Deadline::new(start, settings.time_budget);
+    let out_of_time = || deadline.passed();
     let (width, height) = (scene.film.width, scene.film.height);
     let pixels = width as u64 * height as u64;
 

@@ -326,14 +326,16 @@ pub struct Developed {
 }
 
 /// Develops the image from every tile's sums: `Ĩ`, `b⁰`, the alignment
-/// with weight `alpha` and `iterations` Jacobi sweeps, then `Î(j)` (under
+/// with weight `alpha` and `iterations` Jacobi sweeps (fewer where
+/// `more_sweeps(i)` is false before sweep `i`: see
+/// [`solver::AlignmentProblem::solve_while`]), then `Î(j)` (under
 /// `filter`, from the spread sums: see the module's "Reconstruction
 /// filter").
 pub fn develop(
     tiling: &Tiling,
     tiles: &[TileSums],
     alpha: f64,
-    iterations: usize,
+    (iterations, more_sweeps): (usize, &dyn Fn(usize) -> bool),
     filter: Option<&FilterSplat>,
 ) -> Developed {
     let slots = tiling.slots();
@@ -375,7 +377,7 @@ pub fn develop(
         i_tilde: &i_lum,
         alpha,
     };
-    let alignment = problem.solve(&b0, iterations);
+    let alignment = problem.solve_while(&b0, iterations, more_sweeps);
     let mut image = Vec::with_capacity(pixels);
     let mut samples = Vec::with_capacity(pixels);
     for (j, i_t) in i_tilde.iter().enumerate() {

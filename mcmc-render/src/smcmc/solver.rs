@@ -148,18 +148,32 @@ impl AlignmentProblem<'_> {
     /// `iterations` Jacobi sweeps from `b0` (every update reads only the
     /// previous sweep, so the result does not depend on the thread count).
     pub fn solve(&self, b0: &[f64], iterations: usize) -> Alignment {
+        self.solve_while(b0, iterations, &|_| true)
+    }
+
+    /// [`solve`](Self::solve), stopping before the first sweep `i` (from
+    /// 0) for which `more(i)` is false: a run's deadline cuts the sweeps
+    /// short ([`Alignment::iterations`] counts those run).
+    pub fn solve_while(
+        &self,
+        b0: &[f64],
+        iterations: usize,
+        more: &dyn Fn(usize) -> bool,
+    ) -> Alignment {
         let initial_residual = self.residual(b0);
         let mut b = b0.to_vec();
         let mut next = b.clone();
-        for _ in 0..iterations {
+        let mut done = 0;
+        while done < iterations && more(done) {
             self.sweep(&b, &mut next);
             std::mem::swap(&mut b, &mut next);
+            done += 1;
         }
         Alignment {
             initial_residual,
             residual: self.residual(&b),
             b,
-            iterations,
+            iterations: done,
         }
     }
 }
