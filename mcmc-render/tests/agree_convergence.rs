@@ -104,8 +104,8 @@ fn reference() -> &'static Reference {
     static REF: OnceLock<Reference> = OnceLock::new();
     REF.get_or_init(|| {
         let scene = repo_scene_tilted("cornell-box.xml", 32, 5);
-        let halves =
-            [90_001, 90_002].map(|seed| luminance(&render_image(&scene, &pt_of(&scene), 1024, seed)));
+        let halves = [90_001, 90_002]
+            .map(|seed| luminance(&render_image(&scene, &pt_of(&scene), 1024, seed)));
         Reference::from_halves(scene, &halves)
     })
 }
@@ -113,7 +113,9 @@ fn reference() -> &'static Reference {
 /// `K` replicates' luminance images at `budget` (1 or 4), seeds from
 /// `seed0`.
 fn replicates(render: &impl Fn(u64, u64) -> Vec<Rgb>, budget: u64, seed0: u64) -> Vec<Vec<f64>> {
-    (0..K).map(|s| luminance(&render(budget, seed0 + s))).collect()
+    (0..K)
+        .map(|s| luminance(&render(budget, seed0 + s)))
+        .collect()
 }
 
 /// The ratio of relMSE at budgets `N` and `4N` against a reference, with
