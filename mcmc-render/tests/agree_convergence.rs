@@ -389,13 +389,16 @@ fn erpt_relmse_falls_as_one_over_n() {
 
 /// The factor of `mcmc-vcm`'s control: its replicates scaled by it must
 /// fail the rate test. A scale `s` adds the fixed bias
-/// `(s − 1)² mean_p w_p R_p²` (≈ 0.9 (s − 1)² here, where most pixels are
-/// well above the weights' floor 0.1) to the relMSE at both budgets, so
-/// the ratio falls towards 1 once that bias is comparable to the variance
-/// at `4N`. A 1% scale (bias ≈ 1e-4) would need a relMSE at `4N` near 1e-4,
-/// about 50× the work of this test; 10% (bias ≈ 9e-3, of the order of
-/// the relMSE at `N`) is the smallest round bias that the default budget
-/// resolves.
+/// `(s − 1)² mean_p w_p R_p²` to the relMSE at both budgets, so the ratio
+/// falls towards 1 once that bias is comparable to the variance at `4N`.
+/// Measured (session 15, 16×16): relMSE 4.07e-3 ± 1.6e-4 at N, 1.05e-3 ±
+/// 3.0e-5 at 4N, ratio 3.95 ± 0.19 (t = 4.07, passes); scaled by 1.1,
+/// 6.78e-3 and 2.79e-3, ratio 2.44 ± 0.12 (fails by 13 standard errors).
+/// The bias of 10% is thus 1.7e-3 (mean_p w_p R_p² ≈ 0.17: most pixels of
+/// the tilted box lie near the weights' floor 0.1); a 1% scale would add
+/// 1.7e-5, 1.6% of the relMSE at 4N, which this budget cannot resolve
+/// (it would need about 100× the work), so the control is a 10% bias.
+/// 3.9 s of CPU on 2 threads (6.1 s wall at load 14).
 const MCMC_VCM_CONTROL_SCALE: f64 = 1.1;
 
 /// `mcmc-vcm` (both chains, replica exchange, running normalisation) on
