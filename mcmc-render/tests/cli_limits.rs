@@ -401,10 +401,7 @@ fn relt_start_up_phases_sized_by_a_setting_stop_at_the_time_budget() {
                 // The annealing was not cut: 200 particles × 1 sweep.
                 assert_eq!(steps[1..], [200, 200, 200]);
             }
-            _ => assert!(
-                steps[1..].iter().all(|&s| s < 200_000_000_000),
-                "{steps:?}"
-            ),
+            _ => assert!(steps[1..].iter().all(|&s| s < 200_000_000_000), "{steps:?}"),
         }
     }
 }

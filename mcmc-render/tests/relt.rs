@@ -593,7 +593,10 @@ fn per_class_weights_sum_to_one_on_real_paths_of_the_box() {
                 }
                 if settings.mis_classes == ReltMisClasses::PerClass && !settings.full_l1 {
                     let w = factors[0][1] * q[0];
-                    assert!((w - 1.0).abs() < 1e-12, "L1: the uniform replica's alone, w = {w}");
+                    assert!(
+                        (w - 1.0).abs() < 1e-12,
+                        "L1: the uniform replica's alone, w = {w}"
+                    );
                 }
             }
         }
