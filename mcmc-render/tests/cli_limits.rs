@@ -468,3 +468,84 @@ fn mcmc_vcm_chain_pairs_stop_at_the_time_budget() {
     assert_eq!(stats["units"], 30000, "{stats}");
     assert_eq!(stats["iterations"], 0, "{stats}");
 }
+
+/// `relt`'s start-up phases sized by a setting (`l0_search` draws,
+/// `annealing_sweeps` per particle) stop at `--time` like the chains,
+/// and the JSON says how much of them was done. One run per phase, so
+/// that each is cut by itself (the annealing comes first and would
+/// otherwise leave the search nothing).
+#[test]
+fn relt_start_up_phases_sized_by_a_setting_stop_at_the_time_budget() {
+    let dir = setup("limits-relt-start-up");
+    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/cornell-box.xml");
+    for (phase, setting) in [
+        ("search", "l0_search=1000000000000"),
+        ("annealing", "annealing_sweeps=1000000000"),
+    ] {
+        let mut child = Command::new(BIN)
+            .args([
+                "render",
+                scene,
+                "-D",
+                "width=8",
+                "-D",
+                "height=8",
+                "--integrator",
+                "relt",
+                "--set",
+                "bootstrap=2000",
+                "--set",
+                "annealing_particles=200",
+                "--set",
+                "l0_search=20000",
+                "--set",
+                setting,
+                "--time",
+                "0.5",
+                "--out",
+                "relt.exr",
+                "--quiet",
+            ])
+            .current_dir(&dir)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("the binary runs");
+        // A watchdog, not a speed test: uncut, either phase runs for
+        // days, so any bound far above the budget tells the two apart.
+        let start = Instant::now();
+        let status = loop {
+            if let Some(status) = child.try_wait().expect("wait") {
+                break status;
+            }
+            if start.elapsed() > Duration::from_secs(300) {
+                let _ = child.kill();
+                panic!("relt's {phase} ran 300 s past a 0.5 s budget");
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        };
+        let mut stderr = String::new();
+        std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut stderr).unwrap();
+        assert!(status.success(), "{phase}: {stderr}");
+        let stats = json(&dir.join("relt.json"));
+        let search = &stats["searches"][3];
+        let draws = search["draws"]
+            .as_u64()
+            .unwrap_or_else(|| panic!("no search of the specific replica in {stats}"));
+        let steps: Vec<u64> = stats["annealing"]
+            .as_array()
+            .unwrap_or_else(|| panic!("no annealing in {stats}"))
+            .iter()
+            .map(|m| m["steps"].as_u64().expect("annealing steps"))
+            .collect();
+        assert_eq!(steps.len(), 4, "{stats}");
+        match phase {
+            "search" => {
+                assert!(draws < 1_000_000_000_000, "{draws} draws");
+                // The annealing was not cut: 200 particles × 1 sweep.
+                assert_eq!(steps[1..], [200, 200, 200]);
+            }
+            _ => assert!(steps[1..].iter().all(|&s| s < 200_000_000_000), "{steps:?}"),
+        }
+    }
+}

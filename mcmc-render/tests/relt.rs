@@ -493,3 +493,202 @@ fn the_l0_search_starts_the_specific_replica_on_l0_paths() {
         "{on_l0} starts on L0, expected {expected:.1} ± {sd:.1}"
     );
 }
+
+/// The Cornell box at `res`×`res` and `max_depth` seen from below its
+/// light (camera at y = 0.5 looking straight up, 0.49 below it): the
+/// frame (half-width 0.49 · tan 19.65° = 0.18) lies inside the 0.46 ×
+/// 0.38 emitter, so every pixel is one where the light is seen directly,
+/// the pixels that `mis_classes=per_class` leaves to the uniform replica
+/// (docs/relt.md, "1479 ± 43").
+fn under_the_light(res: u32, max_depth: u32) -> Scene {
+    let text = common::repo_scene_tilted_text("cornell-box.xml", res, max_depth);
+    let from = r#"origin="0, 0, 3.9" target="0, -1.1, 0" up="0, 1, 0""#;
+    let to = r#"origin="0, 0.5, 0.01" target="0, 0.99, 0.01" up="0, 0, 1""#;
+    let out = text.replace(from, to);
+    assert_ne!(out, text, "camera not found");
+    common::load_str(&out)
+}
+
+/// `mis_classes=per_class` (and, as a check of the test, `all`): on real
+/// BDPT samples of the box, drawn uniformly in primary sample space, the
+/// MIS weights `w_k = factor_k · q_k` of every class sum to 1 over the
+/// replicas (1e-12) for random `b̂ > 0`, shares and β, also on the paths
+/// where some replica's density is 0 (such a replica's chain never sits
+/// there, and it contributes `factor · 0`); under `per_class` a replica
+/// whose target lacks the class has factor 0 whatever its density (it
+/// films none of the class), so `L1` is the uniform replica's alone
+/// without `full_l1`, with weight 1. The uniform replica's `q = 1` is in
+/// every class's sum, so no sum is empty or short.
+#[test]
+fn per_class_weights_sum_to_one_on_real_paths_of_the_box() {
+    let mut rng = stream_rng(77, 0);
+    let mut u = move || mcmc_core::rng::uniform(&mut rng);
+    for (scene, name) in [
+        (repo_scene("cornell-box.xml", 16), "front"),
+        (under_the_light(8, 5), "under the light"),
+    ] {
+        let (mut l1_paths, mut l1_zero_q) = (0, 0);
+        for case in 0..4 {
+            let settings = Relt {
+                mis_classes: if case < 3 {
+                    ReltMisClasses::PerClass
+                } else {
+                    ReltMisClasses::All
+                },
+                full_l1: case == 1,
+                specific_replica: case != 2,
+                mis_power: if case == 0 { 1.0 } else { 1.0 + 2.0 * u() },
+                uniform_share: if case == 0 { 1.0 } else { 0.05 + 0.95 * u() },
+                ..Relt::default()
+            };
+            let family = family(&scene, &settings);
+            let replicas = settings.replicas();
+            let m = replicas.len();
+            let specific = replicas.iter().position(|r| r.name == "specific");
+            for i in 0..1500 {
+                let b_hat: Vec<f64> = (0..m).map(|_| 1e-3 + 10.0 * u()).collect();
+                let x = TorusPoint::fresh(stream_rng(78, i));
+                let e = family.target(0).evaluate(&x);
+                let v = class_values(&e.payload.splats, settings.target);
+                if v.iter().any(|l| l.is_nan()) {
+                    continue;
+                }
+                let q: Vec<f64> = (0..m)
+                    .map(|k| family.member_log_density(k, &e.payload).unwrap().exp())
+                    .collect();
+                let factors: Vec<[f64; PATH_CLASSES]> = (0..m)
+                    .map(|k| family.class_weights(k, &e.payload, &b_hat).unwrap())
+                    .collect();
+                if v[1] > 0.0 {
+                    l1_paths += 1;
+                    l1_zero_q += usize::from(q.contains(&0.0));
+                }
+                for c in 0..PATH_CLASSES {
+                    // A replica never sits where its q is 0: its weight
+                    // there is 0 (its factor may be 1/0 for L0).
+                    let total: f64 = factors
+                        .iter()
+                        .zip(&q)
+                        .map(|(f, &q)| if q > 0.0 { f[c] * q } else { 0.0 })
+                        .sum();
+                    // L0 with the specific replica is its alone: weight 1
+                    // where L0 > 0 (q_4 ≥ L0), nothing to weigh elsewhere.
+                    if c == 0 && specific.is_some() && v[0] == 0.0 {
+                        assert!(total == 0.0 || (total - 1.0).abs() < 1e-12);
+                        continue;
+                    }
+                    assert!(
+                        (total - 1.0).abs() < 1e-12,
+                        "{name}, case {case}, path {i}, class {c}: Σw = {total}, q = {q:?}"
+                    );
+                    for (k, r) in replicas.iter().enumerate() {
+                        let films = factors[k][c] != 0.0;
+                        if Some(k) == specific {
+                            assert!(!films || c == 0, "the specific replica films class {c}");
+                        } else if settings.mis_classes == ReltMisClasses::PerClass {
+                            let holds = r.weights.is_none_or(|d| d[c] > 0.0);
+                            assert!(holds || !films, "{} films class {c}", r.name);
+                        }
+                    }
+                }
+                if settings.mis_classes == ReltMisClasses::PerClass && !settings.full_l1 {
+                    let w = factors[0][1] * q[0];
+                    assert!(
+                        (w - 1.0).abs() < 1e-12,
+                        "L1: the uniform replica's alone, w = {w}"
+                    );
+                }
+            }
+        }
+        eprintln!("{name}: {l1_paths} paths with L1, {l1_zero_q} of them with some q_k = 0");
+        assert!(l1_paths > 0, "{name}: no L1 path drawn");
+        assert!(l1_zero_q > 0, "{name}: no L1 path where a replica's q is 0");
+    }
+}
+
+/// Interior-pixel means (2 pixels, the Gaussian filter's radius, from
+/// every edge) of `k` RELT runs under the light: `mis_classes=per_class`,
+/// no specific replica (the box has no `L0`), 48 chains (16 sets of
+/// three) of `mpp` mutations per pixel, seeds `seed0 ..`.
+fn per_class_under_the_light(scene: &Scene, mpp: u64, k: u64, seed0: u64) -> Vec<[f64; 3]> {
+    let settings = Relt {
+        mis_classes: ReltMisClasses::PerClass,
+        specific_replica: false,
+        annealing_particles: 1000,
+        l0_search: 0,
+        ..Relt::default()
+    };
+    let family = family(scene, &settings);
+    let stop = AtomicBool::new(false);
+    let mask = interior(scene);
+    (0..k)
+        .map(|s| {
+            let chain = mcmc_render::markov::ChainSettings::<()> {
+                bootstrap: 10_000,
+                chains: 48,
+                mutations_per_pixel: Some(mpp),
+                seed: seed0 + s,
+                normalization: mcmc_render::markov::Normalization::Running,
+                ..Default::default()
+            };
+            let r = mcmc_render::markov::run(scene, &family, &chain, &stop, &NoObserver)
+                .expect("relt runs");
+            assert_eq!(r.chain_stats.invalid_density, 0, "NaN/inf paths");
+            common::masked_mean(&r.image(), Some(&mask))
+        })
+        .collect()
+}
+
+/// The pixels at least 2 from every edge.
+fn interior(scene: &Scene) -> Vec<bool> {
+    let (w, h) = (scene.film.width, scene.film.height);
+    (0..w * h)
+        .map(|i| (2..w - 2).contains(&(i % w)) && (2..h - 2).contains(&(i / w)))
+        .collect()
+}
+
+/// `mis_classes=per_class` agrees with BDPT where the light is seen
+/// directly (every pixel, `under_the_light`), per channel.
+///
+/// Tolerance: `K` replicates of each (distinct fixed seeds; a RELT
+/// replicate has its own bootstrap, annealing and chains), SE of a mean
+/// = sd(replicate means)/√K, σ of the difference = √(SE_relt² +
+/// SE_bdpt²). Pass within 4σ: with K = 12 each the difference over σ
+/// is Student's t with ≥ 11 dof (Welch), P(|T| > 4) ≈ 2e-3 per
+/// channel. The budget must make 5σ < 1% (asserted), so the control,
+/// the RELT replicates ×1.01, lies ≥ 5σ out and must fail; session 14's
+/// suspected excess (+9%, docs/relt.md) would lie ≥ 45σ out.
+///
+/// Ignored: at this budget (measured, session 15, load ~16) RELT's SE
+/// is 0.30% per channel, so the 1% resolution check fails (+0.42%,
+/// 1.4σ: agreement; a +9% excess would be 30σ out); it needs ~3× the
+/// mutations, over the 3 s limit. Run with `cargo test -p mcmc-render
+/// --test relt -- --ignored per_class_agrees`.
+#[test]
+#[ignore]
+fn per_class_agrees_with_bdpt_where_the_light_is_seen_directly() {
+    const K: u64 = 12;
+    let scene = under_the_light(10, 3);
+    let mask = interior(&scene);
+    let bdpt: Vec<[f64; 3]> = (0..K)
+        .map(|s| {
+            let img = common::render_image(&scene, &bdpt_of(&scene), 64, 500 + s);
+            common::masked_mean(&img, Some(&mask))
+        })
+        .collect();
+    let relt = per_class_under_the_light(&scene, 256, K, 600);
+    let a = common::MeanAgreement::new(&bdpt, &relt);
+    eprintln!("per_class under the light: rel {:?}\n  {a:?}", a.rel());
+    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
+    assert!(
+        a.failures(4.0, 0.01).is_empty(),
+        "per_class disagrees with BDPT on the light: {a:?}"
+    );
+    // The control: a 1% bias must be rejected.
+    let biased: Vec<[f64; 3]> = relt.iter().map(|m| m.map(|v| v * 1.01)).collect();
+    let control = common::MeanAgreement::new(&bdpt, &biased);
+    assert!(
+        !control.failures(4.0, 0.01).is_empty(),
+        "a 1% bias passed: {control:?}"
+    );
+}

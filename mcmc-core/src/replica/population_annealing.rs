@@ -59,6 +59,9 @@ pub struct AnnealedLevel<S, P> {
     pub ratio_relative_error: f64,
     /// Acceptance rate of the level's MH sweeps (NaN at level 0).
     pub acceptance: f64,
+    /// MH steps made at the level over all particles (0 at level 0):
+    /// `particles · sweeps` unless [`anneal_until`]'s `stop` cut them.
+    pub steps: u64,
 }
 
 /// The outcome of population annealing over every level of a family.
@@ -103,6 +106,31 @@ where
     F::Payload: Send,
     A: Algorithm<S, F::Payload>,
 {
+    anneal_until(family, initial, algorithm, sweeps, seed, &|| false)
+}
+
+/// [`anneal`], with the MH sweeps cut once `stop()` holds (a time budget):
+/// each particle checks it before every step and makes no more once it
+/// holds. The weights, resampling and ratio estimates of every level are
+/// still computed (they trace nothing); a particle that made fewer steps
+/// is still a draw of its level (resampled from it and moved only by
+/// kernels that leave it invariant), so the estimates keep their meaning
+/// and only the particles' diversity suffers. [`AnnealedLevel::steps`]
+/// counts the steps made.
+pub fn anneal_until<S, F, A>(
+    family: &F,
+    initial: Vec<Sample<S, F::Payload>>,
+    algorithm: impl Fn(usize) -> A + Sync,
+    sweeps: usize,
+    seed: u64,
+    stop: &(dyn Fn() -> bool + Sync),
+) -> Result<PopulationAnnealing<S, F::Payload>>
+where
+    S: Clone + Send,
+    F: ReplicaFamily<S> + Sync,
+    F::Payload: Send,
+    A: Algorithm<S, F::Payload>,
+{
     let n = initial.len();
     if n == 0 {
         return Err(invalid(
@@ -115,6 +143,7 @@ where
         log_ratio: 0.0,
         ratio_relative_error: 0.0,
         acceptance: f64::NAN,
+        steps: 0,
     }];
     for k in 1..family.levels() {
         let previous = &levels[k - 1].particles;
@@ -192,6 +221,9 @@ where
                             stats: ChainStatistics::new(alg.component_names()),
                         };
                         for _ in 0..sweeps {
+                            if stop() {
+                                break;
+                            }
                             alg.step(&mut state, &target, &mut |_| {});
                         }
                         steps += state.stats.steps;
@@ -208,6 +240,7 @@ where
             log_ratio: mean.ln() + shift,
             ratio_relative_error,
             acceptance: accepted as f64 / steps as f64,
+            steps,
         });
     }
     Ok(PopulationAnnealing { levels })

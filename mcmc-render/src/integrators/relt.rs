@@ -48,6 +48,7 @@ use mcmc_core::target::{Evaluation, Target};
 use rayon::prelude::*;
 use serde_json::json;
 use std::sync::atomic::AtomicBool;
+use std::time::Instant;
 
 crate::choice! {
     /// The exchange move between replicas.
@@ -253,6 +254,8 @@ pub struct ReltFamily<'a> {
     annealing: Option<Annealing>,
     /// Draws of the specific replica's search for `L0` paths.
     l0_search: u64,
+    /// The run's deadline, at which the search stops.
+    deadline: Option<Instant>,
 }
 
 /// First start-up candidate index of the specific replica's search (the
@@ -262,6 +265,10 @@ const SEARCH_OFFSET: u64 = 1 << 39;
 /// Draws of the search traced in full whatever their camera subpath
 /// (every `stride`-th): they estimate the `δ·L5` part of `b_4`.
 const SEARCH_FULL_DRAWS: u64 = 10_000;
+
+/// Draws of the search between two looks at the deadline (in parallel
+/// within a block; the blocks in order, so the draws kept are a prefix).
+const SEARCH_BLOCK: u64 = 1 << 14;
 
 /// Makes a fresh exchange move for one replica set.
 pub type MakeExchange = fn(usize) -> Box<dyn ExchangeMove<TorusPoint, PathSample>>;
@@ -292,7 +299,15 @@ impl<'a> ReltFamily<'a> {
                 sweeps: settings.annealing_sweeps,
             }),
             l0_search: settings.l0_search as u64,
+            deadline: None,
         }
+    }
+
+    /// The family whose start-up search stops at `deadline` (the run's
+    /// time budget; the annealing's sweeps stop at it in the driver).
+    pub fn until(mut self, deadline: Option<Instant>) -> Self {
+        self.deadline = deadline;
+        self
     }
 
     /// The specific replica's search for `L0` paths: `l0_search` uniform
@@ -305,30 +320,55 @@ impl<'a> ReltFamily<'a> {
     /// the subsample depends on the index only, so the mean weight over
     /// all draws is an unbiased estimate of `b_4 = ∫ q_4`, and the
     /// weighted draws are an importance sample of `q_4` to start from.
+    ///
+    /// At the deadline the search stops after its current block of
+    /// [`SEARCH_BLOCK`] draws; `draws` is then the number made. A cut
+    /// that ends inside a stride of `m < stride` draws gives that
+    /// stride's subsampled draw the weight `m · q_4` in place of
+    /// `stride · q_4`, so the mean over the draws made stays unbiased.
+    /// Without a deadline the draws and weights are exactly those of the
+    /// whole search.
     fn search_specific(&self, member: usize, seed: u64) -> Search {
         let stride = (self.l0_search / SEARCH_FULL_DRAWS).max(1);
-        let draws = self.l0_search.div_ceil(stride) * stride;
+        let planned = self.l0_search.div_ceil(stride) * stride;
         let target = &self.targets[member];
-        let weighted = (0..draws)
-            .into_par_iter()
-            .filter_map(|j| {
-                let index = SEARCH_OFFSET + j;
-                let x = self.candidate(seed, index);
-                let scale = if target
-                    .pss
-                    .sampler
-                    .may_carry_specular_implicit(target.pss.scene, &x)
-                {
-                    1.0
-                } else if j % stride == 0 {
-                    stride as f64
-                } else {
-                    return None;
+        // One draw: `None` (weight 0) or its index, `ln q_4` and whether
+        // it stands for its stride's unscreened draws.
+        let draw = |j: u64| {
+            let index = SEARCH_OFFSET + j;
+            let x = self.candidate(seed, index);
+            let subsampled = !target
+                .pss
+                .sampler
+                .may_carry_specular_implicit(target.pss.scene, &x);
+            if subsampled && j % stride != 0 {
+                return None;
+            }
+            let log_q = target.evaluate(&x).log_density;
+            // Zero and NaN weigh nothing (NaN as in the running
+            // normalisation: counted as a zero).
+            log_q.is_finite().then_some((index, log_q, subsampled))
+        };
+        let mut kept: Vec<(u64, f64, bool)> = Vec::new();
+        let mut draws = 0;
+        while draws < planned && !self.deadline.is_some_and(|d| Instant::now() >= d) {
+            let end = (draws + SEARCH_BLOCK).min(planned);
+            kept.par_extend((draws..end).into_par_iter().filter_map(draw));
+            draws = end;
+        }
+        // The last stride's length among the draws made (`stride` unless
+        // the deadline cut it).
+        let last = draws - (draws.max(1) - 1) / stride * stride;
+        let weighted = kept
+            .into_iter()
+            .map(|(index, log_q, subsampled)| {
+                let j = index - SEARCH_OFFSET;
+                let scale = match subsampled {
+                    false => 1,
+                    true if j + last == draws => last,
+                    true => stride,
                 };
-                let log_q = target.evaluate(&x).log_density;
-                // Zero and NaN weigh nothing (NaN as in the running
-                // normalisation: counted as a zero).
-                log_q.is_finite().then(|| (index, log_q + scale.ln()))
+                (index, log_q + (scale as f64).ln())
             })
             .collect();
         Search {
@@ -487,10 +527,14 @@ impl IntegratorSettings for Relt {
             heuristic: MisHeuristic::Power,
         };
         let settings = self.chain.chain_settings((), run);
+        // The start-up's search stops at the budget; the driver's own
+        // deadline (from its start, a moment later) stops the annealing
+        // and the chains.
+        let deadline = run.time_budget.map(|b| Instant::now() + b);
         let mut replicas = self.replicas();
         let mut dropped = Vec::new();
         let result = loop {
-            let family = ReltFamily::new(scene, bdpt, &replicas, self);
+            let family = ReltFamily::new(scene, bdpt, &replicas, self).until(deadline);
             match markov::run(scene, &family, &settings, stop, observer) {
                 // A replica no bootstrap path reached cannot start: drop
                 // it (spec seed002 §5) and run the others.

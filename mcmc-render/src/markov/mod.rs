@@ -72,7 +72,7 @@ use estimator::{MemberTotals, Weights, sum_images};
 use mcmc_core::chain::Chain;
 use mcmc_core::kernel::Kernel;
 use mcmc_core::mh::MetropolisHastings;
-use mcmc_core::replica::population_annealing::{PopulationAnnealing, anneal};
+use mcmc_core::replica::population_annealing::{PopulationAnnealing, anneal_until};
 use mcmc_core::replica::{ExchangeMove, ReplicaExchange};
 use mcmc_core::rng::{splitmix64, stream_rng};
 use mcmc_core::startup::{Bootstrap, RunningNormalization};
@@ -420,6 +420,9 @@ pub struct AnnealedMember {
     pub relative_error: f64,
     /// Acceptance of the member's MH sweeps (NaN for member 0).
     pub acceptance: f64,
+    /// MH steps made at the member over all particles (0 for member 0):
+    /// `particles · sweeps`, or fewer when the time budget cut the sweeps.
+    pub steps: u64,
 }
 
 /// One member's start-up search, as reported.
@@ -437,12 +440,13 @@ pub struct SearchSummary {
 const ANNEALING_STREAM: u64 = 1 << 43;
 
 /// Population annealing over `family`'s members from `count` particles
-/// resampled from member 0's bootstrap.
+/// resampled from member 0's bootstrap; its MH sweeps stop at the run's
+/// `deadline` (the chains get what is left).
 fn anneal_members<F: ChainFamily>(
     family: &F,
     mutation: &F::Mutation,
     boot: &Bootstrap<usize, ()>,
-    settings: Annealing,
+    (settings, deadline): (Annealing, Option<Instant>),
     seed: u64,
 ) -> Result<PopulationAnnealing<F::State, PathSample>, MltError> {
     for d in 0..family.members() {
@@ -462,12 +466,13 @@ fn anneal_members<F: ChainFamily>(
             }
         })
         .collect();
-    Ok(anneal(
+    Ok(anneal_until(
         &Members::all(family),
         initial,
         |k| MetropolisHastings::new(family.kernel(mutation, k).expect("checked above")),
         settings.sweeps,
         splitmix64(seed ^ splitmix64(ANNEALING_STREAM)),
+        &|| deadline.is_some_and(|d| Instant::now() >= d),
     )?)
 }
 
@@ -864,7 +869,7 @@ pub fn run<F: ChainFamily>(
             family,
             &settings.mutation,
             &boots[0],
-            a,
+            (a, deadline),
             seed,
         )?),
         None => None,
@@ -1184,6 +1189,7 @@ pub fn run<F: ChainFamily>(
                     ratio: l.log_ratio.exp(),
                     relative_error: l.ratio_relative_error,
                     acceptance: l.acceptance,
+                    steps: l.steps,
                 })
                 .collect()
         }),
