@@ -15,6 +15,9 @@ pub struct Deadline(Option<Instant>);
 const FAR: Duration = Duration::from_secs(1 << 30);
 
 impl Deadline {
+    /// No deadline: the phase runs to the end of its work.
+    pub const NEVER: Deadline = Deadline(None);
+
     /// The deadline `budget` after `start` (`None`: no deadline); a budget
     /// past the clock's range ends after `FAR` (34 years) instead.
     pub fn new(start: Instant, budget: Option<Duration>) -> Self {

@@ -31,6 +31,7 @@
 
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
+use crate::deadline::Deadline;
 use crate::integrators::bdpt::{Bdpt, MisHeuristic};
 use crate::markov::{self, Annealing, ChainFamily, ChainParams, MltError, MltResult, Search};
 use crate::observer::Observer;
@@ -255,7 +256,7 @@ pub struct ReltFamily<'a> {
     /// Draws of the specific replica's search for `L0` paths.
     l0_search: u64,
     /// The run's deadline, at which the search stops.
-    deadline: Option<Instant>,
+    deadline: Deadline,
 }
 
 /// First start-up candidate index of the specific replica's search (the
@@ -299,13 +300,13 @@ impl<'a> ReltFamily<'a> {
                 sweeps: settings.annealing_sweeps,
             }),
             l0_search: settings.l0_search as u64,
-            deadline: None,
+            deadline: Deadline::NEVER,
         }
     }
 
     /// The family whose start-up search stops at `deadline` (the run's
     /// time budget; the annealing's sweeps stop at it in the driver).
-    pub fn until(mut self, deadline: Option<Instant>) -> Self {
+    pub fn until(mut self, deadline: Deadline) -> Self {
         self.deadline = deadline;
         self
     }
@@ -351,7 +352,7 @@ impl<'a> ReltFamily<'a> {
         };
         let mut kept: Vec<(u64, f64, bool)> = Vec::new();
         let mut draws = 0;
-        while draws < planned && !self.deadline.is_some_and(|d| Instant::now() >= d) {
+        while draws < planned && !self.deadline.passed() {
             let end = (draws + SEARCH_BLOCK).min(planned);
             kept.par_extend((draws..end).into_par_iter().filter_map(draw));
             draws = end;
@@ -530,7 +531,7 @@ impl IntegratorSettings for Relt {
         // The start-up's search stops at the budget; the driver's own
         // deadline (from its start, a moment later) stops the annealing
         // and the chains.
-        let deadline = run.time_budget.map(|b| Instant::now() + b);
+        let deadline = Deadline::new(Instant::now(), run.time_budget);
         let mut replicas = self.replicas();
         let mut dropped = Vec::new();
         let result = loop {

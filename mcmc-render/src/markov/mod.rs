@@ -446,7 +446,7 @@ fn anneal_members<F: ChainFamily>(
     family: &F,
     mutation: &F::Mutation,
     boot: &Bootstrap<usize, ()>,
-    (settings, deadline): (Annealing, Option<Instant>),
+    (settings, deadline): (Annealing, Deadline),
     seed: u64,
 ) -> Result<PopulationAnnealing<F::State, PathSample>, MltError> {
     for d in 0..family.members() {
@@ -472,7 +472,7 @@ fn anneal_members<F: ChainFamily>(
         |k| MetropolisHastings::new(family.kernel(mutation, k).expect("checked above")),
         settings.sweeps,
         splitmix64(seed ^ splitmix64(ANNEALING_STREAM)),
-        &|| deadline.is_some_and(|d| Instant::now() >= d),
+        &|| deadline.passed(),
     )?)
 }
 
