@@ -342,7 +342,7 @@ impl<'a> ReltFamily<'a> {
                 .pss
                 .sampler
                 .may_carry_specular_implicit(target.pss.scene, &x);
-            if subsampled && j % stride != 0 {
+            if subsampled && !j.is_multiple_of(stride) {
                 return None;
             }
             let log_q = target.evaluate(&x).log_density;
