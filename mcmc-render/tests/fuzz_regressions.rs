@@ -231,6 +231,35 @@ fn exr_headers_claiming_more_than_the_file_holds_are_refused() {
     assert_eq!(px.len(), w as usize * h as usize);
 }
 
+/// PLY findings of the `ply` target (`tests/data/fuzz/ply-*.ply`, session
+/// 15: 11 out-of-memory, 4 over the 10 s timeout): binary files declaring
+/// an element with a huge count and no properties (`element face
+/// 614891469123651`). Such entries take no bytes, so the file's end never
+/// stopped ply-rs, which read them into memory until the fuzzer's 2 GB
+/// limit or its clock. They are refused from the header.
+#[test]
+fn ply_elements_without_properties_are_refused() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.file_name().unwrap().to_string_lossy().starts_with("ply-"))
+        .collect();
+    files.sort();
+    assert!(files.len() >= 3, "the committed findings are missing");
+    for path in files {
+        let bytes = std::fs::read(&path).unwrap();
+        let name = path.display().to_string();
+        let err = within(20, &name, move || ply_from_bytes(&bytes).map(|_| ()))
+            .err()
+            .unwrap_or_else(|| panic!("{name} was accepted"));
+        assert_clean_err(&err, "but no properties");
+    }
+    // An ASCII element without properties is bounded by its lines: read.
+    let ascii = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nelement note 2\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n\n\n";
+    assert_eq!(ply_from_bytes(ascii.as_bytes()).unwrap().indices.len(), 1);
+}
+
 /// OBJ findings of the `obj` target (`tests/data/fuzz/obj-*.obj`): a
 /// relative face index reaching before the first texture coordinate or
 /// normal overflowed `vt * 2` / `vn * 3` inside tobj 4.0.5 (`lib.rs:852`,

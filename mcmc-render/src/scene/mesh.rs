@@ -277,6 +277,21 @@ fn ply_from_reader(input: impl std::io::BufRead) -> Result<RawMesh, String> {
     }
     let vparser = Parser::<PlyVertex>::new();
     let header = vparser.read_header(&mut reader).map_err(perr)?;
+    // An element without properties takes no bytes of a binary payload,
+    // so the file's length does not bound its count: ply-rs then reads
+    // `count` empty entries into memory (the fuzzer's `element face
+    // 614891469123651` with no property ran out of memory).
+    if header.encoding != ply_rs_bw::ply::Encoding::Ascii
+        && let Some(e) = header
+            .elements
+            .values()
+            .find(|e| e.count > 0 && e.properties.is_empty())
+    {
+        return Err(format!(
+            "element '{}' has {} entries but no properties",
+            e.name, e.count
+        ));
+    }
     let mut vertices = None;
     let mut faces = None;
     for (_, element) in &header.elements {
