@@ -476,16 +476,17 @@ fn mcmc_vcm_chain_pairs_stop_at_the_time_budget() {
 /// otherwise leave the search nothing).
 #[test]
 fn relt_start_up_phases_sized_by_a_setting_stop_at_the_time_budget() {
-    let dir = setup("limits-relt-start-up");
+    let dir = scratch("limits-relt-start-up");
     let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/cornell-box.xml");
+    std::fs::copy(scene, dir.join("s.xml")).expect("the Cornell box copies");
     for (phase, setting) in [
         ("search", "l0_search=1000000000000"),
         ("annealing", "annealing_sweeps=1000000000"),
     ] {
-        let mut child = Command::new(BIN)
-            .args([
-                "render",
-                scene,
+        let stats = render_within_budget(
+            &dir,
+            BUDGET,
+            &[
                 "-D",
                 "width=8",
                 "-D",
@@ -500,34 +501,8 @@ fn relt_start_up_phases_sized_by_a_setting_stop_at_the_time_budget() {
                 "l0_search=20000",
                 "--set",
                 setting,
-                "--time",
-                "0.5",
-                "--out",
-                "relt.exr",
-                "--quiet",
-            ])
-            .current_dir(&dir)
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("the binary runs");
-        // A watchdog, not a speed test: uncut, either phase runs for
-        // days, so any bound far above the budget tells the two apart.
-        let start = Instant::now();
-        let status = loop {
-            if let Some(status) = child.try_wait().expect("wait") {
-                break status;
-            }
-            if start.elapsed() > Duration::from_secs(300) {
-                let _ = child.kill();
-                panic!("relt's {phase} ran 300 s past a 0.5 s budget");
-            }
-            std::thread::sleep(Duration::from_millis(50));
-        };
-        let mut stderr = String::new();
-        std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut stderr).unwrap();
-        assert!(status.success(), "{phase}: {stderr}");
-        let stats = json(&dir.join("relt.json"));
+            ],
+        );
         let search = &stats["searches"][3];
         let draws = search["draws"]
             .as_u64()
