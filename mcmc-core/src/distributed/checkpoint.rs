@@ -10,8 +10,14 @@ use super::DistributedError;
 use crate::rng::ChainRng;
 use std::path::Path;
 
-/// First word of a replica-exchange checkpoint ("mcmcRE01").
-pub(crate) const REPLICA_MAGIC: u64 = u64::from_le_bytes(*b"mcmcRE01");
+/// First word of a replica-exchange checkpoint ("mcmcRE02": the exchange
+/// stream's state words are saved, so a resume costs no replay of it).
+pub(crate) const REPLICA_MAGIC: u64 = u64::from_le_bytes(*b"mcmcRE02");
+
+/// First word of the earlier format, which saved only the exchange
+/// stream's position (a forged position of 2^63 made a resume replay the
+/// stream for centuries); refused with a message that says so.
+pub(crate) const REPLICA_MAGIC_V1: u64 = u64::from_le_bytes(*b"mcmcRE01");
 
 /// The four state words of a generator ([`crate::rng::rng_words`]).
 pub(crate) fn rng_words(rng: &ChainRng) -> Vec<u64> {

@@ -2,7 +2,7 @@
 
 use super::DistributedError;
 use super::checkpoint::{
-    REPLICA_MAGIC, read_optional, rng_from_words, rng_words, write_atomically,
+    REPLICA_MAGIC, REPLICA_MAGIC_V1, read_optional, rng_from_words, rng_words, write_atomically,
 };
 use super::comm::{
     FNV_OFFSET, Traffic, agree, all_gather_u64, broadcast_bytes, exchange_bytes, exchange_pair,
@@ -53,12 +53,29 @@ type PairCounts = (u64, (u64, f64));
 type LevelRecord<S, P> = (Parcel<S, P>, Vec<u64>);
 
 /// A checkpoint file: magic, set-up fingerprint, sweeps done, exchange
-/// stream position, every level's record in level order, the neighbour
-/// pairs' counts.
+/// stream position and state words, every level's record in level order,
+/// the neighbour pairs' counts.
 type CheckpointFile<S, P> = (
     u64,
-    (u64, (u64, (u64, (Vec<LevelRecord<S, P>>, Vec<PairCounts>)))),
+    (
+        u64,
+        (
+            u64,
+            (u64, (Vec<u64>, (Vec<LevelRecord<S, P>>, Vec<PairCounts>))),
+        ),
+    ),
 );
+
+/// More sweeps than any run makes (2^53: 285 years at a nanosecond per
+/// sweep). A checkpoint claiming more is corrupt, and the counters that
+/// continue from it must not overflow.
+const MAX_CHECKPOINT_SWEEPS: u64 = 1 << 53;
+
+/// A restored level's recorded `ln π` and the one its state evaluates to
+/// must agree to this relative precision. Not bit for bit: a family's
+/// [`ReplicaFamily::log_density_of`] (how a swapped state's density was
+/// computed) may round differently from [`ReplicaFamily::evaluate`].
+const RESTORED_DENSITY_TOLERANCE: f64 = 1e-9;
 
 /// Replica exchange whose levels live on several MPI ranks: rank `r` owns
 /// the contiguous block [`super::share`]`(M, K, r)` of levels, with their
@@ -87,11 +104,12 @@ pub struct DistributedReplicaExchange<S, F: ReplicaFamily<S>, A> {
     rng: ChainRng,
     drawn: u64,
     sweeps: u64,
-    seed: u64,
     /// The set-up fingerprint the ranks agreed on (checked on resume).
     fingerprint: u64,
-    /// On the top rank of a neighbour sweep: rank 0 sent the stream
-    /// position at the end of the last sweep.
+    /// Neighbour sweeps on more than one rank: rank 0 owes the top rank
+    /// (the highest owning levels) the stream position at the end of the
+    /// last sweep, and the top rank expects it; sent at the start of the
+    /// next sweep.
     position_pending: bool,
     /// Pairs whose swap this rank decided.
     stats: ReplicaStatistics,
@@ -179,7 +197,6 @@ where
             rng: stream_rng(seed, EXCHANGE_STREAM),
             drawn: 0,
             sweeps: 0,
-            seed,
             fingerprint,
             position_pending: false,
             stats: ReplicaStatistics::new(m, name),
@@ -471,17 +488,32 @@ where
 
     fn sweep_neighbour(&mut self, observer: &mut Observer<'_, S, F::Payload>) {
         let (lo, hi) = (self.owned.start, self.owned.end);
-        let top = self.size - 1;
+        // The highest rank that owns levels (with fewer levels than ranks,
+        // the ranks above own none and take no part).
+        let top = self.size.min(self.levels()) - 1;
         if lo == hi {
             return;
         }
         // The stream position reaches the top rank from rank 0, which
-        // ended the previous sweep.
-        if self.rank == top && self.position_pending {
+        // ended the previous sweep. It is sent now, not at the end of that
+        // sweep: after the last sweep no message may be left unreceived
+        // (once the communicator is freed, MPI may match it in a later
+        // one, which desynchronised the ranks of the next run).
+        if self.position_pending {
             self.position_pending = false;
-            let p: u64 = decode(&receive_bytes(&self.comm, 0, tag::POSITION))
-                .expect("stream position from rank 0");
-            self.advance_to(p);
+            if self.rank == 0 {
+                send_bytes(
+                    &self.comm,
+                    &mut self.traffic,
+                    top,
+                    tag::POSITION,
+                    &encode(&self.drawn),
+                );
+            } else {
+                let p: u64 = decode(&receive_bytes(&self.comm, 0, tag::POSITION))
+                    .expect("stream position from rank 0");
+                self.advance_to(p);
+            }
         }
         if self.rank < top {
             // Pair (hi, hi−1) is decided above: its deciding rank needs
@@ -549,17 +581,8 @@ where
                 }
             }
         }
-        if self.rank == top && self.size > 1 {
+        if top > 0 && (self.rank == 0 || self.rank == top) {
             self.position_pending = true;
-        }
-        if self.rank == 0 && self.size > 1 {
-            send_bytes(
-                &self.comm,
-                &mut self.traffic,
-                top,
-                tag::POSITION,
-                &encode(&self.drawn),
-            );
         }
     }
 
@@ -613,8 +636,9 @@ where
     /// Writes the state of the run after the sweeps done so far to `path`
     /// (collective; rank 0 writes, through a temporary file renamed over
     /// `path`). Holds every level's sample, replica and random stream, the
-    /// exchange stream's position, the sweep count and the neighbour
-    /// pairs' swap counts, in level order: [`Self::resume`] can continue
+    /// exchange stream's position and state, the sweep count and the
+    /// neighbour pairs' swap counts, in level order, then a checksum of
+    /// all of it (FNV-1a, last 8 bytes): [`Self::resume`] can continue
     /// it on any number of ranks. Not in it: the algorithms (their kernels
     /// and any adaptation state: the caller re-creates them; resume is
     /// bit-identical for kernels that do not adapt, or are frozen with
@@ -650,9 +674,18 @@ where
                 // run's (in a neighbour sweep the others' may lag).
                 let file: CheckpointFile<S, F::Payload> = (
                     REPLICA_MAGIC,
-                    (self.fingerprint, (self.sweeps, (self.drawn, (all, pooled)))),
+                    (
+                        self.fingerprint,
+                        (
+                            self.sweeps,
+                            (self.drawn, (rng_words(&self.rng), (all, pooled))),
+                        ),
+                    ),
                 );
-                write_atomically(path, &encode(&file))
+                let mut bytes = encode(&file);
+                let checksum = fnv1a(&bytes, FNV_OFFSET);
+                bytes.extend_from_slice(&checksum.to_le_bytes());
+                write_atomically(path, &bytes)
             }
             None => Ok(()),
         };
@@ -673,8 +706,13 @@ where
     /// sweep the checkpoint was written after: the sweeps that follow are
     /// bit-identical to those of the run that was not interrupted.
     /// Rank 0 reads the file and broadcasts it. A file written for other
-    /// inputs (levels, seed, schedule, initial densities, fingerprint) or
-    /// not a checkpoint is an error on every rank.
+    /// inputs (levels, seed, schedule, initial densities, fingerprint), not
+    /// a checkpoint, damaged (checksum) or inconsistent (more uniforms than
+    /// its sweeps could draw, replicas that are not a permutation, swap
+    /// counts out of range, a state whose log density is not the one
+    /// recorded with it) is the same error on every rank, and nothing is
+    /// changed. A resume costs one evaluation per owned level, whatever
+    /// the number of sweeps recorded.
     pub fn resume(&mut self, path: &Path) -> Result<bool, DistributedError> {
         if self.sweeps != 0 {
             return Err(DistributedError::Checkpoint(
@@ -706,25 +744,104 @@ where
         }
         let not_ours =
             |why: &str| DistributedError::Checkpoint(format!("{} {why}", path.display()));
-        let (magic, (fingerprint, (sweeps, (drawn, (levels, pairs))))): CheckpointFile<
+        let bytes = &message[1..];
+        match bytes.get(..8) {
+            Some(m) if m == REPLICA_MAGIC.to_le_bytes() => {}
+            Some(m) if m == REPLICA_MAGIC_V1.to_le_bytes() => {
+                return Err(not_ours(
+                    "was written by an earlier mcmc-core (format mcmcRE01), which this version cannot continue; start the run afresh",
+                ));
+            }
+            _ => return Err(not_ours("is not a replica-exchange checkpoint")),
+        }
+        // The last word is the FNV-1a hash of the rest: a damaged file
+        // (a flipped bit, a partial copy) is refused, not continued.
+        let (body, checksum) = bytes.split_at(bytes.len().max(16) - 8);
+        if checksum.len() != 8 || fnv1a(body, FNV_OFFSET).to_le_bytes() != checksum {
+            return Err(not_ours("is corrupt: its checksum does not match"));
+        }
+        let (_, (fingerprint, (sweeps, (drawn, (exchange_words, (levels, pairs)))))): CheckpointFile<
             S,
             F::Payload,
-        > = decode(&message[1..]).map_err(|_| not_ours("is not a replica-exchange checkpoint"))?;
-        if magic != REPLICA_MAGIC {
-            return Err(not_ours("is not a replica-exchange checkpoint"));
-        }
+        > = decode(body).map_err(|_| not_ours("is corrupt: it does not decode"))?;
+        let m = self.levels();
         if fingerprint != self.fingerprint
-            || levels.len() != self.levels()
-            || pairs.len() != self.levels().saturating_sub(1)
+            || levels.len() != m
+            || pairs.len() != m.saturating_sub(1)
         {
             return Err(not_ours(
                 "was written by a run with other inputs (levels, seed, schedule, initial densities or input fingerprint)",
             ));
         }
+        // Every check below sees the same broadcast bytes on every rank,
+        // so all ranks refuse together; only the densities (each rank
+        // evaluates its own levels) need a vote.
+        let corrupt = |why: String| not_ours(&format!("is corrupt: {why}"));
+        if sweeps > MAX_CHECKPOINT_SWEEPS {
+            return Err(corrupt(format!("{sweeps} sweeps")));
+        }
+        // A sweep draws at most one uniform per neighbour pair.
+        if u128::from(drawn) > u128::from(sweeps) * m.saturating_sub(1) as u128 {
+            return Err(corrupt(format!(
+                "{drawn} exchange uniforms drawn in {sweeps} sweeps of {} pairs",
+                m.saturating_sub(1)
+            )));
+        }
+        let exchange_rng = rng_from_words(&exchange_words)?;
+        let mut seen = vec![false; m];
+        let mut records = Vec::with_capacity(m);
         for (level, ((sample, replica), words)) in levels.into_iter().enumerate() {
+            if replica >= m || std::mem::replace(&mut seen[replica], true) {
+                return Err(corrupt(format!(
+                    "the replicas at the levels are not a permutation of 0..{m} (level {level} holds {replica})"
+                )));
+            }
+            records.push(((sample, replica), rng_from_words(&words)?));
+        }
+        for (i, &(attempted, (accepted, sum_alpha))) in pairs.iter().enumerate() {
+            if accepted > attempted
+                || attempted > sweeps
+                || !(0.0..=attempted as f64).contains(&sum_alpha)
+            {
+                return Err(corrupt(format!(
+                    "pair ({i}, {}) accepted {accepted} of {attempted} swaps with Σα = {sum_alpha} in {sweeps} sweeps",
+                    i + 1
+                )));
+            }
+        }
+        // This rank's levels evaluated afresh: the recorded log density
+        // must be the state's, and the payload is taken from the
+        // evaluation (the file's copy is redundant, and a damaged one
+        // would feed every later swap a wrong density).
+        let evaluations: Vec<_> = self
+            .owned
+            .clone()
+            .map(|level| self.family.evaluate(level, &records[level].0.0.state))
+            .collect();
+        let bad_level = self
+            .owned
+            .clone()
+            .zip(&evaluations)
+            .find(|&(level, now)| {
+                let (recorded, now) = (records[level].0.0.log_density, now.log_density);
+                !(recorded.is_finite()
+                    && now.is_finite()
+                    && (recorded - now).abs() <= RESTORED_DENSITY_TOLERANCE * (1.0 + now.abs()))
+            })
+            .map_or(0, |(level, _)| level as u64 + 1);
+        let votes = all_gather_u64(&self.comm, &mut self.traffic, bad_level);
+        if let Some(&level) = votes.iter().find(|&&v| v != 0) {
+            return Err(corrupt(format!(
+                "the state at level {} does not have the log density recorded with it",
+                level - 1
+            )));
+        }
+        let mut evaluations = evaluations.into_iter();
+        for (level, ((mut sample, replica), rng)) in records.into_iter().enumerate() {
             if let Some(l) = self.local(level) {
+                sample.payload = evaluations.next().expect("one per owned level").payload;
                 self.chains[l].current = sample;
-                self.chains[l].rng = rng_from_words(&words)?;
+                self.chains[l].rng = rng;
                 self.replicas[l] = replica;
             }
         }
@@ -738,9 +855,8 @@ where
                 self.stats.set_pair(i, i + 1, p);
             }
         }
-        self.rng = stream_rng(self.seed, EXCHANGE_STREAM);
-        self.drawn = 0;
-        self.advance_to(drawn);
+        self.rng = exchange_rng;
+        self.drawn = drawn;
         self.sweeps = sweeps;
         self.stats.sweeps = sweeps;
         self.position_pending = false;
