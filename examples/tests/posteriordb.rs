@@ -146,9 +146,12 @@ fn dropped_jacobian_fails_the_reference_check() {
 /// (75 / 25 / 150) it is back in the posterior before its first metric
 /// window and no transition diverges; control: session 11's windows
 /// (30 / 20 / 150) estimate that chain's metric on its way back and leave
-/// it with hundreds of divergences (320 and 339, `docs/performance.md`,
-/// "arma-arma11: divergences and stuck chains"). Deterministic counts,
-/// fixed seeds.
+/// it broken — with Stan's acceptance statistic hundreds of divergences
+/// (320 and 339), with the default symmetrised late statistic 286
+/// divergences on seed 1 and on seed 2 a chain that no longer moves
+/// (R-hat 1.53) (`docs/performance.md`, "arma-arma11: divergences and
+/// stuck chains" and "NUTS vs nuts-rs, session 16"). Deterministic
+/// counts, fixed seeds.
 #[test]
 fn arma_default_warmup_avoids_the_late_chains_divergences() {
     let p = load("arma-arma11").unwrap();
@@ -167,9 +170,10 @@ fn arma_default_warmup_avoids_the_late_chains_divergences() {
         };
         let (r, _) = run(&p, &early).unwrap();
         assert!(
-            r.divergences > 100,
-            "seed {seed}: {} divergences",
-            r.divergences
+            r.divergences > 100 || r.rhat_max > 1.1,
+            "seed {seed}: {} divergences, R-hat {}",
+            r.divergences,
+            r.rhat_max
         );
     }
 }
