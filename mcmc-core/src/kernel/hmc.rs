@@ -268,22 +268,12 @@ impl<G: GradientTarget> Hmc<G> {
     /// One warm-up iteration with acceptance statistic `alpha` ending at
     /// `state`; returns true when the metric changed.
     pub(crate) fn adapt(&mut self, alpha: f64, state: &[f64]) -> bool {
-        self.adapt_with_gradient(alpha, state, None)
+        self.adapt_with_statistics(alpha, alpha, state, None)
     }
 
-    /// [`Self::adapt`] with the gradient of `ln π` at `state` (for
-    /// [`MetricAdaptation::DiagonalGradient`]).
-    pub(crate) fn adapt_with_gradient(
-        &mut self,
-        alpha: f64,
-        state: &[f64],
-        gradient: Option<&[f64]>,
-    ) -> bool {
-        self.adapt_with_statistics(alpha, alpha, state, gradient)
-    }
-
-    /// [`Self::adapt_with_gradient`] with the symmetrised acceptance
-    /// statistic as well ([`Warmup::observe_with_statistics`]).
+    /// [`Self::adapt`] with the symmetrised acceptance statistic as well
+    /// ([`Warmup::observe_with_statistics`]) and the gradient of `ln π` at
+    /// `state` (for [`MetricAdaptation::DiagonalGradient`]).
     pub(crate) fn adapt_with_statistics(
         &mut self,
         alpha: f64,

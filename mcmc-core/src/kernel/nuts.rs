@@ -686,14 +686,12 @@ impl<G: GradientTarget> Kernel<Vec<f64>, GradientPayload> for Nuts<G> {
         let gradient = (self.hmc.is_adapting() && observation.state == &self.selected.0)
             .then_some(&self.selected.1[..]);
         if observation.own
-            && self
-                .hmc
-                .adapt_with_statistics(
-                    self.last.accept_stat,
-                    self.last_symmetric,
-                    observation.state,
-                    gradient,
-                )
+            && self.hmc.adapt_with_statistics(
+                self.last.accept_stat,
+                self.last_symmetric,
+                observation.state,
+                gradient,
+            )
         {
             // Stan re-runs its step-size heuristic after a metric update.
             self.init_step_pending = self.step_size_adaptation == StepSizeAdaptation::Restart;
