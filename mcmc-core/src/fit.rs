@@ -37,7 +37,9 @@ pub struct NutsSettings {
     pub draws: usize,
     /// Seed of every chain's stream.
     pub seed: u64,
-    /// Target mean `accept_stat` of the step-size adaptation.
+    /// Target of the step-size adaptation (Stan's `adapt_delta`): the mean
+    /// of the acceptance statistic `acceptance_statistic` names (Stan's
+    /// `accept_stat`, then the symmetrised one in the late warm-up).
     pub target_accept: f64,
     /// Which metric the warm-up estimates.
     pub metric: MetricAdaptation,
