@@ -20,7 +20,9 @@
 //! buffer (CmdStan's `term_buffer`; default that of
 //! `NutsSettings::default()`), `--nuts-init-buffer N` and `--nuts-window N`
 //! its initial step-size-only buffer and first metric window (CmdStan's
-//! `init_buffer`, `window`). `--samplers` also takes the warm-up
+//! `init_buffer`, `window`); `--nuts-acceptance stan|symmetric-late` the
+//! acceptance statistic its step-size adaptation steers (default
+//! `symmetric-late`, `NutsSettings::default()`). `--samplers` also takes the warm-up
 //! variants `nuts-stan` (CmdStan's 75 / 25 / 50, diagonal metric from the
 //! draws, step size restarted at every metric update), `nuts-tb150`
 //! (terminal buffer 150), `nuts-early` (10 / 10 / 150: metric windows from
@@ -62,7 +64,9 @@
 #[path = "targets.rs"]
 mod targets;
 
-use mcmc_core::adaptation::{MetricAdaptation, StepSizeAdaptation, WarmupSchedule};
+use mcmc_core::adaptation::{
+    AcceptanceStatistic, MetricAdaptation, StepSizeAdaptation, WarmupSchedule,
+};
 use mcmc_core::diagnostics::summarize;
 use mcmc_core::fit::NutsSettings;
 use mcmc_core::gradient::{Differentiable, GradientPayload, GradientTarget};
@@ -121,6 +125,7 @@ struct Options {
     nuts_term_buffer: Option<usize>,
     nuts_init_buffer: Option<usize>,
     nuts_window: Option<usize>,
+    nuts_acceptance: Option<AcceptanceStatistic>,
     samplers: Vec<String>,
     targets: Vec<String>,
 }
@@ -207,6 +212,7 @@ fn parse() -> Result<Options, String> {
         nuts_term_buffer: None,
         nuts_init_buffer: None,
         nuts_window: None,
+        nuts_acceptance: None,
         samplers: SAMPLERS.map(String::from).to_vec(),
         targets: TARGETS.map(String::from).to_vec(),
     };
@@ -285,6 +291,17 @@ fn parse() -> Result<Options, String> {
                         .map_err(|e| format!("--nuts-window: {e}"))?,
                 )
             }
+            "--nuts-acceptance" => {
+                o.nuts_acceptance = Some(match value("--nuts-acceptance")?.as_str() {
+                    "stan" => AcceptanceStatistic::Stan,
+                    "symmetric-late" => AcceptanceStatistic::SymmetricLate,
+                    other => {
+                        return Err(format!(
+                            "--nuts-acceptance: `{other}` (expected stan or symmetric-late)"
+                        ));
+                    }
+                })
+            }
             "--mala-steps" => {
                 o.mala_steps = value("--mala-steps")?
                     .parse()
@@ -304,7 +321,7 @@ fn parse() -> Result<Options, String> {
             }
             other => {
                 return Err(format!(
-                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --hmc-time T, --h2mc-tau τ, --h2mc-steps k, --mala-steps k, --nuts-term-buffer N, --nuts-init-buffer N, --nuts-window N, --samplers a,b, --targets a,b)"
+                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --hmc-time T, --h2mc-tau τ, --h2mc-steps k, --mala-steps k, --nuts-term-buffer N, --nuts-init-buffer N, --nuts-window N, --nuts-acceptance stan|symmetric-late, --samplers a,b, --targets a,b)"
                 ));
             }
         }
@@ -727,7 +744,11 @@ fn compare<G: GradientTarget + Clone>(name: &str, g: &G, time: f64, o: &Options)
             o.nuts_window.unwrap_or(s.window),
             tb,
         );
-        let make = || nuts(g.clone(), w, s.metric, schedule, s.step_size_adaptation);
+        let acceptance = o.nuts_acceptance.unwrap_or(s.acceptance_statistic);
+        let make = || {
+            nuts(g.clone(), w, s.metric, schedule, s.step_size_adaptation)
+                .with_acceptance_statistic(acceptance)
+        };
         runs.push(run_ours(name, "nuts", g, make, (w, 1), o));
     }
     for (variant, metric, init, window, term, mode) in NUTS_VARIANTS {

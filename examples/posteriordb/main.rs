@@ -14,11 +14,13 @@
 //! runs with the same settings (`NutsSettings::default()`). Warm-up:
 //! `--init-buffer N`, `--window N`, `--term-buffer N` (CmdStan's names;
 //! defaults 75 / 25 / 150), `--step-size continuous|restart` (restart is
-//! CmdStan's dual averaging, restarted at every metric update);
+//! CmdStan's dual averaging, restarted at every metric update),
+//! `--acceptance stan|symmetric-late` (the statistic dual averaging steers;
+//! default symmetric-late, nuts-rs's from the last metric window on);
 //! `--init-radius r` (initial points uniform in `[−r, r]^d` on the
 //! unconstrained space, Stan's 2).
 
-use mcmc_core::adaptation::StepSizeAdaptation;
+use mcmc_core::adaptation::{AcceptanceStatistic, StepSizeAdaptation};
 use mcmc_core::fit::NutsSettings;
 use mcmc_examples::posteriordb::{PosteriorReport, load, names, run, write_outputs};
 
@@ -62,6 +64,17 @@ fn parse() -> Result<Options, String> {
             "--init-buffer" => s.init_buffer = number(&a, &value(&a)?)?,
             "--window" => s.window = number(&a, &value(&a)?)?,
             "--term-buffer" => s.term_buffer = number(&a, &value(&a)?)?,
+            "--acceptance" => {
+                s.acceptance_statistic = match value(&a)?.as_str() {
+                    "stan" => AcceptanceStatistic::Stan,
+                    "symmetric-late" => AcceptanceStatistic::SymmetricLate,
+                    other => {
+                        return Err(format!(
+                            "--acceptance: `{other}` (expected stan or symmetric-late)"
+                        ));
+                    }
+                }
+            }
             "--step-size" => {
                 s.step_size_adaptation = match value(&a)?.as_str() {
                     "continuous" => StepSizeAdaptation::Continuous,
@@ -85,7 +98,7 @@ fn parse() -> Result<Options, String> {
             }
             other => {
                 return Err(format!(
-                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --adapt-delta δ, --init-radius r, --init-buffer N, --window N, --term-buffer N, --step-size continuous|restart, --posteriors a,b, --out DIR)"
+                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --adapt-delta δ, --init-radius r, --init-buffer N, --window N, --term-buffer N, --step-size continuous|restart, --acceptance stan|symmetric-late, --posteriors a,b, --out DIR)"
                 ));
             }
         }

@@ -6,7 +6,9 @@
 //! its initial point and every transition from `stream_rng(seed, c)` only,
 //! so a fit is bit-identical for any number of threads.
 
-use crate::adaptation::{MetricAdaptation, StepSizeAdaptation, WarmupSchedule};
+use crate::adaptation::{
+    AcceptanceStatistic, MetricAdaptation, StepSizeAdaptation, WarmupSchedule,
+};
 use crate::chain::Chain;
 use crate::diagnostics::{DiagnosticsError, Summary, e_bfmi, summarize};
 use crate::error::{Result, invalid};
@@ -35,7 +37,9 @@ pub struct NutsSettings {
     pub draws: usize,
     /// Seed of every chain's stream.
     pub seed: u64,
-    /// Target mean `accept_stat` of the step-size adaptation.
+    /// Target of the step-size adaptation (Stan's `adapt_delta`): the mean
+    /// of the acceptance statistic `acceptance_statistic` names (Stan's
+    /// `accept_stat`, then the symmetrised one in the late warm-up).
     pub target_accept: f64,
     /// Which metric the warm-up estimates.
     pub metric: MetricAdaptation,
@@ -69,6 +73,13 @@ pub struct NutsSettings {
     /// What the step size does at metric updates: `Continuous` (default,
     /// one dual-averaging run as nuts-rs) or `Restart` (CmdStan's).
     pub step_size_adaptation: StepSizeAdaptation,
+    /// Which acceptance statistic the step-size adaptation steers to
+    /// `target_accept`: `SymmetricLate` (default; nuts-rs's symmetrised
+    /// statistic from the last metric window on, which leaves the
+    /// dual-averaging iterates less noisy and the warm-up cheaper:
+    /// `docs/performance.md`, "NUTS vs nuts-rs, session 16") or `Stan`
+    /// (CmdStan's, throughout).
+    pub acceptance_statistic: AcceptanceStatistic,
 }
 
 impl Default for NutsSettings {
@@ -87,6 +98,7 @@ impl Default for NutsSettings {
             init_buffer: 75,
             window: 25,
             step_size_adaptation: StepSizeAdaptation::Continuous,
+            acceptance_statistic: AcceptanceStatistic::SymmetricLate,
         }
     }
 }
@@ -226,7 +238,8 @@ where
                 settings.window,
                 settings.term_buffer,
             ))?
-            .with_step_size_adaptation(settings.step_size_adaptation);
+            .with_step_size_adaptation(settings.step_size_adaptation)
+            .with_acceptance_statistic(settings.acceptance_statistic);
         let mut chain = Chain::new(&t, start, MetropolisHastings::new(nuts), rng)?;
         let clock = Instant::now();
         for _ in 0..settings.warmup {

@@ -100,6 +100,16 @@ impl WarmupSchedule {
         self.iterations
     }
 
+    /// First iteration of the last slow window (`None` without slow
+    /// windows).
+    pub fn last_window_start(&self) -> Option<usize> {
+        match self.ends.len() {
+            0 => None,
+            1 => Some(self.init_buffer),
+            n => Some(self.ends[n - 2] + 1),
+        }
+    }
+
     /// True when iteration `i` (0-based) belongs to a slow window.
     pub fn in_slow_window(&self, i: usize) -> bool {
         !self.ends.is_empty() && i >= self.init_buffer && i < self.iterations - self.term_buffer
@@ -136,14 +146,17 @@ mod tests {
         // Stan's default 1000: 75 + 25 + 50 + 100 + 200 + 500 (stretched) + 50.
         let s = WarmupSchedule::stan(1000);
         assert!(!s.in_slow_window(74) && s.in_slow_window(75));
+        assert_eq!(s.last_window_start(), Some(450));
         assert!(s.in_slow_window(949) && !s.in_slow_window(950));
         // 100 < 150: fallback 15 % / 75 % / 10 %, one slow window [15, 90).
         let s = WarmupSchedule::stan(100);
         assert_eq!(s.window_ends(), vec![89]);
+        assert_eq!(s.last_window_start(), Some(15));
         assert!(!s.in_slow_window(14) && s.in_slow_window(15) && !s.in_slow_window(90));
         // Under 20 iterations: step size only.
         let s = WarmupSchedule::stan(10);
         assert!(s.window_ends().is_empty());
+        assert_eq!(s.last_window_start(), None);
         assert!((0..10).all(|i| !s.in_slow_window(i)));
     }
 }

@@ -35,7 +35,9 @@
 
 use super::phase_pool::PhasePoint;
 use super::{Kernel, Metric, Proposal, StepObservation};
-use crate::adaptation::{MetricAdaptation, StepSizeAdaptation, Warmup, WarmupSchedule};
+use crate::adaptation::{
+    AcceptanceStatistic, MetricAdaptation, StepSizeAdaptation, Warmup, WarmupSchedule,
+};
 use crate::error::{Result, invalid};
 use crate::gradient::{
     GradientPayload, GradientTarget, all_finite, check_dimension, check_state_dimension,
@@ -219,6 +221,14 @@ impl<G: GradientTarget> Hmc<G> {
         }
     }
 
+    /// Which acceptance statistic the warm-up's dual averaging steers
+    /// ([`Warmup::with_acceptance_statistic`]).
+    pub(crate) fn set_acceptance_statistic(&mut self, statistic: AcceptanceStatistic) {
+        if let Some(w) = self.warmup.take() {
+            self.warmup = Some(w.with_acceptance_statistic(statistic));
+        }
+    }
+
     /// Replaces the windows of the warm-up set by [`Self::with_warmup`].
     pub(crate) fn with_warmup_schedule(mut self, schedule: WarmupSchedule) -> Result<Self> {
         let w = self
@@ -258,19 +268,21 @@ impl<G: GradientTarget> Hmc<G> {
     /// One warm-up iteration with acceptance statistic `alpha` ending at
     /// `state`; returns true when the metric changed.
     pub(crate) fn adapt(&mut self, alpha: f64, state: &[f64]) -> bool {
-        self.adapt_with_gradient(alpha, state, None)
+        self.adapt_with_statistics(alpha, alpha, state, None)
     }
 
-    /// [`Self::adapt`] with the gradient of `ln π` at `state` (for
-    /// [`MetricAdaptation::DiagonalGradient`]).
-    pub(crate) fn adapt_with_gradient(
+    /// [`Self::adapt`] with the symmetrised acceptance statistic as well
+    /// ([`Warmup::observe_with_statistics`]) and the gradient of `ln π` at
+    /// `state` (for [`MetricAdaptation::DiagonalGradient`]).
+    pub(crate) fn adapt_with_statistics(
         &mut self,
         alpha: f64,
+        symmetric_alpha: f64,
         state: &[f64],
         gradient: Option<&[f64]>,
     ) -> bool {
         if let Some(w) = &mut self.warmup
-            && let Some(update) = w.observe_with_gradient(alpha, state, gradient)
+            && let Some(update) = w.observe_with_statistics(alpha, symmetric_alpha, state, gradient)
         {
             self.step_size = update.step_size;
             if let Some(m) = update.metric {

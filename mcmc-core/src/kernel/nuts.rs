@@ -37,7 +37,9 @@
 
 use super::phase_pool::PointPool;
 use super::{Hmc, Kernel, Metric, Proposal, StepObservation};
-use crate::adaptation::{MetricAdaptation, StepSizeAdaptation, WarmupSchedule};
+use crate::adaptation::{
+    AcceptanceStatistic, MetricAdaptation, StepSizeAdaptation, WarmupSchedule,
+};
 use crate::error::{Result, invalid};
 use crate::gradient::{GradientPayload, GradientTarget};
 use crate::kernel::GradientKernelStatistics;
@@ -147,7 +149,10 @@ pub struct Nuts<G> {
     // Run Stan's step-size heuristic before the next transition.
     init_step_pending: bool,
     step_size_adaptation: StepSizeAdaptation,
+    acceptance: AcceptanceStatistic,
     last: NutsDrawStatistics,
+    // Mean symmetrised acceptance of the last transition.
+    last_symmetric: f64,
     depth_saturated: u64,
     // Test control only: always take the newest sub-tree's sample (biased).
     take_newest: bool,
@@ -168,7 +173,9 @@ impl<G: GradientTarget> Nuts<G> {
             max_delta_h: 1000.0,
             init_step_pending: false,
             step_size_adaptation: StepSizeAdaptation::Continuous,
+            acceptance: AcceptanceStatistic::Stan,
             last: NutsDrawStatistics::default(),
+            last_symmetric: 0.0,
             depth_saturated: 0,
             take_newest: false,
             work: Workspace::default(),
@@ -212,6 +219,7 @@ impl<G: GradientTarget> Nuts<G> {
     ) -> Result<Self> {
         self.hmc = self.hmc.with_warmup(iterations, target_accept, metric)?;
         self.hmc.set_step_size_adaptation(self.step_size_adaptation);
+        self.hmc.set_acceptance_statistic(self.acceptance);
         self.init_step_pending = iterations > 0;
         Ok(self)
     }
@@ -224,6 +232,18 @@ impl<G: GradientTarget> Nuts<G> {
     pub fn with_step_size_adaptation(mut self, mode: StepSizeAdaptation) -> Self {
         self.step_size_adaptation = mode;
         self.hmc.set_step_size_adaptation(mode);
+        self
+    }
+
+    /// Which acceptance statistic the warm-up's dual averaging steers:
+    /// [`AcceptanceStatistic::Stan`] (the default) or
+    /// [`AcceptanceStatistic::SymmetricLate`] (nuts-rs's symmetrised mean
+    /// of `2/(1 + e^{|H₀ − Hᵢ|})` from the last metric window on; fewer
+    /// warm-up gradients, `docs/performance.md`). The reported
+    /// `accept_stat` stays Stan's.
+    pub fn with_acceptance_statistic(mut self, statistic: AcceptanceStatistic) -> Self {
+        self.acceptance = statistic;
+        self.hmc.set_acceptance_statistic(statistic);
         self
     }
 
@@ -359,6 +379,7 @@ impl<G: GradientTarget> Nuts<G> {
             max_delta_h: self.max_delta_h,
             n_leapfrog: 0,
             sum_metro_prob: 0.0,
+            sum_symmetric: 0.0,
             divergent: false,
             frames: &mut w.frames,
             pool,
@@ -439,6 +460,11 @@ impl<G: GradientTarget> Nuts<G> {
             builder.sum_metro_prob,
             builder.divergent,
         );
+        self.last_symmetric = if n_leapfrog > 0 {
+            builder.sum_symmetric / n_leapfrog as f64
+        } else {
+            0.0
+        };
         let stats = NutsDrawStatistics {
             accept_stat: if n_leapfrog > 0 {
                 sum_metro_prob / n_leapfrog as f64
@@ -464,6 +490,7 @@ struct Builder<'a, G> {
     max_delta_h: f64,
     n_leapfrog: usize,
     sum_metro_prob: f64,
+    sum_symmetric: f64,
     divergent: bool,
     frames: &'a mut Vec<Frame>,
     pool: &'a mut PointPool,
@@ -504,6 +531,9 @@ impl<G: GradientTarget> Builder<'_, G> {
             let log_w = self.h0 - h;
             *log_sum_weight = log_sum_exp2(*log_sum_weight, log_w);
             self.sum_metro_prob += if log_w > 0.0 { 1.0 } else { log_w.exp() };
+            // 2·min(1, e^d)/(1 + e^d) = 2/(1 + e^{|d|}); 0 for d = −∞ (NaN
+            // energy is H = +∞ here).
+            self.sum_symmetric += 2.0 / (1.0 + log_w.abs().exp());
             rho.copy_from_slice(&z.p);
             if self.divergent {
                 return None;
@@ -656,9 +686,12 @@ impl<G: GradientTarget> Kernel<Vec<f64>, GradientPayload> for Nuts<G> {
         let gradient = (self.hmc.is_adapting() && observation.state == &self.selected.0)
             .then_some(&self.selected.1[..]);
         if observation.own
-            && self
-                .hmc
-                .adapt_with_gradient(self.last.accept_stat, observation.state, gradient)
+            && self.hmc.adapt_with_statistics(
+                self.last.accept_stat,
+                self.last_symmetric,
+                observation.state,
+                gradient,
+            )
         {
             // Stan re-runs its step-size heuristic after a metric update.
             self.init_step_pending = self.step_size_adaptation == StepSizeAdaptation::Restart;
@@ -767,6 +800,34 @@ mod tests {
         assert_eq!(depths[0], 0);
         // Binomial(2000, ½): 1000 ± 22; 5 standard deviations.
         assert!((depths[1] as f64 - 1000.0).abs() < 112.0, "{depths:?}");
+    }
+
+    /// With maximum depth 1 a transition has one new point, so its
+    /// statistics are those of one energy error `d = H₀ − H₁`: Stan's
+    /// `a = min(1, e^d)` and the symmetrised `2/(1 + e^{|d|})`, which is
+    /// `2a/(1 + a)` whenever `d < 0` (and below 1 when `d > 0`, where
+    /// `a = 1`).
+    #[test]
+    fn symmetrised_statistic_of_a_single_step() {
+        let t = Differentiable(Normal1);
+        let mut nuts = Nuts::new(Normal1, 1.7).unwrap().with_max_depth(1).unwrap();
+        let mut rng = stream_rng(5, 0);
+        let mut state = Sample::evaluate(&t, vec![0.4]);
+        let mut out = state.clone();
+        let (mut below, mut above) = (0, 0);
+        for _ in 0..500 {
+            nuts.propose(&state, &mut out, &mut rng);
+            let (a, s) = (nuts.last_draw().accept_stat, nuts.last_symmetric);
+            if a < 1.0 {
+                below += 1;
+                assert!((s - 2.0 * a / (1.0 + a)).abs() < 1e-12, "{a} {s}");
+            } else {
+                above += 1;
+                assert!(s < 1.0 && s > 0.0, "{s}");
+            }
+            std::mem::swap(&mut state, &mut out);
+        }
+        assert!(below > 50 && above > 50, "{below} {above}");
     }
 
     /// 2-d correlated Gaussian: `x₁ = z₁`, `x₂ = 2(0.8 z₁ + 0.6 z₂)`.
