@@ -68,7 +68,7 @@
 //! fixed, so that every `C^Ω` of the render — and the running `b_con` — use
 //! the same weights.
 //!
-//! # Estimating `b_con` (`con_estimate`)
+//! # Estimating `b_con` (`con_estimate`, default `transfer`)
 //! `direct` (Eq. 6.4) is the mean of `lum C^Ω` over the independent light
 //! subpaths. Only the visible ones (`b_vis`, under 1% on an interior)
 //! carry it, so it is `b_vis` times the mean luminance of a few dozen
@@ -85,7 +85,8 @@
 //! per iteration as Eq. 6.4's); before the visibility chain has run, and
 //! for `combined` before two iterations, `direct` is used.
 //!
-//! `transfer` attacks what makes `direct` noisy: the scale `k` of the MIS
+//! `transfer` (the default since session 16) attacks what makes `direct`
+//! noisy: the scale `k` of the MIS
 //! (above) hands the light-subpath techniques the paths that path tracing
 //! samples well, and independent light subpaths, drawn with density `p`,
 //! not `k·p`, estimate those paths' share badly (session 16: on an
@@ -1528,7 +1529,7 @@ crate::settings! {
         /// Scale the light-subpath techniques' densities in the MIS weights by the chains' mixture density (the visibility chain's exact p/b_vis).
         pub vis_pdf: bool = true;
         /// b_con from the independent light subpaths (direct, Eq. 6.4), from b_vis and the visibility chain's mean luminance (visibility), both by inverse variance (combined), or with k = 1 weights plus the camera subpaths' transfer (transfer).
-        pub con_estimate: ConEstimate = ConEstimate::Direct;
+        pub con_estimate: ConEstimate = ConEstimate::Transfer;
         flatten {
             /// VCM: mode, radius, reduction (alpha: 1 here, a fixed radius as the thesis runs), heuristic, depth.
             pub vcm: VcmSettings = VcmSettings {
@@ -1573,7 +1574,7 @@ impl IntegratorSettings for McmcVcmSettings {
             self.con_estimate,
             ConEstimate::Visibility | ConEstimate::Combined
         ) && (self.normalisation == NormalisationScope::Iteration
-                || self.light_chains != LightChains::Both)
+            || self.light_chains != LightChains::Both)
         {
             return Err(
                 "`con_estimate` visibility or combined needs the visibility chain (`light_chains = both`) and `normalisation = render`".into(),
@@ -1624,6 +1625,21 @@ mod tests {
         assert_eq!(r, 1.0);
         assert!((se - 0.5).abs() < 1e-12, "{se}");
         assert!(batch_ratio(&b[..1], 1, 0).1.is_nan());
+    }
+
+    /// Two ratios summed, against values worked by hand: batches
+    /// (num₁, den₁, num₂, den₂) = (1, 2, 0, 1), (3, 2, 2, 1): r₁ = 4/4 = 1,
+    /// r₂ = 2/2 = 1, sum 2; linearised residuals (1 − 2)/4 + (0 − 1)/2 =
+    /// −0.75 and (3 − 2)/4 + (2 − 1)/2 = 0.75; SE = √(2 · 1.125) = 1.5. One
+    /// term alone is `batch_ratio`.
+    #[test]
+    fn batch_ratios_sum_and_linearise() {
+        let b = [[1.0, 2.0, 0.0, 1.0], [3.0, 2.0, 2.0, 1.0]];
+        let (r, se) = batch_ratios(&b, &[(0, 1), (2, 3)]);
+        assert_eq!(r, 2.0);
+        assert!((se - 1.5).abs() < 1e-12, "{se}");
+        assert_eq!(batch_ratios(&b, &[(0, 1)]), batch_ratio(&b, 0, 1));
+        assert!(batch_ratios(&b[..1], &[(0, 1), (2, 3)]).1.is_nan());
     }
 
     /// Inverse variance: SEs 1 and 2 give weights 4:1 (estimate

@@ -784,8 +784,7 @@ impl Vcm {
         let mut specular = true;
         for j in 1..n {
             let zj = &z[j];
-            if !self.path_tracing_at(scene, f, z, mis, j, specular, source, &mut l, tally, None)
-            {
+            if !self.path_tracing_at(scene, f, z, mis, j, specular, source, &mut l, tally, None) {
                 break;
             }
             if zj.is_connectible(scene) {
