@@ -657,9 +657,10 @@ impl Normalisation {
 }
 
 /// `lum C^Ω` of the light subpath of `point` (camera subpath `camera`)
-/// with `unscaled`'s weights when given and it is visible (`luminance`
-/// > 0: with `k ≥ 1` a subpath black with `k`'s weights is black with
-/// `k = 1`'s too), else `luminance`; an invalid value counts as 0.
+/// with `unscaled`'s weights when given and the subpath is visible (its
+/// `luminance` positive: with `k ≥ 1` a subpath black with `k`'s weights is
+/// black with `k = 1`'s too), else `luminance`; an invalid value counts
+/// as 0.
 fn unscaled_luminance(
     scene: &Scene,
     unscaled: Option<&Iteration>,
