@@ -352,7 +352,7 @@ fn the_camera_transfer_is_the_light_side_shift() {
 /// `mcmc-vcm` with `con_estimate = direct`, `visibility` and `combined`
 /// agrees with `vcm` (same replicates and tolerances as the default
 /// estimator's (`transfer`) test;
-/// control: the `combined` estimates ×1.01 must fail). About 3 minutes:
+/// control: the `combined` estimates ×1.01 must fail). About 5 minutes:
 /// `cargo test -p mcmc-render --test mcmc_vcm -- --ignored con_estimates`.
 #[test]
 #[ignore]
