@@ -652,11 +652,20 @@ const LATER_REPS: u64 = 16;
 /// its ×1.01 control reads +0.78% to +0.88%, 5.9–6.3σ, rejected), tempered
 /// PSSMLT −0.17%, −0.14%, −0.13% (0.10–0.12%), mcmc-vcm +0.33%, +0.30%,
 /// +0.14% (0.15–0.19%; +0.12%, +0.11%, +0.03% at 64 iterations).
+/// mcmc-vcm's 16 × 16 iterations left 5σ at 0.95% (blue) with
+/// `con_estimate = direct`; with `transfer` (the default since session 16)
+/// the same seeds gave 1.02% and failed the resolution check, and 24
+/// replicates still 1.03% (red). Over 24 other seeds the two estimators'
+/// image means spread alike (sd 1.10% and 1.12% in red per replicate,
+/// docs/vcm.md session 16), so 5σ < 1% in red needs ~30 replicates at 16
+/// iterations: the budget was at the edge for both. Now 24 × 32
+/// iterations: measured 5σ 0.69%, 0.62%, 0.51% (CLI runs of these seeds,
+/// session 16); about 13 s of CPU more than 16 × 16.
 const RELT_REPS: (u64, u64) = (16, 3100);
 const TEMPERED_REPS: (u64, u64) = (16, 3200);
-const MCMC_VCM_REPS: (u64, u64) = (16, 3300);
+const MCMC_VCM_REPS: (u64, u64) = (24, 3300);
 /// `mcmc-vcm` iterations per replicate (one light subpath per pixel each).
-const MCMC_VCM_ITERATIONS: u32 = 16;
+const MCMC_VCM_ITERATIONS: u32 = 32;
 
 /// Image means and merge shares (`energy_shares.merge` of the sidecar) of
 /// `k` registry runs on the combined scene.

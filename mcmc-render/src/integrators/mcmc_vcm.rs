@@ -68,7 +68,7 @@
 //! fixed, so that every `C^Ω` of the render — and the running `b_con` — use
 //! the same weights.
 //!
-//! # Estimating `b_con` (`con_estimate`)
+//! # Estimating `b_con` (`con_estimate`, default `transfer`)
 //! `direct` (Eq. 6.4) is the mean of `lum C^Ω` over the independent light
 //! subpaths. Only the visible ones (`b_vis`, under 1% on an interior)
 //! carry it, so it is `b_vis` times the mean luminance of a few dozen
@@ -84,6 +84,25 @@
 //! hangs on `b_vis` alone. Estimates use earlier iterations only (frozen
 //! per iteration as Eq. 6.4's); before the visibility chain has run, and
 //! for `combined` before two iterations, `direct` is used.
+//!
+//! `transfer` (the default since session 16) attacks what makes `direct`
+//! noisy: the scale `k` of the MIS
+//! (above) hands the light-subpath techniques the paths that path tracing
+//! samples well, and independent light subpaths, drawn with density `p`,
+//! not `k·p`, estimate those paths' share badly (session 16: on an
+//! interior `k ≈ 120` raised `b_con` from 0.0125 to 0.0216 and its
+//! relative error from ~2.3% to ~4.5%, and the image level follows
+//! `b_con`). The weights sum to one over all techniques for any `k`, so
+//! `b_con(k) = b_con(1) + Δ`, where `b_con(1)` is Eq. 6.4 with the tracing
+//! density's weights (`k = 1`; only visible subpaths need the second
+//! evaluation) and `Δ`, per light subpath, is the mean over the camera
+//! samples of `lum(PT with k = 1 weights − PT with k weights)`: the energy
+//! that `k` moves off path tracing, measured where path tracing sees it.
+//! Both terms are estimated with the weights that suit their samples.
+//! With merging the identity holds up to the difference of the merge
+//! kernel's bias under the two weightings (it vanishes with the radius);
+//! the image total then converges to `vcm`'s (`k = 1`) total instead of
+//! that of the `k`-weighted techniques.
 //!
 //! Determinism: every random number comes from a stream keyed by the seed,
 //! the iteration and the unit (tile, candidate block, chain pair), and
@@ -249,6 +268,10 @@ pub struct CameraPass {
     pub rasters: Vec<Vec2>,
     /// Path-tracing estimate of each camera sample.
     pub estimates: Vec<Rgb>,
+    /// With `con_estimate = transfer` and a light-density scale `k ≠ 1`:
+    /// Σ over the camera samples of `lum` of their path-tracing estimate
+    /// with `k = 1` weights minus that with `k` (module docs); else 0.
+    pub transfer: f64,
     tally: Tally,
 }
 
@@ -443,6 +466,9 @@ struct Candidate {
     rng: ChainRng,
     camera: usize,
     luminance: f64,
+    /// `lum C^Ω` with the tracing density's weights (`k = 1`), for
+    /// `con_estimate = transfer`; `luminance` otherwise.
+    unscaled: f64,
 }
 
 /// Running sums of the normalisations (Eq. 6.4) with per-iteration
@@ -452,28 +478,67 @@ struct Normalisation {
     count: f64,
     vis: f64,
     con: f64,
+    /// Σ `lum C^Ω` with `k = 1` weights (`con_estimate = transfer`).
+    con_unscaled: f64,
     /// Visibility-chain steps.
     chain_steps: f64,
     /// Σ over those steps of the expected `lum C^Ω` of the next state.
     chain_lum: f64,
-    /// (count, Σ π_vis, Σ π_con, chain steps, Σ chain lum) per iteration.
-    batches: Vec<[f64; 5]>,
+    /// Camera samples and their Σ [`CameraPass::transfer`].
+    cameras: f64,
+    transfer: f64,
+    /// The sums above per iteration, columns [`COUNT`] … [`TRANSFER`].
+    batches: Vec<[f64; COLUMNS]>,
 }
 
-/// The ratio `Σ num / Σ den` over `batches` (columns `num`, `den`) and its
-/// standard error, treating the batches (iterations) as independent
-/// (ratio estimator; NaN below two batches).
-fn batch_ratio(batches: &[[f64; 5]], num: usize, den: usize) -> (f64, f64) {
-    let (sn, sd) = batches
+/// Columns of [`Normalisation::batches`].
+const COUNT: usize = 0;
+const VIS: usize = 1;
+const CON: usize = 2;
+const CHAIN_STEPS: usize = 3;
+const CHAIN_LUM: usize = 4;
+const CON_UNSCALED: usize = 5;
+const CAMERAS: usize = 6;
+const TRANSFER: usize = 7;
+const COLUMNS: usize = 8;
+
+/// The sum of ratios `Σ_t (Σ num_t / Σ den_t)` over `batches` for the
+/// column pairs `terms` and its standard error, treating the batches
+/// (iterations) as independent: the ratio estimator linearised, batch `i`
+/// contributing `Σ_t (num_t,i − r_t den_t,i) / Σ den_t`; NaN below two
+/// batches. A ratio whose denominators sum to 0 counts as 0.
+fn batch_ratios<const N: usize>(batches: &[[f64; N]], terms: &[(usize, usize)]) -> (f64, f64) {
+    let sums: Vec<(f64, f64)> = terms
         .iter()
-        .fold((0.0, 0.0), |(a, b), x| (a + x[num], b + x[den]));
-    let r = if sd > 0.0 { sn / sd } else { 0.0 };
+        .map(|&(num, den)| {
+            let (sn, sd) = batches
+                .iter()
+                .fold((0.0, 0.0), |(a, b), x| (a + x[num], b + x[den]));
+            (if sd > 0.0 { sn / sd } else { 0.0 }, sd)
+        })
+        .collect();
+    let r = sums.iter().map(|s| s.0).sum();
     let k = batches.len() as f64;
-    if batches.len() < 2 || !(sd > 0.0) {
+    if batches.len() < 2 || sums.iter().any(|s| !(s.1 > 0.0)) {
         return (r, f64::NAN);
     }
-    let s: f64 = batches.iter().map(|x| (x[num] - r * x[den]).powi(2)).sum();
-    (r, (s * k / (k - 1.0)).sqrt() / sd)
+    let s: f64 = batches
+        .iter()
+        .map(|x| {
+            terms
+                .iter()
+                .zip(&sums)
+                .map(|(&(num, den), &(r, sd))| (x[num] - r * x[den]) / sd)
+                .sum::<f64>()
+                .powi(2)
+        })
+        .sum();
+    (r, (s * k / (k - 1.0)).sqrt())
+}
+
+/// One ratio `Σ num / Σ den` of [`batch_ratios`].
+fn batch_ratio<const N: usize>(batches: &[[f64; N]], num: usize, den: usize) -> (f64, f64) {
+    batch_ratios(batches, &[(num, den)])
 }
 
 /// Inverse-variance combination of two estimates of one quantity with
@@ -488,12 +553,35 @@ fn inverse_variance(a: f64, se_a: f64, b: f64, se_b: f64) -> (f64, f64) {
 }
 
 impl Normalisation {
-    fn add(&mut self, luminance: f64) {
+    /// One independent light subpath of luminance `luminance`, `unscaled`
+    /// with `k = 1` weights.
+    fn add(&mut self, luminance: f64, unscaled: f64) {
         self.count += 1.0;
         if luminance > 0.0 {
             self.vis += 1.0;
             self.con += luminance;
+            self.con_unscaled += unscaled;
         }
+    }
+
+    /// One camera pass of `cameras` samples with its transfer.
+    fn add_cameras(&mut self, cameras: f64, transfer: f64) {
+        self.cameras += cameras;
+        self.transfer += transfer;
+    }
+
+    /// The running sums as one batch.
+    fn batch(&self) -> [f64; COLUMNS] {
+        let mut b = [0.0; COLUMNS];
+        b[COUNT] = self.count;
+        b[VIS] = self.vis;
+        b[CON] = self.con;
+        b[CHAIN_STEPS] = self.chain_steps;
+        b[CHAIN_LUM] = self.chain_lum;
+        b[CON_UNSCALED] = self.con_unscaled;
+        b[CAMERAS] = self.cameras;
+        b[TRANSFER] = self.transfer;
+        b
     }
 
     /// One visibility-chain step whose next state has expected luminance
@@ -507,12 +595,22 @@ impl Normalisation {
         self.count += o.count;
         self.vis += o.vis;
         self.con += o.con;
+        self.con_unscaled += o.con_unscaled;
         self.chain_steps += o.chain_steps;
         self.chain_lum += o.chain_lum;
+        self.cameras += o.cameras;
+        self.transfer += o.transfer;
     }
 
     /// `b_con` by `how` with its standard error (NaN below two batches).
     fn con(&self, how: ConEstimate) -> (f64, f64) {
+        if how == ConEstimate::Transfer {
+            let ratio = |num: f64, den: f64| if den > 0.0 { num / den } else { 0.0 };
+            return (
+                ratio(self.con_unscaled, self.count) + ratio(self.transfer, self.cameras),
+                batch_ratios(&self.batches, &[(CON_UNSCALED, COUNT), (TRANSFER, CAMERAS)]).1,
+            );
+        }
         let direct = (self.estimates().1, self.standard_errors().1);
         if how == ConEstimate::Direct || !(self.chain_steps > 0.0) {
             return direct;
@@ -530,7 +628,7 @@ impl Normalisation {
     fn con_from_visibility(&self) -> (f64, f64) {
         let b_vis = self.estimates().0;
         let se_vis = self.standard_errors().0;
-        let (m, se_m) = batch_ratio(&self.batches, 4, 3);
+        let (m, se_m) = batch_ratio(&self.batches, CHAIN_LUM, CHAIN_STEPS);
         let b = b_vis * m;
         (
             b,
@@ -552,9 +650,31 @@ impl Normalisation {
     /// subpaths, so they are not independent); NaN below two batches.
     fn standard_errors(&self) -> (f64, f64) {
         (
-            batch_ratio(&self.batches, 1, 0).1,
-            batch_ratio(&self.batches, 2, 0).1,
+            batch_ratio(&self.batches, VIS, COUNT).1,
+            batch_ratio(&self.batches, CON, COUNT).1,
         )
+    }
+}
+
+/// `lum C^Ω` of the light subpath of `point` (camera subpath `camera`)
+/// with `unscaled`'s weights when given and the subpath is visible (its
+/// `luminance` positive: with `k ≥ 1` a subpath black with `k`'s weights is
+/// black with `k = 1`'s too), else `luminance`; an invalid value counts
+/// as 0.
+fn unscaled_luminance(
+    scene: &Scene,
+    unscaled: Option<&Iteration>,
+    point: &TorusPoint,
+    camera: usize,
+    luminance: f64,
+) -> f64 {
+    match unscaled {
+        Some(it) if luminance > 0.0 => {
+            let mut c = LightContribution::default();
+            light_contribution(scene, it, &mut PssSource::new(point, 1), camera, &mut c);
+            if c.finite { c.luminance } else { 0.0 }
+        }
+        _ => luminance,
     }
 }
 
@@ -656,11 +776,14 @@ impl McmcVcm {
     }
 
     /// `count` independent light subpaths of iteration `it` in fixed
-    /// blocks, each with a uniformly chosen camera subpath.
+    /// blocks, each with a uniformly chosen camera subpath; the visible
+    /// ones evaluated with `unscaled`'s weights too when given.
+    #[allow(clippy::too_many_arguments)]
     fn trace_candidates(
         &self,
         scene: &Scene,
         it: &Iteration,
+        unscaled: Option<&Iteration>,
         seed: u64,
         stream: u64,
         count: usize,
@@ -688,6 +811,7 @@ impl McmcVcm {
                         rng: point_rng,
                         camera,
                         luminance,
+                        unscaled: unscaled_luminance(scene, unscaled, &point, camera, luminance),
                     });
                 }
                 out
@@ -763,6 +887,7 @@ impl McmcVcm {
                 let c = self.trace_candidates(
                     scene,
                     &pilot,
+                    None,
                     run.seed,
                     STREAM_PILOT,
                     self.candidates,
@@ -783,12 +908,18 @@ impl McmcVcm {
             totals.tally.add(&pass.tally);
             observer.progress(pixels as u64);
             let it = Iteration::new(vcm, cameras, radius, light_scale);
+            // `con_estimate = transfer`: the same iteration with the
+            // tracing density's weights (module docs).
+            let unscaled = self
+                .transfers(light_scale)
+                .then(|| Iteration::new(vcm, cameras, radius, 1.0));
 
             // Restart candidates; they join the running normalisation.
             let independent = self.chains == LightChains::Independent;
             let pool = self.trace_candidates(
                 scene,
                 &it,
+                unscaled.as_ref(),
                 run.seed,
                 STREAM_CANDIDATES ^ (iterations << 24),
                 if independent { 0 } else { self.candidates },
@@ -800,17 +931,31 @@ impl McmcVcm {
             }
             let mut batch = Normalisation::default();
             for c in &pool {
-                batch.add(c.luminance);
+                batch.add(c.luminance, c.unscaled);
             }
+            batch.add_cameras(pixels as f64, pass.transfer);
             norm.merge(&batch);
             let b = match self.normalisation {
                 NormalisationScope::Render => (norm.estimates().0, norm.con(self.con_estimate).0),
-                NormalisationScope::Iteration => batch.estimates(),
+                NormalisationScope::Iteration => {
+                    (batch.estimates().0, batch.con(self.con_estimate).0)
+                }
             };
             // The chains need a visible candidate to restart from.
             if batch.vis > 0.0 || independent {
                 units.par_iter_mut().enumerate().for_each(|(p, unit)| {
-                    self.run_unit(scene, &it, &pool, b, unit, p, run.seed, iterations, &abort);
+                    self.run_unit(
+                        scene,
+                        &it,
+                        unscaled.as_ref(),
+                        &pool,
+                        b,
+                        unit,
+                        p,
+                        run.seed,
+                        iterations,
+                        &abort,
+                    );
                 });
             } else {
                 totals.skipped_iterations += 1;
@@ -832,13 +977,7 @@ impl McmcVcm {
                 batch.merge(&unit.norm);
                 unit.norm = Normalisation::default();
             }
-            norm.batches.push([
-                batch.count,
-                batch.vis,
-                batch.con,
-                batch.chain_steps,
-                batch.chain_lum,
-            ]);
+            norm.batches.push(batch.batch());
             for ((&raster, &pt), &l) in pass.rasters.iter().zip(&pass.estimates).zip(&light) {
                 film.add_sample(raster, pt + l);
             }
@@ -867,6 +1006,12 @@ impl McmcVcm {
             interrupted,
             pixels,
         )
+    }
+
+    /// Whether `b_con` is estimated by `transfer` with a scale `k ≠ 1`
+    /// (with `k = 1` it is `direct`).
+    fn transfers(&self, light_scale: f32) -> bool {
+        self.con_estimate == ConEstimate::Transfer && light_scale != 1.0
     }
 
     /// `(n_con, n_vis)`: steps of each chain per iteration over all units.
@@ -901,8 +1046,9 @@ impl McmcVcm {
     ) {
         let (width, height) = (scene.film.width, scene.film.height);
         let pixels = width as usize * height as usize;
-        let f = MisFactors::new(self.vcm.mode, self.vcm.heuristic, radius, pixels as f64)
-            .with_light_density_scale(light_scale);
+        let unscaled = MisFactors::new(self.vcm.mode, self.vcm.heuristic, radius, pixels as f64);
+        let f = unscaled.with_light_density_scale(light_scale);
+        let unscaled = self.transfers(light_scale).then_some(unscaled);
         let tiles: Vec<(u32, u32, u32, u32)> = (0..height.div_ceil(TILE))
             .flat_map(|ty| {
                 (0..width.div_ceil(TILE)).map(move |tx| {
@@ -914,19 +1060,23 @@ impl McmcVcm {
         let results: Vec<_> = tiles
             .par_iter()
             .enumerate()
-            .map(|(t, &tile)| self.camera_tile(scene, &f, tile, seed, iteration, t))
+            .map(|(t, &tile)| {
+                self.camera_tile(scene, &f, unscaled.as_ref(), tile, seed, iteration, t)
+            })
             .collect();
         out.cameras.clear();
         out.rasters.clear();
         out.estimates.clear();
+        out.transfer = 0.0;
         out.tally = Tally::default();
-        for (set, rasters, estimates, tally) in &results {
+        for (set, rasters, estimates, transfer, tally) in &results {
             for k in 0..set.len() {
                 let (z, mis) = set.subpath(k);
                 out.cameras.push(z, mis);
             }
             out.rasters.extend_from_slice(rasters);
             out.estimates.extend_from_slice(estimates);
+            out.transfer += transfer;
             out.tally.add(tally);
         }
         if self.vcm.mode.merges() {
@@ -935,20 +1085,25 @@ impl McmcVcm {
     }
 
     /// One tile of camera subpaths: the subpaths, their raster positions
-    /// and path-tracing estimates, and the technique tally.
+    /// and path-tracing estimates, their transfer (Σ `lum` of the
+    /// estimates with the `unscaled` weights minus with `f`'s; 0 without
+    /// `unscaled`) and the technique tally.
+    #[allow(clippy::too_many_arguments)]
     fn camera_tile(
         &self,
         scene: &Scene,
         f: &MisFactors,
+        unscaled: Option<&MisFactors>,
         (x0, y0, x1, y1): (u32, u32, u32, u32),
         seed: u64,
         iteration: u64,
         tile: usize,
-    ) -> (CameraSet, Vec<Vec2>, Vec<Rgb>, Tally) {
+    ) -> (CameraSet, Vec<Vec2>, Vec<Rgb>, f64, Tally) {
         let mut set = CameraSet::default();
         set.clear();
         let mut rasters = Vec::new();
         let mut estimates = Vec::new();
+        let mut transfer = 0.0;
         let mut tally = Tally::default();
         let mut src = unit_source(seed, 2 * iteration, tile as u64);
         let (mut z, mut mis) = (Vec::new(), Vec::new());
@@ -959,7 +1114,7 @@ impl McmcVcm {
                 let n = self
                     .vcm
                     .trace_camera_subpath(scene, f, raster, &mut src, &mut z, &mut mis);
-                let mut l = Rgb::BLACK;
+                let (mut l, mut l_unscaled) = (Rgb::BLACK, Rgb::BLACK);
                 for j in 1..n {
                     if !self.vcm.path_tracing_at(
                         scene,
@@ -971,16 +1126,20 @@ impl McmcVcm {
                         &mut src,
                         &mut l,
                         &mut tally,
+                        unscaled.map(|u| (u, &mut l_unscaled)),
                     ) {
                         break;
                     }
+                }
+                if unscaled.is_some() {
+                    transfer += f64::from(l_unscaled.luminance()) - f64::from(l.luminance());
                 }
                 set.push(&z[..n], &mis[..n]);
                 rasters.push(raster);
                 estimates.push(l);
             }
         }
-        (set, rasters, estimates, tally)
+        (set, rasters, estimates, transfer, tally)
     }
 
     /// The chain pair `p` for one iteration: restart from `pool`, then its
@@ -990,6 +1149,7 @@ impl McmcVcm {
         &self,
         scene: &Scene,
         it: &Iteration,
+        unscaled: Option<&Iteration>,
         pool: &[Candidate],
         (b_vis, b_con): (f64, f64),
         unit: &mut Unit,
@@ -1020,10 +1180,10 @@ impl McmcVcm {
                 light_contribution(scene, it, &mut PssSource::new(&point, 1), camera, &mut c);
                 if !c.finite {
                     unit.invalid += 1;
-                    unit.norm.add(0.0);
+                    unit.norm.add(0.0, 0.0);
                     continue;
                 }
-                unit.norm.add(c.luminance);
+                unit.norm.add(c.luminance, c.luminance);
                 deposit(&mut unit.camera, &mut unit.splats, &mut unit.tally, &c, 1.0);
             }
             return;
@@ -1121,7 +1281,8 @@ impl McmcVcm {
                     if let Some(y) = t.proposal {
                         splat(&y.payload, t.alpha);
                         if t.component == large_component {
-                            norm.add(lum(&y.payload));
+                            let l = lum(&y.payload);
+                            norm.add(l, unscaled_luminance(scene, unscaled, &y.state, camera, l));
                         }
                     }
                 },
@@ -1232,6 +1393,11 @@ impl McmcVcm {
         } else {
             (f64::NAN, f64::NAN)
         };
+        let (b_con_transfer, se_con_transfer) = if self.con_estimate == ConEstimate::Transfer {
+            norm.con(ConEstimate::Transfer)
+        } else {
+            (f64::NAN, f64::NAN)
+        };
         let finite_or_null = |x: f64| {
             if x.is_finite() {
                 serde_json::json!(x)
@@ -1268,6 +1434,8 @@ impl McmcVcm {
             "b_con_direct_standard_error": finite_or_null(se_con_direct),
             "b_con_visibility": finite_or_null(b_con_vis),
             "b_con_visibility_standard_error": finite_or_null(se_con_vis),
+            "b_con_transfer": finite_or_null(b_con_transfer),
+            "b_con_transfer_standard_error": finite_or_null(se_con_transfer),
             "visibility_chain_steps": norm.chain_steps,
             "normalisation_samples": norm.count,
             "light_density_scale": light_scale,
@@ -1330,6 +1498,8 @@ crate::choice! {
         Visibility = "visibility",
         /// Both, weighted by their inverse squared standard errors.
         Combined = "combined",
+        /// b_con with the tracing density's weights (k = 1) from the independent light subpaths, plus the energy the MIS scale k moves off path tracing, measured on the camera subpaths.
+        Transfer = "transfer",
     }
 }
 
@@ -1359,8 +1529,8 @@ crate::settings! {
         pub normalisation: NormalisationScope = NormalisationScope::Render;
         /// Scale the light-subpath techniques' densities in the MIS weights by the chains' mixture density (the visibility chain's exact p/b_vis).
         pub vis_pdf: bool = true;
-        /// b_con from the independent light subpaths (direct, Eq. 6.4), from b_vis and the visibility chain's mean luminance (visibility), or both by inverse variance (combined).
-        pub con_estimate: ConEstimate = ConEstimate::Direct;
+        /// b_con from the independent light subpaths (direct, Eq. 6.4), from b_vis and the visibility chain's mean luminance (visibility), both by inverse variance (combined), or with k = 1 weights plus the camera subpaths' transfer (transfer).
+        pub con_estimate: ConEstimate = ConEstimate::Transfer;
         flatten {
             /// VCM: mode, radius, reduction (alpha: 1 here, a fixed radius as the thesis runs), heuristic, depth.
             pub vcm: VcmSettings = VcmSettings {
@@ -1401,12 +1571,14 @@ impl IntegratorSettings for McmcVcmSettings {
                 "`normalisation = render` needs a fixed radius (`alpha = 1`): with radius reduction the targets change with each iteration; use `normalisation = iteration`".into(),
             );
         }
-        if self.con_estimate != ConEstimate::Direct
-            && (self.normalisation == NormalisationScope::Iteration
-                || self.light_chains != LightChains::Both)
+        if matches!(
+            self.con_estimate,
+            ConEstimate::Visibility | ConEstimate::Combined
+        ) && (self.normalisation == NormalisationScope::Iteration
+            || self.light_chains != LightChains::Both)
         {
             return Err(
-                "`con_estimate` other than direct needs the visibility chain (`light_chains = both`) and `normalisation = render`".into(),
+                "`con_estimate` visibility or combined needs the visibility chain (`light_chains = both`) and `normalisation = render`".into(),
             );
         }
         if self.light_chains == LightChains::Contribution && !(self.large_step > 0.0) {
@@ -1454,6 +1626,21 @@ mod tests {
         assert_eq!(r, 1.0);
         assert!((se - 0.5).abs() < 1e-12, "{se}");
         assert!(batch_ratio(&b[..1], 1, 0).1.is_nan());
+    }
+
+    /// Two ratios summed, against values worked by hand: batches
+    /// (num₁, den₁, num₂, den₂) = (1, 2, 0, 1), (3, 2, 2, 1): r₁ = 4/4 = 1,
+    /// r₂ = 2/2 = 1, sum 2; linearised residuals (1 − 2)/4 + (0 − 1)/2 =
+    /// −0.75 and (3 − 2)/4 + (2 − 1)/2 = 0.75; SE = √(2 · 1.125) = 1.5. One
+    /// term alone is `batch_ratio`.
+    #[test]
+    fn batch_ratios_sum_and_linearise() {
+        let b = [[1.0, 2.0, 0.0, 1.0], [3.0, 2.0, 2.0, 1.0]];
+        let (r, se) = batch_ratios(&b, &[(0, 1), (2, 3)]);
+        assert_eq!(r, 2.0);
+        assert!((se - 1.5).abs() < 1e-12, "{se}");
+        assert_eq!(batch_ratios(&b, &[(0, 1)]), batch_ratio(&b, 0, 1));
+        assert!(batch_ratios(&b[..1], &[(0, 1), (2, 3)]).1.is_nan());
     }
 
     /// Inverse variance: SEs 1 and 2 give weights 4:1 (estimate

@@ -362,16 +362,16 @@ fn camera_side_weight(
 }
 
 /// Next-event estimation at camera vertex `z[j]` with the light-sample
-/// numbers `u_sel`, `u_pos`: contribution with its MIS weight.
+/// numbers `u_sel`, `u_pos`: its contribution *without* the MIS weight and
+/// the emitter vertex, for [`weight_direct`] (the caller may weigh one
+/// sample with more than one set of [`MisFactors`]).
 pub fn direct(
     scene: &Scene,
-    f: &MisFactors,
     z: &[Vertex],
-    mis: &[PartialMis],
     j: usize,
     u_sel: f32,
     u_pos: (f32, f32),
-) -> Option<Rgb> {
+) -> Option<(Rgb, Vertex)> {
     let pt = &z[j];
     let (index, _) = scene.lights.select(u_sel)?;
     let ds = scene
@@ -388,7 +388,7 @@ pub fn direct(
     if l.is_black() || !(lv.pdf_fwd > 0.0) || !scene.light_visible(&pt.sp, &ds) {
         return None;
     }
-    Some(l * weight_direct(scene, f, &lv, z, mis, j))
+    Some((l, lv))
 }
 
 /// MIS weight of connecting light vertex `y` to camera vertex `z[j]`.
@@ -784,7 +784,7 @@ impl Vcm {
         let mut specular = true;
         for j in 1..n {
             let zj = &z[j];
-            if !self.path_tracing_at(scene, f, z, mis, j, specular, source, &mut l, tally) {
+            if !self.path_tracing_at(scene, f, z, mis, j, specular, source, &mut l, tally, None) {
                 break;
             }
             if zj.is_connectible(scene) {
@@ -834,7 +834,10 @@ impl Vcm {
     /// sample (its numbers drawn at every surface vertex below the depth
     /// limit, used or not: a fixed count per vertex). `specular`: every
     /// camera vertex before `z[j]` scattered specularly (`ppm` mode).
-    /// False when the subpath ends at `z[j]` (not a surface).
+    /// False when the subpath ends at `z[j]` (not a surface). With `alt`,
+    /// the same samples weighted with its factors are added to its sum too
+    /// (finite values only, not tallied): `mcmc-vcm`'s `con_estimate =
+    /// transfer` needs them with the tracing density's weights.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn path_tracing_at(
         &self,
@@ -847,7 +850,16 @@ impl Vcm {
         source: &mut dyn RandomSource,
         l: &mut Rgb,
         tally: &mut Tally,
+        mut alt: Option<(&MisFactors, &mut Rgb)>,
     ) -> bool {
+        let mut add_alt = |weighted: &dyn Fn(&MisFactors) -> Rgb| {
+            if let Some((fa, la)) = alt.as_mut() {
+                let c = weighted(fa);
+                if c.is_finite() {
+                    **la += c;
+                }
+            }
+        };
         let zj = &z[j];
         let ppm = self.mode == VcmMode::Ppm;
         let nee =
@@ -862,16 +874,26 @@ impl Vcm {
             if tally.take(Technique::Emission, c) {
                 *l += c;
             }
+            add_alt(&|fa| {
+                if ppm {
+                    c
+                } else {
+                    emission(scene, fa, z, mis, j)
+                }
+            });
         }
         if zj.kind != VertexKind::Surface {
             return false;
         }
         if zj.is_connectible(scene)
             && let Some((u_sel, u_pos)) = nee
-            && let Some(c) = direct(scene, f, z, mis, j, u_sel, u_pos)
-            && tally.take(Technique::Direct, c)
+            && let Some((c, lv)) = direct(scene, z, j, u_sel, u_pos)
         {
-            *l += c;
+            let weighted = c * weight_direct(scene, f, &lv, z, mis, j);
+            if tally.take(Technique::Direct, weighted) {
+                *l += weighted;
+            }
+            add_alt(&|fa| c * weight_direct(scene, fa, &lv, z, mis, j));
         }
         true
     }
