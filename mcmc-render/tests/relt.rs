@@ -203,8 +203,10 @@ fn small_settings() -> Relt {
     s.chain.chains = 64;
     s.chain.mutations_per_pixel = Some(16);
     s.depth.max_depth = 5;
-    // A small search: still run (and so covered by the thread-count tests).
+    // A small search: still run (and so covered by the thread-count tests),
+    // and continued during the run (one draw per mutation).
     s.l0_search = 20_000;
+    s.l0_search_rate = 1.0;
     s
 }
 
@@ -263,7 +265,7 @@ fn relt_is_bit_identical_across_thread_counts() {
     assert!(bits(&one) == bits(&two), "1 vs 2 threads differ");
     assert!(bits(&one) == bits(&three), "1 vs 3 threads differ");
     assert_eq!(one.statistics["exchange"], two.statistics["exchange"]);
-    // The search continued during the run (default l0_search_rate 1):
+    // The search continued during the run (l0_search_rate 1 here):
     // 16 tasks of one replica set each, 256 mutations per task in one
     // round, units (strides) of 20 000 / 10 000 = 2 draws, so every task
     // owes ⌊1 · 256 / 2⌋ = 128 units: 4096 draws; equal for every thread
@@ -494,6 +496,7 @@ fn the_l0_search_estimates_b4_without_bias() {
     let settings = Relt {
         delta: 1.0,
         l0_search: 100_000,
+        l0_search_rate: 1.0,
         ..Relt::default()
     };
     let fam = family(&scene, &settings);
