@@ -356,7 +356,9 @@ fn the_continued_search_pools_its_draws_into_b4_and_rescales_only_the_specific_r
         heuristic: MisHeuristic::Power,
     };
     let fam = ReltFamily::new(&scene, bdpt, &s.replicas(), &s);
-    let plan = fam.continued_search(3).expect("the specific replica searches on");
+    let plan = fam
+        .continued_search(3)
+        .expect("the specific replica searches on");
     assert_eq!(plan.unit, 2);
     let mut sum = 0.0;
     for t in 0..16 {
@@ -370,8 +372,15 @@ fn the_continued_search_pools_its_draws_into_b4_and_rescales_only_the_specific_r
         }
     }
     let pooled = (n_off * b4(&off) + sum) / n_on;
-    eprintln!("b_4: {} without, {} with, pooled by hand {pooled}", b4(&off), b4(&on));
-    assert!((b4(&on) - pooled).abs() <= 1e-9 * pooled, "b_4 is not the pooled mean");
+    eprintln!(
+        "b_4: {} without, {} with, pooled by hand {pooled}",
+        b4(&off),
+        b4(&on)
+    );
+    assert!(
+        (b4(&on) - pooled).abs() <= 1e-9 * pooled,
+        "b_4 is not the pooled mean"
+    );
     // No other replica searches.
     assert!((0..3).all(|m| fam.continued_search(m).is_none()));
 }
@@ -537,7 +546,9 @@ fn the_l0_search_estimates_b4_without_bias() {
     // independent, each an unbiased estimate of 10·b_4, so b_4 is their
     // mean over 10 with the standard error of that mean; against the
     // plain mean within 4σ.
-    let plan = fam.continued_search(specific).expect("the search continues");
+    let plan = fam
+        .continued_search(specific)
+        .expect("the search continues");
     assert_eq!(plan.unit, 10);
     // Control: each unit's representative (its first draw, when it fails
     // the screen) without its factor 10 must fall outside 4σ.
@@ -559,7 +570,10 @@ fn the_l0_search_estimates_b4_without_bias() {
     let (b_run, se_run) = mean_se(units.into_iter(), 5000);
     let sigma = se_run.hypot(se_plain);
     eprintln!("b_4: continued search {b_run:.5} ± {se_run:.5}");
-    assert!((b_run - b_plain).abs() < 4.0 * sigma, "continued search disagrees");
+    assert!(
+        (b_run - b_plain).abs() < 4.0 * sigma,
+        "continued search disagrees"
+    );
     let (b_control, _) = mean_se(controls.into_iter(), 5000);
     eprintln!("control (representatives unscaled): {b_control:.5}");
     assert!((b_control - b_plain).abs() > 4.0 * sigma, "control passed");

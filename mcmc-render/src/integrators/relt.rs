@@ -34,8 +34,8 @@ use super::{DepthParams, RenderError, Rendered, RunSettings};
 use crate::deadline::Deadline;
 use crate::integrators::bdpt::{Bdpt, MisHeuristic};
 use crate::markov::{
-    self, Annealing, ChainFamily, ChainParams, ContinuedSearch, MltError, MltResult,
-    Normalization, Search,
+    self, Annealing, ChainFamily, ChainParams, ContinuedSearch, MltError, MltResult, Normalization,
+    Search,
 };
 use crate::observer::Observer;
 use crate::path_classes::{ClassScalar, ClassifiedBdpt, class_values};
