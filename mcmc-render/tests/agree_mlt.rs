@@ -404,19 +404,38 @@ fn bdpt_and_pssmlt_agree_with_pt_on_the_glossy_glass_box() {
 #[test]
 #[ignore = "minutes: RELT to 1% on the glossy-glass box"]
 fn relt_agrees_with_pt_on_the_glossy_glass_box() {
-    // 48 replicates of 16384 mutations per pixel (4096 per replica). At
-    // 24 × 8192 the means agreed (+0.33%, +0.41%, +0.09%) but σ was
-    // 0.24–0.28%, too large to resolve 1% at 5σ.
     // With the default start-up, the specific replica's chains start
     // from the l0_search's L0 paths (the glass sphere's) and its b_4
     // includes the search's draws.
+    relt_agrees_on_the_glossy_glass_box("relt", Relt::default());
+}
+
+#[test]
+#[ignore = "minutes: RELT with the search continued to 1% on the glossy-glass box"]
+fn relt_with_the_search_continued_agrees_with_pt_on_the_glossy_glass_box() {
+    // The search goes on while the chains run (one draw per mutation)
+    // and its draws join the specific replica's b_4, which scales the
+    // glass sphere's L0 light.
+    let settings = Relt {
+        l0_search_rate: 1.0,
+        ..Relt::default()
+    };
+    relt_agrees_on_the_glossy_glass_box("relt l0_search_rate=1", settings);
+}
+
+/// RELT with `settings` against PT on the glossy-glass box, with a ×1.01
+/// control that must fail.
+fn relt_agrees_on_the_glossy_glass_box(name: &str, settings: Relt) {
+    // 48 replicates of 16384 mutations per pixel (4096 per replica). At
+    // 24 × 8192 the means agreed (+0.33%, +0.41%, +0.09%) but σ was
+    // 0.24–0.28%, too large to resolve 1% at 5σ.
     let (scene, pt) = glossy();
-    let reps = relt_reps_on(&scene, Relt::default(), None, 16_384, 48, 9000);
-    check("relt", &pt, &reps);
+    let reps = relt_reps_on(&scene, settings, None, 16_384, 48, 9000);
+    check(name, &pt, &reps);
     // Control: the same replicates biased by 1% must fail the check.
     let biased: Vec<[f64; 3]> = reps.iter().map(|m| m.map(|v| v * 1.01)).collect();
     let a = MeanAgreement::new(&pt, &biased);
-    eprintln!("relt glossy x1.01: rel {:?}\n  {a:?}", a.rel());
+    eprintln!("{name} glossy x1.01: rel {:?}\n  {a:?}", a.rel());
     assert!(!a.failures(4.0, 0.01).is_empty(), "a 1% bias passed: {a:?}");
 }
 

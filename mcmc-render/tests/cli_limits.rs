@@ -473,7 +473,9 @@ fn mcmc_vcm_chain_pairs_stop_at_the_time_budget() {
 /// `annealing_sweeps` per particle) stop at `--time` like the chains,
 /// and the JSON says how much of them was done. One run per phase, so
 /// that each is cut by itself (the annealing comes first and would
-/// otherwise leave the search nothing).
+/// otherwise leave the search nothing). So does the search continued
+/// during the run (`l0_search_rate`: 10^9 draws per mutation, in units
+/// of 2 draws, owed after the chains' first round).
 #[test]
 fn relt_start_up_phases_sized_by_a_setting_stop_at_the_time_budget() {
     let dir = scratch("limits-relt-start-up");
@@ -482,6 +484,7 @@ fn relt_start_up_phases_sized_by_a_setting_stop_at_the_time_budget() {
     for (phase, setting) in [
         ("search", "l0_search=1000000000000"),
         ("annealing", "annealing_sweeps=1000000000"),
+        ("continued search", "l0_search_rate=1000000000"),
     ] {
         let stats = render_within_budget(
             &dir,
@@ -499,6 +502,10 @@ fn relt_start_up_phases_sized_by_a_setting_stop_at_the_time_budget() {
                 "annealing_particles=200",
                 "--set",
                 "l0_search=20000",
+                // Two replica sets: rounds of 512 mutations, so that the
+                // chains finish some before the budget.
+                "--set",
+                "chains=8",
                 "--set",
                 setting,
             ],
@@ -520,7 +527,17 @@ fn relt_start_up_phases_sized_by_a_setting_stop_at_the_time_budget() {
                 // The annealing was not cut: 200 particles × 1 sweep.
                 assert_eq!(steps[1..], [200, 200, 200]);
             }
-            _ => assert!(steps[1..].iter().all(|&s| s < 200_000_000_000), "{steps:?}"),
+            "annealing" => {
+                assert!(steps[1..].iter().all(|&s| s < 200_000_000_000), "{steps:?}")
+            }
+            _ => {
+                // The start-up whole, then some of the continued draws.
+                assert_eq!(draws, 20_000);
+                assert_eq!(steps[1..], [200, 200, 200]);
+                let run = search["run_draws"].as_u64().expect("run draws");
+                let mutations = stats["mutations"].as_u64().expect("mutations");
+                assert!(run > 0 && run < 1_000_000_000 * mutations, "{stats}");
+            }
         }
     }
 }

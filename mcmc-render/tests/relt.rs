@@ -203,8 +203,10 @@ fn small_settings() -> Relt {
     s.chain.chains = 64;
     s.chain.mutations_per_pixel = Some(16);
     s.depth.max_depth = 5;
-    // A small search: still run (and so covered by the thread-count tests).
+    // A small search: still run (and so covered by the thread-count tests),
+    // and continued during the run (one draw per mutation).
     s.l0_search = 20_000;
+    s.l0_search_rate = 1.0;
     s
 }
 
@@ -263,6 +265,15 @@ fn relt_is_bit_identical_across_thread_counts() {
     assert!(bits(&one) == bits(&two), "1 vs 2 threads differ");
     assert!(bits(&one) == bits(&three), "1 vs 3 threads differ");
     assert_eq!(one.statistics["exchange"], two.statistics["exchange"]);
+    // The search continued during the run (l0_search_rate 1 here):
+    // 16 tasks of one replica set each, 256 mutations per task in one
+    // round, units (strides) of 20 000 / 10 000 = 2 draws, so every task
+    // owes ⌊1 · 256 / 2⌋ = 128 units: 4096 draws; equal for every thread
+    // count, as the specific replica's b_4 they go into.
+    assert_eq!(one.statistics["searches"][3]["run_draws"], 4096);
+    assert_eq!(one.statistics["searches"], two.statistics["searches"]);
+    assert_eq!(one.statistics["searches"], three.statistics["searches"]);
+    assert_eq!(one.statistics["families"], three.statistics["families"]);
     let other = with_threads(2, || small(&scene, 6, small_settings()));
     assert!(bits(&one) != bits(&other), "seed ignored");
     // Every neighbour pair exchanged, and the layers sum to the image.
@@ -282,6 +293,96 @@ fn relt_is_bit_identical_across_thread_counts() {
             "pixel {i}"
         );
     }
+}
+
+#[test]
+fn the_continued_search_pools_its_draws_into_b4_and_rescales_only_the_specific_replica() {
+    // 64 chains / 4 replicas = 16 replica sets in 16 tasks; 48 mutations
+    // per pixel on 16×16 = 12 288 mutations, 768 per task in 3 rounds of
+    // 64 sweeps (256 mutations). At 0.3 draws per mutation in units
+    // (strides) of 20 000 / 10 000 = 2 draws, a task owes ⌊0.3·256/2⌋ =
+    // 38, ⌊76.8⌋ = 76 and ⌊115.2⌋ = 115 units after its rounds: 230
+    // draws, 3680 over the 16 tasks.
+    let scene = repo_scene_tilted("cornell-glossy-glass.xml", 16, 5);
+    let settings = |rate: f64| {
+        let mut s = small_settings();
+        s.chain.mutations_per_pixel = Some(48);
+        s.l0_search_rate = rate;
+        s
+    };
+    let off = small(&scene, 5, settings(0.0));
+    let on = small(&scene, 5, settings(0.3));
+    assert_eq!(on.statistics["searches"][3]["run_draws"], 3680);
+    assert_eq!(off.statistics["searches"][3]["run_draws"], 0);
+    // The continued draws enter the specific replica's running b_4 only
+    // (not the MIS weights' b̂, nor any chain): the other layers are the
+    // same bits, the specific one is scaled by the ratio of the b_4's.
+    let layer_bits = |r: &Rendered, k: usize| -> Vec<u32> {
+        r.layers[k]
+            .1
+            .iter()
+            .flat_map(|p| [p.r.to_bits(), p.g.to_bits(), p.b.to_bits()])
+            .collect()
+    };
+    for k in 0..3 {
+        assert!(layer_bits(&on, k) == layer_bits(&off, k), "layer {k}");
+    }
+    let b4 = |r: &Rendered| r.statistics["families"][3]["b_running"].as_f64().unwrap();
+    let ratio = b4(&on) / b4(&off);
+    assert!(ratio != 1.0);
+    let mut lit = 0;
+    for (a, b) in on.layers[3].1.iter().zip(&off.layers[3].1) {
+        for (x, y) in [(a.r, b.r), (a.g, b.g), (a.b, b.b)] {
+            let expected = f64::from(y) * ratio;
+            assert!((f64::from(x) - expected).abs() <= 1e-6 * expected.abs());
+            lit += usize::from(y > 0.0);
+        }
+    }
+    assert!(lit > 0, "the specific replica filmed nothing");
+    // b_4 merged over the rounds is the pooled mean of all its draws: the
+    // run without the continued search pools the 4000 bootstrap draws,
+    // the 20 000 start-up search draws and the uniform replica's 3072
+    // draws (one per sweep); the continued draws, recomputed here by hand
+    // (task t's unit u starts at first_index + (16u + t)·2), add their
+    // weights and their count.
+    let uniform_draws = on.statistics["families"][0]["mutations"].as_u64().unwrap();
+    assert_eq!(uniform_draws, 3072);
+    let n_off = (4000 + 20_000 + uniform_draws) as f64;
+    let n_on = n_off + 3680.0;
+    let s = settings(0.3);
+    let bdpt = Bdpt {
+        max_depth: s.depth.limit(),
+        rr_depth: s.depth.rr_depth,
+        heuristic: MisHeuristic::Power,
+    };
+    let fam = ReltFamily::new(&scene, bdpt, &s.replicas(), &s);
+    let plan = fam
+        .continued_search(3)
+        .expect("the specific replica searches on");
+    assert_eq!(plan.unit, 2);
+    let mut sum = 0.0;
+    for t in 0..16 {
+        for u in 0..115 {
+            let first = plan.first_index + (u * 16 + t) * plan.unit;
+            sum += fam
+                .search_unit(3, 5, first)
+                .iter()
+                .map(|lw| lw.exp())
+                .sum::<f64>();
+        }
+    }
+    let pooled = (n_off * b4(&off) + sum) / n_on;
+    eprintln!(
+        "b_4: {} without, {} with, pooled by hand {pooled}",
+        b4(&off),
+        b4(&on)
+    );
+    assert!(
+        (b4(&on) - pooled).abs() <= 1e-9 * pooled,
+        "b_4 is not the pooled mean"
+    );
+    // No other replica searches.
+    assert!((0..3).all(|m| fam.continued_search(m).is_none()));
 }
 
 #[test]
@@ -404,6 +505,7 @@ fn the_l0_search_estimates_b4_without_bias() {
     let settings = Relt {
         delta: 1.0,
         l0_search: 100_000,
+        l0_search_rate: 1.0,
         ..Relt::default()
     };
     let fam = family(&scene, &settings);
@@ -438,6 +540,42 @@ fn the_l0_search_estimates_b4_without_bias() {
         .map(|(w, &s)| if s { w / stride } else { w });
     let (b_control, _) = mean_se(control, search.draws);
     eprintln!("control (subsample unscaled): {b_control:.5}");
+    assert!((b_control - b_plain).abs() > 4.0 * sigma, "control passed");
+    // The search continued during the run: 5000 units (strides of 10
+    // draws) of its own candidates. The units' weight sums are
+    // independent, each an unbiased estimate of 10·b_4, so b_4 is their
+    // mean over 10 with the standard error of that mean; against the
+    // plain mean within 4σ.
+    let plan = fam
+        .continued_search(specific)
+        .expect("the search continues");
+    assert_eq!(plan.unit, 10);
+    // Control: each unit's representative (its first draw, when it fails
+    // the screen) without its factor 10 must fall outside 4σ.
+    let (units, controls): (Vec<f64>, Vec<f64>) = (0..5000u64)
+        .map(|u| {
+            let first = plan.first_index + u * plan.unit;
+            let w = fam.search_unit(specific, 5, first);
+            let sum = w.iter().map(|lw| lw.exp()).sum::<f64>();
+            let x = fam.candidate(5, first);
+            let control = if sampler.may_carry_specular_implicit(&scene, &x) {
+                sum
+            } else {
+                let q = fam.target(specific).evaluate(&x).log_density.exp().max(0.0);
+                sum - q * (stride - 1.0)
+            };
+            (sum / stride, control / stride)
+        })
+        .unzip();
+    let (b_run, se_run) = mean_se(units.into_iter(), 5000);
+    let sigma = se_run.hypot(se_plain);
+    eprintln!("b_4: continued search {b_run:.5} ± {se_run:.5}");
+    assert!(
+        (b_run - b_plain).abs() < 4.0 * sigma,
+        "continued search disagrees"
+    );
+    let (b_control, _) = mean_se(controls.into_iter(), 5000);
+    eprintln!("control (representatives unscaled): {b_control:.5}");
     assert!((b_control - b_plain).abs() > 4.0 * sigma, "control passed");
 }
 

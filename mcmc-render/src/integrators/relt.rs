@@ -33,7 +33,10 @@ use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
 use crate::deadline::Deadline;
 use crate::integrators::bdpt::{Bdpt, MisHeuristic};
-use crate::markov::{self, Annealing, ChainFamily, ChainParams, MltError, MltResult, Search};
+use crate::markov::{
+    self, Annealing, ChainFamily, ChainParams, ContinuedSearch, MltError, MltResult, Normalization,
+    Search,
+};
 use crate::observer::Observer;
 use crate::path_classes::{ClassScalar, ClassifiedBdpt, class_values};
 use crate::pss::{Mutation, PATH_CLASSES, PathSample, PssTarget, SmallStepKind};
@@ -112,8 +115,10 @@ crate::settings! {
         pub annealing_particles: usize = 10_000;
         /// Metropolis–Hastings steps per particle and replica in the annealing.
         pub annealing_sweeps: usize = 1;
-        /// Uniform draws screened for L0 paths to start the specific replica (0: no search; docs/relt.md).
+        /// Uniform draws screened for L0 paths to start the specific replica (0: no search, neither at start-up nor during the run; docs/relt.md).
         pub l0_search: usize = 4_000_000;
+        /// Further search draws per chain mutation, made while the chains run and merged into the specific replica's b_4 (0: start-up search only; normalization=running only; docs/relt.md session 16).
+        pub l0_search_rate: f64 = 0.0, check check::non_negative;
         flatten {
             /// Path depth.
             pub depth: DepthParams = DepthParams::default();
@@ -255,6 +260,8 @@ pub struct ReltFamily<'a> {
     annealing: Option<Annealing>,
     /// Draws of the specific replica's search for `L0` paths.
     l0_search: u64,
+    /// Search draws per chain mutation made while the chains run.
+    l0_search_rate: f64,
     /// The run's deadline, at which the search stops.
     deadline: Deadline,
 }
@@ -270,6 +277,10 @@ const SEARCH_FULL_DRAWS: u64 = 10_000;
 /// Draws of the search between two looks at the deadline (in parallel
 /// within a block; the blocks in order, so the draws kept are a prefix).
 const SEARCH_BLOCK: u64 = 1 << 14;
+
+/// First candidate index of the search continued during the run: after
+/// the start-up search's (disjoint from them for `l0_search < 2^38`).
+const CONTINUED_SEARCH_OFFSET: u64 = SEARCH_OFFSET + (1 << 38);
 
 /// Makes a fresh exchange move for one replica set.
 pub type MakeExchange = fn(usize) -> Box<dyn ExchangeMove<TorusPoint, PathSample>>;
@@ -300,6 +311,13 @@ impl<'a> ReltFamily<'a> {
                 sweeps: settings.annealing_sweeps,
             }),
             l0_search: settings.l0_search as u64,
+            // Only the running normalisation pools the draws into the
+            // image's b_4 (the others scale by the bootstrap's or by
+            // the chain of ratios): elsewhere they would be wasted.
+            l0_search_rate: match settings.chain.normalization {
+                Normalization::Running => settings.l0_search_rate,
+                _ => 0.0,
+            },
             deadline: Deadline::NEVER,
         }
     }
@@ -330,25 +348,12 @@ impl<'a> ReltFamily<'a> {
     /// Without a deadline the draws and weights are exactly those of the
     /// whole search.
     fn search_specific(&self, member: usize, seed: u64) -> Search {
-        let stride = (self.l0_search / SEARCH_FULL_DRAWS).max(1);
+        let stride = self.search_stride();
         let planned = self.l0_search.div_ceil(stride) * stride;
-        let target = &self.targets[member];
-        // One draw: `None` (weight 0) or its index, `ln q_4` and whether
-        // it stands for its stride's unscreened draws.
         let draw = |j: u64| {
             let index = SEARCH_OFFSET + j;
-            let x = self.candidate(seed, index);
-            let subsampled = !target
-                .pss
-                .sampler
-                .may_carry_specular_implicit(target.pss.scene, &x);
-            if subsampled && !j.is_multiple_of(stride) {
-                return None;
-            }
-            let log_q = target.evaluate(&x).log_density;
-            // Zero and NaN weigh nothing (NaN as in the running
-            // normalisation: counted as a zero).
-            log_q.is_finite().then_some((index, log_q, subsampled))
+            self.screened_draw(member, seed, index, j.is_multiple_of(stride))
+                .map(|(log_q, subsampled)| (index, log_q, subsampled))
         };
         let mut kept: Vec<(u64, f64, bool)> = Vec::new();
         let mut draws = 0;
@@ -377,6 +382,41 @@ impl<'a> ReltFamily<'a> {
             weighted,
             ..Search::default()
         }
+    }
+
+    /// Every `stride`-th draw of the search is traced whatever its camera
+    /// subpath: [`SEARCH_FULL_DRAWS`] of them in a search of `l0_search`.
+    fn search_stride(&self) -> u64 {
+        (self.l0_search / SEARCH_FULL_DRAWS).max(1)
+    }
+
+    /// One draw of the specific replica's search, candidate `index`,
+    /// screened by its camera subpath alone
+    /// ([`ClassifiedBdpt::may_carry_specular_implicit`]): `None` (weight
+    /// 0) for a draw that fails the screen unless it is its stride's
+    /// `representative`, and for one whose `q_4` is 0 or NaN; else `ln
+    /// q_4` and whether it failed the screen (it then stands for its
+    /// stride's unscreened draws).
+    fn screened_draw(
+        &self,
+        member: usize,
+        seed: u64,
+        index: u64,
+        representative: bool,
+    ) -> Option<(f64, bool)> {
+        let target = &self.targets[member];
+        let x = self.candidate(seed, index);
+        let subsampled = !target
+            .pss
+            .sampler
+            .may_carry_specular_implicit(target.pss.scene, &x);
+        if subsampled && !representative {
+            return None;
+        }
+        let log_q = target.evaluate(&x).log_density;
+        // Zero and NaN weigh nothing (NaN as in the running
+        // normalisation: counted as a zero).
+        log_q.is_finite().then_some((log_q, subsampled))
     }
 
     /// The family with the exchange move `make(replicas)` (any move of
@@ -435,6 +475,30 @@ impl<'a> ChainFamily for ReltFamily<'a> {
     fn search(&self, member: usize, seed: u64) -> Option<Search> {
         (Some(member) == self.specific && self.l0_search > 0)
             .then(|| self.search_specific(member, seed))
+    }
+    fn continued_search(&self, member: usize) -> Option<ContinuedSearch> {
+        (Some(member) == self.specific && self.l0_search > 0 && self.l0_search_rate > 0.0).then(
+            || ContinuedSearch {
+                per_mutation: self.l0_search_rate,
+                unit: self.search_stride(),
+                first_index: CONTINUED_SEARCH_OFFSET,
+            },
+        )
+    }
+    /// One stride of the search, screened as at start-up: its first draw
+    /// is the representative of the unscreened ones (weight `stride ·
+    /// q_4` if it fails the screen), the others weigh `q_4` if they pass
+    /// it and 0 if not, so the stride's weights sum to `stride · b_4` in
+    /// expectation.
+    fn search_unit(&self, member: usize, seed: u64, first: u64) -> Vec<f64> {
+        let stride = self.search_stride();
+        (0..stride)
+            .filter_map(|j| self.screened_draw(member, seed, first + j, j == 0))
+            .map(|(log_q, subsampled)| match subsampled {
+                true => log_q + (stride as f64).ln(),
+                false => log_q,
+            })
+            .collect()
     }
     fn sweep_share(&self, member: usize) -> f64 {
         self.targets[member].replica.share

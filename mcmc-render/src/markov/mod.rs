@@ -335,6 +335,38 @@ pub trait ChainFamily: Sync {
     fn search(&self, _member: usize, _seed: u64) -> Option<Search> {
         None
     }
+    /// A member's search continued while the chains run, if any: after
+    /// each whole round, every task makes [`ContinuedSearch::per_mutation`]
+    /// draws per mutation it ran (rounded down to whole units, counted
+    /// from its first mutation) by [`ChainFamily::search_unit`] and adds
+    /// their weights to its running estimate of the member's `b_d`, which
+    /// thus keeps pooling draws (the member's `b̂` of the MIS weights stays
+    /// the start-up's). The draws are a function of the task's mutation
+    /// count, so the image stays bit-identical for any thread count and
+    /// checkpoints need nothing more. `None` (the default): no search
+    /// during the run.
+    fn continued_search(&self, _member: usize) -> Option<ContinuedSearch> {
+        None
+    }
+    /// One unit of the member's continued search: the candidates `first ..
+    /// first + unit` ([`ContinuedSearch::unit`]); returns `ln w` of those
+    /// with a weight `w > 0` (the others weigh 0), such that the sum of
+    /// the unit's weights is an unbiased estimate of `unit · b_d`.
+    fn search_unit(&self, _member: usize, _seed: u64, _first: u64) -> Vec<f64> {
+        Vec::new()
+    }
+}
+
+/// A member's search continued during the run ([`ChainFamily::continued_search`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ContinuedSearch {
+    /// Draws per chain mutation (of the task that makes them).
+    pub per_mutation: f64,
+    /// Draws per unit (≥ 1): draws are made, and merged, in whole units.
+    pub unit: u64,
+    /// Candidate index of the first draw: unit `u` of task `t` (of `T`)
+    /// starts at `first_index + (u·T + t)·unit`.
+    pub first_index: u64,
 }
 
 /// The result of [`ChainFamily::search`]: `draws` independent draws from
@@ -434,6 +466,8 @@ pub struct SearchSummary {
     pub weighted: u64,
     /// Chains started from them (0: the member kept its other starts).
     pub started_chains: usize,
+    /// Draws made while the chains ran ([`ChainFamily::continued_search`]).
+    pub run_draws: u64,
 }
 
 /// Stream offset from which the annealing's seed is derived.
@@ -964,6 +998,7 @@ pub fn run<F: ChainFamily>(
                 draws: search.draws,
                 weighted: search.weighted.len() as u64,
                 started_chains: resampled.as_ref().map_or(0, Vec::len),
+                run_draws: 0,
             });
             if let Some(s) = resampled {
                 starts[d] = s;
@@ -1002,6 +1037,9 @@ pub fn run<F: ChainFamily>(
         _ => tasks?,
     };
     let all_tasks = tasks.len();
+    for (t, task) in tasks.iter_mut().enumerate() {
+        task.plan_searches(family, seed, (t as u64, all_tasks as u64));
+    }
     let task_ids: Vec<usize> = (0..tasks.len()).filter(|&t| owned(t)).collect();
     if cluster.is_some() {
         let mut t = 0;
@@ -1119,8 +1157,10 @@ pub fn run<F: ChainFamily>(
 
     let mut member_stats: Vec<Option<ChainStatistics>> = vec![None; members];
     let mut exchange_summary = None;
+    let mut run_draws = vec![0u64; members];
     for t in &tasks {
         t.collect_statistics(&mut member_stats, &mut exchange_summary);
+        t.add_search_draws(&mut run_draws);
     }
     // Rank 0 of a cluster reduces every rank's tasks; the others keep
     // their own (their results are not written).
@@ -1134,16 +1174,24 @@ pub fn run<F: ChainFamily>(
     let mut ranks = Vec::new();
     if let Some(c) = cluster {
         let local_mutations = tasks.iter().flat_map(|t| &t.mutations).sum();
-        let report = distribute::rank_report(
+        let mut report = distribute::rank_report(
             &member_stats,
             &exchange_summary,
             tasks.len(),
             local_mutations,
             start.elapsed().as_secs_f64(),
         );
+        // Each rank's draws of the continued searches, summed below.
+        report["search_draws"] = serde_json::json!(run_draws);
         let report = crate::cluster::with_ranks(serde_json::json!({}), report);
         if let Some(all) = report.get("ranks").and_then(|r| r.as_array()) {
             (member_stats, exchange_summary) = distribute::merge_reports(all, members);
+            run_draws = vec![0; members];
+            for r in all {
+                for (d, n) in run_draws.iter_mut().enumerate() {
+                    *n += r["search_draws"][d].as_u64().unwrap_or(0);
+                }
+            }
             ranks = all.clone();
         }
         debug_assert!(c.rank() != 0 || !ranks.is_empty());
@@ -1160,6 +1208,11 @@ pub fn run<F: ChainFamily>(
     for t in &sums {
         for (c, &v) in sample_counts.iter_mut().zip(&t.counts.samples) {
             *c += f64::from(v);
+        }
+    }
+    for (summary, &n) in searches.iter_mut().zip(&run_draws) {
+        if let Some(s) = summary {
+            s.run_draws = n;
         }
     }
     let running_b = (

@@ -4,7 +4,7 @@
 //! counters, run in rounds.
 
 use super::estimator::{DepthAcceptance, MemberSink, RatioSum, TransitionCounts, Weights, observe};
-use super::{ChainFamily, ExchangeSummary};
+use super::{ChainFamily, ContinuedSearch, ExchangeSummary};
 use crate::film::Film;
 use crate::observer::Observer;
 use crate::pss::PathSample;
@@ -126,6 +126,34 @@ pub(crate) struct Task<'f, F: ChainFamily> {
     pub counts: TransitionCounts,
     /// The chains or replica sets.
     pub units: Units<'f, F>,
+    /// Per member, its search continued during the run, if any.
+    pub searches: Vec<Option<TaskSearch>>,
+}
+
+/// A task's share of a member's search continued during the run
+/// ([`ChainFamily::continued_search`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct TaskSearch {
+    plan: ContinuedSearch,
+    seed: u64,
+    /// The task's index and the number of tasks (which interleave their
+    /// units' candidate indices).
+    task: (u64, u64),
+    /// Draws made (since the run, or its resumption, started).
+    made: u64,
+}
+
+impl TaskSearch {
+    /// Units owed after `mutations` mutations of the task.
+    fn owed(&self, mutations: u64) -> u64 {
+        (mutations as f64 * self.plan.per_mutation / self.plan.unit as f64).floor() as u64
+    }
+
+    /// Candidate index of unit `u`'s first draw.
+    fn first(&self, u: u64) -> u64 {
+        let (t, tasks) = self.task;
+        self.plan.first_index + (u * tasks + t) * self.plan.unit
+    }
 }
 
 impl<'f, F: ChainFamily> Task<'f, F> {
@@ -150,6 +178,30 @@ impl<'f, F: ChainFamily> Task<'f, F> {
             ratios: vec![RatioSum::default(); n],
             counts: TransitionCounts::new(probe.width, probe.height),
             units,
+            searches: vec![None; n],
+        }
+    }
+
+    /// Gives the task its share of the members' continued searches (`task`:
+    /// its index among all the run's tasks, and their number).
+    pub fn plan_searches(&mut self, family: &F, seed: u64, task: (u64, u64)) {
+        for (s, &m) in self.searches.iter_mut().zip(&self.members) {
+            *s = family.continued_search(m).map(|plan| TaskSearch {
+                plan,
+                seed,
+                task,
+                made: 0,
+            });
+        }
+    }
+
+    /// Adds the draws of the continued searches made by this task to
+    /// `draws` (per member).
+    pub fn add_search_draws(&self, draws: &mut [u64]) {
+        for (s, &m) in self.searches.iter().zip(&self.members) {
+            if let Some(s) = s {
+                draws[m] += s.made;
+            }
         }
     }
 
@@ -179,7 +231,12 @@ impl<'f, F: ChainFamily> Task<'f, F> {
             ratios,
             counts,
             units,
+            searches,
         } = self;
+        // The continued searches owe units for the mutations since the
+        // task's start; those of the rounds before this one are made (a
+        // round cut short ends the run), also after a checkpoint's resume.
+        let before: u64 = mutations.iter().sum();
         match units {
             Units::Chains(chains) => {
                 let member = members[0];
@@ -244,6 +301,20 @@ impl<'f, F: ChainFamily> Task<'f, F> {
                     }
                     observer.progress(done);
                 }
+            }
+        }
+        let after: u64 = mutations.iter().sum();
+        for (level, search) in searches.iter_mut().enumerate() {
+            let Some(s) = search else { continue };
+            for u in s.owed(before)..s.owed(after) {
+                if abort() {
+                    return false;
+                }
+                let weighted = family.search_unit(members[level], s.seed, s.first(u));
+                let zeros = s.plan.unit.saturating_sub(weighted.len() as u64);
+                weighted.iter().for_each(|&lw| running[level].add(lw));
+                (0..zeros).for_each(|_| running[level].add(f64::NEG_INFINITY));
+                s.made += s.plan.unit;
             }
         }
         true
