@@ -756,8 +756,12 @@ where
         }
         // The last word is the FNV-1a hash of the rest: a damaged file
         // (a flipped bit, a partial copy) is refused, not continued.
-        let (body, checksum) = bytes.split_at(bytes.len().max(16) - 8);
-        if checksum.len() != 8 || fnv1a(body, FNV_OFFSET).to_le_bytes() != checksum {
+        // (At least the magic and the checksum: 16 bytes.)
+        let Some(body_len) = bytes.len().checked_sub(8).filter(|&n| n >= 8) else {
+            return Err(not_ours("is corrupt: it ends before its checksum"));
+        };
+        let (body, checksum) = bytes.split_at(body_len);
+        if fnv1a(body, FNV_OFFSET).to_le_bytes() != checksum {
             return Err(not_ours("is corrupt: its checksum does not match"));
         }
         let (_, (fingerprint, (sweeps, (drawn, (exchange_words, (levels, pairs)))))): CheckpointFile<
