@@ -11,13 +11,15 @@
 # FUZZ_BIN_DIR=DIR runs DIR/TARGET instead of the build's binary (a copy,
 # so that a rebuild during a run does not swap the binary that libFuzzer's
 # fork mode re-executes for every job).
+# FUZZ_NICE=N runs at niceness N instead of 10 (0: an equal share with
+# everything else on the machine).
 set -e
 target=$1
 seconds=${2:-600}
 workers=${3:-1}
 bin=${FUZZ_BIN_DIR:-fuzz/target/x86_64-unknown-linux-gnu/release}/$target
 mkdir -p fuzz/corpus/$target fuzz/artifacts/$target
-exec nice -n 10 "$bin" fuzz/corpus/$target fuzz/seeds/$target \
+exec nice -n "${FUZZ_NICE:-10}" "$bin" fuzz/corpus/$target fuzz/seeds/$target \
     -fork=$workers -ignore_crashes=1 -ignore_timeouts=1 -ignore_ooms=1 \
     -timeout=10 -rss_limit_mb=2048 -max_len=65536 \
     -max_total_time=$seconds -artifact_prefix=fuzz/artifacts/$target/

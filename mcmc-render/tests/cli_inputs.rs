@@ -162,10 +162,24 @@ fn texture_and_checkpoint_paths_that_are_not_files_are_refused() {
     assert_clean_failure(&out, &["sky.exr is a FIFO"]);
     write(&dir, "s.xml", &floor_scene(8, 6));
     mkfifo(&dir.join("run.ckpt"));
-    for (ckpt, what) in [("run.ckpt", "a FIFO"), ("/dev/zero", "a device")] {
-        let args = ["render", "s.xml", "--spp", "1", "--checkpoint", ckpt];
-        let out = run_bounded(&[&args[..], &["--quiet"]].concat(), &dir);
-        assert_clean_failure(&out, &[ckpt, what]);
-        assert!(!dir.join("render.exr").exists());
+    // Both checkpoint readers: the per-pixel driver's (`pt`) and the
+    // Markov-chain driver's (`pssmlt`; it read `/dev/zero` until memory
+    // ran out and blocked on the FIFO until session 17).
+    for integrator in ["pt", "pssmlt"] {
+        for (ckpt, what) in [("run.ckpt", "a FIFO"), ("/dev/zero", "a device")] {
+            let args = [
+                "render",
+                "s.xml",
+                "--spp",
+                "1",
+                "--integrator",
+                integrator,
+                "--checkpoint",
+                ckpt,
+            ];
+            let out = run_bounded(&[&args[..], &["--quiet"]].concat(), &dir);
+            assert_clean_failure(&out, &[ckpt, what]);
+            assert!(!dir.join("render.exr").exists());
+        }
     }
 }

@@ -1,15 +1,21 @@
-//! Render checkpoints (`render --checkpoint FILE`): the reader, then the
-//! resumed render, as the command runs it: a path tracer continues the
-//! progress for one more pass in a 4×3 scene.
+//! Render checkpoints (`render --checkpoint FILE`): both readers, then the
+//! resumed render, as the command runs it. The per-pixel driver's file
+//! (`pt`): a path tracer continues the progress for one more pass in a
+//! 4×3 scene. The Markov-chain driver's file: `pssmlt` (2 chains, 100
+//! mutations per pixel, so rounds of 256, 256 and 88 mutations a chain)
+//! restores its tasks and runs to the end in the same scene.
 //!
-//! The reader first compares the file's fingerprint and image size with
-//! the run's; the target takes both from the input (its first word and the
-//! scene's size), so that the fuzzer gets past them to the rest.
+//! Each reader first compares the file's fingerprint and image size with
+//! the run's; the target takes the fingerprint from the input (the word
+//! after the magic) and the size from the scene, so that the fuzzer gets
+//! past them to the rest.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 use mcmc_render::checkpoint::{Checkpoint, progress_from_bytes};
+use mcmc_render::film::Filter;
 use mcmc_render::integrators::RunSettings;
 use mcmc_render::integrators::registry;
+use mcmc_render::markov::checkpoint::progress_from_bytes as chain_progress_from_bytes;
 use mcmc_render::observer::NoObserver;
 use mcmc_render::scene::Scene;
 use std::path::Path;
@@ -46,18 +52,37 @@ fuzz_target!(|data: &[u8]| {
     let scene = scene();
     let size = (scene.film.width, scene.film.height);
     let path = Path::new("fuzz.ckpt");
-    let Ok(progress) = progress_from_bytes(data, path, fingerprint, size) else {
-        return;
-    };
-    let spp = u32::try_from(progress.spp_done + 1).unwrap_or(u32::MAX);
-    let checkpoint = Checkpoint {
+    let mut checkpoint = Checkpoint {
         path: out_dir().join("run.ckpt"),
         fingerprint,
-        resume: Some(Arc::new(progress)),
+        resume: None,
+        chains: None,
     };
-    let integrator = registry::configure(None, Some("pt"), &[]).expect("pt");
+    let (integrator, spp) = if let Ok(progress) = progress_from_bytes(data, path, fingerprint, size)
+    {
+        let spp = u32::try_from(progress.spp_done + 1).unwrap_or(u32::MAX);
+        checkpoint.resume = Some(Arc::new(progress));
+        (
+            registry::configure(None, Some("pt"), &[]).expect("pt"),
+            Some(spp),
+        )
+    } else {
+        let filter = Arc::new(Filter::new(scene.film.filter, size.0, size.1));
+        let Ok(progress) = chain_progress_from_bytes(data, path, fingerprint, size, &filter) else {
+            return;
+        };
+        checkpoint.chains = Some(Arc::new(progress));
+        let sets = [
+            ("bootstrap", "1000"),
+            ("chains", "2"),
+            ("mutations_per_pixel", "100"),
+        ]
+        .map(|(k, v)| (k.to_string(), v.to_string()));
+        let integrator = registry::configure(None, Some("pssmlt"), &sets).expect("pssmlt");
+        (integrator, None)
+    };
     let run = RunSettings {
-        spp: Some(spp),
+        spp,
         checkpoint: Some(checkpoint),
         ..RunSettings::default()
     };

@@ -133,18 +133,43 @@ pub fn save(path: &Path, fingerprint: u64, progress: &ChainProgress) -> Result<(
 /// The progress saved at `path` for the inputs `fingerprint` and an image
 /// of `size` (films rebuilt with `filter`): `None` when there is no file;
 /// an error (one line) when it is not a Markov-chain checkpoint or belongs
-/// to another render.
+/// to another render. A path that is not a regular file is refused before
+/// it is opened (a FIFO would block, a device never end), and a file is
+/// read only if twice its length fits in the available memory (the
+/// decoded progress takes about as many bytes as the file: every length
+/// in it is bounded by the bytes that follow).
 pub fn load(
     path: &Path,
     fingerprint: u64,
     size: (u32, u32),
     filter: &Arc<Filter>,
 ) -> Result<Option<ChainProgress>, String> {
-    let bytes = match std::fs::read(path) {
-        Ok(b) => b,
+    let len = match std::fs::metadata(path) {
+        Ok(m) => m.len(),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(e) => return Err(format!("cannot read checkpoint {}: {e}", path.display())),
     };
+    crate::resources::regular_file(path).map_err(|e| format!("checkpoint: {e}"))?;
+    crate::resources::check_memory(
+        &format!("checkpoint {} ({len} bytes)", path.display()),
+        2 * u128::from(len),
+    )?;
+    let bytes = std::fs::read(path)
+        .map_err(|e| format!("cannot read checkpoint {}: {e}", path.display()))?;
+    progress_from_bytes(&bytes, path, fingerprint, size, filter).map(Some)
+}
+
+/// The progress a checkpoint's bytes hold, checked as [`load`] checks a
+/// file (`path` names it in messages): the magic, the fingerprint, the
+/// encoding and every film's size. Whether the tasks fit the run is
+/// checked when the run restores them.
+pub fn progress_from_bytes(
+    bytes: &[u8],
+    path: &Path,
+    fingerprint: u64,
+    size: (u32, u32),
+    filter: &Arc<Filter>,
+) -> Result<ChainProgress, String> {
     let bad = |why: &str| format!("checkpoint {}: {why}", path.display());
     let Some(body) = bytes.strip_prefix(MAGIC) else {
         return Err(bad("not a checkpoint of mcmc-render's Markov-chain driver"));
@@ -170,7 +195,7 @@ pub fn load(
             )));
         }
     }
-    Ok(Some(progress))
+    Ok(progress)
 }
 
 /// The record of a chain: its current sample, stream and statistics.
