@@ -47,6 +47,10 @@ use crate::math::log_sum_exp2;
 use crate::rng::{ChainRng, uniform};
 use crate::sample::Sample;
 
+/// The smallest step Stan's step-size heuristic tries (nuts-rs's bound
+/// too); below it the search gives up.
+pub const MIN_INITIAL_STEP: f64 = 1e-10;
+
 /// What one NUTS transition did, named as Stan's sampler diagnostics.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct NutsDrawStatistics {
@@ -314,12 +318,66 @@ impl<G: GradientTarget> Nuts<G> {
         if h.is_nan() { f64::INFINITY } else { h }
     }
 
+    /// Runs Stan's step-size heuristic from `start` now rather than at the
+    /// first warm-up transition, drawing exactly what that transition would
+    /// have drawn first, and restarts dual averaging around the step found.
+    /// Without a pending heuristic (no warm-up, or already run) it returns
+    /// the current step and draws nothing.
+    /// `None` (the heuristic stays pending) when no step of at least
+    /// [`MIN_INITIAL_STEP`] has one-step acceptance above 0.8: the target
+    /// varies at `start` on a scale ten orders of magnitude below that of
+    /// Stan's initial box, and a warm-up started there spends hundreds of
+    /// iterations creeping (`arma-arma11` from `|θ| > 1`: `ln π ≈ −10¹¹⁶`,
+    /// one chain in 34 ended in a local mode, `docs/performance.md`,
+    /// "arma-arma11: stuck chains, session 17"). [`sample_nuts`] then draws
+    /// another initial point.
+    ///
+    /// [`sample_nuts`]: crate::fit::sample_nuts
+    pub fn search_initial_step_size(
+        &mut self,
+        start: &Sample<Vec<f64>, GradientPayload>,
+        rng: &mut ChainRng,
+    ) -> Option<f64> {
+        if !(self.init_step_pending && self.hmc.is_adapting()) {
+            return Some(self.hmc.step_size());
+        }
+        let d = self.hmc.target().dim();
+        if start.state.len() != d || start.payload.gradient.len() != d {
+            return None;
+        }
+        let mut w = std::mem::take(&mut self.work);
+        w.pool.reset(d);
+        let s = w.pool.alloc();
+        {
+            let z = w.pool.get_mut(s);
+            z.x.clone_from(&start.state);
+            z.grad.clone_from(&start.payload.gradient);
+            z.lp = start.log_density;
+        }
+        let (eps, found) = self.initial_step_size(&mut w.pool, s, rng);
+        self.work = w;
+        if !found {
+            return None;
+        }
+        self.init_step_pending = false;
+        self.hmc.restart_step_size(eps);
+        Some(eps)
+    }
+
     /// Stan's heuristic: from the pool's point `start`, double (or halve)
     /// `ε` while one leapfrog step's acceptance stays above (below) 0.8.
-    fn initial_step_size(&mut self, pool: &mut PointPool, start: usize, rng: &mut ChainRng) -> f64 {
+    /// Also returns whether the acceptance crossed 0.8 (false when `ε` hit
+    /// [`MIN_INITIAL_STEP`] or 10⁷ first).
+    fn initial_step_size(
+        &mut self,
+        pool: &mut PointPool,
+        start: usize,
+        rng: &mut ChainRng,
+    ) -> (f64, bool) {
         let mut eps = self.hmc.step_size();
         let scratch = pool.alloc();
         let mut direction = 0.0;
+        let mut found = false;
         for _ in 0..100 {
             self.hmc
                 .metric()
@@ -333,16 +391,17 @@ impl<G: GradientTarget> Nuts<G> {
             if direction == 0.0 {
                 direction = if up { 2.0 } else { 0.5 };
             } else if up != (direction > 1.0) {
+                found = true;
                 break;
             }
             let next = eps * direction;
-            if !(next > 1e-10 && next < 1e7) {
+            if !(next > MIN_INITIAL_STEP && next < 1e7) {
                 break;
             }
             eps = next;
         }
         pool.release(scratch);
-        eps
+        (eps, found)
     }
 
     /// One NUTS transition from the pool's point `start` (whose momentum is
@@ -650,7 +709,7 @@ impl<G: GradientTarget> Kernel<Vec<f64>, GradientPayload> for Nuts<G> {
         }
         if self.init_step_pending && self.hmc.is_adapting() {
             self.init_step_pending = false;
-            let eps = self.initial_step_size(&mut w.pool, start, rng);
+            let (eps, _) = self.initial_step_size(&mut w.pool, start, rng);
             self.hmc.restart_step_size(eps);
         }
         self.hmc.statistics_mut().trajectories += 1;
