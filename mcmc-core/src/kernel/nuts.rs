@@ -1248,4 +1248,75 @@ mod tests {
         eprintln!("biased banana: z = {z:?}");
         assert!(z.iter().any(|v| v.abs() > 4.5), "biased banana: z = {z:?}");
     }
+
+    /// `ln π = −½·10³⁰·x²`: at `x = 1` one leapfrog step of 10⁻¹⁰ still has
+    /// an energy error of ≈ 10¹⁰, so the heuristic reaches its floor.
+    #[derive(Clone, Copy)]
+    struct Stiff;
+    impl GradientTarget for Stiff {
+        fn dim(&self) -> usize {
+            1
+        }
+        fn log_density_gradient(&self, x: &[f64], g: &mut [f64]) -> f64 {
+            g[0] = -1e30 * x[0];
+            -0.5e30 * x[0] * x[0]
+        }
+    }
+
+    /// Searching the step before the chain starts draws exactly what the
+    /// first warm-up transition would have drawn: the chain is
+    /// bit-identical to one that ran the heuristic itself (so a fit whose
+    /// first initial point is accepted is unchanged). At a point where no
+    /// step ≥ 10⁻¹⁰ is accepted the search reports `None` and leaves the
+    /// kernel's step as it was; control: the same search from `x = 1` on a
+    /// standard normal finds a step.
+    #[test]
+    fn initial_step_search_before_the_chain_matches_the_warmup_and_refuses_stiff_points() {
+        let t = Differentiable(Correlated);
+        let make = || {
+            Nuts::new(Correlated, 1.0)
+                .unwrap()
+                .with_warmup(100, 0.8, MetricAdaptation::Diagonal)
+                .unwrap()
+        };
+        let x0 = vec![1.5, -0.5];
+        let mut plain = Chain::new(
+            &t,
+            x0.clone(),
+            MetropolisHastings::new(make()),
+            stream_rng(4, 0),
+        )
+        .unwrap();
+        let mut rng = stream_rng(4, 0);
+        let mut searched = make();
+        let eps = searched
+            .search_initial_step_size(&Sample::evaluate(&t, x0.clone()), &mut rng)
+            .unwrap();
+        assert_eq!(searched.step_size(), eps);
+        let mut early = Chain::new(&t, x0, MetropolisHastings::new(searched), rng).unwrap();
+        for _ in 0..150 {
+            plain.step(&t);
+            early.step(&t);
+            assert_eq!(plain.state(), early.state());
+        }
+        assert_eq!(
+            plain.algorithm().kernel().step_size(),
+            early.algorithm().kernel().step_size()
+        );
+
+        let mut rng = stream_rng(5, 0);
+        let mut stiff = Nuts::new(Stiff, 1.0)
+            .unwrap()
+            .with_warmup(100, 0.8, MetricAdaptation::Diagonal)
+            .unwrap();
+        let s = Sample::evaluate(&Differentiable(Stiff), vec![1.0]);
+        assert_eq!(stiff.search_initial_step_size(&s, &mut rng), None);
+        assert_eq!(stiff.step_size(), 1.0);
+        let mut normal = Nuts::new(Normal1, 1.0)
+            .unwrap()
+            .with_warmup(100, 0.8, MetricAdaptation::Diagonal)
+            .unwrap();
+        let s = Sample::evaluate(&Differentiable(Normal1), vec![1.0]);
+        assert!(normal.search_initial_step_size(&s, &mut rng).is_some());
+    }
 }
