@@ -1,7 +1,7 @@
 //! The posteriordb example's models and its agreement with posteriordb's
 //! reference draws.
 
-use mcmc_core::adaptation::{AcceptanceStatistic, StepSizeAdaptation};
+use mcmc_core::adaptation::{AcceptanceStatistic, MetricAdaptation, StepSizeAdaptation};
 use mcmc_core::fit::NutsSettings;
 use mcmc_core::gradient::GradientTarget;
 use mcmc_core::rng::{standard_normal, stream_rng};
@@ -65,14 +65,15 @@ fn gradients_match_finite_differences() {
 fn nuts_agrees_with_posteriordb_references() {
     let settings = NutsSettings {
         seed: 2026,
-        // CmdStan's windows (75 / 25 / 50), step-size restarts and
-        // acceptance statistic: the committed expectations were made with
-        // them.
+        // CmdStan's windows (75 / 25 / 50), step-size restarts, acceptance
+        // statistic and metric (`diag_e`): the committed expectations were
+        // made with them.
         init_buffer: 75,
         window: 25,
         term_buffer: 50,
         step_size_adaptation: StepSizeAdaptation::Restart,
         acceptance_statistic: AcceptanceStatistic::Stan,
+        metric: MetricAdaptation::Diagonal,
         ..Default::default()
     };
     let mut failures = Vec::new();
@@ -133,14 +134,15 @@ fn dropped_jacobian_fails_the_reference_check() {
     };
     let settings = NutsSettings {
         seed: 2026,
-        // CmdStan's windows (75 / 25 / 50), step-size restarts and
-        // acceptance statistic: the committed expectations were made with
-        // them.
+        // CmdStan's windows (75 / 25 / 50), step-size restarts, acceptance
+        // statistic and metric (`diag_e`): the committed expectations were
+        // made with them.
         init_buffer: 75,
         window: 25,
         term_buffer: 50,
         step_size_adaptation: StepSizeAdaptation::Restart,
         acceptance_statistic: AcceptanceStatistic::Stan,
+        metric: MetricAdaptation::Diagonal,
         ..Default::default()
     };
     let (r, _) = run(&wrong, &settings).unwrap();

@@ -24,9 +24,11 @@ use std::time::Instant;
 /// (4 chains, 1000 warm-up iterations, 1000 draws, `adapt_delta` 0.8,
 /// diagonal metric, maximum depth 10, initial step size 1, initial points
 /// uniform in `[−2, 2]^d`) except the warm-up: windows 75 / 25 / 150
-/// (CmdStan: 75 / 25 / 50) and one dual-averaging run for the step size,
-/// chosen by measurement on the four targets of `examples/hmc_vs_nuts`
-/// and on `arma-arma11` of `examples/posteriordb` (`docs/performance.md`).
+/// (CmdStan: 75 / 25 / 50), one dual-averaging run for the step size and
+/// initial points redrawn where no usable step size exists, chosen by
+/// measurement on the
+/// four targets of `examples/hmc_vs_nuts` and on `arma-arma11` of
+/// `examples/posteriordb` (`docs/performance.md`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct NutsSettings {
     /// Number of chains.
@@ -41,7 +43,13 @@ pub struct NutsSettings {
     /// of the acceptance statistic `acceptance_statistic` names (Stan's
     /// `accept_stat`, then the symmetrised one in the late warm-up).
     pub target_accept: f64,
-    /// Which metric the warm-up estimates.
+    /// Which metric the warm-up estimates: by default Stan's diagonal
+    /// ([`MetricAdaptation::Diagonal`], the variances).
+    /// [`MetricAdaptation::DiagonalGradientEarly`] (nuts-rs's
+    /// gradient-based estimate in the short early windows, the variances in
+    /// the last two) spends 5 % fewer warm-up gradients on the non-centred
+    /// eight schools at the same ESS (`docs/performance.md`, "Eight
+    /// schools' warm-up, session 17").
     pub metric: MetricAdaptation,
     /// Maximum tree depth.
     pub max_depth: usize,

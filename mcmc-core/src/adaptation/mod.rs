@@ -87,15 +87,18 @@ pub enum MetricAdaptation {
     /// ([`Warmup::observe_with_gradient`]): NUTS does; with a kernel that
     /// does not, the metric stays as given.
     DiagonalGradient,
-    /// [`Self::DiagonalGradient`] in every slow window but the last, then
-    /// [`Self::Diagonal`] (the variances) in the last, longest window, whose
+    /// [`Self::DiagonalGradient`] in every slow window but the last two,
+    /// then [`Self::Diagonal`] (the variances) in the last two, whose
     /// estimate the chain keeps. The short early windows (25, 50, 100
     /// draws of Stan's schedule) give the variances alone a noisy metric
     /// and the warm-up long trees; the gradient-based estimate settles from
     /// few draws. The final metric is still Stan's variances, which sample
-    /// arK better than the gradient-based one (`docs/performance.md`,
-    /// "Eight schools' warm-up, session 17"). Falls back to the variances
-    /// where the kernel passes no gradient.
+    /// arK better than the gradient-based one; switching one window before
+    /// the end leaves continuous dual averaging 550 iterations to follow
+    /// the change (switching at the last update left arK's final step too
+    /// large: 65 divergences, half the ESS). `docs/performance.md`, "Eight
+    /// schools' warm-up, session 17". Falls back to the variances where the
+    /// kernel passes no gradient.
     DiagonalGradientEarly,
 }
 
@@ -104,7 +107,7 @@ pub enum MetricAdaptation {
 enum Estimator {
     Draws(MetricEstimator),
     Gradient(GradientMetricEstimator),
-    /// Gradient-based before the last slow window, variances in it.
+    /// Gradient-based before the last two slow windows, variances in them.
     GradientEarly(GradientMetricEstimator, MetricEstimator),
 }
 
