@@ -88,7 +88,7 @@ fn nuts_agrees_with_posteriordb_references() {
             continue;
         }
         for q in &r.quantities {
-            if q.z_mean.abs() > 4.0 || q.z_sd.abs() > 4.0 || !(q.rhat < 1.01) {
+            if q.z_mean.abs() > 4.0 || q.z_sd.abs() > 4.0 || q.rhat.is_nan() || q.rhat >= 1.01 {
                 failures.push(format!(
                     "{name} {}: z_mean {:.2}, z_sd {:.2}, R-hat {:.3}",
                     q.name, q.z_mean, q.z_sd, q.rhat
