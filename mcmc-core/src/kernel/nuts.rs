@@ -327,10 +327,10 @@ impl<G: GradientTarget> Nuts<G> {
     /// [`MIN_INITIAL_STEP`] has one-step acceptance above 0.8: the target
     /// varies at `start` on a scale ten orders of magnitude below that of
     /// Stan's initial box, and a warm-up started there spends hundreds of
-    /// iterations creeping (`arma-arma11` from `|θ| > 1`: `ln π ≈ −10¹¹⁶`,
-    /// one chain in 34 ended in a local mode, `docs/performance.md`,
-    /// "arma-arma11: stuck chains, session 17"). [`sample_nuts`] then draws
-    /// another initial point.
+    /// iterations creeping (`arma-arma11` from `|θ| > 1`, `ln π` down to
+    /// `−10¹¹⁶`: 2 of its 68 chains over 17 seeds ended in a local mode,
+    /// `docs/performance.md`, "arma-arma11: stuck chains, session 17").
+    /// [`sample_nuts`] then draws another initial point.
     ///
     /// [`sample_nuts`]: crate::fit::sample_nuts
     pub fn search_initial_step_size(
