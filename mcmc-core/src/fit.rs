@@ -26,9 +26,8 @@ use std::time::Instant;
 /// uniform in `[−2, 2]^d`) except the warm-up: windows 75 / 25 / 150
 /// (CmdStan: 75 / 25 / 50), one dual-averaging run for the step size and
 /// initial points redrawn where no usable step size exists, chosen by
-/// measurement on the
-/// four targets of `examples/hmc_vs_nuts` and on `arma-arma11` of
-/// `examples/posteriordb` (`docs/performance.md`).
+/// measurement on the four targets of `examples/hmc_vs_nuts` and on
+/// `arma-arma11` of `examples/posteriordb` (`docs/performance.md`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct NutsSettings {
     /// Number of chains.
@@ -65,7 +64,7 @@ pub struct NutsSettings {
     /// scale ten orders of magnitude below the initial box's. Default true;
     /// false is Stan's rule, under which one `arma-arma11` chain started in
     /// the model's explosive `|θ| > 1` region (`ln π ≈ −10¹¹⁶`) creeps into
-    /// a local mode and never leaves it (seeds 5 and 8, R-hat 1.58;
+    /// a local mode and never leaves it (seeds 5 and 8, R-hat 1.53;
     /// `docs/performance.md`, "arma-arma11: stuck chains, session 17").
     /// Points given by `init` are used as they are.
     pub retry_stiff_inits: bool,

@@ -354,9 +354,9 @@ impl<G: GradientTarget> Nuts<G> {
             z.grad.clone_from(&start.payload.gradient);
             z.lp = start.log_density;
         }
-        let (eps, found) = self.initial_step_size(&mut w.pool, s, rng);
+        let (eps, too_stiff) = self.initial_step_size(&mut w.pool, s, rng);
         self.work = w;
-        if !found {
+        if too_stiff {
             return None;
         }
         self.init_step_pending = false;
@@ -366,8 +366,9 @@ impl<G: GradientTarget> Nuts<G> {
 
     /// Stan's heuristic: from the pool's point `start`, double (or halve)
     /// `ε` while one leapfrog step's acceptance stays above (below) 0.8.
-    /// Also returns whether the acceptance crossed 0.8 (false when `ε` hit
-    /// [`MIN_INITIAL_STEP`] or 10⁷ first).
+    /// Also returns whether the halving reached [`MIN_INITIAL_STEP`] with
+    /// the acceptance still below 0.8 (doubling up to 10⁷ is no failure:
+    /// a flat target).
     fn initial_step_size(
         &mut self,
         pool: &mut PointPool,
@@ -377,7 +378,7 @@ impl<G: GradientTarget> Nuts<G> {
         let mut eps = self.hmc.step_size();
         let scratch = pool.alloc();
         let mut direction = 0.0;
-        let mut found = false;
+        let mut too_stiff = false;
         for _ in 0..100 {
             self.hmc
                 .metric()
@@ -391,17 +392,17 @@ impl<G: GradientTarget> Nuts<G> {
             if direction == 0.0 {
                 direction = if up { 2.0 } else { 0.5 };
             } else if up != (direction > 1.0) {
-                found = true;
                 break;
             }
             let next = eps * direction;
             if !(next > MIN_INITIAL_STEP && next < 1e7) {
+                too_stiff = direction < 1.0;
                 break;
             }
             eps = next;
         }
         pool.release(scratch);
-        (eps, found)
+        (eps, too_stiff)
     }
 
     /// One NUTS transition from the pool's point `start` (whose momentum is
@@ -1268,8 +1269,9 @@ mod tests {
     /// bit-identical to one that ran the heuristic itself (so a fit whose
     /// first initial point is accepted is unchanged). At a point where no
     /// step ≥ 10⁻¹⁰ is accepted the search reports `None` and leaves the
-    /// kernel's step as it was; control: the same search from `x = 1` on a
-    /// standard normal finds a step.
+    /// kernel's step as it was; controls: the same search from `x = 1` on a
+    /// standard normal finds a step, and on a nearly flat target it stops
+    /// doubling at 10⁷ and succeeds.
     #[test]
     fn initial_step_search_before_the_chain_matches_the_warmup_and_refuses_stiff_points() {
         let t = Differentiable(Correlated);
@@ -1318,5 +1320,27 @@ mod tests {
             .unwrap();
         let s = Sample::evaluate(&Differentiable(Normal1), vec![1.0]);
         assert!(normal.search_initial_step_size(&s, &mut rng).is_some());
+        // A nearly flat target: the doubling stops at 10⁷, which is no
+        // failure.
+        let mut flat = Nuts::new(Flat, 1.0)
+            .unwrap()
+            .with_warmup(100, 0.8, MetricAdaptation::Diagonal)
+            .unwrap();
+        let s = Sample::evaluate(&Differentiable(Flat), vec![1.0]);
+        let eps = flat.search_initial_step_size(&s, &mut rng).unwrap();
+        assert!(eps > 1e6, "{eps}");
+    }
+
+    /// `ln π = −½·10⁻³⁰·x²`: one leapfrog step of 10⁷ is still accepted.
+    #[derive(Clone, Copy)]
+    struct Flat;
+    impl GradientTarget for Flat {
+        fn dim(&self) -> usize {
+            1
+        }
+        fn log_density_gradient(&self, x: &[f64], g: &mut [f64]) -> f64 {
+            g[0] = -1e-30 * x[0];
+            -0.5e-30 * x[0] * x[0]
+        }
     }
 }
