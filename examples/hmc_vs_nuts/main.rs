@@ -22,7 +22,10 @@
 //! its initial step-size-only buffer and first metric window (CmdStan's
 //! `init_buffer`, `window`); `--nuts-acceptance stan|symmetric-late` the
 //! acceptance statistic its step-size adaptation steers (default
-//! `symmetric-late`, `NutsSettings::default()`). `--samplers` also takes the warm-up
+//! `symmetric-late`, `NutsSettings::default()`); `--nuts-metric
+//! diagonal|gradient|gradient-early` the metric its warm-up estimates
+//! (`MetricAdaptation::Diagonal`, `DiagonalGradient`,
+//! `DiagonalGradientEarly`; default `NutsSettings::default()`'s). `--samplers` also takes the warm-up
 //! variants `nuts-stan` (CmdStan's 75 / 25 / 50, diagonal metric from the
 //! draws, step size restarted at every metric update), `nuts-tb150`
 //! (terminal buffer 150), `nuts-early` (10 / 10 / 150: metric windows from
@@ -126,6 +129,7 @@ struct Options {
     nuts_init_buffer: Option<usize>,
     nuts_window: Option<usize>,
     nuts_acceptance: Option<AcceptanceStatistic>,
+    nuts_metric: Option<MetricAdaptation>,
     samplers: Vec<String>,
     targets: Vec<String>,
 }
@@ -213,6 +217,7 @@ fn parse() -> Result<Options, String> {
         nuts_init_buffer: None,
         nuts_window: None,
         nuts_acceptance: None,
+        nuts_metric: None,
         samplers: SAMPLERS.map(String::from).to_vec(),
         targets: TARGETS.map(String::from).to_vec(),
     };
@@ -302,6 +307,18 @@ fn parse() -> Result<Options, String> {
                     }
                 })
             }
+            "--nuts-metric" => {
+                o.nuts_metric = Some(match value("--nuts-metric")?.as_str() {
+                    "diagonal" => MetricAdaptation::Diagonal,
+                    "gradient" => MetricAdaptation::DiagonalGradient,
+                    "gradient-early" => MetricAdaptation::DiagonalGradientEarly,
+                    other => {
+                        return Err(format!(
+                            "--nuts-metric: `{other}` (expected diagonal, gradient or gradient-early)"
+                        ));
+                    }
+                })
+            }
             "--mala-steps" => {
                 o.mala_steps = value("--mala-steps")?
                     .parse()
@@ -321,7 +338,7 @@ fn parse() -> Result<Options, String> {
             }
             other => {
                 return Err(format!(
-                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --hmc-time T, --h2mc-tau τ, --h2mc-steps k, --mala-steps k, --nuts-term-buffer N, --nuts-init-buffer N, --nuts-window N, --nuts-acceptance stan|symmetric-late, --samplers a,b, --targets a,b)"
+                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --hmc-time T, --h2mc-tau τ, --h2mc-steps k, --mala-steps k, --nuts-term-buffer N, --nuts-init-buffer N, --nuts-window N, --nuts-acceptance stan|symmetric-late, --nuts-metric diagonal|gradient|gradient-early, --samplers a,b, --targets a,b)"
                 ));
             }
         }
@@ -745,8 +762,9 @@ fn compare<G: GradientTarget + Clone>(name: &str, g: &G, time: f64, o: &Options)
             tb,
         );
         let acceptance = o.nuts_acceptance.unwrap_or(s.acceptance_statistic);
+        let metric = o.nuts_metric.unwrap_or(s.metric);
         let make = || {
-            nuts(g.clone(), w, s.metric, schedule, s.step_size_adaptation)
+            nuts(g.clone(), w, metric, schedule, s.step_size_adaptation)
                 .with_acceptance_statistic(acceptance)
         };
         runs.push(run_ours(name, "nuts", g, make, (w, 1), o));

@@ -18,9 +18,14 @@
 //! `--acceptance stan|symmetric-late` (the statistic dual averaging steers;
 //! default symmetric-late, nuts-rs's from the last metric window on);
 //! `--init-radius r` (initial points uniform in `[−r, r]^d` on the
-//! unconstrained space, Stan's 2).
+//! unconstrained space, Stan's 2); `--stiff-inits redraw|keep` (default
+//! redraw: a random initial point where Stan's step-size heuristic finds no
+//! step ≥ 10⁻¹⁰ is drawn again; keep is Stan's rule);
+//! `--metric diagonal|gradient|gradient-early|dense` (the metric the
+//! warm-up estimates: `MetricAdaptation::Diagonal`, `DiagonalGradient`,
+//! `DiagonalGradientEarly`, `Dense`).
 
-use mcmc_core::adaptation::{AcceptanceStatistic, StepSizeAdaptation};
+use mcmc_core::adaptation::{AcceptanceStatistic, MetricAdaptation, StepSizeAdaptation};
 use mcmc_core::fit::NutsSettings;
 use mcmc_examples::posteriordb::{PosteriorReport, load, names, run, write_outputs};
 
@@ -61,6 +66,30 @@ fn parse() -> Result<Options, String> {
                     return Err("--init-radius must be finite and non-negative".into());
                 }
             }
+            "--stiff-inits" => {
+                s.retry_stiff_inits = match value(&a)?.as_str() {
+                    "redraw" => true,
+                    "keep" => false,
+                    other => {
+                        return Err(format!(
+                            "--stiff-inits: `{other}` (expected redraw or keep)"
+                        ));
+                    }
+                }
+            }
+            "--metric" => {
+                s.metric = match value(&a)?.as_str() {
+                    "diagonal" => MetricAdaptation::Diagonal,
+                    "gradient" => MetricAdaptation::DiagonalGradient,
+                    "gradient-early" => MetricAdaptation::DiagonalGradientEarly,
+                    "dense" => MetricAdaptation::Dense,
+                    other => {
+                        return Err(format!(
+                            "--metric: `{other}` (expected diagonal, gradient, gradient-early or dense)"
+                        ));
+                    }
+                }
+            }
             "--init-buffer" => s.init_buffer = number(&a, &value(&a)?)?,
             "--window" => s.window = number(&a, &value(&a)?)?,
             "--term-buffer" => s.term_buffer = number(&a, &value(&a)?)?,
@@ -98,7 +127,7 @@ fn parse() -> Result<Options, String> {
             }
             other => {
                 return Err(format!(
-                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --adapt-delta δ, --init-radius r, --init-buffer N, --window N, --term-buffer N, --step-size continuous|restart, --acceptance stan|symmetric-late, --posteriors a,b, --out DIR)"
+                    "unknown argument `{other}` (expected --json, --chains N, --warmup N, --draws N, --seed N, --adapt-delta δ, --init-radius r, --stiff-inits redraw|keep, --metric diagonal|gradient|gradient-early|dense, --init-buffer N, --window N, --term-buffer N, --step-size continuous|restart, --acceptance stan|symmetric-late, --posteriors a,b, --out DIR)"
                 ));
             }
         }

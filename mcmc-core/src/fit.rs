@@ -17,16 +17,17 @@ use crate::kernel::{GradientKernelStatistics, Nuts, NutsDrawStatistics};
 use crate::mh::MetropolisHastings;
 use crate::rng::uniform;
 use crate::runner::run_chains;
-use crate::target::Target;
+use crate::sample::Sample;
 use std::time::Instant;
 
 /// Settings of a multi-chain NUTS run; [`Default`] is CmdStan's defaults
 /// (4 chains, 1000 warm-up iterations, 1000 draws, `adapt_delta` 0.8,
 /// diagonal metric, maximum depth 10, initial step size 1, initial points
 /// uniform in `[−2, 2]^d`) except the warm-up: windows 75 / 25 / 150
-/// (CmdStan: 75 / 25 / 50) and one dual-averaging run for the step size,
-/// chosen by measurement on the four targets of `examples/hmc_vs_nuts`
-/// and on `arma-arma11` of `examples/posteriordb` (`docs/performance.md`).
+/// (CmdStan: 75 / 25 / 50), one dual-averaging run for the step size and
+/// initial points redrawn where no usable step size exists, chosen by
+/// measurement on the four targets of `examples/hmc_vs_nuts` and on
+/// `arma-arma11` of `examples/posteriordb` (`docs/performance.md`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct NutsSettings {
     /// Number of chains.
@@ -41,7 +42,13 @@ pub struct NutsSettings {
     /// of the acceptance statistic `acceptance_statistic` names (Stan's
     /// `accept_stat`, then the symmetrised one in the late warm-up).
     pub target_accept: f64,
-    /// Which metric the warm-up estimates.
+    /// Which metric the warm-up estimates: by default Stan's diagonal
+    /// ([`MetricAdaptation::Diagonal`], the variances).
+    /// [`MetricAdaptation::DiagonalGradientEarly`] (nuts-rs's
+    /// gradient-based estimate in the short early windows, the variances in
+    /// the last two) spends 5 % fewer warm-up gradients on the non-centred
+    /// eight schools at the same ESS (`docs/performance.md`, "Eight
+    /// schools' warm-up, session 17").
     pub metric: MetricAdaptation,
     /// Maximum tree depth.
     pub max_depth: usize,
@@ -49,6 +56,18 @@ pub struct NutsSettings {
     pub initial_step_size: f64,
     /// Initial points are drawn uniformly in `[−r, r]^d` (Stan: 2).
     pub init_radius: f64,
+    /// Also redraw a random initial point (as Stan redraws one whose log
+    /// density or gradient is not finite) when Stan's step-size heuristic
+    /// finds no step of at least
+    /// [`MIN_INITIAL_STEP`](crate::kernel::MIN_INITIAL_STEP) there
+    /// ([`Nuts::search_initial_step_size`]): the target varies there on a
+    /// scale ten orders of magnitude below the initial box's. Default true;
+    /// false is Stan's rule, under which one `arma-arma11` chain started in
+    /// the model's explosive `|θ| > 1` region (`ln π ≈ −10¹¹⁶`) creeps into
+    /// a local mode and never leaves it (seeds 5 and 8, R-hat 1.53;
+    /// `docs/performance.md`, "arma-arma11: stuck chains, session 17").
+    /// Points given by `init` are used as they are.
+    pub retry_stiff_inits: bool,
     /// Warm-up iterations after the last metric update in which only the
     /// step size adapts (CmdStan's `term_buffer` is 50; the default here is
     /// 150, nuts-rs's final step-size window of 15 % of 1000). The longer
@@ -94,6 +113,7 @@ impl Default for NutsSettings {
             max_depth: 10,
             initial_step_size: 1.0,
             init_radius: 2.0,
+            retry_stiff_inits: true,
             term_buffer: 150,
             init_buffer: 75,
             window: 25,
@@ -180,7 +200,9 @@ impl Fit {
 /// Runs `settings.chains` NUTS chains on `target` in parallel. Chain `c`
 /// starts at `init(c)` when given, else at a point uniform in
 /// `[−r, r]^d` from its own stream (up to 100 attempts at a finite
-/// density, as Stan). Errors: invalid settings, or an
+/// density and gradient, as Stan, and with
+/// [`NutsSettings::retry_stiff_inits`] a usable step size). Errors:
+/// invalid settings, or an
 /// initial point whose density or gradient is not finite
 /// ([`CoreError::NonFiniteInitialState`](crate::CoreError::NonFiniteInitialState)).
 ///
@@ -207,16 +229,35 @@ where
     let d = target.dim();
     let t = Differentiable(target.clone());
     let chains = run_chains(settings.chains, settings.seed, |c, mut rng| {
+        let mut nuts = Nuts::new(target.clone(), settings.initial_step_size)?
+            .with_max_depth(settings.max_depth)?
+            .with_warmup(settings.warmup, settings.target_accept, settings.metric)?
+            .with_warmup_schedule(WarmupSchedule::new(
+                settings.warmup,
+                settings.init_buffer,
+                settings.window,
+                settings.term_buffer,
+            ))?
+            .with_step_size_adaptation(settings.step_size_adaptation)
+            .with_acceptance_statistic(settings.acceptance_statistic);
         let start = match &init {
             Some(f) => f(c),
-            // Like Stan, up to 100 attempts at a point of finite density.
+            // Like Stan, up to 100 attempts at a point of finite density
+            // (a non-finite gradient makes it NaN); optionally also at a
+            // usable step size. The search draws what the first warm-up
+            // transition would have drawn, so an accepted first point gives
+            // the same chain as without it.
             None => {
                 let mut x = Vec::new();
                 for _ in 0..100 {
                     x = (0..d)
                         .map(|_| settings.init_radius * (2.0 * uniform(&mut rng) - 1.0))
                         .collect();
-                    if t.evaluate(&x).log_density.is_finite() {
+                    let s = Sample::evaluate(&t, x.clone());
+                    if s.log_density.is_finite()
+                        && (!settings.retry_stiff_inits
+                            || nuts.search_initial_step_size(&s, &mut rng).is_some())
+                    {
                         break;
                     }
                 }
@@ -229,17 +270,6 @@ where
                 got: start.len(),
             });
         }
-        let nuts = Nuts::new(target.clone(), settings.initial_step_size)?
-            .with_max_depth(settings.max_depth)?
-            .with_warmup(settings.warmup, settings.target_accept, settings.metric)?
-            .with_warmup_schedule(WarmupSchedule::new(
-                settings.warmup,
-                settings.init_buffer,
-                settings.window,
-                settings.term_buffer,
-            ))?
-            .with_step_size_adaptation(settings.step_size_adaptation)
-            .with_acceptance_statistic(settings.acceptance_statistic);
         let mut chain = Chain::new(&t, start, MetropolisHastings::new(nuts), rng)?;
         let clock = Instant::now();
         for _ in 0..settings.warmup {

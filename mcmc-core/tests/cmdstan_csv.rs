@@ -16,7 +16,7 @@
 //! reading with ours: the draws and sampler statistics ArviZ and cmdstanpy
 //! parsed, and ArviZ's summary and E-BFMI against `mcmc_core::diagnostics`.
 
-use mcmc_core::adaptation::{AcceptanceStatistic, StepSizeAdaptation};
+use mcmc_core::adaptation::{AcceptanceStatistic, MetricAdaptation, StepSizeAdaptation};
 use mcmc_core::cmdstan::{vector_names, write_chain};
 use mcmc_core::diagnostics::{ess_bulk, rank_normalized_split_rhat};
 use mcmc_core::fit::{Fit, NutsSettings, sample_nuts};
@@ -53,14 +53,15 @@ fn fit() -> Fit {
         warmup: 300,
         draws: 200,
         seed: 5,
-        // CmdStan's windows (75 / 25 / 50), step-size restarts and
-        // acceptance statistic: the committed expectations were made with
-        // them.
+        // CmdStan's windows (75 / 25 / 50), step-size restarts, acceptance
+        // statistic and metric (`diag_e`): the committed expectations were
+        // made with them.
         init_buffer: 75,
         window: 25,
         term_buffer: 50,
         step_size_adaptation: StepSizeAdaptation::Restart,
         acceptance_statistic: AcceptanceStatistic::Stan,
+        metric: MetricAdaptation::Diagonal,
         ..Default::default()
     };
     sample_nuts(&Gauss3, &s, None::<fn(usize) -> Vec<f64>>).unwrap()

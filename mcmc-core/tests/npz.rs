@@ -14,7 +14,7 @@
 //! This test regenerates the fit, checks that the writer still produces
 //! the committed bytes, and compares numpy's reading with the fit.
 
-use mcmc_core::adaptation::{AcceptanceStatistic, StepSizeAdaptation};
+use mcmc_core::adaptation::{AcceptanceStatistic, MetricAdaptation, StepSizeAdaptation};
 use mcmc_core::fit::{Fit, NutsSettings, sample_nuts};
 use mcmc_core::npz::write_npz;
 use serde_json::Value;
@@ -30,14 +30,15 @@ fn fit() -> Fit {
         warmup: 200,
         draws: 100,
         seed: 9,
-        // CmdStan's windows (75 / 25 / 50), step-size restarts and
-        // acceptance statistic: the committed expectations were made with
-        // them.
+        // CmdStan's windows (75 / 25 / 50), step-size restarts, acceptance
+        // statistic and metric (`diag_e`): the committed expectations were
+        // made with them.
         init_buffer: 75,
         window: 25,
         term_buffer: 50,
         step_size_adaptation: StepSizeAdaptation::Restart,
         acceptance_statistic: AcceptanceStatistic::Stan,
+        metric: MetricAdaptation::Diagonal,
         ..Default::default()
     };
     sample_nuts(&Ar1Gaussian::new(3, 0.5), &s, None::<fn(usize) -> Vec<f64>>).unwrap()

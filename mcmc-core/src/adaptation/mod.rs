@@ -87,6 +87,19 @@ pub enum MetricAdaptation {
     /// ([`Warmup::observe_with_gradient`]): NUTS does; with a kernel that
     /// does not, the metric stays as given.
     DiagonalGradient,
+    /// [`Self::DiagonalGradient`] in every slow window but the last two,
+    /// then [`Self::Diagonal`] (the variances) in the last two, whose
+    /// estimate the chain keeps. The short early windows (25, 50, 100
+    /// draws of Stan's schedule) give the variances alone a noisy metric
+    /// and the warm-up long trees; the gradient-based estimate settles from
+    /// few draws. The final metric is still Stan's variances, which sample
+    /// arK better than the gradient-based one; switching one window before
+    /// the end leaves continuous dual averaging 550 iterations to follow
+    /// the change (switching at the last update left arK's final step too
+    /// large: 65 divergences, half the ESS). `docs/performance.md`, "Eight
+    /// schools' warm-up, session 17". Falls back to the variances where the
+    /// kernel passes no gradient.
+    DiagonalGradientEarly,
 }
 
 /// The estimator behind a [`MetricAdaptation`].
@@ -94,6 +107,8 @@ pub enum MetricAdaptation {
 enum Estimator {
     Draws(MetricEstimator),
     Gradient(GradientMetricEstimator),
+    /// Gradient-based before the last two slow windows, variances in them.
+    GradientEarly(GradientMetricEstimator, MetricEstimator),
 }
 
 /// What one warm-up iteration changed.
@@ -141,6 +156,10 @@ impl Warmup {
             MetricAdaptation::DiagonalGradient => {
                 Some(Estimator::Gradient(GradientMetricEstimator::new(dim)))
             }
+            MetricAdaptation::DiagonalGradientEarly => Some(Estimator::GradientEarly(
+                GradientMetricEstimator::new(dim),
+                MetricEstimator::diagonal(dim),
+            )),
         };
         Ok(Warmup {
             schedule: WarmupSchedule::stan(iterations),
@@ -256,11 +275,16 @@ impl Warmup {
         let mut step_size = self.step.update(if a.is_nan() { 0.0 } else { a });
         let mut metric = None;
         if let Some(est) = &mut self.estimator {
+            // `DiagonalGradientEarly` estimates the variances in the last two
+            // windows (all windows when there are fewer than three).
+            let variances = self.schedule.early_windows_end().is_none_or(|e| i > e);
             if self.schedule.in_slow_window(i) {
                 match (&mut *est, gradient) {
                     (Estimator::Draws(e), _) => e.add(state),
                     (Estimator::Gradient(e), Some(g)) => e.add(state, g),
                     (Estimator::Gradient(_), None) => {}
+                    (Estimator::GradientEarly(e, _), Some(g)) if !variances => e.add(state, g),
+                    (Estimator::GradientEarly(_, e), _) => e.add(state),
                 }
             }
             if self.schedule.is_window_end(i) {
@@ -272,6 +296,16 @@ impl Warmup {
                     Estimator::Gradient(e) => {
                         metric = e.metric();
                         e.reset();
+                    }
+                    // Without gradients the early windows fed the variances.
+                    Estimator::GradientEarly(g, v) => {
+                        metric = if g.count() > 0 {
+                            g.metric()
+                        } else {
+                            v.metric()
+                        };
+                        g.reset();
+                        v.reset();
                     }
                 }
                 // Stan restarts dual averaging around the current step size
@@ -358,5 +392,58 @@ mod tests {
         let stan = steps_with(AcceptanceStatistic::Stan, |i| (alpha(i), symmetric(i)));
         assert_eq!(stan[..150], late[..150]);
         assert_ne!(stan[150], late[150]);
+    }
+
+    /// The metric at each window end of a 1000-iteration warm-up (windows
+    /// 75 / 25 / 150: ends 99, 149, 249, 449, 849) fed draws `x ~ N(0, 1)`
+    /// with gradients `−4x` (`with_gradient`) or none: the gradient-based
+    /// estimate is `√(var x / var g) = 1/4` exactly, the variances' ≈ 1.
+    fn window_metrics(metric: MetricAdaptation, with_gradient: bool) -> Vec<f64> {
+        let mut w = Warmup::new(1000, 0.5, 0.8, metric, 1)
+            .unwrap()
+            .with_schedule(WarmupSchedule::new(1000, 75, 25, 150))
+            .unwrap();
+        let mut rng = crate::rng::stream_rng(3, 0);
+        let mut out = Vec::new();
+        for _ in 0..1000 {
+            let x = [crate::rng::standard_normal(&mut rng)];
+            let g = [-4.0 * x[0]];
+            let u = w
+                .observe_with_gradient(0.8, &x, with_gradient.then_some(&g[..]))
+                .unwrap();
+            if let Some(m) = u.metric {
+                out.push(m.inverse_mass_diagonal()[0]);
+            }
+        }
+        out
+    }
+
+    /// `DiagonalGradientEarly`: the gradient-based estimate at the first
+    /// three window ends, the variances at the last two (the metric the
+    /// chain keeps); without gradients, the variances throughout.
+    /// Controls: `DiagonalGradient` is gradient-based at every end,
+    /// `Diagonal` nowhere.
+    #[test]
+    fn gradient_early_metric_switches_to_the_variances_for_the_last_two_windows() {
+        let early = window_metrics(MetricAdaptation::DiagonalGradientEarly, true);
+        assert_eq!(early.len(), 5);
+        for m in &early[..3] {
+            assert!((m - 0.25).abs() < 1e-12, "{early:?}");
+        }
+        for m in &early[3..] {
+            assert!((m - 1.0).abs() < 0.3, "{early:?}");
+        }
+        let plain = window_metrics(MetricAdaptation::Diagonal, true);
+        assert_eq!(
+            window_metrics(MetricAdaptation::DiagonalGradientEarly, false),
+            plain
+        );
+        assert_eq!(early[3..], plain[3..]);
+        assert!(plain.iter().all(|m| (m - 1.0).abs() < 0.4), "{plain:?}");
+        let gradient = window_metrics(MetricAdaptation::DiagonalGradient, true);
+        assert!(
+            gradient.iter().all(|m| (m - 0.25).abs() < 1e-12),
+            "{gradient:?}"
+        );
     }
 }

@@ -110,6 +110,14 @@ impl WarmupSchedule {
         }
     }
 
+    /// Last iteration of the slow windows before the last two (`None` with
+    /// fewer than three windows): where
+    /// [`MetricAdaptation::DiagonalGradientEarly`](super::MetricAdaptation::DiagonalGradientEarly)
+    /// switches to the variances.
+    pub fn early_windows_end(&self) -> Option<usize> {
+        self.ends.len().checked_sub(3).map(|k| self.ends[k])
+    }
+
     /// True when iteration `i` (0-based) belongs to a slow window.
     pub fn in_slow_window(&self, i: usize) -> bool {
         !self.ends.is_empty() && i >= self.init_buffer && i < self.iterations - self.term_buffer
@@ -147,11 +155,13 @@ mod tests {
         let s = WarmupSchedule::stan(1000);
         assert!(!s.in_slow_window(74) && s.in_slow_window(75));
         assert_eq!(s.last_window_start(), Some(450));
+        assert_eq!(s.early_windows_end(), Some(249));
         assert!(s.in_slow_window(949) && !s.in_slow_window(950));
         // 100 < 150: fallback 15 % / 75 % / 10 %, one slow window [15, 90).
         let s = WarmupSchedule::stan(100);
         assert_eq!(s.window_ends(), vec![89]);
         assert_eq!(s.last_window_start(), Some(15));
+        assert_eq!(s.early_windows_end(), None);
         assert!(!s.in_slow_window(14) && s.in_slow_window(15) && !s.in_slow_window(90));
         // Under 20 iterations: step size only.
         let s = WarmupSchedule::stan(10);

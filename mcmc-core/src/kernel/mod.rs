@@ -29,7 +29,7 @@ pub use independent::Independent;
 pub use mala::Mala;
 pub use metric::Metric;
 pub use mixture::Mixture;
-pub use nuts::{Nuts, NutsDrawStatistics};
+pub use nuts::{MIN_INITIAL_STEP, Nuts, NutsDrawStatistics};
 pub use torus_step::{AdaptiveTorusStep, TorusStep};
 
 use crate::rng::ChainRng;

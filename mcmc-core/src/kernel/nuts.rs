@@ -47,6 +47,10 @@ use crate::math::log_sum_exp2;
 use crate::rng::{ChainRng, uniform};
 use crate::sample::Sample;
 
+/// The smallest step Stan's step-size heuristic tries (nuts-rs's bound
+/// too); below it the search gives up.
+pub const MIN_INITIAL_STEP: f64 = 1e-10;
+
 /// What one NUTS transition did, named as Stan's sampler diagnostics.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct NutsDrawStatistics {
@@ -314,12 +318,67 @@ impl<G: GradientTarget> Nuts<G> {
         if h.is_nan() { f64::INFINITY } else { h }
     }
 
+    /// Runs Stan's step-size heuristic from `start` now rather than at the
+    /// first warm-up transition, drawing exactly what that transition would
+    /// have drawn first, and restarts dual averaging around the step found.
+    /// Without a pending heuristic (no warm-up, or already run) it returns
+    /// the current step and draws nothing.
+    /// `None` (the heuristic stays pending) when no step of at least
+    /// [`MIN_INITIAL_STEP`] has one-step acceptance above 0.8: the target
+    /// varies at `start` on a scale ten orders of magnitude below that of
+    /// Stan's initial box, and a warm-up started there spends hundreds of
+    /// iterations creeping (`arma-arma11` from `|θ| > 1`, `ln π` down to
+    /// `−10¹¹⁶`: 2 of its 68 chains over 17 seeds ended in a local mode,
+    /// `docs/performance.md`, "arma-arma11: stuck chains, session 17").
+    /// [`sample_nuts`] then draws another initial point.
+    ///
+    /// [`sample_nuts`]: crate::fit::sample_nuts
+    pub fn search_initial_step_size(
+        &mut self,
+        start: &Sample<Vec<f64>, GradientPayload>,
+        rng: &mut ChainRng,
+    ) -> Option<f64> {
+        if !(self.init_step_pending && self.hmc.is_adapting()) {
+            return Some(self.hmc.step_size());
+        }
+        let d = self.hmc.target().dim();
+        if start.state.len() != d || start.payload.gradient.len() != d {
+            return None;
+        }
+        let mut w = std::mem::take(&mut self.work);
+        w.pool.reset(d);
+        let s = w.pool.alloc();
+        {
+            let z = w.pool.get_mut(s);
+            z.x.clone_from(&start.state);
+            z.grad.clone_from(&start.payload.gradient);
+            z.lp = start.log_density;
+        }
+        let (eps, too_stiff) = self.initial_step_size(&mut w.pool, s, rng);
+        self.work = w;
+        if too_stiff {
+            return None;
+        }
+        self.init_step_pending = false;
+        self.hmc.restart_step_size(eps);
+        Some(eps)
+    }
+
     /// Stan's heuristic: from the pool's point `start`, double (or halve)
     /// `ε` while one leapfrog step's acceptance stays above (below) 0.8.
-    fn initial_step_size(&mut self, pool: &mut PointPool, start: usize, rng: &mut ChainRng) -> f64 {
+    /// Also returns whether the halving reached [`MIN_INITIAL_STEP`] with
+    /// the acceptance still below 0.8 (doubling up to 10⁷ is no failure:
+    /// a flat target).
+    fn initial_step_size(
+        &mut self,
+        pool: &mut PointPool,
+        start: usize,
+        rng: &mut ChainRng,
+    ) -> (f64, bool) {
         let mut eps = self.hmc.step_size();
         let scratch = pool.alloc();
         let mut direction = 0.0;
+        let mut too_stiff = false;
         for _ in 0..100 {
             self.hmc
                 .metric()
@@ -336,13 +395,14 @@ impl<G: GradientTarget> Nuts<G> {
                 break;
             }
             let next = eps * direction;
-            if !(next > 1e-10 && next < 1e7) {
+            if !(next > MIN_INITIAL_STEP && next < 1e7) {
+                too_stiff = direction < 1.0;
                 break;
             }
             eps = next;
         }
         pool.release(scratch);
-        eps
+        (eps, too_stiff)
     }
 
     /// One NUTS transition from the pool's point `start` (whose momentum is
@@ -650,7 +710,7 @@ impl<G: GradientTarget> Kernel<Vec<f64>, GradientPayload> for Nuts<G> {
         }
         if self.init_step_pending && self.hmc.is_adapting() {
             self.init_step_pending = false;
-            let eps = self.initial_step_size(&mut w.pool, start, rng);
+            let (eps, _) = self.initial_step_size(&mut w.pool, start, rng);
             self.hmc.restart_step_size(eps);
         }
         self.hmc.statistics_mut().trajectories += 1;
@@ -1188,5 +1248,99 @@ mod tests {
         );
         eprintln!("biased banana: z = {z:?}");
         assert!(z.iter().any(|v| v.abs() > 4.5), "biased banana: z = {z:?}");
+    }
+
+    /// `ln π = −½·10³⁰·x²`: at `x = 1` one leapfrog step of 10⁻¹⁰ still has
+    /// an energy error of ≈ 10¹⁰, so the heuristic reaches its floor.
+    #[derive(Clone, Copy)]
+    struct Stiff;
+    impl GradientTarget for Stiff {
+        fn dim(&self) -> usize {
+            1
+        }
+        fn log_density_gradient(&self, x: &[f64], g: &mut [f64]) -> f64 {
+            g[0] = -1e30 * x[0];
+            -0.5e30 * x[0] * x[0]
+        }
+    }
+
+    /// Searching the step before the chain starts draws exactly what the
+    /// first warm-up transition would have drawn: the chain is
+    /// bit-identical to one that ran the heuristic itself (so a fit whose
+    /// first initial point is accepted is unchanged). At a point where no
+    /// step ≥ 10⁻¹⁰ is accepted the search reports `None` and leaves the
+    /// kernel's step as it was; controls: the same search from `x = 1` on a
+    /// standard normal finds a step, and on a nearly flat target it stops
+    /// doubling at 10⁷ and succeeds.
+    #[test]
+    fn initial_step_search_before_the_chain_matches_the_warmup_and_refuses_stiff_points() {
+        let t = Differentiable(Correlated);
+        let make = || {
+            Nuts::new(Correlated, 1.0)
+                .unwrap()
+                .with_warmup(100, 0.8, MetricAdaptation::Diagonal)
+                .unwrap()
+        };
+        let x0 = vec![1.5, -0.5];
+        let mut plain = Chain::new(
+            &t,
+            x0.clone(),
+            MetropolisHastings::new(make()),
+            stream_rng(4, 0),
+        )
+        .unwrap();
+        let mut rng = stream_rng(4, 0);
+        let mut searched = make();
+        let eps = searched
+            .search_initial_step_size(&Sample::evaluate(&t, x0.clone()), &mut rng)
+            .unwrap();
+        assert_eq!(searched.step_size(), eps);
+        let mut early = Chain::new(&t, x0, MetropolisHastings::new(searched), rng).unwrap();
+        for _ in 0..150 {
+            plain.step(&t);
+            early.step(&t);
+            assert_eq!(plain.state(), early.state());
+        }
+        assert_eq!(
+            plain.algorithm().kernel().step_size(),
+            early.algorithm().kernel().step_size()
+        );
+
+        let mut rng = stream_rng(5, 0);
+        let mut stiff = Nuts::new(Stiff, 1.0)
+            .unwrap()
+            .with_warmup(100, 0.8, MetricAdaptation::Diagonal)
+            .unwrap();
+        let s = Sample::evaluate(&Differentiable(Stiff), vec![1.0]);
+        assert_eq!(stiff.search_initial_step_size(&s, &mut rng), None);
+        assert_eq!(stiff.step_size(), 1.0);
+        let mut normal = Nuts::new(Normal1, 1.0)
+            .unwrap()
+            .with_warmup(100, 0.8, MetricAdaptation::Diagonal)
+            .unwrap();
+        let s = Sample::evaluate(&Differentiable(Normal1), vec![1.0]);
+        assert!(normal.search_initial_step_size(&s, &mut rng).is_some());
+        // A nearly flat target: the doubling stops at 10⁷, which is no
+        // failure.
+        let mut flat = Nuts::new(Flat, 1.0)
+            .unwrap()
+            .with_warmup(100, 0.8, MetricAdaptation::Diagonal)
+            .unwrap();
+        let s = Sample::evaluate(&Differentiable(Flat), vec![1.0]);
+        let eps = flat.search_initial_step_size(&s, &mut rng).unwrap();
+        assert!(eps > 1e6, "{eps}");
+    }
+
+    /// `ln π = −½·10⁻³⁰·x²`: one leapfrog step of 10⁷ is still accepted.
+    #[derive(Clone, Copy)]
+    struct Flat;
+    impl GradientTarget for Flat {
+        fn dim(&self) -> usize {
+            1
+        }
+        fn log_density_gradient(&self, x: &[f64], g: &mut [f64]) -> f64 {
+            g[0] = -1e-30 * x[0];
+            -0.5e-30 * x[0] * x[0]
+        }
     }
 }
