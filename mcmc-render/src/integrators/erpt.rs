@@ -365,7 +365,12 @@ impl IntegratorSettings for Erpt {
                 .collect();
             busy += t.elapsed().as_secs_f64();
             if crate::cluster::any_rank(bands.iter().any(|(_, b)| b.stopped)) {
-                dropped_mutations = bands.iter().map(|(_, b)| b.stats.steps).sum();
+                let own: u64 = bands.iter().map(|(_, b)| b.stats.steps).sum();
+                // Every rank's (a collective: all ranks drop the pass here).
+                dropped_mutations = match cluster {
+                    Some(c) => c.all_gather_f64s(vec![own as f64]).iter().sum::<f64>() as u64,
+                    None => own,
+                };
                 interrupted = stop.load(Ordering::Relaxed) || planned.is_some();
                 break;
             }
@@ -428,7 +433,6 @@ impl IntegratorSettings for Erpt {
             json!({
                 "units": own_bands,
                 "mutations": own_mutations,
-                "dropped_pass_mutations": dropped_mutations,
                 "busy_seconds": busy,
             }),
         );
