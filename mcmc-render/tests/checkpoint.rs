@@ -411,6 +411,12 @@ fn a_damaged_foreign_or_misfitting_markov_checkpoint_is_refused_with_one_line() 
     let mut v2 = good.clone();
     v2[..8].copy_from_slice(b"mcmcMC02");
     refused(&v2, 7, "earlier format");
+    // Not a regular file: refused before it is read (`/dev/zero` never
+    // ends), with one line.
+    for special in [std::path::Path::new("/dev/zero"), &std::env::temp_dir()] {
+        let e = load_chains(special, 7, (w, h), &filter).unwrap_err();
+        assert!(e.contains("not a regular file") && !e.contains('\n'), "{e}");
+    }
     // Control: the file itself loads.
     std::fs::write(&path, &good).unwrap();
     assert!(load_chains(&path, 7, (w, h), &filter).unwrap().is_some());

@@ -139,7 +139,8 @@ pub fn save(path: &Path, fingerprint: u64, progress: &ChainProgress) -> Result<(
 
 /// The progress saved at `path` for the inputs `fingerprint` and an image
 /// of `size` (films rebuilt with `filter`): `None` when there is no file;
-/// an error (one line) when it is not a Markov-chain checkpoint (or one of
+/// an error (one line) when it is not a regular file (refused before it
+/// is opened), not a Markov-chain checkpoint (or one of
 /// the earlier format), is damaged (its checksum does not match: a flipped
 /// bit, a cut or a file written over) or belongs to another render.
 pub fn load(
@@ -148,11 +149,13 @@ pub fn load(
     size: (u32, u32),
     filter: &Arc<Filter>,
 ) -> Result<Option<ChainProgress>, String> {
-    let bytes = match std::fs::read(path) {
-        Ok(b) => b,
+    match std::fs::metadata(path) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(format!("cannot read checkpoint {}: {e}", path.display())),
-    };
+        // A FIFO would block the read, a device such as `/dev/zero` never end.
+        _ => crate::resources::regular_file(path).map_err(|e| format!("checkpoint: {e}"))?,
+    }
+    let bytes = std::fs::read(path)
+        .map_err(|e| format!("cannot read checkpoint {}: {e}", path.display()))?;
     let bad = |why: &str| format!("checkpoint {}: {why}", path.display());
     if bytes.starts_with(MAGIC_V2) {
         return Err(bad(
