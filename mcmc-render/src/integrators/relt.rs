@@ -342,9 +342,8 @@ impl<'a> ReltFamily<'a> {
     ///
     /// At the deadline (on a cluster: any rank's) the search stops after
     /// its current block of [`SEARCH_BLOCK`] draws; `draws` is then the
-    /// number made. A cut
-    /// that ends inside a stride of `m < stride` draws gives that
-    /// stride's subsampled draw the weight `m · q_4` in place of
+    /// number made. A cut that ends inside a stride of `m < stride` draws
+    /// gives that stride's subsampled draw the weight `m · q_4` in place of
     /// `stride · q_4`, so the mean over the draws made stays unbiased.
     /// Without a deadline the draws and weights are exactly those of the
     /// whole search.
