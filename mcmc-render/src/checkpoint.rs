@@ -22,7 +22,8 @@ pub const INTEGRATORS: [&str; 3] = ["pt", "lt", "bdpt"];
 /// The integrators whose runs can be checkpointed on the Markov-chain
 /// driver (independent chains and replica sets on primary sample space;
 /// see [`crate::markov::checkpoint`]).
-pub const CHAIN_INTEGRATORS: [&str; 4] = ["pssmlt", "mmlt", "tempered-pssmlt", "tempered-mmlt"];
+pub const CHAIN_INTEGRATORS: [&str; 5] =
+    ["pssmlt", "mmlt", "tempered-pssmlt", "tempered-mmlt", "relt"];
 
 /// First bytes of a checkpoint file (format version 1).
 const MAGIC: &[u8; 8] = b"mcmcPX01";
@@ -86,17 +87,22 @@ impl Progress {
     }
 }
 
+/// Start value of [`fnv1a`].
+pub(crate) const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+
+/// FNV-1a of `bytes`, continuing from `h`.
+pub(crate) fn fnv1a(bytes: &[u8], mut h: u64) -> u64 {
+    for &b in bytes {
+        h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+    }
+    h
+}
+
 /// FNV-1a over the described inputs (each part with its length, so that
 /// parts cannot run into each other).
 pub fn fingerprint(parts: &[String]) -> u64 {
-    let fnv = |bytes: &[u8], mut h: u64| {
-        for &b in bytes {
-            h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
-        }
-        h
-    };
-    parts.iter().fold(0xcbf2_9ce4_8422_2325, |h, p| {
-        fnv(p.as_bytes(), fnv(&(p.len() as u64).to_le_bytes(), h))
+    parts.iter().fold(FNV_OFFSET, |h, p| {
+        fnv1a(p.as_bytes(), fnv1a(&(p.len() as u64).to_le_bytes(), h))
     })
 }
 

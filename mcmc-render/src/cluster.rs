@@ -11,6 +11,7 @@
 //! [`current`] is `None` and nothing changes.
 
 use crate::film::{Film, Filter};
+use rayon::prelude::*;
 use serde_json::Value;
 use std::sync::{Arc, OnceLock};
 
@@ -213,6 +214,37 @@ pub fn reduce_units<'a>(
             (p.numbers, p.counts)
         })
         .collect()
+}
+
+/// `f(i)` (`width` numbers each) for `i` in `0..n`, flattened in order
+/// and evaluated in parallel. On a cluster each rank evaluates a
+/// contiguous block of `i` and every rank gets them all (bit-exactly):
+/// the work (the Markov driver's start-up candidates, `erpt`'s luminance
+/// walks) is split, not repeated, and every rank holds the same numbers
+/// (each depends on `i` alone) as one process. Collective on a cluster.
+pub fn evaluate_split(n: usize, width: usize, f: impl Fn(usize) -> Vec<f64> + Sync) -> Vec<f64> {
+    let cluster = current();
+    let (rank, size) = cluster.map_or((0, 1), |c| (c.rank(), c.size()));
+    let block = n * rank / size..n * (rank + 1) / size;
+    let local: Vec<f64> = block
+        .into_par_iter()
+        .flat_map_iter(|i| {
+            let v = f(i);
+            debug_assert_eq!(v.len(), width);
+            v
+        })
+        .collect();
+    match cluster {
+        Some(c) => c.all_gather_f64s(local),
+        None => local,
+    }
+}
+
+/// Whether `flag` is set on this process or, on a cluster, on any rank: a
+/// decision (stop now, a pass was cut) every rank must take alike.
+/// Collective on a cluster: every rank calls it the same number of times.
+pub fn any_rank(flag: bool) -> bool {
+    current().map_or(flag, |c| c.any(flag))
 }
 
 /// Whether this process writes the outputs: rank 0, or the only process.

@@ -10,15 +10,17 @@
 //! give the uninterrupted image, or the comparison could not tell.
 //!
 //! The Markov-chain driver (`pssmlt`, `mmlt`, and the replica sets of
-//! `tempered-pssmlt` and `tempered-mmlt`): a render stopped after two of
-//! its rounds and resumed ends with the uninterrupted render's bits,
-//! statistics included. Control: the same checkpoint with every chain's
-//! random stream put back to where it started (all other state kept) must
-//! differ.
+//! `tempered-pssmlt`, `tempered-mmlt` and `relt`): a render stopped after
+//! two of its rounds and resumed ends with the uninterrupted render's
+//! bits, statistics included. Control: the same checkpoint with every
+//! chain's random stream put back to where it started (all other state
+//! kept) must differ. RELT's start-up (annealing, search) is not cut by
+//! the time budget when checkpointed (control: it is without), and
+//! damaged, foreign or misfitting checkpoints are refused with one line.
 
 mod common;
 
-use common::{bdpt_of, lt_of, pt_of, repo_scene};
+use common::{bdpt_of, lt_of, pt_of, repo_scene, repo_scene_tilted};
 use mcmc_render::checkpoint::{Checkpoint, load};
 use mcmc_render::color::Rgb;
 use mcmc_render::integrators::registry;
@@ -29,6 +31,7 @@ use mcmc_render::render::{RenderSettings, render, render_checkpointed};
 use mcmc_render::scene::Scene;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::time::Duration;
 
 /// Samples per pixel: passes of 1, 2, 4 and 3 (light paths: capped at 4).
 const SPP: u32 = 10;
@@ -234,6 +237,8 @@ fn check_markov_resume(
         "acceptance_per_depth",
         "families",
         "exchange",
+        "searches",
+        "annealing",
     ] {
         assert_eq!(
             resumed.statistics.get(key),
@@ -284,4 +289,151 @@ fn a_stopped_tempered_render_resumed_from_its_checkpoint_ends_bit_identical() {
         ];
         check_markov_resume(&scene, (name, &sets), 4 * 256, 24 * 24 * 24);
     }
+}
+
+/// RELT on the 16×16 glossy-glass box (its four replicas all start): 16
+/// chains, i.e. 4 replica sets of the 4 replicas in 4 tasks; a small
+/// annealing and L0 search, the search continued during the run (its
+/// draws go into each task's running `b_4`), the uniform replica resting
+/// every other sweep and one random neighbour pair per sweep (drawn from
+/// the set's exchange stream).
+const RELT: [(&str, &str); 9] = [
+    ("bootstrap", "4000"),
+    ("chains", "16"),
+    ("mutations_per_pixel", "32"),
+    ("max_depth", "5"),
+    ("annealing_particles", "500"),
+    ("l0_search", "20000"),
+    ("l0_search_rate", "0.5"),
+    ("uniform_share", "0.5"),
+    ("exchange", "random_neighbour"),
+];
+
+#[test]
+fn a_stopped_relt_render_resumed_from_its_checkpoint_ends_bit_identical() {
+    let scene = repo_scene_tilted("cornell-glossy-glass.xml", 16, 5);
+    // 16×16 × 32 = 8192 mutations at 3.5 a sweep (the uniform replica in
+    // the odd sweeps): ⌈8192/3.5⌉ = 2341 sweeps, 586 + 3 × 585 over the
+    // sets, i.e. 586·3 + 293 + 3·(585·3 + 292) = 8192 mutations. A round
+    // is 64 sweeps (256 / 4 levels) of 3.5 mutations in each of 4 sets.
+    check_markov_resume(&scene, ("relt", &RELT), 4 * 224, 16 * 16 * 32);
+}
+
+/// A RELT render of `RELT` with `run`'s budget and checkpoint.
+fn relt_render(
+    scene: &Scene,
+    sets: &[(&str, &str)],
+    run: &RunSettings,
+) -> Result<Rendered, String> {
+    let sets: Vec<(String, String)> = (sets.iter())
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
+    let integ = registry::configure(None, Some("relt"), &sets).expect("relt");
+    integ
+        .render(scene, run, &AtomicBool::new(false), &NoObserver)
+        .map_err(|e| e.to_string())
+}
+
+#[test]
+fn a_checkpointed_relt_start_up_is_not_cut_by_the_time_budget() {
+    // A budget spent before the run starts: with a checkpoint the search
+    // and the annealing still run to their end (a resumed run makes the
+    // start-up again and must get the same b̂ and replica sets); without
+    // one (the control) the budget cuts both at once.
+    let scene = repo_scene_tilted("cornell-glossy-glass.xml", 16, 5);
+    let path = std::env::temp_dir().join(format!(
+        "mcmc-render-checkpoint-relt-startup-{}.ckpt",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_file(&path);
+    let run = |checkpoint: bool| RunSettings {
+        seed: 5,
+        time_budget: Some(Duration::ZERO),
+        checkpoint: checkpoint.then(|| Checkpoint {
+            path: path.clone(),
+            fingerprint: 7,
+            resume: None,
+            chains: None,
+        }),
+        ..RunSettings::default()
+    };
+    let with = relt_render(&scene, &RELT, &run(true)).unwrap();
+    let without = relt_render(&scene, &RELT, &run(false)).unwrap();
+    assert!(with.interrupted && without.interrupted);
+    // No whole round ran, so nothing was saved.
+    assert!(!path.exists());
+    let draws = |r: &Rendered| r.statistics["searches"][3]["draws"].as_u64().unwrap();
+    let steps = |r: &Rendered| -> Vec<u64> {
+        (r.statistics["annealing"].as_array().unwrap().iter())
+            .map(|a| a["steps"].as_u64().unwrap())
+            .collect()
+    };
+    assert_eq!(draws(&with), 20_000);
+    assert_eq!(steps(&with), vec![0, 500, 500, 500]);
+    assert_eq!(draws(&without), 0);
+    assert_eq!(steps(&without), vec![0, 0, 0, 0]);
+}
+
+#[test]
+fn a_damaged_foreign_or_misfitting_markov_checkpoint_is_refused_with_one_line() {
+    let scene = repo_scene_tilted("cornell-glossy-glass.xml", 16, 5);
+    let (w, h) = (scene.film.width, scene.film.height);
+    let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
+    let path = std::env::temp_dir().join(format!(
+        "mcmc-render-checkpoint-relt-damaged-{}.ckpt",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_file(&path);
+    // A checkpoint after one round.
+    let stop = AtomicBool::new(false);
+    let observer = StopAfter {
+        stop: &stop,
+        after: 1,
+        seen: AtomicU32::new(0),
+    };
+    chains_render(&scene, ("relt", &RELT), &path, None, &stop, &observer);
+    let good = std::fs::read(&path).unwrap();
+    let progress = load_chains(&path, 7, (w, h), &filter)
+        .unwrap()
+        .expect("a checkpoint");
+    let refused = |bytes: &[u8], fingerprint: u64, why: &str| {
+        std::fs::write(&path, bytes).unwrap();
+        let e = load_chains(&path, fingerprint, (w, h), &filter).unwrap_err();
+        assert!(e.contains(why) && !e.contains('\n'), "{why}: {e}");
+    };
+    // One bit flipped in the middle (in a film or a chain), the last word
+    // cut, another render's fingerprint, the earlier format.
+    let mut flipped = good.clone();
+    flipped[good.len() / 2] ^= 0x10;
+    refused(&flipped, 7, "damaged");
+    refused(&good[..good.len() - 8], 7, "damaged");
+    refused(&good, 8, "another render");
+    let mut v2 = good.clone();
+    v2[..8].copy_from_slice(b"mcmcMC02");
+    refused(&v2, 7, "earlier format");
+    // Not a regular file: refused before it is read (`/dev/zero` never
+    // ends), with one line.
+    for special in [std::path::Path::new("/dev/zero"), &std::env::temp_dir()] {
+        let e = load_chains(special, 7, (w, h), &filter).unwrap_err();
+        assert!(e.contains("not a regular file") && !e.contains('\n'), "{e}");
+    }
+    // Control: the file itself loads.
+    std::fs::write(&path, &good).unwrap();
+    assert!(load_chains(&path, 7, (w, h), &filter).unwrap().is_some());
+    // A checkpoint of 4 replica sets given to a run of 5: one line.
+    let mut five = RELT;
+    five[1] = ("chains", "20");
+    let run = RunSettings {
+        seed: 5,
+        checkpoint: Some(Checkpoint {
+            path: path.clone(),
+            fingerprint: 7,
+            resume: None,
+            chains: Some(Arc::new(progress)),
+        }),
+        ..RunSettings::default()
+    };
+    let e = relt_render(&scene, &five, &run).unwrap_err();
+    assert!(e.contains("checkpoint") && !e.contains('\n'), "{e}");
+    std::fs::remove_file(&path).unwrap();
 }

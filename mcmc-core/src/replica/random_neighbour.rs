@@ -41,4 +41,14 @@ impl<S, P: Clone> ExchangeMove<S, P> for RandomNeighbour {
             cx.stats().move_changes += 1;
         }
     }
+
+    // Nothing carries over between sweeps: the pair comes from the set's
+    // exchange stream, which the set's progress saves.
+    fn state_words(&self) -> Option<Vec<u64>> {
+        Some(Vec::new())
+    }
+
+    fn restore_words(&mut self, words: &[u64]) -> bool {
+        words.is_empty()
+    }
 }

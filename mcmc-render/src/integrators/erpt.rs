@@ -49,6 +49,15 @@
 //! luminance estimate, which then uses the walks it took (reported as
 //! `luminance_samples`), so no setting (`chain_length` or
 //! `luminance_samples` of 10^15) keeps a run past `--time`.
+//!
+//! On a cluster ([`crate::cluster`], `mpirun`) band `b` of every pass is
+//! rendered by rank `b mod K`, and rank 0 adds the bands' films and
+//! counters in band order, as one process does; each block of the
+//! luminance estimate's walks is split over the ranks and gathered in walk
+//! order. Every rank agrees (one all-gather of a flag) before each block
+//! of walks, before each pass and after it whether any rank was stopped,
+//! so all ranks end at the same pass and rank 0 writes the passes done:
+//! the image is the single process's for any number of ranks.
 
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
@@ -68,10 +77,10 @@ use glam::Vec2;
 use mcmc_core::chain::{Algorithm, ChainState};
 use mcmc_core::kernel::Mixture;
 use mcmc_core::mh::MetropolisHastings;
-use mcmc_core::rng::{ChainRng, splitmix64, uniform};
-use mcmc_core::runner::{run_chain_range, run_chains};
+use mcmc_core::rng::{ChainRng, splitmix64, stream_rng, uniform};
 use mcmc_core::sample::Sample;
 use mcmc_core::stats::ChainStatistics;
+use rayon::prelude::*;
 use serde_json::json;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -232,11 +241,15 @@ impl IntegratorSettings for Erpt {
         let vertices = self.walk_vertices();
         let deadline = Deadline::new(start, run.time_budget);
         let time_up = || stop.load(Ordering::Relaxed) || deadline.passed();
+        // Whether any rank is stopped: every rank then stops at the same
+        // point (collective; without a cluster, `time_up` itself).
+        let any_time_up = || crate::cluster::any_rank(time_up());
+        let cluster = crate::cluster::current();
         // L̄: mean pixel luminance from independent camera walks.
         let lum = estimate_luminance(
             self.luminance_samples,
             splitmix64(run.seed ^ 0x4c55_4d49),
-            &time_up,
+            &any_time_up,
             |mut rng| {
                 let (mut camera, mut light) = (Vec::new(), Vec::new());
                 let raster = in_pixel(
@@ -264,15 +277,17 @@ impl IntegratorSettings for Erpt {
         // Mutations of the pass the stop or the deadline cut (not in the
         // image: a part of a pass is not an estimate).
         let mut dropped_mutations = 0u64;
+        // This rank's share: bands, mutations, seconds rendering.
+        let (mut own_bands, mut own_mutations, mut busy) = (0u64, 0u64, 0.0f64);
         while mean_lum > 0.0 && planned.is_none_or(|p| passes < p) {
-            if time_up() {
+            if any_time_up() {
                 // The time budget ends a run without a sample count as
                 // planned; Ctrl-C, or the budget before the count, stops it.
                 interrupted = stop.load(Ordering::Relaxed) || planned.is_some();
                 break;
             }
             let pass_seed = splitmix64(run.seed.wrapping_add(passes.wrapping_mul(0x9e37_79b9)));
-            let bands = run_chains(BANDS as usize, pass_seed, |band, mut rng| {
+            let render_band = |band: usize, mut rng: ChainRng| {
                 let mut out = Band {
                     film: Film::new_splat_only(w, h, filter.clone()),
                     stats: stats_like(&stats),
@@ -338,17 +353,42 @@ impl IntegratorSettings for Erpt {
                     }
                 }
                 out
-            });
-            if bands.iter().any(|b| b.stopped) {
-                dropped_mutations = bands.iter().map(|b| b.stats.steps).sum();
+            };
+            // This rank's bands (all of them in one process), each from
+            // its own stream `(pass_seed, band)`.
+            let t = Instant::now();
+            let bands: Vec<(usize, Band)> = (0..BANDS as usize)
+                .filter(|&b| crate::cluster::owns(cluster, b))
+                .collect::<Vec<_>>()
+                .into_par_iter()
+                .map(|b| (b, render_band(b, stream_rng(pass_seed, b as u64))))
+                .collect();
+            busy += t.elapsed().as_secs_f64();
+            if crate::cluster::any_rank(bands.iter().any(|(_, b)| b.stopped)) {
+                let own: u64 = bands.iter().map(|(_, b)| b.stats.steps).sum();
+                // Every rank's (a collective: all ranks drop the pass here).
+                dropped_mutations = match cluster {
+                    Some(c) => c.all_gather_f64s(vec![own as f64]).iter().sum::<f64>() as u64,
+                    None => own,
+                };
                 interrupted = stop.load(Ordering::Relaxed) || planned.is_some();
                 break;
             }
-            for b in &bands {
-                film.add_film(&b.film);
-                stats.merge(&b.stats);
-                seeds_total += b.seeds;
-                chains_total += b.chains;
+            own_bands += bands.len() as u64;
+            own_mutations += bands.iter().map(|(_, b)| b.stats.steps).sum::<u64>();
+            // Films and counters in band order (on a cluster every rank's,
+            // on rank 0; the other ranks add nothing).
+            let counters = crate::cluster::reduce_units(
+                &mut film,
+                bands.iter().map(|(u, b)| (*u, &b.film, band_counters(b))),
+                &filter,
+            );
+            for (_, counts) in counters {
+                let (band_seeds, band_chains, band_stats) =
+                    band_of_counters(&counts).map_err(RenderError::Invalid)?;
+                stats.merge(&band_stats);
+                seeds_total += band_seeds;
+                chains_total += band_chains;
             }
             passes += 1;
             observer.progress(u64::from(w) * u64::from(h));
@@ -387,6 +427,15 @@ impl IntegratorSettings for Erpt {
                 seconds,
             ),
         });
+        // On a cluster, every rank's share (on rank 0; collective).
+        let statistics = crate::cluster::with_ranks(
+            statistics,
+            json!({
+                "units": own_bands,
+                "mutations": own_mutations,
+                "busy_seconds": busy,
+            }),
+        );
         let serde_json::Value::Object(statistics) = statistics else {
             unreachable!("json! of an object literal is an object")
         };
@@ -432,7 +481,9 @@ struct LuminanceEstimate {
 
 /// `L̄` from up to `walks` independent camera walks, `walk(rng)` giving
 /// one walk's luminance, in blocks of [`LUMINANCE_BLOCK`] walks until
-/// `time_up()`. Nothing is kept per walk (10^15 walks aborted on an 8 PB
+/// `time_up()` (on a cluster a collective: each block's walks are split
+/// over the ranks and gathered in order, and every rank gets the same
+/// estimate). Nothing is kept per walk (10^15 walks aborted on an 8 PB
 /// allocation when the luminances were collected), and a cut estimate is
 /// the mean of the walks taken: `e_d` only sets how many chains start, and
 /// any `e_d > 0` leaves a pass unbiased (module docs). Each walk has its
@@ -449,8 +500,11 @@ fn estimate_luminance(
     // error without keeping the walks.
     let (mut running_mean, mut squares) = (0.0f64, 0.0f64);
     while done < walks && !time_up() {
-        let end = done + LUMINANCE_BLOCK.min(walks - done);
-        for l in run_chain_range(done..end, seed, |_, rng| walk(rng)) {
+        let (first, n) = (done, LUMINANCE_BLOCK.min(walks - done));
+        let block = crate::cluster::evaluate_split(n, 1, |i| {
+            vec![walk(stream_rng(seed, (first + i) as u64))]
+        });
+        for l in block {
             done += 1;
             sum += l;
             let delta = l - running_mean;
@@ -464,6 +518,29 @@ fn estimate_luminance(
         mean: if done > 0 { sum / n } else { 0.0 },
         standard_error: (squares / (n * (n - 1.0))).sqrt(),
     }
+}
+
+/// A band's counters for the reduction: its seeds, chains and chain
+/// statistics (bit-exactly).
+fn band_counters(band: &Band) -> crate::cluster::Counters {
+    let mut counts = vec![band.seeds, band.chains];
+    crate::markov::checkpoint::stats_words(&band.stats, &mut counts);
+    (Vec::new(), counts)
+}
+
+/// The seeds, chains and statistics [`band_counters`] wrote.
+fn band_of_counters(counts: &[u64]) -> Result<(u64, u64, ChainStatistics), String> {
+    let mut words = counts.iter().copied();
+    let mut next = || {
+        words
+            .next()
+            .ok_or_else(|| "a band's counters are cut".to_string())
+    };
+    Ok((
+        next()?,
+        next()?,
+        crate::markov::checkpoint::stats_from_words(&mut next)?,
+    ))
 }
 
 /// Empty statistics with the components of `like`.

@@ -340,10 +340,10 @@ impl<'a> ReltFamily<'a> {
     /// all draws is an unbiased estimate of `b_4 = ∫ q_4`, and the
     /// weighted draws are an importance sample of `q_4` to start from.
     ///
-    /// At the deadline the search stops after its current block of
-    /// [`SEARCH_BLOCK`] draws; `draws` is then the number made. A cut
-    /// that ends inside a stride of `m < stride` draws gives that
-    /// stride's subsampled draw the weight `m · q_4` in place of
+    /// At the deadline (on a cluster: any rank's) the search stops after
+    /// its current block of [`SEARCH_BLOCK`] draws; `draws` is then the
+    /// number made. A cut that ends inside a stride of `m < stride` draws
+    /// gives that stride's subsampled draw the weight `m · q_4` in place of
     /// `stride · q_4`, so the mean over the draws made stays unbiased.
     /// Without a deadline the draws and weights are exactly those of the
     /// whole search.
@@ -357,7 +357,10 @@ impl<'a> ReltFamily<'a> {
         };
         let mut kept: Vec<(u64, f64, bool)> = Vec::new();
         let mut draws = 0;
-        while draws < planned && !self.deadline.passed() {
+        // Every rank of a cluster searches: they agree before each block
+        // whether any has passed the deadline (collective), so all keep
+        // the same draws.
+        while draws < planned && !crate::cluster::any_rank(self.deadline.passed()) {
             let end = (draws + SEARCH_BLOCK).min(planned);
             kept.par_extend((draws..end).into_par_iter().filter_map(draw));
             draws = end;
@@ -452,6 +455,16 @@ impl<'a> ChainFamily for ReltFamily<'a> {
         0.0
     }
     crate::primary_sample_space_family!();
+    /// Checkpoints hold every replica set as the driver saves them: the
+    /// Kelemen small steps and the uniform replica's independent draws
+    /// keep no state of their own, and the start-up (bootstrap,
+    /// annealing, search) is made again on resume, uncut by the budget
+    /// (`markov::startup_deadline`), so `b̂` and the replica set are the
+    /// saved run's; the continued search's draws are in each task's
+    /// running `b_4` (saved) and follow from its mutation count.
+    fn checkpointable(&self, _mutation: &()) -> bool {
+        true
+    }
     fn exchange_move(&self) -> Option<Box<dyn ExchangeMove<TorusPoint, PathSample>>> {
         let m = self.members();
         if let Some(make) = self.custom_exchange {
@@ -592,10 +605,14 @@ impl IntegratorSettings for Relt {
             heuristic: MisHeuristic::Power,
         };
         let settings = self.chain.chain_settings((), run);
-        // The start-up's search stops at the budget; the driver's own
+        // The start-up's search stops at the budget (not with a checkpoint:
+        // `markov::startup_deadline`); the driver's own
         // deadline (from its start, a moment later) stops the annealing
         // and the chains.
-        let deadline = Deadline::new(Instant::now(), run.time_budget);
+        let deadline = markov::startup_deadline(
+            Deadline::new(Instant::now(), run.time_budget),
+            run.checkpoint.is_some(),
+        );
         let mut replicas = self.replicas();
         let mut dropped = Vec::new();
         let result = loop {

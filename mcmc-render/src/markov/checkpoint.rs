@@ -21,6 +21,7 @@
 use super::ChainFamily;
 use super::distribute::TaskSums;
 use super::work::{Task, Units};
+use crate::checkpoint::{FNV_OFFSET, fnv1a};
 use crate::cluster::Parcel;
 use crate::color::Rgb;
 use crate::film::Filter;
@@ -32,9 +33,12 @@ use mcmc_core::stats::ChainStatistics;
 use std::path::Path;
 use std::sync::Arc;
 
-/// First bytes of a Markov-chain checkpoint file (format version 2:
-/// replica sets).
-const MAGIC: &[u8; 8] = b"mcmcMC02";
+/// First bytes of a Markov-chain checkpoint file (format version 3:
+/// version 2's replica sets, and a checksum at the end).
+const MAGIC: &[u8; 8] = b"mcmcMC03";
+
+/// First bytes of a file of the earlier format (no checksum), refused.
+const MAGIC_V2: &[u8; 8] = b"mcmcMC02";
 
 /// One chain as saved.
 #[derive(Clone, Debug)]
@@ -122,22 +126,25 @@ impl ChainProgress {
 }
 
 /// Saves `progress` for the inputs `fingerprint` to `path` (atomically: a
-/// run killed while writing keeps the previous checkpoint).
+/// run killed while writing keeps the previous checkpoint): the magic, the
+/// fingerprint, the progress, then an FNV-1a checksum of all before it.
 pub fn save(path: &Path, fingerprint: u64, progress: &ChainProgress) -> Result<(), String> {
     let mut out = MAGIC.to_vec();
     out.extend_from_slice(&fingerprint.to_le_bytes());
     out.extend(progress.to_bytes());
+    let checksum = fnv1a(&out, FNV_OFFSET);
+    out.extend_from_slice(&checksum.to_le_bytes());
     crate::output::write_bytes(path, &out)
 }
 
 /// The progress saved at `path` for the inputs `fingerprint` and an image
 /// of `size` (films rebuilt with `filter`): `None` when there is no file;
-/// an error (one line) when it is not a Markov-chain checkpoint or belongs
-/// to another render. A path that is not a regular file is refused before
-/// it is opened (a FIFO would block, a device never end), and a file is
-/// read only if twice its length fits in the available memory (the
-/// decoded progress takes about as many bytes as the file: every length
-/// in it is bounded by the bytes that follow).
+/// an error (one line) when it is not a regular file (refused before it
+/// is opened: a FIFO would block, a device never end), too long to read
+/// (twice its length must fit in the available memory: the decoded
+/// progress takes about as many bytes as the file, every length in it
+/// being bounded by the bytes that follow), or when [`progress_from_bytes`]
+/// refuses its bytes.
 pub fn load(
     path: &Path,
     fingerprint: u64,
@@ -159,9 +166,11 @@ pub fn load(
     progress_from_bytes(&bytes, path, fingerprint, size, filter).map(Some)
 }
 
-/// The progress a checkpoint's bytes hold, checked as [`load`] checks a
-/// file (`path` names it in messages): the magic, the fingerprint, the
-/// encoding and every film's size. Whether the tasks fit the run is
+/// The progress a checkpoint's bytes hold (`path` names it in messages):
+/// refused, with one line, when they are not a Markov-chain checkpoint (or
+/// one of the earlier format), are damaged (the checksum does not match: a
+/// flipped bit, a cut or a file written over), belong to another render
+/// or hold films of another size. Whether the tasks fit the run is
 /// checked when the run restores them.
 pub fn progress_from_bytes(
     bytes: &[u8],
@@ -171,9 +180,20 @@ pub fn progress_from_bytes(
     filter: &Arc<Filter>,
 ) -> Result<ChainProgress, String> {
     let bad = |why: &str| format!("checkpoint {}: {why}", path.display());
+    if bytes.starts_with(MAGIC_V2) {
+        return Err(bad(
+            "of an earlier format (mcmcMC02, without a checksum); delete it to start afresh",
+        ));
+    }
     let Some(body) = bytes.strip_prefix(MAGIC) else {
         return Err(bad("not a checkpoint of mcmc-render's Markov-chain driver"));
     };
+    let Some((body, checksum)) = body.split_last_chunk::<8>() else {
+        return Err(bad("truncated"));
+    };
+    if fnv1a(&bytes[..bytes.len() - 8], FNV_OFFSET) != u64::from_le_bytes(*checksum) {
+        return Err(bad("damaged (its checksum does not match its contents)"));
+    }
     let Some((fp, body)) = body.split_first_chunk::<8>() else {
         return Err(bad("truncated"));
     };
@@ -343,6 +363,7 @@ pub(crate) fn restore_task<F: ChainFamily>(
     task.mutations = sums.mutations.into_owned();
     task.ratios = sums.ratios.into_owned();
     task.counts = sums.counts.into_owned();
+    task.recount_searches();
     Ok(())
 }
 
@@ -369,19 +390,7 @@ pub(crate) fn parcel_of(record: &TaskRecord) -> Parcel {
             counts.push(u64::from(s.class));
         }
         counts.extend(c.rng);
-        let st = &c.stats;
-        counts.extend([
-            st.steps,
-            st.accepted,
-            st.evaluations,
-            st.invalid_density,
-            st.outside_support,
-            st.failed,
-            st.components.len() as u64,
-        ]);
-        for k in &st.components {
-            counts.extend([k.proposed, k.accepted, k.sum_alpha.to_bits()]);
-        }
+        stats_words(&c.stats, &mut counts);
     }
     counts.push(record.sets.len() as u64);
     for set in &record.sets {
@@ -394,6 +403,50 @@ pub(crate) fn parcel_of(record: &TaskRecord) -> Parcel {
         numbers: record.sums.numbers.clone(),
         counts,
     }
+}
+
+/// Appends `stats`' counters to `out`, bit-exactly (the component names
+/// are not written: the receiver knows its kernel's).
+pub(crate) fn stats_words(stats: &ChainStatistics, out: &mut Vec<u64>) {
+    out.extend([
+        stats.steps,
+        stats.accepted,
+        stats.evaluations,
+        stats.invalid_density,
+        stats.outside_support,
+        stats.failed,
+        stats.components.len() as u64,
+    ]);
+    for k in &stats.components {
+        out.extend([k.proposed, k.accepted, k.sum_alpha.to_bits()]);
+    }
+}
+
+/// The statistics [`stats_words`] wrote, read word by word from `next`,
+/// with empty component names.
+pub(crate) fn stats_from_words(
+    next: &mut impl FnMut() -> Result<u64, String>,
+) -> Result<ChainStatistics, String> {
+    let mut stats = ChainStatistics::new(Vec::new());
+    [
+        stats.steps,
+        stats.accepted,
+        stats.evaluations,
+        stats.invalid_density,
+        stats.outside_support,
+        stats.failed,
+    ] = [next()?, next()?, next()?, next()?, next()?, next()?];
+    for _ in 0..next()? {
+        stats
+            .components
+            .push(mcmc_core::stats::ComponentStatistics {
+                name: String::new(),
+                proposed: next()?,
+                accepted: next()?,
+                sum_alpha: f64::from_bits(next()?),
+            });
+    }
+    Ok(stats)
 }
 
 /// The record [`parcel_of`] made.
@@ -423,26 +476,8 @@ pub(crate) fn record_of(p: Parcel) -> Result<TaskRecord, String> {
             })
             .collect::<Result<_, String>>()?;
         let rng = [next()?, next()?, next()?, next()?];
-        let mut stats = ChainStatistics::new(Vec::new());
-        [
-            stats.steps,
-            stats.accepted,
-            stats.evaluations,
-            stats.invalid_density,
-            stats.outside_support,
-            stats.failed,
-        ] = [next()?, next()?, next()?, next()?, next()?, next()?];
-        for _ in 0..next()? {
-            stats
-                .components
-                .push(mcmc_core::stats::ComponentStatistics {
-                    // The kernel's names, put back by `restore_task`.
-                    name: String::new(),
-                    proposed: next()?,
-                    accepted: next()?,
-                    sum_alpha: f64::from_bits(next()?),
-                });
-        }
+        // The kernel's component names are put back by `restore_task`.
+        let stats = stats_from_words(&mut next)?;
         chains.push(ChainRecord {
             state,
             log_density,

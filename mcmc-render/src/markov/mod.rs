@@ -903,7 +903,10 @@ pub fn run<F: ChainFamily>(
             family,
             &settings.mutation,
             &boots[0],
-            (a, deadline),
+            (
+                a,
+                annealing_deadline(deadline, settings.checkpoint.is_some()),
+            ),
             seed,
         )?),
         None => None,
@@ -1259,6 +1262,38 @@ pub fn run<F: ChainFamily>(
             .as_ref()
             .map(|_| (resumed.unwrap_or(0), checkpoint_error)),
     })
+}
+
+/// The deadline of a run's start-up beyond the bootstrap (the population
+/// annealing's sweeps, a family's own search): the run's `deadline`,
+/// unless the run is `checkpointed` — a resumed run makes the start-up
+/// again, and its `b̂` and starts must be the saved run's — in which case
+/// the start-up runs to its end whatever the time budget (which goes on
+/// counting from the run's start).
+pub fn startup_deadline(deadline: Deadline, checkpointed: bool) -> Deadline {
+    if checkpointed {
+        Deadline::NEVER
+    } else {
+        deadline
+    }
+}
+
+/// The deadline of the population annealing's sweeps: the start-up's
+/// ([`startup_deadline`]), except on a cluster of several ranks, where
+/// every rank anneals and all must end with the same particles: there
+/// the ranks agree when the annealing starts (collective) whether any
+/// has passed it — then no sweep runs — and otherwise it runs to its end
+/// (a particle checks the deadline before each step, in parallel, where
+/// the ranks cannot agree).
+fn annealing_deadline(deadline: Deadline, checkpointed: bool) -> Deadline {
+    let deadline = startup_deadline(deadline, checkpointed);
+    match crate::cluster::current() {
+        Some(c) if c.size() > 1 => match c.any(deadline.passed()) {
+            true => Deadline::new(Instant::now(), Some(Duration::ZERO)),
+            false => Deadline::NEVER,
+        },
+        _ => deadline,
+    }
 }
 
 /// Least time between two checkpoints of a run (besides the one at its

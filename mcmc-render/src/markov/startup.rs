@@ -3,38 +3,15 @@
 //! and the allocation of chains to members.
 
 use super::{ChainFamily, MltError};
+use crate::cluster::evaluate_split;
 use mcmc_core::rng::stream_rng;
 use mcmc_core::startup::Bootstrap;
 use mcmc_core::target::Target;
-use rayon::prelude::*;
 use std::ops::Range;
 
 /// Stream offset of the resampling of chain starts (apart from the chains'
 /// own streams and [`super::CANDIDATE_STREAM`]).
 pub(crate) const RESAMPLE_STREAM: u64 = 1 << 41;
-
-/// `f(i)` (`width` numbers each) for `i` in `0..n`, flattened in order
-/// and evaluated in parallel. On a cluster ([`crate::cluster`]) each rank
-/// evaluates a contiguous block of `i` and every rank gets them all: the
-/// start-up is split, not repeated, and every rank holds the same numbers
-/// (each depends on `i` alone) as one process.
-fn evaluate_split(n: usize, width: usize, f: impl Fn(usize) -> Vec<f64> + Sync) -> Vec<f64> {
-    let cluster = crate::cluster::current();
-    let (rank, size) = cluster.map_or((0, 1), |c| (c.rank(), c.size()));
-    let block = n * rank / size..n * (rank + 1) / size;
-    let local: Vec<f64> = block
-        .into_par_iter()
-        .flat_map_iter(|i| {
-            let v = f(i);
-            debug_assert_eq!(v.len(), width);
-            v
-        })
-        .collect();
-    match cluster {
-        Some(c) => c.all_gather_f64s(local),
-        None => local,
-    }
-}
 
 /// `ln I(x_j) − ln p₀(x_j)` of the `count` candidates of every member,
 /// evaluated in parallel (on a cluster, split over the ranks) and

@@ -139,7 +139,8 @@ pub(crate) struct TaskSearch {
     /// The task's index and the number of tasks (which interleave their
     /// units' candidate indices).
     task: (u64, u64),
-    /// Draws made (since the run, or its resumption, started).
+    /// Draws made (after a checkpoint's resume, those of the saved rounds
+    /// included: [`Task::recount_searches`]).
     made: u64,
 }
 
@@ -192,6 +193,18 @@ impl<'f, F: ChainFamily> Task<'f, F> {
                 task,
                 made: 0,
             });
+        }
+    }
+
+    /// After a checkpoint's sums were put back into the task: the draws
+    /// of its continued searches made so far are those owed for its
+    /// mutations (the saved rounds made them, and their weights are in
+    /// the saved running estimates), so a resumed run reports the
+    /// uninterrupted run's draws.
+    pub fn recount_searches(&mut self) {
+        let mutations: u64 = self.mutations.iter().sum();
+        for s in self.searches.iter_mut().flatten() {
+            s.made = s.owed(mutations) * s.plan.unit;
         }
     }
 
