@@ -8,7 +8,10 @@
 //! Each reader first compares the file's fingerprint and image size with
 //! the run's; the target takes the fingerprint from the input (the word
 //! after the magic) and the size from the scene, so that the fuzzer gets
-//! past them to the rest.
+//! past them to the rest. A Markov-chain checkpoint ends with an FNV-1a
+//! checksum of what precedes it, which the target writes into the input
+//! before the reader sees it (damaged checksums are refused first and are
+//! tested in `tests/checkpoint.rs`).
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 use mcmc_render::checkpoint::{Checkpoint, progress_from_bytes};
@@ -36,6 +39,13 @@ fn scene() -> &'static Scene {
             .expect("the Cornell box loads");
         assert_eq!((scene.film.width, scene.film.height), (4, 3));
         scene
+    })
+}
+
+/// 64-bit FNV-1a, the Markov-chain checkpoint's checksum.
+fn fnv1a(bytes: &[u8]) -> u64 {
+    (bytes.iter()).fold(0xcbf2_9ce4_8422_2325, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
     })
 }
 
@@ -68,7 +78,13 @@ fuzz_target!(|data: &[u8]| {
         )
     } else {
         let filter = Arc::new(Filter::new(scene.film.filter, size.0, size.1));
-        let Ok(progress) = chain_progress_from_bytes(data, path, fingerprint, size, &filter) else {
+        let mut data = data.to_vec();
+        if let Some(body) = data.len().checked_sub(8) {
+            let checksum = fnv1a(&data[..body]);
+            data[body..].copy_from_slice(&checksum.to_le_bytes());
+        }
+        let Ok(progress) = chain_progress_from_bytes(&data, path, fingerprint, size, &filter)
+        else {
             return;
         };
         checkpoint.chains = Some(Arc::new(progress));
