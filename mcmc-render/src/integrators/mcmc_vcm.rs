@@ -1077,7 +1077,8 @@ impl McmcVcm {
         out.transfer = 0.0;
         out.tally = Tally::default();
         // Exact sizes, and each tile freed once copied: the peak is the
-        // joined subpaths plus the tiles (see `memory_bytes`).
+        // joined subpaths (or last iteration's, whose buffers are reused)
+        // plus the tiles (see `memory_bytes`).
         let vertices = results.iter().map(|r| r.0.vertices.len()).sum();
         out.cameras.vertices.reserve_exact(vertices);
         out.cameras.mis.reserve_exact(vertices);
@@ -1154,6 +1155,13 @@ impl McmcVcm {
                 estimates.push(l);
             }
         }
+        // The tiles wait for the join together: without the slack of their
+        // growth they hold the pass once (see `memory_bytes`).
+        set.vertices.shrink_to_fit();
+        set.mis.shrink_to_fit();
+        set.starts.shrink_to_fit();
+        rasters.shrink_to_fit();
+        estimates.shrink_to_fit();
         (set, rasters, estimates, transfer, tally)
     }
 
@@ -1560,10 +1568,12 @@ crate::settings! {
 /// two chains (state with its lazily drawn coordinates, the adaptive
 /// kernel, statistics) and their current states' contributions `C^Ω`.
 /// An estimate of the same kind as `markov`'s bytes per chain, set from
-/// the heap measured by `tests/mcmc_vcm_memory.rs` (about 2.4 KB per pair on the
-/// Cornell box at `max_depth` 5, docs/vcm.md "Session 17") with room for
-/// longer paths; a state's contribution holds one 28-byte part per merged
-/// camera vertex, so a radius spanning many pixels can exceed it.
+/// what was measured (docs/vcm.md "Session 17": about 3.4 KB of heap per
+/// pair on the Cornell box at `max_depth` 5 in `tests/mcmc_vcm_memory.rs`;
+/// 3.8 KB and 5.5 KB of resident set per pair on the interior at
+/// `max_depth` 6 and 20) with room for longer paths; a state's
+/// contribution holds one 28-byte part per merged camera vertex, so a
+/// radius spanning many pixels can exceed it.
 pub const BYTES_PER_UNIT: u128 = 8192;
 
 /// Mean camera vertices per subpath assumed with an unbounded depth
@@ -1579,10 +1589,10 @@ pub struct MemoryEstimate {
     /// The chain pairs: two images each (24 B a pixel) and [`BYTES_PER_UNIT`].
     pub units: u128,
     /// One iteration's camera subpaths: every vertex with its MIS
-    /// quantities, up to three times (the tiles, each grown by doubling,
-    /// and the joined copy), the merge grid over them (48 B a vertex with
-    /// its construction), and per pixel its raster position, estimate and
-    /// start index (three times).
+    /// quantities twice (the tiles and the joined copy, both at their
+    /// exact sizes), the merge grid over them (48 B a vertex with its
+    /// construction), and per pixel its raster position, estimate and
+    /// start index (twice).
     pub cameras: u128,
     /// The restart candidates (the blocks and the joined pool, 2 ×
     /// 56 B each) and each running pair's cumulative weights (8 B per
@@ -1623,7 +1633,7 @@ impl McmcVcmSettings {
         MemoryEstimate {
             films: pixels * (u128::from(crate::resources::FILM_BYTES_PER_PIXEL) + rgb),
             units: self.units as u128 * (pixels * 2 * rgb + BYTES_PER_UNIT),
-            cameras: pixels * (vertices * (3 * vertex + grid) + 3 * per_pixel),
+            cameras: pixels * (vertices * (2 * vertex + grid) + 2 * per_pixel),
             candidates: self.candidates as u128 * (2 * candidate + 8 * threads as u128),
         }
     }
