@@ -99,7 +99,10 @@ fn the_memory_estimate_covers_the_heap_a_render_takes() {
             estimate as f64 / peak as f64,
             old_estimate(&scene, &s)
         );
-        assert!(peak <= estimate, "{what}: peak {peak} > estimate {estimate}");
+        assert!(
+            peak <= estimate,
+            "{what}: peak {peak} > estimate {estimate}"
+        );
         assert!(
             estimate <= 4 * peak,
             "{what}: estimate {estimate} > 4 × peak {peak}"

@@ -1622,8 +1622,7 @@ impl McmcVcmSettings {
         } else {
             UNBOUNDED_CAMERA_VERTICES
         };
-        let vertex =
-            size(std::mem::size_of::<Vertex>() + std::mem::size_of::<PartialMis>());
+        let vertex = size(std::mem::size_of::<Vertex>() + std::mem::size_of::<PartialMis>());
         // The grid's entry (position, index), bucket start, bucket of each
         // point and next slot while sorting, the point list it is built
         // from, and the (subpath, vertex) of each merge point.
@@ -1694,7 +1693,9 @@ impl IntegratorSettings for McmcVcmSettings {
         // 3·10^15 bytes; the estimate is checked before anything sized by
         // them or by the film is allocated.
         let (w, h) = (scene.film.width, scene.film.height);
-        let bytes = self.memory_bytes(scene, rayon::current_num_threads()).total();
+        let bytes = self
+            .memory_bytes(scene, rayon::current_num_threads())
+            .total();
         crate::resources::check_memory(
             &format!(
                 "mcmc-vcm: {w}×{h} with {} units and {} candidates",
