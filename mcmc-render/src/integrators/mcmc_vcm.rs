@@ -1603,7 +1603,10 @@ pub struct MemoryEstimate {
 impl MemoryEstimate {
     /// The sum of the parts.
     pub fn total(&self) -> u128 {
-        self.films + self.units + self.cameras + self.candidates
+        self.films
+            .saturating_add(self.units)
+            .saturating_add(self.cameras)
+            .saturating_add(self.candidates)
     }
 }
 
@@ -1629,9 +1632,11 @@ impl McmcVcmSettings {
         let grid = 16 + 4 + 4 + 4 + 12 + 8;
         let per_pixel = size(std::mem::size_of::<Vec2>()) + rgb + 4;
         let candidate = size(std::mem::size_of::<Candidate>());
+        // Saturating: 2^64 − 1 pairs on a 2^32 × 2^32 film would overflow
+        // even 128 bits (and are refused all the same).
         MemoryEstimate {
             films: pixels * (u128::from(crate::resources::FILM_BYTES_PER_PIXEL) + rgb),
-            units: self.units as u128 * (pixels * 2 * rgb + BYTES_PER_UNIT),
+            units: (self.units as u128).saturating_mul(pixels * 2 * rgb + BYTES_PER_UNIT),
             cameras: pixels * (vertices * (2 * vertex + grid) + 2 * per_pixel),
             candidates: self.candidates as u128 * (2 * candidate + 8 * threads as u128),
         }
