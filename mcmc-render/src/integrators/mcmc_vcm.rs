@@ -817,7 +817,14 @@ impl McmcVcm {
                 out
             })
             .collect();
-        blocks.into_iter().flatten().collect()
+        // Joined into a vector of the exact size, each block freed once
+        // copied (collecting the flattened blocks grew the vector by
+        // doubling: up to 3× the candidates' bytes at the peak).
+        let mut pool = Vec::with_capacity(blocks.iter().map(Vec::len).sum());
+        for block in blocks {
+            pool.extend(block);
+        }
+        pool
     }
 
     /// Renders to `run`'s budget in whole iterations (one camera subpath
@@ -1069,15 +1076,24 @@ impl McmcVcm {
         out.estimates.clear();
         out.transfer = 0.0;
         out.tally = Tally::default();
-        for (set, rasters, estimates, transfer, tally) in &results {
+        // Exact sizes, and each tile freed once copied: the peak is the
+        // joined subpaths (or last iteration's, whose buffers are reused)
+        // plus the tiles (see `memory_bytes`).
+        let vertices = results.iter().map(|r| r.0.vertices.len()).sum();
+        out.cameras.vertices.reserve_exact(vertices);
+        out.cameras.mis.reserve_exact(vertices);
+        out.cameras.starts.reserve_exact(pixels + 1);
+        out.rasters.reserve_exact(pixels);
+        out.estimates.reserve_exact(pixels);
+        for (set, rasters, estimates, transfer, tally) in results {
             for k in 0..set.len() {
                 let (z, mis) = set.subpath(k);
                 out.cameras.push(z, mis);
             }
-            out.rasters.extend_from_slice(rasters);
-            out.estimates.extend_from_slice(estimates);
+            out.rasters.extend_from_slice(&rasters);
+            out.estimates.extend_from_slice(&estimates);
             out.transfer += transfer;
-            out.tally.add(tally);
+            out.tally.add(&tally);
         }
         if self.vcm.mode.merges() {
             out.cameras.build_grid(scene, radius);
@@ -1139,6 +1155,13 @@ impl McmcVcm {
                 estimates.push(l);
             }
         }
+        // The tiles wait for the join together: without the slack of their
+        // growth they hold the pass once (see `memory_bytes`).
+        set.vertices.shrink_to_fit();
+        set.mis.shrink_to_fit();
+        set.starts.shrink_to_fit();
+        rasters.shrink_to_fit();
+        estimates.shrink_to_fit();
         (set, rasters, estimates, transfer, tally)
     }
 
@@ -1541,7 +1564,84 @@ crate::settings! {
     }
 }
 
+/// Heap bytes of one chain pair beyond its two images: the [`Unit`], its
+/// two chains (state with its lazily drawn coordinates, the adaptive
+/// kernel, statistics) and their current states' contributions `C^Ω`.
+/// An estimate of the same kind as `markov`'s bytes per chain, set from
+/// what was measured (docs/vcm.md "Session 17": about 3.4 KB of heap per
+/// pair on the Cornell box at `max_depth` 5 in `tests/mcmc_vcm_memory.rs`;
+/// 3.8 KB and 5.5 KB of resident set per pair on the interior at
+/// `max_depth` 6 and 20) with room for longer paths; a state's
+/// contribution holds one 28-byte part per merged camera vertex, so a
+/// radius spanning many pixels can exceed it.
+pub const BYTES_PER_UNIT: u128 = 8192;
+
+/// Mean camera vertices per subpath assumed with an unbounded depth
+/// (Russian roulette ends the walks; with a bounded depth the bound,
+/// `max_depth + 1`, is used).
+pub const UNBOUNDED_CAMERA_VERTICES: u128 = 16;
+
+/// [`McmcVcmSettings::memory_bytes`]: a render's peak heap, by part.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MemoryEstimate {
+    /// The output film and the iteration's light-side sum (40 B a pixel).
+    pub films: u128,
+    /// The chain pairs: two images each (24 B a pixel) and [`BYTES_PER_UNIT`].
+    pub units: u128,
+    /// One iteration's camera subpaths: every vertex with its MIS
+    /// quantities twice (the tiles and the joined copy, both at their
+    /// exact sizes), the merge grid over them (48 B a vertex with its
+    /// construction), and per pixel its raster position, estimate and
+    /// start index (twice).
+    pub cameras: u128,
+    /// The restart candidates (the blocks and the joined pool, 2 ×
+    /// 56 B each) and each running pair's cumulative weights (8 B per
+    /// candidate and thread).
+    pub candidates: u128,
+}
+
+impl MemoryEstimate {
+    /// The sum of the parts.
+    pub fn total(&self) -> u128 {
+        self.films
+            .saturating_add(self.units)
+            .saturating_add(self.cameras)
+            .saturating_add(self.candidates)
+    }
+}
+
 impl McmcVcmSettings {
+    /// The heap a render of `scene` with these settings takes at its peak,
+    /// on `threads` threads (an estimate, by part; the scene itself is not
+    /// counted). Checked against the memory available before the render
+    /// allocates anything (docs/errors.md).
+    pub fn memory_bytes(&self, scene: &Scene, threads: usize) -> MemoryEstimate {
+        let size = |bytes: usize| bytes as u128;
+        let pixels = u128::from(scene.film.width) * u128::from(scene.film.height);
+        let rgb = size(std::mem::size_of::<Rgb>());
+        let depth = u128::from(self.vcm.depth.limit());
+        let vertices = if depth < UNBOUNDED_CAMERA_VERTICES {
+            depth + 1
+        } else {
+            UNBOUNDED_CAMERA_VERTICES
+        };
+        let vertex = size(std::mem::size_of::<Vertex>() + std::mem::size_of::<PartialMis>());
+        // The grid's entry (position, index), bucket start, bucket of each
+        // point and next slot while sorting, the point list it is built
+        // from, and the (subpath, vertex) of each merge point.
+        let grid = 16 + 4 + 4 + 4 + 12 + 8;
+        let per_pixel = size(std::mem::size_of::<Vec2>()) + rgb + 4;
+        let candidate = size(std::mem::size_of::<Candidate>());
+        // Saturating: 2^64 − 1 pairs on a 2^32 × 2^32 film would overflow
+        // even 128 bits (and are refused all the same).
+        MemoryEstimate {
+            films: pixels * (u128::from(crate::resources::FILM_BYTES_PER_PIXEL) + rgb),
+            units: (self.units as u128).saturating_mul(pixels * 2 * rgb + BYTES_PER_UNIT),
+            cameras: pixels * (vertices * (2 * vertex + grid) + 2 * per_pixel),
+            candidates: self.candidates as u128 * (2 * candidate + 8 * threads as u128),
+        }
+    }
+
     /// The integrator these settings describe for `scene`.
     pub fn integrator(&self, scene: &Scene) -> McmcVcm {
         McmcVcm {
@@ -1594,21 +1694,27 @@ impl IntegratorSettings for McmcVcmSettings {
         stop: &AtomicBool,
         observer: &dyn Observer,
     ) -> Result<Rendered, RenderError> {
-        // Each unit keeps a camera image and a splat film; the pilot keeps
-        // every candidate (10^15 units or candidates aborted on
-        // allocations of 10^18 and 3·10^15 bytes).
-        let pixels = u128::from(scene.film.width) * u128::from(scene.film.height);
-        let unit = pixels * (std::mem::size_of::<Rgb>() as u128 + 12) + 256;
+        // 10^15 units or candidates aborted on allocations of 10^18 and
+        // 3·10^15 bytes; the estimate is checked before anything sized by
+        // them or by the film is allocated.
+        let (w, h) = (scene.film.width, scene.film.height);
+        let bytes = self
+            .memory_bytes(scene, rayon::current_num_threads())
+            .total();
         crate::resources::check_memory(
             &format!(
-                "mcmc-vcm: {} units and {} candidates",
+                "mcmc-vcm: {w}×{h} with {} units and {} candidates",
                 self.units, self.candidates
             ),
-            self.units as u128 * unit
-                + self.candidates as u128 * std::mem::size_of::<Candidate>() as u128,
+            bytes,
         )
         .map_err(RenderError::Invalid)?;
-        Ok(self.integrator(scene).render(scene, run, stop, observer))
+        let mut out = self.integrator(scene).render(scene, run, stop, observer);
+        // Reported so that the estimate can be set against the resident
+        // set a run measures (docs/vcm.md, "Session 17").
+        out.statistics
+            .insert("memory_estimate_bytes".into(), (bytes as f64).into());
+        Ok(out)
     }
 }
 
