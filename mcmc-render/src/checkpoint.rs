@@ -143,7 +143,7 @@ fn file_bytes(size: (u32, u32)) -> u128 {
 /// The largest count a checkpoint may hold (samples done in all, and
 /// non-finite samples dropped): 2^53, the largest integer the JSON
 /// sidecar's readers hold exactly. A real run stays far below.
-const MAX_COUNT: u64 = 1 << 53;
+pub(crate) const MAX_COUNT: u64 = 1 << 53;
 
 /// The progress saved at `path` for the inputs `fingerprint` and an image
 /// of `size`: `None` when there is no file; an error (one line) when it is

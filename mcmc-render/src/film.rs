@@ -282,6 +282,21 @@ impl Film {
         samples: Vec<[f32; 4]>,
         splats: Vec<[f32; 3]>,
     ) -> Result<Film, String> {
+        // The window must lie in the image the filter was made for (a
+        // forged checkpoint could say otherwise; splats index by both).
+        let inside =
+            |start: u32, len: u32, full: u32| start.checked_add(len).is_some_and(|e| e <= full);
+        if !inside(x0, w, width)
+            || !inside(y0, h, height)
+            || filter.norm_x.len() != width as usize
+            || filter.norm_y.len() != height as usize
+        {
+            return Err(format!(
+                "a {w}×{h} window at ({x0}, {y0}) does not fit a {width}×{height} image filtered for {}×{}",
+                filter.norm_x.len(),
+                filter.norm_y.len()
+            ));
+        }
         let n = w as usize * h as usize;
         if splats.len() != n || !(samples.is_empty() || samples.len() == n) {
             return Err(format!(

@@ -581,3 +581,54 @@ fn texture_exr_whose_data_window_exceeds_the_file_is_refused() {
         assert_clean_err(&err, "more than a file of 7627 bytes can hold");
     }
 }
+
+/// The `checkpoint` target's findings in the Markov-chain driver's
+/// reader (session 17: 361 of 177 k inputs in 600 s): its task records
+/// are the parcels the ranks of a distributed run exchange, which the
+/// reader trusted. Forged files (`tests/data/fuzz/checkpoint-*.ckpt`, one
+/// per kind found, rewritten to format 3 with their checksum recomputed)
+/// made it allocate what a length claimed (petabytes, or a capacity
+/// overflow), run off the end of a task's sums, overflow counters near
+/// 2^64 when the resumed chains counted on, or index a film or the
+/// sample-count image outside itself. Each is now one line from the
+/// reader; the control, the target's seed (a complete `pssmlt` run of the
+/// same 4×3 box), still loads.
+#[test]
+fn forged_markov_checkpoints_are_refused_by_the_reader() {
+    use mcmc_render::film::Filter;
+    use mcmc_render::markov::checkpoint::progress_from_bytes;
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/cornell-box.xml"),
+    )
+    .unwrap()
+    .replace("name=\"width\" value=\"256\"", "name=\"width\" value=\"4\"")
+    .replace(
+        "name=\"height\" value=\"256\"",
+        "name=\"height\" value=\"3\"",
+    );
+    let scene =
+        mcmc_render::scene::Scene::load_str(&text, Path::new("cornell-box.xml"), Path::new("."))
+            .unwrap();
+    let size = (scene.film.width, scene.film.height);
+    let filter = std::sync::Arc::new(Filter::new(scene.film.filter, size.0, size.1));
+    let read = |path: &Path| {
+        let bytes = std::fs::read(path).unwrap();
+        let fingerprint = u64::from_le_bytes(bytes[8..16].try_into().unwrap());
+        progress_from_bytes(&bytes, path, fingerprint, size, &filter)
+    };
+    let control = read(&seed("checkpoint", "pssmlt-complete-mpp50.ckpt")).expect("the seed loads");
+    assert_eq!(control.mutations(), 600);
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz");
+    let mut found = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap().to_string_lossy().to_string();
+        if !(name.starts_with("checkpoint-") && name.ends_with(".ckpt")) {
+            continue;
+        }
+        found += 1;
+        let err = read(&path).map(|p| p.tasks.len()).expect_err(&name);
+        assert_clean_err(&err, &name);
+    }
+    assert_eq!(found, 11, "the findings in {}", dir.display());
+}

@@ -92,8 +92,8 @@ impl ChainProgress {
     pub fn mutations(&self) -> u64 {
         self.tasks
             .iter()
-            .map(|t| sums_of(&t.sums).mutations.iter().sum::<u64>())
-            .sum()
+            .flat_map(|t| sums_of(&t.sums).mutations.into_owned())
+            .fold(0, u64::saturating_add)
     }
 
     /// The progress as bytes (the body of a checkpoint file).
@@ -212,6 +212,21 @@ pub fn progress_from_bytes(
             return Err(bad(&format!(
                 "holds a {}×{} image, the scene is {}×{}",
                 f.width, f.height, size.0, size.1
+            )));
+        }
+    }
+    for t in &progress.tasks {
+        let counts = &sums_of(&t.sums).counts;
+        let pixels = u64::from(size.0) * u64::from(size.1);
+        if !counts.samples.is_empty()
+            && (counts.width != size.0 || counts.samples.len() as u64 != pixels)
+        {
+            return Err(bad(&format!(
+                "holds a sample-count image of {} counts {} wide, the scene is {}×{}",
+                counts.samples.len(),
+                counts.width,
+                size.0,
+                size.1
             )));
         }
     }
@@ -446,6 +461,23 @@ pub(crate) fn stats_from_words(
                 sum_alpha: f64::from_bits(next()?),
             });
     }
+    // Counters past 2^53 come only from a forged file; they would
+    // overflow when the resumed chain counts on.
+    let counters = [stats.steps, stats.accepted, stats.evaluations]
+        .into_iter()
+        .chain([stats.invalid_density, stats.outside_support, stats.failed])
+        .chain(
+            stats
+                .components
+                .iter()
+                .flat_map(|k| [k.proposed, k.accepted]),
+        );
+    if let Some(k) = counters
+        .into_iter()
+        .find(|&k| k > crate::checkpoint::MAX_COUNT)
+    {
+        return Err(format!("a chain's counter {k} exceeds 2^53"));
+    }
     Ok(stats)
 }
 
@@ -464,14 +496,14 @@ pub(crate) fn record_of(p: Parcel) -> Result<TaskRecord, String> {
     for _ in 0..next()? {
         let state = (0..next()?).map(|_| next()).collect::<Result<_, _>>()?;
         let log_density = f64::from_bits(next()?);
-        let depth = next()? as u32;
+        let depth = u32::try_from(next()?).map_err(|_| "a path depth overflows")?;
         let splats = (0..next()?)
             .map(|_| {
                 let [x, y, r, g, b, class] = [next()?, next()?, next()?, next()?, next()?, next()?];
                 Ok(Splat {
                     p: glam::Vec2::new(f32_of(x), f32_of(y)),
                     l: Rgb::new(f32_of(r), f32_of(g), f32_of(b)),
-                    class: class as u8,
+                    class: u8::try_from(class).map_err(|_| "a path class overflows")?,
                 })
             })
             .collect::<Result<_, String>>()?;
@@ -495,14 +527,14 @@ pub(crate) fn record_of(p: Parcel) -> Result<TaskRecord, String> {
     if !words.is_empty() {
         return Err("a task's record has trailing words".into());
     }
-    Ok(TaskRecord {
-        sums: Parcel {
-            counts: sums_counts,
-            ..p
-        },
-        chains,
-        sets,
-    })
+    let sums = Parcel {
+        counts: sums_counts,
+        ..p
+    };
+    // The sums are read again (`sums_of`) wherever they are used: checked
+    // here, once, so that those reads cannot fail.
+    TaskSums::try_from_parcel(sums.clone())?;
+    Ok(TaskRecord { sums, chains, sets })
 }
 
 /// Restores this process's `tasks` (`ids[i]`: local task `i`'s index

@@ -87,42 +87,91 @@ impl<'a> TaskSums<'a> {
         }
     }
 
-    /// The sums a [`TaskSums::parcel`] carries.
+    /// The sums a [`TaskSums::parcel`] carries, from another rank of the
+    /// same binary (checked at start-up): a malformed parcel is a bug.
     pub(crate) fn from_parcel(p: Parcel) -> TaskSums<'static> {
+        Self::try_from_parcel(p).expect("a task parcel from a rank of the same binary")
+    }
+
+    /// The sums a parcel carries, refused (one line) when its words do not
+    /// have the shape [`TaskSums::parcel`] writes or a counter exceeds
+    /// 2^53 (a forged checkpoint): every length is checked against the
+    /// words left before anything of that length is allocated.
+    pub(crate) fn try_from_parcel(p: Parcel) -> Result<TaskSums<'static>, String> {
+        const MAX: u64 = crate::checkpoint::MAX_COUNT;
+        let (n_counts, n_numbers) = (p.counts.len(), p.numbers.len());
         let mut c = p.counts.into_iter();
         let mut x = p.numbers.into_iter();
-        // Every rank runs the same binary (checked at start-up): a short
-        // parcel is a bug, not an input error.
-        let mut count = || c.next().expect("a task parcel's counts");
-        let n = count() as usize;
-        let members: Vec<usize> = (0..n).map(|_| count() as usize).collect();
-        let mutations: Vec<u64> = (0..n).map(|_| count()).collect();
-        let counts_of_running: Vec<u64> = (0..n).map(|_| count()).collect();
-        let depths = count() as usize;
+        let mut count = || c.next().ok_or("a task's sums are cut");
+        // A length of `per` words each, within the `left` words there are.
+        let length = |k: u64, per: usize, left: usize| {
+            usize::try_from(k)
+                .ok()
+                .filter(|&k| k.saturating_mul(per) <= left)
+                .ok_or_else(|| format!("a task's sums claim {k} entries"))
+        };
+        let counter = |k: u64| {
+            if k <= MAX {
+                Ok(k)
+            } else {
+                Err(format!("a task's counter {k} exceeds 2^53"))
+            }
+        };
+        let n = length(count()?, 3, n_counts)?;
+        let members = (0..n)
+            .map(|_| usize::try_from(count()?).map_err(|_| "a member index overflows".to_string()))
+            .collect::<Result<Vec<usize>, String>>()?;
+        let mutations = (0..n)
+            .map(|_| counter(count()?))
+            .collect::<Result<Vec<u64>, String>>()?;
+        let counts_of_running = (0..n)
+            .map(|_| counter(count()?))
+            .collect::<Result<Vec<u64>, String>>()?;
+        let depths = length(count()?, 2, n_counts)?;
         let per_depth = (0..depths)
-            .map(|_| DepthAcceptance {
-                proposed: count(),
-                accepted: count(),
+            .map(|_| {
+                Ok(DepthAcceptance {
+                    proposed: counter(count()?)?,
+                    accepted: counter(count()?)?,
+                })
             })
-            .collect();
-        let coords = count();
-        let samples_len = count() as usize;
-        let width = count() as u32;
-        let mut number = || x.next().expect("a task parcel's numbers");
+            .collect::<Result<_, String>>()?;
+        let coords = length(count()?, 1, n_numbers + 1)?;
+        let samples_len = length(count()?, 1, n_numbers)?;
+        let width = u32::try_from(count()?).map_err(|_| "a sample image's width overflows")?;
+        if samples_len > 0 && (width == 0 || samples_len % width as usize != 0) {
+            return Err(format!(
+                "{samples_len} sample counts do not make rows of {width}"
+            ));
+        }
+        if c.next().is_some() {
+            return Err("a task's sums have trailing words".into());
+        }
+        let mut number = || x.next().ok_or("a task's numbers are cut");
         let running = counts_of_running
             .iter()
-            .map(|&k| RunningNormalization::from_parts((k, number(), number())))
-            .collect();
+            .map(|&k| Ok(RunningNormalization::from_parts((k, number()?, number()?))))
+            .collect::<Result<_, String>>()?;
         let ratios = (0..n)
-            .map(|_| RatioSum {
-                weight: number(),
-                sum: number(),
+            .map(|_| {
+                Ok(RatioSum {
+                    weight: number()?,
+                    sum: number()?,
+                })
             })
-            .collect();
-        let first_nonfinite = (coords > 0).then(|| (1..coords).map(|_| number()).collect());
+            .collect::<Result<_, String>>()?;
+        let first_nonfinite = match coords {
+            0 => None,
+            _ => Some((1..coords).map(|_| number()).collect::<Result<_, _>>()?),
+        };
         // Counts are f32 sums: the f64 round trip is exact.
-        let samples = (0..samples_len).map(|_| number() as f32).collect();
-        TaskSums {
+        let samples = (0..samples_len)
+            .map(|_| number().map(|v| v as f32))
+            .collect::<Result<_, _>>()?;
+        if x.next().is_some() {
+            return Err("a task's sums have trailing numbers".into());
+        }
+        Ok(TaskSums {
             members: Cow::Owned(members),
             films: Cow::Owned(p.films),
             running: Cow::Owned(running),
@@ -134,7 +183,7 @@ impl<'a> TaskSums<'a> {
                 samples,
                 width,
             }),
-        }
+        })
     }
 }
 
