@@ -346,14 +346,7 @@ impl<G: GradientTarget> Nuts<G> {
             return None;
         }
         let mut w = std::mem::take(&mut self.work);
-        w.pool.reset(d);
-        let s = w.pool.alloc();
-        {
-            let z = w.pool.get_mut(s);
-            z.x.clone_from(&start.state);
-            z.grad.clone_from(&start.payload.gradient);
-            z.lp = start.log_density;
-        }
+        let s = w.pool.reset_to(d, start);
         let (eps, too_stiff) = self.initial_step_size(&mut w.pool, s, rng);
         self.work = w;
         if too_stiff {
@@ -700,14 +693,7 @@ impl<G: GradientTarget> Kernel<Vec<f64>, GradientPayload> for Nuts<G> {
             return Proposal::failed(0);
         }
         let mut w = std::mem::take(&mut self.work);
-        w.pool.reset(d);
-        let start = w.pool.alloc();
-        {
-            let z = w.pool.get_mut(start);
-            z.x.clone_from(&current.state);
-            z.grad.clone_from(&current.payload.gradient);
-            z.lp = current.log_density;
-        }
+        let start = w.pool.reset_to(d, current);
         if self.init_step_pending && self.hmc.is_adapting() {
             self.init_step_pending = false;
             let (eps, _) = self.initial_step_size(&mut w.pool, start, rng);

@@ -45,6 +45,23 @@ impl PointPool {
         self.free.extend((0..self.points.len()).rev());
     }
 
+    /// Frees every slot for points of dimension `dim` and puts `sample`
+    /// (position, gradient, `ln π`) in a fresh one, whose index it returns:
+    /// the start of a trajectory.
+    pub fn reset_to(
+        &mut self,
+        dim: usize,
+        sample: &crate::sample::Sample<Vec<f64>, crate::gradient::GradientPayload>,
+    ) -> usize {
+        self.reset(dim);
+        let i = self.alloc();
+        let z = self.get_mut(i);
+        z.x.clone_from(&sample.state);
+        z.grad.clone_from(&sample.payload.gradient);
+        z.lp = sample.log_density;
+        i
+    }
+
     /// A free slot (contents unspecified) with one reference.
     pub fn alloc(&mut self) -> usize {
         let i = self.free.pop().unwrap_or_else(|| {
