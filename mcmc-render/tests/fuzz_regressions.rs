@@ -582,19 +582,14 @@ fn texture_exr_whose_data_window_exceeds_the_file_is_refused() {
     }
 }
 
-/// The `checkpoint` target's findings in the Markov-chain driver's
-/// reader (session 17: 361 of 177 k inputs in 600 s): its task records
-/// are the parcels the ranks of a distributed run exchange, which the
-/// reader trusted. Forged files (`tests/data/fuzz/checkpoint-*.ckpt`, one
-/// per kind found, rewritten to format 3 with their checksum recomputed)
-/// made it allocate what a length claimed (petabytes, or a capacity
-/// overflow), run off the end of a task's sums, overflow counters near
-/// 2^64 when the resumed chains counted on, or index a film or the
-/// sample-count image outside itself. Each is now one line from the
-/// reader; the control, the target's seed (a complete `pssmlt` run of the
-/// same 4×3 box), still loads.
-#[test]
-fn forged_markov_checkpoints_are_refused_by_the_reader() {
+/// The `checkpoint` target's scene (the Cornell box on a 4×3 film) and
+/// its Markov-chain reader: a file's progress, with the fingerprint taken
+/// from the file (the word after the magic) as the target takes it.
+#[allow(clippy::type_complexity)]
+fn checkpoint_target_box() -> (
+    mcmc_render::scene::Scene,
+    impl Fn(&Path) -> Result<mcmc_render::markov::checkpoint::ChainProgress, String>,
+) {
     use mcmc_render::film::Filter;
     use mcmc_render::markov::checkpoint::progress_from_bytes;
     let text = std::fs::read_to_string(
@@ -611,11 +606,85 @@ fn forged_markov_checkpoints_are_refused_by_the_reader() {
             .unwrap();
     let size = (scene.film.width, scene.film.height);
     let filter = std::sync::Arc::new(Filter::new(scene.film.filter, size.0, size.1));
-    let read = |path: &Path| {
+    let read = move |path: &Path| {
         let bytes = std::fs::read(path).unwrap();
         let fingerprint = u64::from_le_bytes(bytes[8..16].try_into().unwrap());
         progress_from_bytes(&bytes, path, fingerprint, size, &filter)
     };
+    (scene, read)
+}
+
+/// Session 18's `checkpoint` findings (2 files in 600 s): chains whose
+/// saved current sample the reader took, but which panicked once the
+/// resumed `pssmlt` ran on (`attempt to multiply with overflow` indexing
+/// the sample-count image at a position far outside it). Each file must
+/// now be refused by the reader with one line, or resume and finish as
+/// the target runs it (2 chains, 100 mutations per pixel); the control,
+/// the target's seed, resumes and finishes too.
+#[test]
+fn forged_markov_checkpoints_resume_or_are_refused() {
+    use mcmc_render::checkpoint::Checkpoint;
+    use mcmc_render::integrators::{RunSettings, registry};
+    use mcmc_render::observer::NoObserver;
+    use std::sync::atomic::AtomicBool;
+    let (scene, read) = checkpoint_target_box();
+    let dir = tempfile::tempdir().unwrap();
+    let resume = |path: &Path| -> Result<(), String> {
+        let progress = read(path)?;
+        let sets = [
+            ("bootstrap", "1000"),
+            ("chains", "2"),
+            ("mutations_per_pixel", "100"),
+        ]
+        .map(|(k, v)| (k.to_string(), v.to_string()));
+        let run = RunSettings {
+            checkpoint: Some(Checkpoint {
+                path: dir.path().join("run.ckpt"),
+                fingerprint: u64::from_le_bytes(
+                    std::fs::read(path).unwrap()[8..16].try_into().unwrap(),
+                ),
+                resume: None,
+                chains: Some(std::sync::Arc::new(progress)),
+            }),
+            ..RunSettings::default()
+        };
+        let integrator = registry::configure(None, Some("pssmlt"), &sets).unwrap();
+        integrator
+            .render(&scene, &run, &AtomicBool::new(false), &NoObserver)
+            .map(|_| ())
+            .map_err(|e| e.to_string())
+    };
+    resume(&seed("checkpoint", "pssmlt-complete-mpp50.ckpt")).expect("the seed resumes");
+    let fuzz = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz");
+    let mut found = 0;
+    for entry in std::fs::read_dir(&fuzz).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap().to_string_lossy().to_string();
+        if !(name.starts_with("resumed-checkpoint-") && name.ends_with(".ckpt")) {
+            continue;
+        }
+        found += 1;
+        if let Err(err) = resume(&path) {
+            assert_clean_err(&err, "");
+        }
+    }
+    assert_eq!(found, 2, "the findings in {}", fuzz.display());
+}
+
+/// The `checkpoint` target's findings in the Markov-chain driver's
+/// reader (session 17: 361 of 177 k inputs in 600 s): its task records
+/// are the parcels the ranks of a distributed run exchange, which the
+/// reader trusted. Forged files (`tests/data/fuzz/checkpoint-*.ckpt`, one
+/// per kind found, rewritten to format 3 with their checksum recomputed)
+/// made it allocate what a length claimed (petabytes, or a capacity
+/// overflow), run off the end of a task's sums, overflow counters near
+/// 2^64 when the resumed chains counted on, or index a film or the
+/// sample-count image outside itself. Each is now one line from the
+/// reader; the control, the target's seed (a complete `pssmlt` run of the
+/// same 4×3 box), still loads.
+#[test]
+fn forged_markov_checkpoints_are_refused_by_the_reader() {
+    let (_, read) = checkpoint_target_box();
     let control = read(&seed("checkpoint", "pssmlt-complete-mpp50.ckpt")).expect("the seed loads");
     assert_eq!(control.mutations(), 600);
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz");

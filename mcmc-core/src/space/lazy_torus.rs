@@ -403,11 +403,19 @@ impl TorusPoint {
             2 => SmallStep::Power { theta: a },
             _ => return None,
         };
+        // What no point can hold: a coordinate outside [0, 1) (or NaN), or
+        // a small step its constructor refuses (a step of 1e-300 would
+        // take forever to catch a coordinate up).
+        step.validate().ok()?;
+        let values: Vec<f64> = values.iter().map(|&v| f64::from_bits(v)).collect();
+        if !values.iter().all(|v| (0.0..1.0).contains(v)) {
+            return None;
+        }
         let rng = crate::rng::rng_from_words([r0, r1, r2, r3])?;
         *input = &rest[8..];
         Some(TorusPoint {
             inner: RefCell::new(LazyCoordinates {
-                values: values.iter().map(|&v| f64::from_bits(v)).collect(),
+                values,
                 updated_at: updated_at.to_vec(),
                 iteration,
                 step,
@@ -506,6 +514,15 @@ mod tests {
         assert!(TorusPoint::from_words(&mut &words[..words.len() - 3]).is_none());
         let mut bad = words.clone();
         bad[1 + 2 * words[0] as usize + 1] = 9;
+        assert!(TorusPoint::from_words(&mut &bad[..]).is_none());
+        // Nor a coordinate outside [0, 1), nor a step no constructor makes.
+        for (at, word) in [(1, 1.0f64.to_bits()), (2, f64::NAN.to_bits())] {
+            let mut bad = words.clone();
+            bad[at] = word;
+            assert!(TorusPoint::from_words(&mut &bad[..]).is_none());
+        }
+        let mut bad = words.clone();
+        bad[1 + 2 * words[0] as usize + 2] = (-0.01f64).to_bits();
         assert!(TorusPoint::from_words(&mut &bad[..]).is_none());
     }
 }

@@ -496,13 +496,25 @@ pub(crate) fn record_of(p: Parcel) -> Result<TaskRecord, String> {
     for _ in 0..next()? {
         let state = (0..next()?).map(|_| next()).collect::<Result<_, _>>()?;
         let log_density = f64::from_bits(next()?);
+        // Metropolis–Hastings never accepts a NaN or +∞ density.
+        if log_density.is_nan() || log_density == f64::INFINITY {
+            return Err("a chain's density is not a number or infinite".into());
+        }
         let depth = u32::try_from(next()?).map_err(|_| "a path depth overflows")?;
         let splats = (0..next()?)
             .map(|_| {
                 let [x, y, r, g, b, class] = [next()?, next()?, next()?, next()?, next()?, next()?];
+                let (p, l) = (
+                    glam::Vec2::new(f32_of(x), f32_of(y)),
+                    Rgb::new(f32_of(r), f32_of(g), f32_of(b)),
+                );
+                // A chain's current sample was accepted, so it is finite.
+                if !(p.is_finite() && l.is_finite()) {
+                    return Err("a chain's path sample is not finite".to_string());
+                }
                 Ok(Splat {
-                    p: glam::Vec2::new(f32_of(x), f32_of(y)),
-                    l: Rgb::new(f32_of(r), f32_of(g), f32_of(b)),
+                    p,
+                    l,
                     class: u8::try_from(class).map_err(|_| "a path class overflows")?,
                 })
             })

@@ -289,11 +289,12 @@ impl TransitionCounts {
         };
         let w = self.width as usize;
         if a > 0.0 && sp.p.x >= 0.0 && sp.p.y >= 0.0 && w > 0 {
+            // Both coordinates are checked before the index is formed: a
+            // position far outside the image (a resumed checkpoint's, which
+            // the fuzzer forged) would overflow `y · w`.
             let (x, y) = (sp.p.x as usize, sp.p.y as usize);
-            if x < w
-                && let Some(c) = self.samples.get_mut(y * w + x)
-            {
-                *c += a as f32;
+            if x < w && y < self.samples.len() / w {
+                self.samples[y * w + x] += a as f32;
             }
         }
     }
