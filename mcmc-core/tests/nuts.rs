@@ -4,10 +4,11 @@
 //!
 //! z-tests: an estimate `m` of `E f` with Monte Carlo standard error `s`
 //! (`sd/√ESS` from `mcmc_core::diagnostics`) is approximately `N(E f, s²)`
-//! after warm-up. `|z| < 4.5` fails with probability 6.8e-6 per check
-//! (≤ 200 checks per test: family-wise ≈ 1.4e-3); for the 2000 checks of
-//! the 1000-d test `|z| < 5` (5.7e-7 each, family-wise ≈ 1.1e-3). The ESS
-//! is estimated, so the bounds are approximate.
+//! after warm-up. A single check uses `|z| < 4.5` (probability 6.8e-6 of
+//! failing); for the 2000 checks of the 1000-d test `|z| < 5` (5.7e-7
+//! each, family-wise ≈ 1.1e-3). The 100-d test combines its 200 correlated
+//! z-scores into one χ²-type statistic (`ar1_chi2_threshold`). The ESS is
+//! estimated, so the bounds are approximate.
 
 // Index loops over coordinates read more clearly here.
 #![allow(clippy::needless_range_loop)]
@@ -75,28 +76,99 @@ fn settings(chains: usize, warmup: usize, draws: usize, seed: u64) -> NutsSettin
 
 const NO_INIT: Option<fn(usize) -> Vec<f64>> = None;
 
+/// The 2d z-scores of the 100-d test on the AR(1) Gaussian `g`: those of
+/// `E xᵢ` (exact 0) then those of `E xᵢ²` (exact `(1 + bias)·scaleᵢ²`),
+/// and the largest R-hat.
+fn ar1_z_scores(fit: &Fit, g: &Ar1Gaussian, bias: f64) -> (Vec<f64>, f64) {
+    let d = g.scale.len();
+    let mut z = vec![0.0; 2 * d];
+    let mut worst_rhat: f64 = 0.0;
+    for i in 0..d {
+        let (zm, rhat) = z_score(fit, 0.0, |x| x[i]);
+        let var = (1.0 + bias) * g.scale[i] * g.scale[i];
+        let (zv, rhat_v) = z_score(fit, var, |x| x[i] * x[i]);
+        z[i] = zm;
+        z[d + i] = zv;
+        worst_rhat = worst_rhat.max(rhat).max(rhat_v);
+    }
+    (z, worst_rhat)
+}
+
+/// `(tr R, tr R²)` of the z-scores' correlation matrix `R` under
+/// independent draws (derivation at [`ar1_chi2_threshold`]).
+fn ar1_z_correlation_traces(d: usize, rho: f64) -> (f64, f64) {
+    let mut tr2 = 0.0;
+    for i in 0..d {
+        for j in 0..d {
+            let k = i.abs_diff(j) as i32;
+            tr2 += rho.powi(2 * k) + rho.powi(4 * k);
+        }
+    }
+    (2.0 * d as f64, tr2)
+}
+
+/// Upper `tail` quantile of `T = Σ zₖ²` over the 2d z-scores of
+/// [`ar1_z_scores`] on a d-dimensional AR(1) Gaussian with correlation
+/// `rho`, under the null (every estimate unbiased, every MCSE right).
+///
+/// The z-scores are correlated: for independent draws the estimates of
+/// `E xᵢ` and `E xⱼ` have the target's correlation `ρ^|i−j|`, those of
+/// `E xᵢ²` and `E xⱼ²` have `cov(xᵢ², xⱼ²)/(2σᵢ²σⱼ²) = ρ^{2|i−j|}`
+/// (Gaussian fourth moments), and means and squares are uncorrelated (odd
+/// moments). With that correlation matrix `R` (2d × 2d, unit diagonal),
+/// `T = Σ λₖ χ²₁` over the eigenvalues λ of R: `E T = tr R = 2d` whatever
+/// the correlation, `Var T = 2 tr R²`. For d = 100, ρ = 0.5:
+/// `tr R² = Σᵢⱼ ρ^{2|i−j|} + ρ^{4|i−j|} = 165.78 + 113.19 = 278.97`, so
+/// `Var T = 558` (χ²₂₀₀ would have 400). The threshold is the
+/// moment-matched (Satterthwaite) `a χ²_ν` with `a = tr R²/tr R = 1.395`
+/// and `ν = (tr R)²/tr R² = 143.4` degrees of freedom: at `tail` = 10⁻³
+/// it is 281 (χ²₂₀₀'s would be 268, too tight for correlated z-scores).
+///
+/// MCMC changes the cross-correlations of the estimates (each
+/// coordinate's MCSE already carries its autocorrelation): the
+/// multi-seed check `nuts_100d_chi2_statistic_over_seeds` measures the
+/// neighbours' correlations of the z-scores and the spread of T over
+/// seeds against this model (`docs/performance.md`, "The 100-d z-test
+/// over seeds, session 18").
+fn ar1_chi2_threshold(d: usize, rho: f64, tail: f64) -> f64 {
+    use statrs::distribution::{ChiSquared, ContinuousCDF};
+    let (tr, tr2) = ar1_z_correlation_traces(d, rho);
+    let a = tr2 / tr;
+    a * ChiSquared::new(tr / a).unwrap().inverse_cdf(1.0 - tail)
+}
+
+/// MCSE z-tests of `E xᵢ` and `E xᵢ²` on the 100-d AR(1) Gaussian, as one
+/// statistic: `T = Σ z²` over the 200 z-scores must stay below its 10⁻³
+/// quantile under the null (281; derivation at [`ar1_chi2_threshold`]),
+/// so a correct sampler fails with probability ≈ 10⁻³ at this fixed seed.
+/// (Until session 18 each |z| had to stay below 4.5: a bound on the
+/// single largest of 200 correlated, estimated-MCSE z-scores, whose
+/// false-alarm rate depends on their tails; `DiagonalGradientEarly` read
+/// −4.62 on seed 100 although its z² averaged 0.98 over seeds 100–107.)
+/// Also R-hat < 1.01, no divergence, E-BFMI > 0.3, tree depth < 10.
+///
+/// Control: the same draws against variances 5 % too large must fail. Per
+/// coordinate that shifts `z` by `0.05 σᵢ²/MCSE(xᵢ²) ≈ 0.05 √(ESS/2)`,
+/// ≈ 2 at the ≈ 3 000 bulk ESS of `xᵢ²` here, so T grows by ≈ 400 over
+/// 100 coordinates (its sd under the null is 24). A 1 % bias moves T by
+/// only ≈ 15 at 4 × 1 000 draws: no test of this size detects it.
 #[test]
-fn nuts_on_a_100d_correlated_gaussian_passes_mcse_z_tests() {
+fn nuts_on_a_100d_correlated_gaussian_passes_a_chi2_test_of_its_z_scores() {
     let g = Ar1Gaussian::new(100, 0.5);
     let fit = sample_nuts(&g, &settings(4, 1000, 1000, 100), NO_INIT).unwrap();
-    let (mut worst_rhat, mut worst_z, mut control_z): (f64, f64, f64) = (0.0, 0.0, 0.0);
-    for i in 0..100 {
-        let var = g.scale[i] * g.scale[i];
-        let (z, rhat) = z_score(&fit, 0.0, |x| x[i]);
-        assert!(z.abs() < 4.5, "E x_{i}: z = {z}");
-        let (zv, rhat_v) = z_score(&fit, var, |x| x[i] * x[i]);
-        assert!(zv.abs() < 4.5, "E x_{i}²: z = {zv}");
-        worst_rhat = worst_rhat.max(rhat).max(rhat_v);
-        worst_z = worst_z.max(z.abs()).max(zv.abs());
-        // Control: the same test against variances 10 % too large.
-        let (zc, _) = z_score(&fit, 1.1 * var, |x| x[i] * x[i]);
-        control_z = control_z.max(zc.abs());
-    }
+    let threshold = ar1_chi2_threshold(100, 0.5, 1e-3);
+    let (z, worst_rhat) = ar1_z_scores(&fit, &g, 0.0);
+    let t: f64 = z.iter().map(|v| v * v).sum();
+    let (zc, _) = ar1_z_scores(&fit, &g, 0.05);
+    let t_control: f64 = zc.iter().map(|v| v * v).sum();
+    let worst_z = z.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     eprintln!(
-        "100-d: max |z| {worst_z:.2}, max R-hat {worst_rhat:.4}, control max |z| {control_z:.1}"
+        "100-d: T = {t:.1} (threshold {threshold:.1}), max |z| {worst_z:.2}, \
+         max R-hat {worst_rhat:.4}, control T = {t_control:.1}"
     );
+    assert!(t < threshold, "T = Σ z² = {t} ≥ {threshold}: {z:?}");
+    assert!(t_control > threshold, "control not detected: T = {t_control}");
     assert!(worst_rhat < 1.01, "R-hat {worst_rhat}");
-    assert!(control_z > 4.5, "control not detected: {control_z}");
     assert_eq!(fit.divergences(), 0);
     for c in &fit.chains {
         let b = c.e_bfmi().unwrap();
@@ -104,6 +176,88 @@ fn nuts_on_a_100d_correlated_gaussian_passes_mcse_z_tests() {
         // A Gaussian needs no deep trees: depth stays well below 10.
         assert!(c.statistics.iter().all(|s| s.tree_depth < 10));
     }
+}
+
+/// The statistic of
+/// `nuts_on_a_100d_correlated_gaussian_passes_a_chi2_test_of_its_z_scores`
+/// over seeds 100–115 under both diagonal warm-ups (`Diagonal` and
+/// `DiagonalGradientEarly`): per seed T, max |z|, R-hat and gradients; per
+/// metric the mean and sd of T and the z-scores' correlation between
+/// neighbours at lags 1 and 2 (pooled over coordinates and seeds), against
+/// the model of [`ar1_chi2_threshold`] (means: ρ, ρ² = 0.5, 0.25; squares:
+/// ρ², ρ⁴ = 0.25, 0.0625; T: mean 200, sd 23.6). Asserts, per metric, that
+/// the mean of T over the 16 seeds lies within ±3.29 of its standard error
+/// under that model (two-sided 10⁻³) and that no seed is above the
+/// per-seed threshold at 10⁻³/16 (Bonferroni: ≤ 10⁻³ over the 16 seeds).
+/// ≈ 32 fits, ≈ 20 s of CPU: `cargo test -p mcmc-core --test nuts --
+/// --ignored nuts_100d_chi2_statistic_over_seeds --nocapture`.
+#[test]
+#[ignore]
+fn nuts_100d_chi2_statistic_over_seeds() {
+    let (d, rho) = (100, 0.5);
+    let g = Ar1Gaussian::new(d, rho);
+    let seeds: Vec<u64> = (100..116).collect();
+    let per_seed = ar1_chi2_threshold(d, rho, 1e-3 / seeds.len() as f64);
+    let (mean_t, tr2) = ar1_z_correlation_traces(d, rho);
+    let var_t = 2.0 * tr2;
+    let mut failures = Vec::new();
+    for metric in [
+        MetricAdaptation::Diagonal,
+        MetricAdaptation::DiagonalGradientEarly,
+    ] {
+        let mut ts = Vec::new();
+        // Σ z_i z_{i+k} and Σ (z_i² + z_{i+k}²)/2 per block (means,
+        // squares) and lag k = 1, 2.
+        let mut cross = [[0.0; 2]; 2];
+        let mut norm = [[0.0; 2]; 2];
+        for &seed in &seeds {
+            let mut s = settings(4, 1000, 1000, seed);
+            s.metric = metric;
+            let fit = sample_nuts(&g, &s, NO_INIT).unwrap();
+            let (z, rhat) = ar1_z_scores(&fit, &g, 0.0);
+            let t: f64 = z.iter().map(|v| v * v).sum();
+            let t_means: f64 = z[..d].iter().map(|v| v * v).sum();
+            let worst = z.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for (b, block) in [&z[..d], &z[d..]].into_iter().enumerate() {
+                for k in 1..=2 {
+                    for i in 0..d - k {
+                        cross[b][k - 1] += block[i] * block[i + k];
+                        norm[b][k - 1] += 0.5 * (block[i] * block[i] + block[i + k] * block[i + k]);
+                    }
+                }
+            }
+            eprintln!(
+                "{metric:?} seed {seed}: T {t:.1} (means {t_means:.1}, squares {:.1}), \
+                 max |z| {worst:.2}, R-hat {rhat:.4}, divergences {}, gradients {}",
+                t - t_means,
+                fit.divergences(),
+                fit.gradient_evaluations()
+            );
+            if t >= per_seed {
+                failures.push(format!("{metric:?} seed {seed}: T {t:.1} ≥ {per_seed:.1}"));
+            }
+            ts.push(t);
+        }
+        let n = ts.len() as f64;
+        let mean = ts.iter().sum::<f64>() / n;
+        let sd = (ts.iter().map(|t| (t - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+        let r = |b: usize, k: usize| cross[b][k] / norm[b][k];
+        eprintln!(
+            "{metric:?}: T mean {mean:.1} sd {sd:.1} over {} seeds (model 200, 23.6); \
+             neighbour correlation of z: means {:.3} {:.3} (model 0.5 0.25), \
+             squares {:.3} {:.3} (model 0.25 0.0625)",
+            ts.len(),
+            r(0, 0),
+            r(0, 1),
+            r(1, 0),
+            r(1, 1)
+        );
+        let bound = 3.29 * (var_t / n).sqrt();
+        if (mean - mean_t).abs() > bound {
+            failures.push(format!("{metric:?}: mean T {mean:.1} outside {mean_t} ± {bound:.1}"));
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
 }
 
 #[test]
