@@ -8,7 +8,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use super::transforms::{
-    cauchy_log1p, cauchy_log1p_derivative, log1p_exp, log_logistic_jacobian, logistic, positive,
+    cauchy_log1p, cauchy_log1p_derivative, log_logistic_jacobian, log1p_exp, logistic, positive,
 };
 use mcmc_core::gradient::GradientTarget;
 use serde_json::Value;
