@@ -199,12 +199,13 @@ fn nuts_on_a_100d_correlated_gaussian_passes_a_chi2_test_of_its_z_scores() {
 /// `DiagonalGradientEarly`): per seed T, max |z|, R-hat and gradients; per
 /// metric the mean and sd of T, the z-scores' correlation between
 /// coordinates 1–5 apart (pooled over coordinates and seeds; where
-/// [`MEASURED_Z_CORRELATION`] comes from) and the counts of |z| > 3 and
-/// > 4 against a normal's. Asserts, per metric, that the mean of T over
+/// [`MEASURED_Z_CORRELATION`] comes from) and the counts of z-scores
+/// beyond 3 and 4 in size against a normal's. Asserts, per metric, that
+/// the mean of T over
 /// the 16 seeds lies within ±3.29 standard errors of 200 (sd of T from
 /// [`ar1_chi2_threshold`]; two-sided 10⁻³) and that no seed is above the
 /// per-seed threshold at 10⁻³/16 (Bonferroni: ≤ 10⁻³ over the 16 seeds).
-/// 32 fits, ≈ 45 s wall at load 8: `cargo test -p mcmc-core --test nuts
+/// 32 fits, ≈ 20–45 s wall at load 8: `cargo test -p mcmc-core --test nuts
 /// -- --ignored nuts_100d_chi2_statistic_over_seeds --nocapture`.
 #[test]
 #[ignore]
