@@ -1,9 +1,10 @@
 //! Our NUTS, adaptive HMC, MALA and H²MC side by side with nuts-rs, in one
 //! process, on the same targets: a 100-d correlated Gaussian and a Bayesian
 //! logistic regression (d = 25, n = 1000, synthetic data); then our NUTS
-//! and nuts-rs only on two posteriordb posteriors of
-//! `mcmc_examples::posteriordb` (`arK-arK`, an AR(5) time series, and
-//! `eight_schools-eight_schools_noncentered`).
+//! and nuts-rs only on three posteriordb posteriors of
+//! `mcmc_examples::posteriordb` (`arK-arK`, an AR(5) time series,
+//! `eight_schools-eight_schools_noncentered`, and `dogs-dogs`, a logistic
+//! regression).
 //!
 //! ```text
 //! cargo run --release --example hmc_vs_nuts -- --json
@@ -12,9 +13,9 @@
 //! cargo run --release --example hmc_vs_nuts -- --samplers nuts,nuts-rs --nuts-term-buffer 150
 //! ```
 //!
-//! `--targets a,b` runs only the named targets (default all four:
+//! `--targets a,b` runs only the named targets (default all five:
 //! `gaussian-100`, `logistic-25`, `arK-arK`,
-//! `eight_schools-eight_schools_noncentered`).
+//! `eight_schools-eight_schools_noncentered`, `dogs-dogs`).
 //!
 //! `--nuts-term-buffer N` sets our NUTS's final step-size-only warm-up
 //! buffer (CmdStan's `term_buffer`; default that of
@@ -135,11 +136,12 @@ struct Options {
 }
 
 /// Every target of the comparison, in the order they run.
-const TARGETS: [&str; 4] = [
+const TARGETS: [&str; 5] = [
     "gaussian-100",
     "logistic-25",
     "arK-arK",
     "eight_schools-eight_schools_noncentered",
+    "dogs-dogs",
 ];
 
 /// Every sampler the comparison knows.
@@ -646,8 +648,9 @@ fn main() {
             &o,
         ));
     }
-    // Posteriordb posteriors: the NUTS comparison only (HMC's integration
-    // time is hand-chosen per target; MALA and H²MC are compared above).
+    // Posteriordb posteriors (every target after the first two): the NUTS
+    // comparison only (HMC's integration time is hand-chosen per target;
+    // MALA and H²MC are compared above).
     let nuts_only = Options {
         samplers: o
             .samplers
@@ -657,7 +660,7 @@ fn main() {
             .collect(),
         ..o.clone()
     };
-    for name in ["arK-arK", "eight_schools-eight_schools_noncentered"] {
+    for name in TARGETS[2..].iter().copied() {
         if !on(name) {
             continue;
         }

@@ -3,6 +3,7 @@
 
 use mcmc_core::gradient::GradientTarget;
 use mcmc_core::rng::{standard_normal, stream_rng, uniform};
+use mcmc_examples::posteriordb::transforms::log1p_exp;
 
 /// A correlated Gaussian in `d` dimensions: AR(1) correlation `ρ` between
 /// neighbours and marginal standard deviations from 0.5 to 2 (geometric),
@@ -116,15 +117,6 @@ impl LogisticRegression {
             prior_scale: 2.0,
             true_beta,
         }
-    }
-}
-
-/// `ln(1 + e^t)` without overflow.
-fn log1p_exp(t: f64) -> f64 {
-    if t > 0.0 {
-        t + (-t).exp().ln_1p()
-    } else {
-        t.exp().ln_1p()
     }
 }
 

@@ -8,10 +8,11 @@
 #![allow(clippy::needless_range_loop)]
 
 use super::transforms::{
-    cauchy_log1p, cauchy_log1p_derivative, log_logistic_jacobian, logistic, positive,
+    cauchy_log1p, cauchy_log1p_derivative, log_logistic_jacobian, log1p_exp, logistic, positive,
 };
 use mcmc_core::gradient::GradientTarget;
 use serde_json::Value;
+use std::collections::BTreeMap;
 
 /// A posterior: a gradient target on the unconstrained space plus the map
 /// to the quantities posteriordb has reference draws of.
@@ -292,6 +293,100 @@ impl Model for LinearRegression {
         let mut q = x[..self.d].to_vec();
         q.push(positive(x[self.d]));
         q
+    }
+}
+
+// ---- logistic regression -----------------------------------------------------
+
+/// `y ~ Bernoulli(logit⁻¹(Xβ))`, `β ~ N(0, s)`: `dogs`. Observations with
+/// the same row of `X` are pooled into one binomial term
+/// `k η − n ln(1 + e^η)` (`k` successes in `n`), which is the sum of their
+/// Bernoulli terms exactly: the dogs' 775 trials have 195 distinct rows.
+/// Unconstrained coordinates: `β[D]`.
+pub struct LogisticRegression {
+    /// Distinct rows of the design matrix, `groups × D`, row-major.
+    x: Vec<f64>,
+    /// Successes `k` and trials `n` per distinct row.
+    counts: Vec<(f64, f64)>,
+    d: usize,
+    prior_sd: f64,
+}
+
+impl LogisticRegression {
+    /// `dogs` (Gelman & Hill, ch. 24): `y = 1` at dog `j`'s trial `t` with
+    /// logit `β₁ + β₂ n_avoid + β₃ n_shock`, the counts of its earlier
+    /// trials with `y = 0` (avoidances) and `y = 1` (shocks), as the Stan
+    /// program counts them; `β ~ N(0, 100)`.
+    pub fn dogs(data: &Value) -> Result<Self, String> {
+        let (n_dogs, n_trials) = (int(data, "n_dogs")?, int(data, "n_trials")?);
+        let y = field(data, "y")?
+            .as_array()
+            .filter(|rows| rows.len() == n_dogs)
+            .ok_or("dogs: `y` must have n_dogs rows")?;
+        // (n_avoid, n_shock) → (successes, trials), in a fixed order.
+        let mut groups: BTreeMap<(u64, u64), (f64, f64)> = BTreeMap::new();
+        for row in y {
+            let row = row
+                .as_array()
+                .filter(|r| r.len() == n_trials)
+                .ok_or("dogs: every row of `y` must have n_trials entries")?;
+            let (mut avoid, mut shock) = (0, 0);
+            for v in row {
+                let shocked: u64 = match v.as_u64() {
+                    Some(b @ (0 | 1)) => b,
+                    _ => return Err("dogs: `y` must be 0 or 1".into()),
+                };
+                let g = groups.entry((avoid, shock)).or_default();
+                g.0 += shocked as f64;
+                g.1 += 1.0;
+                avoid += 1 - shocked;
+                shock += shocked;
+            }
+        }
+        Ok(LogisticRegression {
+            x: groups
+                .keys()
+                .flat_map(|&(a, s)| [1.0, a as f64, s as f64])
+                .collect(),
+            counts: groups.into_values().collect(),
+            d: 3,
+            prior_sd: 100.0,
+        })
+    }
+}
+
+impl GradientTarget for LogisticRegression {
+    fn dim(&self) -> usize {
+        self.d
+    }
+
+    fn log_density_gradient(&self, beta: &[f64], g: &mut [f64]) -> f64 {
+        let inv_var = 1.0 / (self.prior_sd * self.prior_sd);
+        let mut lp = 0.0;
+        for j in 0..self.d {
+            lp -= 0.5 * beta[j] * beta[j] * inv_var;
+            g[j] = -beta[j] * inv_var;
+        }
+        for (row, &(k, n)) in self.x.chunks_exact(self.d).zip(&self.counts) {
+            let eta: f64 = row.iter().zip(beta).map(|(a, b)| a * b).sum();
+            lp += k * eta - n * log1p_exp(eta);
+            // d/dη = k − n logit⁻¹(η).
+            let r = k - n * logistic(eta);
+            for j in 0..self.d {
+                g[j] += r * row[j];
+            }
+        }
+        lp
+    }
+}
+
+impl Model for LogisticRegression {
+    fn names(&self) -> Vec<String> {
+        indexed("beta", self.d)
+    }
+
+    fn constrain(&self, x: &[f64]) -> Vec<f64> {
+        x.to_vec()
     }
 }
 

@@ -28,6 +28,17 @@ pub fn log_logistic_jacobian(u: f64) -> f64 {
     -u.abs() - 2.0 * (-u.abs()).exp().ln_1p()
 }
 
+/// `ln(1 + e^t)` (softplus) without overflow: minus the log-probability of
+/// a Bernoulli failure at logit `t`.
+#[inline]
+pub fn log1p_exp(t: f64) -> f64 {
+    if t > 0.0 {
+        t + (-t).exp().ln_1p()
+    } else {
+        t.exp().ln_1p()
+    }
+}
+
 /// `ln(1 + (x/s)²)`: minus the log density of a Cauchy(0, s) at `x`, up to
 /// a constant; its derivative in `x` is [`cauchy_log1p_derivative`].
 #[inline]

@@ -49,9 +49,9 @@ fn gradients_match_finite_differences() {
 /// The z-scores are `(ours − ref)/√(MCSE² + MCSE_ref²)`: approximately
 /// standard normal when both estimates are unbiased and both MCSEs right
 /// (MCMC central limit theorem; our bulk ESS is in the thousands, the
-/// reference's ≈ 10 000). Over the 9 posteriors checked here there are
-/// 2 × 52 = 104 z-scores; with |z| ≤ 4 the chance that any exceeds it by
-/// chance is ≈ 104 × 6.3·10⁻⁵ ≈ 0.7 %, so a failure means a wrong model,
+/// reference's ≈ 10 000). Over the 10 posteriors checked here there are
+/// 2 × 53 = 106 z-scores; with |z| ≤ 4 the chance that any exceeds it by
+/// chance is ≈ 106 × 6.3·10⁻⁵ ≈ 0.7 %, so a failure means a wrong model,
 /// gradient or sampler. Seeds are fixed. The centred eight schools is the
 /// exception the issue names: its funnel must produce divergences, which
 /// are reported rather than compared.

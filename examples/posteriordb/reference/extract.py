@@ -12,13 +12,25 @@ the first argument; read with `git show`, nothing is checked out):
   draws; the reference draws are near-independent: posteriordb checks
   |lag-1 autocorrelation| < 0.05).
 
+`dogs-dogs` (a logistic regression) is read at commit ce288e2 (12 Aug
+2022): posteriordb computed its reference draws in April 2020 and removed
+them in 0548b9e (15 Aug 2022) together with a fix to the data (the old file
+has a 31st dog whose 25 trials are all 0, an artifact of reading the
+original table). The data and the draws of ce288e2 belong together: the
+reference is Stan's posterior of this model given those 31 rows. No
+logistic regression has reference draws at posteriordb's HEAD (v1.0).
+
 Usage: python3 extract.py /work/.mirror/stan-dev+posteriordb/repo
 Writes one <posterior>.json per posterior next to this script. Python's
 standard library only.
 """
 import io, json, math, os, subprocess, sys, zipfile
 
-# (file name here, posteriordb posterior whose data we use, posterior whose reference draws we use)
+# The commit of the last posteriordb version with dogs-dogs's reference draws.
+DOGS = "ce288e20651cd1b4dcc30586c23a80d52a8f5cbb"
+
+# (file name here, posteriordb posterior whose data we use, posterior whose
+# reference draws we use[, git revision; default HEAD])
 POSTERIORS = [
     ("eight_schools-eight_schools_noncentered", "eight_schools", "eight_schools-eight_schools_noncentered"),
     # Same model, centred parameterisation: posteriordb has no reference of
@@ -33,13 +45,15 @@ POSTERIORS = [
     ("low_dim_gauss_mix-low_dim_gauss_mix", "low_dim_gauss_mix", "low_dim_gauss_mix-low_dim_gauss_mix"),
     ("garch-garch11", "garch", "garch-garch11"),
     ("mesquite-logmesquite", "mesquite", "mesquite-logmesquite"),
+    # Bernoulli-logit regression; data and draws of commit DOGS (see above).
+    ("dogs-dogs", "dogs", "dogs-dogs", DOGS),
 ]
 
 DB = "posterior_database"
 
 
-def show(repo, path):
-    return subprocess.run(["git", "-C", repo, "show", "HEAD:" + path], check=True, capture_output=True).stdout
+def show(repo, rev, path):
+    return subprocess.run(["git", "-C", repo, "show", rev + ":" + path], check=True, capture_output=True).stdout
 
 
 def unzip_json(blob):
@@ -48,12 +62,13 @@ def unzip_json(blob):
 
 
 def main(repo):
-    commit = subprocess.run(["git", "-C", repo, "rev-parse", "HEAD"], check=True, capture_output=True, text=True).stdout.strip()
     here = os.path.dirname(os.path.abspath(__file__))
-    for name, data_name, ref_name in POSTERIORS:
-        data = unzip_json(show(repo, f"{DB}/data/data/{data_name}.json.zip"))
-        chains = unzip_json(show(repo, f"{DB}/reference_posteriors/draws/draws/{ref_name}.json.zip"))
-        info = json.loads(show(repo, f"{DB}/reference_posteriors/draws/info/{ref_name}.info.json"))
+    for name, data_name, ref_name, *rev in POSTERIORS:
+        rev = rev[0] if rev else "HEAD"
+        commit = subprocess.run(["git", "-C", repo, "rev-parse", rev], check=True, capture_output=True, text=True).stdout.strip()
+        data = unzip_json(show(repo, rev, f"{DB}/data/data/{data_name}.json.zip"))
+        chains = unzip_json(show(repo, rev, f"{DB}/reference_posteriors/draws/draws/{ref_name}.json.zip"))
+        info = json.loads(show(repo, rev, f"{DB}/reference_posteriors/draws/info/{ref_name}.info.json"))
         diag = info["diagnostics"]
         ess = dict(zip(diag["diagnostic_information"]["names"], diag["effective_sample_size_bulk"]))
         params = []
