@@ -79,8 +79,8 @@
 //! `W · P(i chosen) = lum_i / M`, under that weighting the other
 //! candidates stay independent draws of the tracing density. So the
 //! visibility chain starts uniformly among the visible candidates *other*
-//! than the contribution chain's (when there is none, from fresh
-//! independent light subpaths until one is visible), and the pair's start
+//! than the contribution chain's (when there is none, from a fresh light
+//! subpath drawn until it is visible, one per iteration), and the pair's start
 //! `(x₀, y₀)`, weighted by `W`, is `b_con` times the product of the two
 //! targets; Metropolis–Hastings steps and exchanges keep that, so every
 //! later state is properly weighted too. Iteration `i`'s light side `G_i`
@@ -194,10 +194,10 @@ const TILE: u32 = 32;
 const CANDIDATE_BLOCKS: usize = 16;
 /// Light subpaths between two checks of the stop flag.
 const STOP_CHECK: usize = 256;
-/// Fresh light subpaths per candidate tried for a visibility chain's
+/// Fresh light subpaths per candidate tried for the visibility chains'
 /// restart when the pool's one visible candidate went to the contribution
-/// chain ([`Restart::Weighted`]): the pool held one visible candidate, so
-/// about `candidates` are expected to be needed; 16 times that fail with
+/// chains ([`Restart::Weighted`]): a pool with one visible candidate
+/// suggests about `candidates` are needed; 16 times that fail with
 /// probability about e^−16.
 const FRESH_TRIES: usize = 16;
 /// Stream tags of the random streams (mixed with iteration and unit).
@@ -205,6 +205,7 @@ const STREAM_CANDIDATES: u64 = 1 << 40;
 const STREAM_CHAINS: u64 = 2 << 40;
 const STREAM_STEPS: u64 = 3 << 40;
 const STREAM_PILOT: u64 = 4 << 40;
+const STREAM_FRESH: u64 = 5 << 40;
 
 /// Where one part of a light subpath's contribution lands.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -547,6 +548,11 @@ impl RestartPool {
                 self.visible.push(i as u32);
             }
         }
+    }
+
+    /// The number of visible candidates.
+    pub fn visible(&self) -> usize {
+        self.visible.len()
     }
 
     /// The pool's mean luminance: the restart weight `W` of the
@@ -996,6 +1002,42 @@ impl McmcVcm {
         pool
     }
 
+    /// A light subpath of iteration `it` (with a uniformly chosen camera
+    /// subpath) drawn afresh until one is visible — rejection sampling,
+    /// exactly `π_vis/b_vis` — at most `tries` times; `None` when none is
+    /// or the run stops.
+    fn fresh_visible(
+        &self,
+        scene: &Scene,
+        it: &Iteration,
+        seed: u64,
+        iteration: u64,
+        tries: usize,
+        abort: &(dyn Fn() -> bool + Sync),
+    ) -> Option<Candidate> {
+        let n = it.cameras.len();
+        let mut rng = stream_rng(seed, STREAM_FRESH ^ (iteration << 24));
+        let mut c = LightContribution::default();
+        for t in 0..tries {
+            if t % STOP_CHECK == 0 && abort() {
+                return None;
+            }
+            let point_rng = child_rng(&mut rng);
+            let point = TorusPoint::fresh(point_rng.clone());
+            let camera = ((uniform(&mut rng) * n as f64) as usize).min(n - 1);
+            light_contribution(scene, it, &mut PssSource::new(&point, 1), camera, &mut c);
+            if c.finite && c.luminance > 0.0 {
+                return Some(Candidate {
+                    rng: point_rng,
+                    camera,
+                    luminance: c.luminance,
+                    unscaled: c.luminance,
+                });
+            }
+        }
+        None
+    }
+
     /// Renders to `run`'s budget in whole iterations (one camera subpath
     /// and one light subpath per pixel each); stopping discards the
     /// iteration in flight.
@@ -1136,6 +1178,17 @@ impl McmcVcm {
             } else {
                 1.0
             };
+            // With `weighted` restarts and one visible candidate, every
+            // contribution chain restarts from it and the visibility
+            // chains from a fresh visible light subpath (module docs).
+            let fresh = (self.weighs_restarts()
+                && self.chains == LightChains::Both
+                && restarts.visible() == 1)
+                .then(|| {
+                    let tries = FRESH_TRIES * pool.len();
+                    self.fresh_visible(scene, &it, run.seed, iterations, tries, &abort)
+                })
+                .flatten();
             // The chains need a visible candidate to restart from.
             if batch.vis > 0.0 || independent {
                 units.par_iter_mut().enumerate().for_each(|(p, unit)| {
@@ -1145,6 +1198,7 @@ impl McmcVcm {
                         unscaled.as_ref(),
                         &pool,
                         &restarts,
+                        fresh.as_ref(),
                         weight,
                         b,
                         unit,
@@ -1376,8 +1430,10 @@ impl McmcVcm {
     }
 
     /// The chain pair `p` for one iteration: restart from `pool` (seen
-    /// through `restarts`), then its share of the iteration's light
-    /// subpaths, each splat multiplied by the restart weight `weight`.
+    /// through `restarts`; `fresh`, when the pool holds one visible
+    /// candidate, for the visibility chain), then its share of the
+    /// iteration's light subpaths, each splat multiplied by the restart
+    /// weight `weight`.
     #[allow(clippy::too_many_arguments)]
     fn run_unit(
         &self,
@@ -1386,6 +1442,7 @@ impl McmcVcm {
         unscaled: Option<&Iteration>,
         pool: &[Candidate],
         restarts: &RestartPool,
+        fresh: Option<&Candidate>,
         weight: f64,
         (b_vis, b_con): (f64, f64),
         unit: &mut Unit,
@@ -1449,30 +1506,18 @@ impl McmcVcm {
                     let exclude = if weighted { con_index } else { None };
                     match restarts.visibility(uniform(&mut rng), exclude) {
                         Some(i) => resampled(i),
-                        None => {
-                            // The pool's one visible candidate is the
-                            // contribution chain's: fresh independent light
-                            // subpaths until one is visible (rejection
-                            // sampling, exactly π_vis/b_vis), at most
-                            // FRESH_TRIES per candidate; failing that, the
-                            // contribution chain's (a bias this rare case
-                            // leaves).
-                            let mut found = None;
-                            for t in 0..FRESH_TRIES * pool.len() {
-                                if t % STOP_CHECK == 0 && abort() {
-                                    return;
-                                }
-                                let point = TorusPoint::fresh(child_rng(&mut rng));
-                                let camera =
-                                    ((uniform(&mut rng) * pixels as f64) as usize).min(pixels - 1);
-                                let y = Sample::evaluate(&target(camera), point);
-                                if y.log_density == 0.0 {
-                                    found = Some(y);
-                                    break;
-                                }
-                            }
-                            found.unwrap_or_else(|| resampled(con_index.expect("drawn first")))
-                        }
+                        // The pool's one visible candidate is the
+                        // contribution chain's: the iteration's fresh
+                        // visible light subpath, or failing that the
+                        // contribution chain's (a bias this rare case
+                        // leaves).
+                        None => match fresh {
+                            Some(c) => Sample::evaluate(
+                                &target(c.camera),
+                                TorusPoint::fresh(c.rng.clone()),
+                            ),
+                            None => resampled(con_index.expect("drawn first")),
+                        },
                     }
                 }
             };
