@@ -434,10 +434,7 @@ fn the_restart_pool_picks_as_worked_by_hand() {
     pool.rebuild([0.0, 2.0, 0.0, 1.0, 3.0].into_iter());
     assert!((pool.weight() - 1.2).abs() < 1e-12);
     // ∝ lum: u · 6 = 0.6, 2.4, 5.4 fall in the sums of candidates 1, 3, 4.
-    assert_eq!(
-        [0.1, 0.4, 0.9].map(|u| pool.contribution(u)),
-        [1, 3, 4]
-    );
+    assert_eq!([0.1, 0.4, 0.9].map(|u| pool.contribution(u)), [1, 3, 4]);
     // Uniform among the visible: thirds.
     assert_eq!(
         [0.0, 0.5, 0.99].map(|u| pool.visibility(u, None)),
@@ -595,7 +592,10 @@ fn weighted_restarts_agree_with_vcm_from_a_tiny_pool() {
     let weighted = reps(scene, &tiny_pool(Restart::Weighted), TINY_ITERATIONS, 1200);
     let resampled = reps(scene, &tiny_pool(Restart::Resampled), TINY_ITERATIONS, 1200);
     let control = MeanAgreement::new(&reference, &resampled);
-    eprintln!("control (resampled): rel {:?}\n  {control:?}", control.rel());
+    eprintln!(
+        "control (resampled): rel {:?}\n  {control:?}",
+        control.rel()
+    );
     check("restart=weighted from 4 candidates", &reference, &weighted);
     assert!(
         !control.failures(4.0, 0.01).is_empty(),

@@ -1166,8 +1166,9 @@ impl McmcVcm {
                 (norm.vis > 0.0).then(|| (norm.estimates().0, norm.con(self.con_estimate).0));
             norm.merge(&batch);
             let b = match self.normalisation {
-                NormalisationScope::Render => prior
-                    .unwrap_or_else(|| (norm.estimates().0, norm.con(self.con_estimate).0)),
+                NormalisationScope::Render => {
+                    prior.unwrap_or_else(|| (norm.estimates().0, norm.con(self.con_estimate).0))
+                }
                 NormalisationScope::Iteration => {
                     (batch.estimates().0, batch.con(self.con_estimate).0)
                 }
@@ -1245,11 +1246,14 @@ impl McmcVcm {
         // The light side's energies carry the restart weights: normalised
         // by their mean, as the image is (`develop`).
         let mean_weight = weights.sum / weights.iterations;
+        let scale = if mean_weight > 0.0 {
+            mean_weight.recip()
+        } else {
+            0.0
+        };
         for unit in &units {
             let mut tally = unit.tally.clone();
-            for e in &mut tally.energy {
-                *e = if mean_weight > 0.0 { *e / mean_weight } else { 0.0 };
-            }
+            tally.energy.iter_mut().for_each(|e| *e *= scale);
             totals.tally.add(&tally);
             totals.swaps += unit.swaps;
             totals.swaps_accepted += unit.swaps_accepted;
@@ -1274,9 +1278,12 @@ impl McmcVcm {
     /// Whether the chains' restarts carry their pool's weight
     /// ([`Restart::Weighted`] with the render-wide normalisation; with
     /// `normalisation = iteration` the restarts are `resampled`: each
-    /// iteration's normalisation comes from its own pool).
+    /// iteration's normalisation comes from its own pool). Independent
+    /// light subpaths have no restarts: weight one.
     fn weighs_restarts(&self) -> bool {
-        self.restart == Restart::Weighted && self.normalisation == NormalisationScope::Render
+        self.restart == Restart::Weighted
+            && self.normalisation == NormalisationScope::Render
+            && self.chains != LightChains::Independent
     }
 
     /// Whether `b_con` is estimated by `transfer` with a scale `k ≠ 1`
@@ -1494,7 +1501,10 @@ impl McmcVcm {
                 kind,
             };
             let resampled = |i: usize| {
-                Sample::evaluate(&target(pool[i].camera), TorusPoint::fresh(pool[i].rng.clone()))
+                Sample::evaluate(
+                    &target(pool[i].camera),
+                    TorusPoint::fresh(pool[i].rng.clone()),
+                )
             };
             let sample = match kind {
                 ChainKind::Contribution => {
@@ -2002,9 +2012,7 @@ impl IntegratorSettings for McmcVcmSettings {
         // 3·10^15 bytes; the estimate is checked before anything sized by
         // them or by the film is allocated.
         let (w, h) = (scene.film.width, scene.film.height);
-        let bytes = self
-            .memory_bytes(scene)
-            .total();
+        let bytes = self.memory_bytes(scene).total();
         crate::resources::check_memory(
             &format!(
                 "mcmc-vcm: {w}×{h} with {} units and {} candidates",
