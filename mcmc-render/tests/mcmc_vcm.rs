@@ -29,7 +29,7 @@
 
 mod common;
 
-use common::{MeanAgreement, image_mean, mean_se1, repo_scene_tilted};
+use common::{MeanAgreement, image_mean, mean_se, mean_se1, repo_scene_path, repo_scene_tilted};
 use mcmc_core::chain::Chain;
 use mcmc_core::rng::{ChainRng, child_rng, stream_rng, uniform};
 use mcmc_core::sample::Sample;
@@ -44,6 +44,7 @@ use mcmc_render::integrators::{Rendered, RunSettings};
 use mcmc_render::observer::NoObserver;
 use mcmc_render::pss::PssSource;
 use mcmc_render::scene::Scene;
+use std::collections::HashMap;
 use std::sync::OnceLock;
 use std::sync::atomic::AtomicBool;
 
@@ -561,44 +562,76 @@ fn weighted_restarts_are_properly_weighted() {
     assert!((m - bright_con).abs() > 4.0 * se);
 }
 
-/// Pool size, chain pairs and iterations of the tiny-pool restart test:
-/// 4 candidates, and 64 pairs on 256 pixels (2 steps per chain per
-/// iteration), so that the chains stay near their restart states and a
-/// restart rule's bias shows undiluted.
-const TINY_POOL: usize = 4;
-const TINY_UNITS: usize = 64;
-const TINY_ITERATIONS: u32 = 32;
-
-/// `mcmc-vcm` on the 16×16 box restarting from a tiny pool by `restart`.
-fn tiny_pool(restart: Restart) -> McmcVcmSettings {
-    McmcVcmSettings {
-        candidates: TINY_POOL,
-        units: TINY_UNITS,
-        restart,
-        ..settings(cornell_16(), LightChains::Both)
-    }
+/// The interior of session 17's restart-bias study at 64×48 (image
+/// means do not depend on the resolution), radius 0.01 m fixed.
+fn interior() -> &'static Scene {
+    static SCENE: OnceLock<Scene> = OnceLock::new();
+    SCENE.get_or_init(|| {
+        let defines = HashMap::from([
+            ("width".to_string(), "64".to_string()),
+            ("height".to_string(), "48".to_string()),
+        ]);
+        Scene::load(&repo_scene_path("interior-window.xml"), &defines).expect("interior loads")
+    })
 }
 
-/// Restarts from a pool of 4 candidates (issue 16, session 18): with
-/// `restart = weighted` the image agrees with `vcm` (the tolerances of
-/// `check`: 24 replicates each, Student's t with 23 dof, 4σ and 1%, 5σ
-/// under 1%); the thesis's rule (`resampled`) on the same seeds must
-/// fail — its chains start from an importance resample of 4 candidates,
-/// not from their targets.
+/// Iterations per replicate of the interior restart test.
+const INTERIOR_ITERATIONS: u32 = 96;
+
+/// Restarts from 1000 candidates on the interior (issue 16, sessions 17–18;
+/// about 4 visible candidates per pool, where the thesis's rule read G
+/// −10% at 48 iterations): `restart = weighted` agrees with `vcm` at the
+/// same radius, and the thesis's rule (`resampled`) on the same seeds
+/// must fail. 24 replicates of 96 iterations each (`mcmc-vcm`'s image mean
+/// spread ~10% per run at 48 iterations there, `vcm`'s ~5%): σ of the
+/// difference ≈ 1.6% (Student's t, 23 dof); pass within 4σ, and 4σ must
+/// lie under 10% of the mean (the old rule's bias, so the control can
+/// fail). About 2 minutes of CPU:
+/// `cargo test -p mcmc-render --test mcmc_vcm -- --ignored weighted_restarts_remove --nocapture`.
 #[test]
-fn weighted_restarts_agree_with_vcm_from_a_tiny_pool() {
-    let scene = cornell_16();
-    let reference = vcm_reps(scene, TINY_ITERATIONS, 1100);
-    let weighted = reps(scene, &tiny_pool(Restart::Weighted), TINY_ITERATIONS, 1200);
-    let resampled = reps(scene, &tiny_pool(Restart::Resampled), TINY_ITERATIONS, 1200);
+#[ignore]
+fn weighted_restarts_remove_the_restart_bias_on_the_interior() {
+    let scene = interior();
+    let mut v = vcm_settings(scene);
+    v.radius = Some(0.01);
+    let reference: Vec<[f64; 3]> = (0..REPS)
+        .map(|k| {
+            let run = RunSettings {
+                spp: Some(INTERIOR_ITERATIONS),
+                seed: 1300 + k,
+                ..RunSettings::default()
+            };
+            let out = v
+                .integrator(scene)
+                .render(scene, &run, &AtomicBool::new(false), &NoObserver);
+            image_mean(&out.image)
+        })
+        .collect();
+    let mcmc = |restart| McmcVcmSettings {
+        candidates: 1000,
+        restart,
+        vcm: v.clone(),
+        ..McmcVcmSettings::default()
+    };
+    let weighted = reps(scene, &mcmc(Restart::Weighted), INTERIOR_ITERATIONS, 1400);
+    let resampled = reps(scene, &mcmc(Restart::Resampled), INTERIOR_ITERATIONS, 1400);
+    let a = MeanAgreement::new(&reference, &weighted);
     let control = MeanAgreement::new(&reference, &resampled);
+    let paired: Vec<[f64; 3]> = resampled
+        .iter()
+        .zip(&weighted)
+        .map(|(r, w)| [0, 1, 2].map(|c| r[c] - w[c]))
+        .collect();
     eprintln!(
-        "control (resampled): rel {:?}\n  {control:?}",
-        control.rel()
+        "weighted: rel {:?}\n  {a:?}\nresampled: rel {:?}\n  {control:?}\nresampled − weighted, paired: {:?}",
+        a.rel(),
+        control.rel(),
+        mean_se(&paired)
     );
-    check("restart=weighted from 4 candidates", &reference, &weighted);
+    assert!(a.resolves(4.0, 0.1), "noise too large: {a:?}");
+    assert!(a.failures(4.0, 1.0).is_empty(), "weighted: {a:?}");
     assert!(
-        !control.failures(4.0, 0.01).is_empty(),
+        !control.failures(4.0, 1.0).is_empty(),
         "the resampled restarts' bias not detected: {control:?}"
     );
 }
