@@ -31,7 +31,7 @@ fn measure(scene: &Scene, s: &McmcVcmSettings, iterations: u32) -> (u128, u128) 
         .num_threads(1)
         .build()
         .expect("a one-thread pool");
-    let estimate = s.memory_bytes(scene, 1).total();
+    let estimate = s.memory_bytes(scene).total();
     let run = RunSettings {
         spp: Some(iterations),
         seed: 7,
@@ -93,7 +93,7 @@ fn the_memory_estimate_covers_the_heap_a_render_takes() {
         let scene = repo_scene_tilted("cornell-box.xml", res, 5);
         let s = settings(&scene, units, candidates);
         let (peak, estimate) = measure(&scene, &s, iterations);
-        let parts = s.memory_bytes(&scene, 1);
+        let parts = s.memory_bytes(&scene);
         eprintln!(
             "{what}: peak {peak} B, estimate {estimate} B ({:.2}×; {parts:?}), old estimate {} B",
             estimate as f64 / peak as f64,

@@ -2,8 +2,8 @@
 # Image means over seeds (docs/vcm.md, "Session 17"): per seed one render of
 # SCENE with INTEGRATOR at SPP samples (iterations), one thread, and one line
 # "seed R G B merge_share k b_con b_con_direct b_con_visibility b_con_transfer
-# b_vis user_s sys_s" (the sidecar's fields; None where the integrator has
-# none). Extra arguments (-D k=v, --set k=v) go to every render.
+# b_vis restart_weight_ess user_s sys_s" (the sidecar's fields; None where the
+# integrator has none). Extra arguments (-D k=v, --set k=v) go to every render.
 #
 # Usage: scenes/tools/image_mean_reps.sh BINARY SCENE INTEGRATOR SPP OUTDIR "SEEDS" [-D k=v | --set k=v ...]
 set -u
@@ -20,7 +20,7 @@ import json, sys
 d = json.load(open(sys.argv[1]))
 shares = d.get("energy_shares") or {}
 print(shares.get("merge", 0), *(d.get(k) for k in ("light_density_scale", "b_con", "b_con_direct",
-      "b_con_visibility", "b_con_transfer", "b_vis")))
+      "b_con_visibility", "b_con_transfer", "b_vis", "restart_weight_ess")))
 PY
 )
   echo "$s $m $x $(cat "$OUT/time.txt")"

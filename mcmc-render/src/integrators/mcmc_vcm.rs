@@ -14,7 +14,10 @@
 //!    primary-sample points, each with a uniformly chosen camera subpath)
 //!    are evaluated; each chain pair starts by importance resampling from
 //!    them: the contribution chain ∝ `lum C^Ω`, the visibility chain
-//!    uniformly among those with `C^Ω > 0` (§6.3.2).
+//!    uniformly among those with `C^Ω > 0` (§6.3.2), with
+//!    `restart = weighted` (the default) among those other than the
+//!    contribution chain's, and the iteration's light side carries the
+//!    pool's weight (below).
 //! 3. **Chains.** `units` independent pairs, each running its share of
 //!    the `N` light subpaths of the iteration, alternating the two chains
 //!    (Fig. 6.10). Each step: a camera subpath chosen uniformly for the
@@ -55,6 +58,48 @@
 //! which has `n_c = N/2`). Parts that land on camera sample `k` are added to
 //! its estimate (as `vcm` adds connections and merges), raster parts are
 //! splats.
+//!
+//! # Restarts (`restart`, default `weighted`)
+//! The estimator above holds when each chain's states follow its target
+//! `π_c/b_c`. A restart by importance resampling from `M` candidates does
+//! not start there: it draws candidate `i` with probability
+//! `lum_i / Σ_j lum_j`, which under-represents the bright tail of
+//! `lum C^Ω` (a bright candidate's share of its pool is smaller than its
+//! share of the target), more so the fewer visible candidates a pool
+//! holds and the heavier the tail. The contribution chain, whose small
+//! steps do not reach that tail within an iteration, starts too dim and
+//! hands its dim states to the visibility chain through the exchanges;
+//! the image then reads low by an amount that shrinks with `M` but not
+//! with the iterations (docs/vcm.md, sessions 17–18). `restart =
+//! resampled` is that rule (the thesis's, which dropped the start-up
+//! weight, §6.3.2).
+//!
+//! `weighted` uses importance resampling's proper weight: with
+//! `W = (1/M) Σ_j lum_j`, `E[W h(x₀)] = ∫ h π_con` for any `M`, and since
+//! `W · P(i chosen) = lum_i / M`, under that weighting the other
+//! candidates stay independent draws of the tracing density. So the
+//! visibility chain starts uniformly among the visible candidates *other*
+//! than the contribution chain's (when there is none, from a fresh light
+//! subpath drawn until it is visible, one per iteration), and the pair's start
+//! `(x₀, y₀)`, weighted by `W`, is `b_con` times the product of the two
+//! targets; Metropolis–Hastings steps and exchanges keep that, so every
+//! later state is properly weighted too. Iteration `i`'s light side `G_i`
+//! (splats and camera-sample parts) is therefore weighted by its pool's
+//! `W_i`, and the image's light side is `Σ_i W_i G_i / Σ_i W_i` (a
+//! self-normalised mean over iterations: consistent in the iterations at
+//! any `M`, and `b_con` keeps setting the level, so the weights do not
+//! add the noise of a per-iteration normalisation). An iteration without
+//! a visible candidate has `W = 0`, so it is no longer a bias either. The
+//! visibility chain's mean luminance (`con_estimate = visibility`) is
+//! weighted the same way. The cost is the spread of the weights: the
+//! sidecar's `restart_weight_ess` is the effective share of the
+//! iterations, `(Σ W)² / (n Σ W²)`. With `normalisation = iteration` the
+//! restarts are `resampled` (each iteration's normalisation comes from its
+//! own pool, PSSMLT's start-up weight with `direct`).
+//!
+//! `b_vis`, `b_con` of an iteration come from the earlier iterations (the
+//! first iterations, before any visible subpath, from their own), so that
+//! they do not share the pool that sets its weight.
 //!
 //! # MIS between path tracing and the chains (§6.3.4)
 //! The visibility chain draws light subpaths with density `p/b_vis`, the
@@ -149,11 +194,18 @@ const TILE: u32 = 32;
 const CANDIDATE_BLOCKS: usize = 16;
 /// Light subpaths between two checks of the stop flag.
 const STOP_CHECK: usize = 256;
+/// Fresh light subpaths per candidate tried for the visibility chains'
+/// restart when the pool's one visible candidate went to the contribution
+/// chains ([`Restart::Weighted`]): a pool with one visible candidate
+/// suggests about `candidates` are needed; 16 times that fail with
+/// probability about e^−16.
+const FRESH_TRIES: usize = 16;
 /// Stream tags of the random streams (mixed with iteration and unit).
 const STREAM_CANDIDATES: u64 = 1 << 40;
 const STREAM_CHAINS: u64 = 2 << 40;
 const STREAM_STEPS: u64 = 3 << 40;
 const STREAM_PILOT: u64 = 4 << 40;
+const STREAM_FRESH: u64 = 5 << 40;
 
 /// Where one part of a light subpath's contribution lands.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -471,6 +523,74 @@ struct Candidate {
     unscaled: f64,
 }
 
+/// An iteration's restart pool as the chain pairs' restarts see it: the
+/// candidates' cumulative luminances (the contribution chain's
+/// importance resampling) and the indices of the visible ones (the
+/// visibility chain's), built once per iteration (module docs,
+/// "Restarts").
+#[derive(Debug, Default)]
+pub struct RestartPool {
+    cumulative: Vec<f64>,
+    visible: Vec<u32>,
+}
+
+impl RestartPool {
+    /// Rebuilds it for candidates of luminances `luminances` (in pool
+    /// order; non-negative, 0 for a black or invalid candidate).
+    pub fn rebuild(&mut self, luminances: impl Iterator<Item = f64>) {
+        self.cumulative.clear();
+        self.visible.clear();
+        let mut total = 0.0;
+        for (i, l) in luminances.enumerate() {
+            total += l;
+            self.cumulative.push(total);
+            if l > 0.0 {
+                self.visible.push(i as u32);
+            }
+        }
+    }
+
+    /// The number of visible candidates.
+    pub fn visible(&self) -> usize {
+        self.visible.len()
+    }
+
+    /// The pool's mean luminance: the restart weight `W` of the
+    /// contribution chain's resampled start (`E[W h(x₀)] = ∫ h π_con` for
+    /// any pool size: importance resampling's proper weight).
+    pub fn weight(&self) -> f64 {
+        match self.cumulative.last() {
+            Some(&total) => total / self.cumulative.len() as f64,
+            None => 0.0,
+        }
+    }
+
+    /// The candidate the contribution chain restarts from, `∝ lum` for
+    /// `u` uniform in [0, 1); the pool must hold a visible candidate.
+    pub fn contribution(&self, u: f64) -> usize {
+        let x = u * self.cumulative.last().copied().unwrap_or(0.0);
+        self.cumulative
+            .partition_point(|&c| c <= x)
+            .min(self.cumulative.len() - 1)
+    }
+
+    /// The candidate the visibility chain restarts from: uniform (by `u`)
+    /// among the visible ones other than `exclude`; `None` when there is
+    /// none.
+    pub fn visibility(&self, u: f64, exclude: Option<usize>) -> Option<usize> {
+        let skip = exclude.and_then(|e| self.visible.binary_search(&(e as u32)).ok());
+        let n = self.visible.len() - usize::from(skip.is_some());
+        if n == 0 {
+            return None;
+        }
+        let mut r = ((u * n as f64) as usize).min(n - 1);
+        if skip.is_some_and(|s| r >= s) {
+            r += 1;
+        }
+        Some(self.visible[r] as usize)
+    }
+}
+
 /// Running sums of the normalisations (Eq. 6.4) with per-iteration
 /// batches for their standard errors.
 #[derive(Clone, Debug, Default)]
@@ -591,6 +711,13 @@ impl Normalisation {
         self.chain_lum += luminance;
     }
 
+    /// Weighs the visibility-chain sums by the restart weight of their
+    /// iteration (the chain states' proper weight, [`Restart::Weighted`]).
+    fn weigh_chain(&mut self, weight: f64) {
+        self.chain_steps *= weight;
+        self.chain_lum *= weight;
+    }
+
     fn merge(&mut self, o: &Normalisation) {
         self.count += o.count;
         self.vis += o.vis;
@@ -704,6 +831,52 @@ struct Totals {
     skipped_iterations: u64,
 }
 
+/// The restart weights of the iterations so far ([`Restart::Weighted`];
+/// one each otherwise).
+#[derive(Clone, Copy, Debug, Default)]
+struct RestartWeights {
+    sum: f64,
+    sum_squares: f64,
+    iterations: f64,
+}
+
+impl RestartWeights {
+    /// One iteration's weight.
+    fn add(&mut self, weight: f64) {
+        self.sum += weight;
+        self.sum_squares += weight * weight;
+        self.iterations += 1.0;
+    }
+
+    /// Kish's effective number of iterations as a fraction of the
+    /// iterations, `(Σ W)² / (n Σ W²)`: the share of the iterations'
+    /// worth that weighing them leaves; NaN before a positive weight.
+    fn effective_fraction(&self) -> f64 {
+        if self.sum_squares > 0.0 {
+            self.sum * self.sum / (self.iterations * self.sum_squares)
+        } else {
+            f64::NAN
+        }
+    }
+}
+
+/// The image after `iterations` iterations: path tracing's mean (`film`)
+/// plus the light side's restart-weighted mean `Σ_i W_i G_i / Σ_i W_i`
+/// (`light` holds the `W_i G_i`; with weights of one it is the plain mean).
+fn develop(film: &Film, light: &Film, weights: &RestartWeights, iterations: u64) -> Vec<Rgb> {
+    let n = iterations as f64;
+    let scale = if weights.sum > 0.0 {
+        (n / weights.sum) as f32
+    } else {
+        0.0
+    };
+    film.develop(n)
+        .into_iter()
+        .zip(light.develop(n))
+        .map(|(pt, l)| pt + l * scale)
+        .collect()
+}
+
 /// Adds `factor · C^Ω` to the camera-sample estimates `camera` and the
 /// splat film, counting each part's energy in `tally`.
 fn deposit(
@@ -746,6 +919,8 @@ pub struct McmcVcm {
     pub vis_pdf: bool,
     /// How `b_con` is estimated (module docs).
     pub con_estimate: ConEstimate,
+    /// How the chains restart (module docs).
+    pub restart: Restart,
 }
 
 impl McmcVcm {
@@ -827,6 +1002,42 @@ impl McmcVcm {
         pool
     }
 
+    /// A light subpath of iteration `it` (with a uniformly chosen camera
+    /// subpath) drawn afresh until one is visible — rejection sampling,
+    /// exactly `π_vis/b_vis` — at most `tries` times; `None` when none is
+    /// or the run stops.
+    fn fresh_visible(
+        &self,
+        scene: &Scene,
+        it: &Iteration,
+        seed: u64,
+        iteration: u64,
+        tries: usize,
+        abort: &(dyn Fn() -> bool + Sync),
+    ) -> Option<Candidate> {
+        let n = it.cameras.len();
+        let mut rng = stream_rng(seed, STREAM_FRESH ^ (iteration << 24));
+        let mut c = LightContribution::default();
+        for t in 0..tries {
+            if t % STOP_CHECK == 0 && abort() {
+                return None;
+            }
+            let point_rng = child_rng(&mut rng);
+            let point = TorusPoint::fresh(point_rng.clone());
+            let camera = ((uniform(&mut rng) * n as f64) as usize).min(n - 1);
+            light_contribution(scene, it, &mut PssSource::new(&point, 1), camera, &mut c);
+            if c.finite && c.luminance > 0.0 {
+                return Some(Candidate {
+                    rng: point_rng,
+                    camera,
+                    luminance: c.luminance,
+                    unscaled: c.luminance,
+                });
+            }
+        }
+        None
+    }
+
     /// Renders to `run`'s budget in whole iterations (one camera subpath
     /// and one light subpath per pixel each); stopping discards the
     /// iteration in flight.
@@ -841,7 +1052,10 @@ impl McmcVcm {
         let (width, height) = (scene.film.width, scene.film.height);
         let pixels = width as usize * height as usize;
         let filter = Arc::new(Filter::new(scene.film.filter, width, height));
+        // Path tracing, and apart from it the light side weighted by the
+        // restart weights (normalised by their sum in `develop`).
         let mut film = Film::new(width, height, filter.clone());
+        let mut light_film = Film::new(width, height, filter.clone());
         let start = Instant::now();
         let deadline = Deadline::new(start, run.time_budget);
         let target = run.samples_per_pixel(scene.sample_count).map(u64::from);
@@ -866,6 +1080,8 @@ impl McmcVcm {
             })
             .collect();
         let mut pass = CameraPass::default();
+        let mut restarts = RestartPool::default();
+        let mut weights = RestartWeights::default();
         let mut norm = Normalisation::default();
         let mut totals = Totals::default();
         let mut light_scale = 1.0f32;
@@ -941,13 +1157,39 @@ impl McmcVcm {
                 batch.add(c.luminance, c.unscaled);
             }
             batch.add_cameras(pixels as f64, pass.transfer);
+            // Frozen before this iteration's candidates join: with
+            // `weighted` restarts they set the iteration's weight, and a
+            // normalisation computed from them too would correlate with it.
+            // Until a visible subpath is seen (the first iteration), they
+            // are all there is.
+            let prior =
+                (norm.vis > 0.0).then(|| (norm.estimates().0, norm.con(self.con_estimate).0));
             norm.merge(&batch);
             let b = match self.normalisation {
-                NormalisationScope::Render => (norm.estimates().0, norm.con(self.con_estimate).0),
+                NormalisationScope::Render => {
+                    prior.unwrap_or_else(|| (norm.estimates().0, norm.con(self.con_estimate).0))
+                }
                 NormalisationScope::Iteration => {
                     (batch.estimates().0, batch.con(self.con_estimate).0)
                 }
             };
+            restarts.rebuild(pool.iter().map(|c| c.luminance));
+            let weight = if self.weighs_restarts() {
+                restarts.weight()
+            } else {
+                1.0
+            };
+            // With `weighted` restarts and one visible candidate, every
+            // contribution chain restarts from it and the visibility
+            // chains from a fresh visible light subpath (module docs).
+            let fresh = (self.weighs_restarts()
+                && self.chains == LightChains::Both
+                && restarts.visible() == 1)
+                .then(|| {
+                    let tries = FRESH_TRIES * pool.len();
+                    self.fresh_visible(scene, &it, run.seed, iterations, tries, &abort)
+                })
+                .flatten();
             // The chains need a visible candidate to restart from.
             if batch.vis > 0.0 || independent {
                 units.par_iter_mut().enumerate().for_each(|(p, unit)| {
@@ -956,6 +1198,9 @@ impl McmcVcm {
                         &it,
                         unscaled.as_ref(),
                         &pool,
+                        &restarts,
+                        fresh.as_ref(),
+                        weight,
                         b,
                         unit,
                         p,
@@ -977,25 +1222,39 @@ impl McmcVcm {
                     *a += *c;
                     *c = Rgb::BLACK;
                 }
-                film.add_film(&unit.splats);
+                light_film.add_film(&unit.splats);
                 unit.splats.clear();
-                // Large steps of this iteration join the running sums.
+                // Large steps of this iteration join the running sums, the
+                // visibility chain's states with their restart weight.
+                unit.norm.weigh_chain(weight);
                 norm.merge(&unit.norm);
                 batch.merge(&unit.norm);
                 unit.norm = Normalisation::default();
             }
             norm.batches.push(batch.batch());
             for ((&raster, &pt), &l) in pass.rasters.iter().zip(&pass.estimates).zip(&light) {
-                film.add_sample(raster, pt + l);
+                film.add_sample(raster, pt);
+                light_film.add_sample(raster, l);
             }
+            weights.add(weight);
             iterations += 1;
             observer.snapshot(
-                &|| film.develop(iterations as f64),
+                &|| develop(&film, &light_film, &weights, iterations),
                 iterations * pixels as u64,
             );
         }
+        // The light side's energies carry the restart weights: normalised
+        // by their mean, as the image is (`develop`).
+        let mean_weight = weights.sum / weights.iterations;
+        let scale = if mean_weight > 0.0 {
+            mean_weight.recip()
+        } else {
+            0.0
+        };
         for unit in &units {
-            totals.tally.add(&unit.tally);
+            let mut tally = unit.tally.clone();
+            tally.energy.iter_mut().for_each(|e| *e *= scale);
+            totals.tally.add(&tally);
             totals.swaps += unit.swaps;
             totals.swaps_accepted += unit.swaps_accepted;
             totals.swap_alpha += unit.swap_alpha;
@@ -1003,16 +1262,28 @@ impl McmcVcm {
         }
         let seconds = start.elapsed().as_secs_f64();
         self.report(
-            &film,
+            develop(&film, &light_film, &weights, iterations),
             &units,
             &norm,
             &totals,
+            &weights,
             light_scale,
             iterations,
             seconds,
             interrupted,
             pixels,
         )
+    }
+
+    /// Whether the chains' restarts carry their pool's weight
+    /// ([`Restart::Weighted`] with the render-wide normalisation; with
+    /// `normalisation = iteration` the restarts are `resampled`: each
+    /// iteration's normalisation comes from its own pool). Independent
+    /// light subpaths have no restarts: weight one.
+    fn weighs_restarts(&self) -> bool {
+        self.restart == Restart::Weighted
+            && self.normalisation == NormalisationScope::Render
+            && self.chains != LightChains::Independent
     }
 
     /// Whether `b_con` is estimated by `transfer` with a scale `k ≠ 1`
@@ -1165,8 +1436,11 @@ impl McmcVcm {
         (set, rasters, estimates, transfer, tally)
     }
 
-    /// The chain pair `p` for one iteration: restart from `pool`, then its
-    /// share of the iteration's light subpaths.
+    /// The chain pair `p` for one iteration: restart from `pool` (seen
+    /// through `restarts`; `fresh`, when the pool holds one visible
+    /// candidate, for the visibility chain), then its share of the
+    /// iteration's light subpaths, each splat multiplied by the restart
+    /// weight `weight`.
     #[allow(clippy::too_many_arguments)]
     fn run_unit(
         &self,
@@ -1174,6 +1448,9 @@ impl McmcVcm {
         it: &Iteration,
         unscaled: Option<&Iteration>,
         pool: &[Candidate],
+        restarts: &RestartPool,
+        fresh: Option<&Candidate>,
+        weight: f64,
         (b_vis, b_con): (f64, f64),
         unit: &mut Unit,
         p: usize,
@@ -1189,6 +1466,7 @@ impl McmcVcm {
         }
         let pixels = it.cameras.len();
         let kinds = self.kinds();
+        let weighted = self.weighs_restarts();
         let mut rng = stream_rng(seed, STREAM_STEPS ^ (iteration << 24) ^ p as u64);
         let steps = pixels * (p + 1) / self.units - pixels * p / self.units;
         if self.chains == LightChains::Independent {
@@ -1212,28 +1490,47 @@ impl McmcVcm {
             return;
         }
         // Restart by importance resampling (the contribution chain ∝ lum,
-        // the visibility chain uniform among the visible candidates).
-        let mut cumulative: Vec<f64> = Vec::with_capacity(pool.len());
+        // the visibility chain uniform among the visible candidates; with
+        // `weighted`, other than the contribution chain's, module docs).
+        let mut con_index = None;
         for &(kind, large) in kinds {
-            cumulative.clear();
-            let mut total = 0.0;
-            for c in pool {
-                total += match kind {
-                    ChainKind::Contribution => c.luminance,
-                    ChainKind::Visibility => f64::from(u8::from(c.luminance > 0.0)),
-                };
-                cumulative.push(total);
-            }
-            let x = uniform(&mut rng) * total;
-            let i = cumulative.partition_point(|&c| c <= x).min(pool.len() - 1);
-            let target = LightTarget {
+            let target = move |camera: usize| LightTarget {
                 scene,
                 it,
-                camera: pool[i].camera,
+                camera,
                 kind,
             };
-            let point = TorusPoint::fresh(pool[i].rng.clone());
-            let sample = Sample::evaluate(&target, point);
+            let resampled = |i: usize| {
+                Sample::evaluate(
+                    &target(pool[i].camera),
+                    TorusPoint::fresh(pool[i].rng.clone()),
+                )
+            };
+            let sample = match kind {
+                ChainKind::Contribution => {
+                    let i = restarts.contribution(uniform(&mut rng));
+                    con_index = Some(i);
+                    resampled(i)
+                }
+                ChainKind::Visibility => {
+                    let exclude = if weighted { con_index } else { None };
+                    match restarts.visibility(uniform(&mut rng), exclude) {
+                        Some(i) => resampled(i),
+                        // The pool's one visible candidate is the
+                        // contribution chain's: the iteration's fresh
+                        // visible light subpath, or failing that the
+                        // contribution chain's (a bias this rare case
+                        // leaves).
+                        None => match fresh {
+                            Some(c) => Sample::evaluate(
+                                &target(c.camera),
+                                TorusPoint::fresh(c.rng.clone()),
+                            ),
+                            None => resampled(con_index.expect("drawn first")),
+                        },
+                    }
+                }
+            };
             let slot = &mut unit.chains[kind as usize];
             match slot {
                 Some(chain) => chain.parts_mut().current = sample,
@@ -1283,7 +1580,7 @@ impl McmcVcm {
                 |t: &Transition<'_, TorusPoint, LightContribution>| {
                     let mut splat = |c: &LightContribution, w: f64| {
                         if w > 0.0 && c.luminance > 0.0 && c.finite {
-                            deposit(acc, splats, tally, c, (w * scale / mix(c)) as f32);
+                            deposit(acc, splats, tally, c, (w * weight * scale / mix(c)) as f32);
                         }
                     };
                     splat(&t.current.payload, 1.0 - t.alpha);
@@ -1346,10 +1643,11 @@ impl McmcVcm {
     #[allow(clippy::too_many_arguments)]
     fn report(
         &self,
-        film: &Film,
+        image: Vec<Rgb>,
         units: &[Unit],
         norm: &Normalisation,
         totals: &Totals,
+        weights: &RestartWeights,
         light_scale: f32,
         iterations: u64,
         seconds: f64,
@@ -1463,6 +1761,8 @@ impl McmcVcm {
             "normalisation_samples": norm.count,
             "light_density_scale": light_scale,
             "candidates": self.candidates,
+            "restart": self.restart.name(),
+            "restart_weight_ess": finite_or_null(weights.effective_fraction()),
             "units": self.units,
             "skipped_iterations": totals.skipped_iterations,
             "energy_shares": shares,
@@ -1470,7 +1770,7 @@ impl McmcVcm {
             "invalid_proposals": totals.invalid,
         });
         Rendered {
-            image: film.develop(iterations as f64),
+            image,
             seconds,
             samples,
             interrupted,
@@ -1526,6 +1826,16 @@ crate::choice! {
     }
 }
 
+crate::choice! {
+    /// How the light-subpath chains restart each iteration (module docs).
+    pub enum Restart {
+        /// Importance resampling with the pool's mean luminance as the weight of the iteration's light side (properly weighted: unbiased for any pool size); the visibility chain from a visible candidate other than the contribution chain's.
+        Weighted = "weighted",
+        /// Importance resampling alone, each chain in stationarity assumed (the thesis, Fig. 6.8: biased for a finite pool).
+        Resampled = "resampled",
+    }
+}
+
 /// `target_acceptance` lies in (0, 1).
 fn check_acceptance(v: &f64) -> Result<(), String> {
     if *v > 0.0 && *v < 1.0 {
@@ -1554,6 +1864,8 @@ crate::settings! {
         pub vis_pdf: bool = true;
         /// b_con from the independent light subpaths (direct, Eq. 6.4), from b_vis and the visibility chain's mean luminance (visibility), both by inverse variance (combined), or with k = 1 weights plus the camera subpaths' transfer (transfer).
         pub con_estimate: ConEstimate = ConEstimate::Transfer;
+        /// Chain restarts: weighted (each iteration's light side weighted by its restart pool's mean luminance, the contribution chain's proper weight; the visibility chain from another candidate) or resampled (the thesis's importance resampling alone, biased for a finite pool). With normalisation = iteration the restarts are resampled.
+        pub restart: Restart = Restart::Weighted;
         flatten {
             /// VCM: mode, radius, reduction (alpha: 1 here, a fixed radius as the thesis runs), heuristic, depth.
             pub vcm: VcmSettings = VcmSettings {
@@ -1584,7 +1896,8 @@ pub const UNBOUNDED_CAMERA_VERTICES: u128 = 16;
 /// [`McmcVcmSettings::memory_bytes`]: a render's peak heap, by part.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct MemoryEstimate {
-    /// The output film and the iteration's light-side sum (40 B a pixel).
+    /// The output film, the light side's film apart from it and the
+    /// iteration's light-side sum (68 B a pixel).
     pub films: u128,
     /// The chain pairs: two images each (24 B a pixel) and [`BYTES_PER_UNIT`].
     pub units: u128,
@@ -1595,8 +1908,8 @@ pub struct MemoryEstimate {
     /// start index (twice).
     pub cameras: u128,
     /// The restart candidates (the blocks and the joined pool, 2 ×
-    /// 56 B each) and each running pair's cumulative weights (8 B per
-    /// candidate and thread).
+    /// 56 B each) and the restart pool's cumulative luminances and
+    /// visible indices (12 B per candidate).
     pub candidates: u128,
 }
 
@@ -1611,11 +1924,11 @@ impl MemoryEstimate {
 }
 
 impl McmcVcmSettings {
-    /// The heap a render of `scene` with these settings takes at its peak,
-    /// on `threads` threads (an estimate, by part; the scene itself is not
-    /// counted). Checked against the memory available before the render
+    /// The heap a render of `scene` with these settings takes at its peak
+    /// (an estimate, by part; the scene itself is not counted; it does not
+    /// depend on the thread count). Checked against the memory available before the render
     /// allocates anything (docs/errors.md).
-    pub fn memory_bytes(&self, scene: &Scene, threads: usize) -> MemoryEstimate {
+    pub fn memory_bytes(&self, scene: &Scene) -> MemoryEstimate {
         let size = |bytes: usize| bytes as u128;
         let pixels = u128::from(scene.film.width) * u128::from(scene.film.height);
         let rgb = size(std::mem::size_of::<Rgb>());
@@ -1635,10 +1948,10 @@ impl McmcVcmSettings {
         // Saturating: 2^64 − 1 pairs on a 2^32 × 2^32 film would overflow
         // even 128 bits (and are refused all the same).
         MemoryEstimate {
-            films: pixels * (u128::from(crate::resources::FILM_BYTES_PER_PIXEL) + rgb),
+            films: pixels * (2 * u128::from(crate::resources::FILM_BYTES_PER_PIXEL) + rgb),
             units: (self.units as u128).saturating_mul(pixels * 2 * rgb + BYTES_PER_UNIT),
             cameras: pixels * (vertices * (2 * vertex + grid) + 2 * per_pixel),
-            candidates: self.candidates as u128 * (2 * candidate + 8 * threads as u128),
+            candidates: self.candidates as u128 * (2 * candidate + 12),
         }
     }
 
@@ -1654,6 +1967,7 @@ impl McmcVcmSettings {
             normalisation: self.normalisation,
             vis_pdf: self.vis_pdf,
             con_estimate: self.con_estimate,
+            restart: self.restart,
         }
     }
 }
@@ -1698,9 +2012,7 @@ impl IntegratorSettings for McmcVcmSettings {
         // 3·10^15 bytes; the estimate is checked before anything sized by
         // them or by the film is allocated.
         let (w, h) = (scene.film.width, scene.film.height);
-        let bytes = self
-            .memory_bytes(scene, rayon::current_num_threads())
-            .total();
+        let bytes = self.memory_bytes(scene).total();
         crate::resources::check_memory(
             &format!(
                 "mcmc-vcm: {w}×{h} with {} units and {} candidates",
