@@ -25,8 +25,16 @@ pub const INTEGRATORS: [&str; 3] = ["pt", "lt", "bdpt"];
 pub const CHAIN_INTEGRATORS: [&str; 5] =
     ["pssmlt", "mmlt", "tempered-pssmlt", "tempered-mmlt", "relt"];
 
-/// First bytes of a checkpoint file (format version 1).
-const MAGIC: &[u8; 8] = b"mcmcPX01";
+/// First bytes of a checkpoint file (format version 2: version 1's
+/// contents followed by an FNV-1a checksum of everything before it).
+const MAGIC: &[u8; 8] = b"mcmcPX02";
+
+/// First bytes of a file of the earlier format (no checksum), refused.
+const MAGIC_V1: &[u8; 8] = b"mcmcPX01";
+
+/// Bytes of a checkpoint besides its accumulators: the magic, eight
+/// words and the checksum.
+const FRAME_BYTES: u128 = 8 + 64 + 8;
 
 /// Where a render keeps its checkpoint, for which inputs, and the progress
 /// it resumes from.
@@ -107,9 +115,12 @@ pub fn fingerprint(parts: &[String]) -> u64 {
 }
 
 /// Saves `progress` for the inputs `fingerprint` to `path` (atomically: a
-/// run killed while writing keeps the previous checkpoint).
+/// run killed while writing keeps the previous checkpoint): the magic,
+/// eight words, the accumulators, then an FNV-1a checksum of all before
+/// it.
 pub fn save(path: &Path, fingerprint: u64, progress: &Progress) -> Result<(), String> {
-    let mut out = Vec::with_capacity(64 + 16 * progress.samples.len() + 12 * progress.splats.len());
+    let mut out =
+        Vec::with_capacity(80 + 16 * progress.samples.len() + 12 * progress.splats.len());
     out.extend_from_slice(MAGIC);
     let (w, h) = progress.size;
     for v in [
@@ -130,14 +141,16 @@ pub fn save(path: &Path, fingerprint: u64, progress: &Progress) -> Result<(), St
     for x in progress.splats.as_flattened() {
         out.extend_from_slice(&x.to_bits().to_le_bytes());
     }
+    let checksum = fnv1a(&out, FNV_OFFSET);
+    out.extend_from_slice(&checksum.to_le_bytes());
     crate::output::write_bytes(path, &out)
 }
 
-/// Bytes of a checkpoint of a `size` image: the magic, eight words, and
-/// 4 + 3 `f32` accumulators per pixel.
+/// Bytes of a checkpoint of a `size` image: the magic, eight words,
+/// 4 + 3 `f32` accumulators per pixel and the checksum.
 fn file_bytes(size: (u32, u32)) -> u128 {
     let pixels = u128::from(size.0) * u128::from(size.1);
-    (MAGIC.len() + 64) as u128 + 28 * pixels
+    FRAME_BYTES + 28 * pixels
 }
 
 /// The largest count a checkpoint may hold (samples done in all, and
@@ -147,9 +160,9 @@ pub(crate) const MAX_COUNT: u64 = 1 << 53;
 
 /// The progress saved at `path` for the inputs `fingerprint` and an image
 /// of `size`: `None` when there is no file; an error (one line) when it is
-/// not a checkpoint or belongs to another render. A path that is not a
-/// regular file, or a file longer than a checkpoint of `size`, is refused
-/// before it is read.
+/// not a checkpoint, of the earlier format, damaged or belongs to another
+/// render. A path that is not a regular file, or a file longer than a
+/// checkpoint of `size`, is refused before it is read.
 pub fn load(path: &Path, fingerprint: u64, size: (u32, u32)) -> Result<Option<Progress>, String> {
     let len = match std::fs::metadata(path) {
         Ok(m) => m.len(),
@@ -172,7 +185,10 @@ pub fn load(path: &Path, fingerprint: u64, size: (u32, u32)) -> Result<Option<Pr
 }
 
 /// The progress a checkpoint's bytes hold, checked as [`load`] checks a
-/// file (`path` names it in messages): the fingerprint, the image size,
+/// file (`path` names it in messages): the format (a file of format 1,
+/// `mcmcPX01`, has no checksum and is refused), the checksum (a flipped
+/// bit, a cut or a file written over is refused as damaged before
+/// anything in it is read), the fingerprint, the image size,
 /// one sample and one splat accumulator per pixel, every accumulator
 /// finite, at most one pass per sample per pixel and counts within
 /// [`MAX_COUNT`]. What it returns makes a film ([`Progress::film`]).
@@ -183,9 +199,20 @@ pub fn progress_from_bytes(
     size: (u32, u32),
 ) -> Result<Progress, String> {
     let bad = |why: &str| format!("checkpoint {}: {why}", path.display());
+    if bytes.starts_with(MAGIC_V1) {
+        return Err(bad(
+            "of an earlier format (mcmcPX01, without a checksum); delete it to start afresh",
+        ));
+    }
     let Some(body) = bytes.strip_prefix(MAGIC) else {
         return Err(bad("not a checkpoint of mcmc-render's per-pixel driver"));
     };
+    let Some((body, checksum)) = body.split_last_chunk::<8>() else {
+        return Err(bad("truncated"));
+    };
+    if fnv1a(&bytes[..bytes.len() - 8], FNV_OFFSET) != u64::from_le_bytes(*checksum) {
+        return Err(bad("damaged (its checksum does not match its contents)"));
+    }
     let word = |i: usize| {
         body.get(8 * i..8 * i + 8)
             .map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")))
@@ -213,7 +240,7 @@ pub fn progress_from_bytes(
         )));
     }
     let floats = &body[64.min(body.len())..];
-    if floats.len() as u128 != file_bytes(size) - 72 {
+    if floats.len() as u128 != file_bytes(size) - FRAME_BYTES {
         return Err(bad("truncated or padded"));
     }
     let samples_done = u128::from(spp_done) * u128::from(pixels);

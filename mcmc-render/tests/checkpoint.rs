@@ -7,7 +7,9 @@
 //!
 //! Control: resuming from the saved film but restarting the pass count at
 //! 0 (so the later passes reuse the first passes' random streams) must not
-//! give the uninterrupted image, or the comparison could not tell.
+//! give the uninterrupted image, or the comparison could not tell. A
+//! damaged checkpoint or one of the earlier format is refused with one
+//! line.
 //!
 //! The Markov-chain driver (`pssmlt`, `mmlt`, and the replica sets of
 //! `tempered-pssmlt`, `tempered-mmlt` and `relt`): a render stopped after
@@ -135,6 +137,67 @@ fn a_stopped_render_resumed_from_its_checkpoint_ends_bit_identical() {
         assert!(resumed == whole, "{name}: resumed image differs");
         assert!(control != whole, "{name}: control agreed");
     }
+}
+
+/// The per-pixel driver's checkpoint (format 2, `mcmcPX02`) ends with an
+/// FNV-1a checksum: a flipped bit (here in the non-finite count, which the
+/// reader's consistency checks alone would accept), a flipped accumulator
+/// bit or a cut file is refused as damaged, and a file of format 1
+/// (`mcmcPX01`, no checksum) as of an earlier format, each with one line.
+/// Control: the intact file loads and holds the passes saved.
+#[test]
+fn a_damaged_or_old_per_pixel_checkpoint_is_refused_with_one_line() {
+    let scene = repo_scene("cornell-box.xml", 8);
+    let size = (scene.film.width, scene.film.height);
+    let path = std::env::temp_dir().join(format!(
+        "mcmc-render-checkpoint-pt-damaged-{}.ckpt",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_file(&path);
+    let settings = RenderSettings {
+        spp: Some(SPP),
+        time_budget: None,
+        seed: 11,
+    };
+    let fresh = Checkpoint {
+        path: path.clone(),
+        fingerprint: 42,
+        resume: None,
+        chains: None,
+    };
+    // A checkpoint after two passes (1 + 2 spp).
+    let stop = AtomicBool::new(false);
+    let observer = StopAfter {
+        stop: &stop,
+        after: 2,
+        seen: AtomicU32::new(0),
+    };
+    let pt = pt_of(&scene);
+    let first = render_checkpointed(&scene, &pt, &settings, Some(&fresh), &stop, &observer);
+    assert!(first.interrupted);
+    let good = std::fs::read(&path).unwrap();
+    let refused = |bytes: &[u8], why: &str| {
+        std::fs::write(&path, bytes).unwrap();
+        let e = load(&path, 42, size).unwrap_err();
+        assert!(e.contains(why) && !e.contains('\n'), "{why}: {e}");
+    };
+    // Word 3 (after the magic) is the non-finite count: 0 → 1.
+    let mut count = good.clone();
+    count[8 + 3 * 8] ^= 1;
+    refused(&count, "damaged");
+    let mut accumulator = good.clone();
+    accumulator[good.len() / 2] ^= 0x10;
+    refused(&accumulator, "damaged");
+    refused(&good[..good.len() - 8], "damaged");
+    // Format 1: the same words and accumulators, no checksum.
+    let mut v1 = good[..good.len() - 8].to_vec();
+    v1[..8].copy_from_slice(b"mcmcPX01");
+    refused(&v1, "of an earlier format (mcmcPX01");
+    // Control: the file itself loads.
+    std::fs::write(&path, &good).unwrap();
+    let progress = load(&path, 42, size).unwrap().expect("a checkpoint");
+    assert_eq!((progress.pass, progress.spp_done, progress.nonfinite), (2, 3, 0));
+    std::fs::remove_file(&path).unwrap();
 }
 
 /// A Markov render as the command line runs it, with `sets` (the driver's
