@@ -634,15 +634,16 @@ impl Tally {
     }
 
     /// The counters as a distributed run sends them.
-    fn to_counters(&self) -> crate::cluster::Counters {
+    pub(crate) fn to_counters(&self) -> crate::cluster::Counters {
         (
             self.energy.to_vec(),
             vec![self.nonfinite, self.light_vertices],
         )
     }
 
-    /// The counters [`Self::to_counters`] sent.
-    fn from_counters((energy, counts): crate::cluster::Counters) -> Tally {
+    /// The counters [`Self::to_counters`] sent (at the front of longer
+    /// lists, the rest ignored).
+    pub(crate) fn from_counters((energy, counts): crate::cluster::Counters) -> Tally {
         Tally {
             energy: std::array::from_fn(|i| energy[i]),
             nonfinite: counts[0],
