@@ -189,7 +189,7 @@ fn a_damaged_or_old_per_pixel_checkpoint_is_refused_with_one_line() {
     accumulator[good.len() / 2] ^= 0x10;
     refused(&accumulator, "damaged");
     refused(&good[..good.len() - 8], "damaged");
-    // Format 1: the same words and accumulators, no checksum.
+    // Format 1's magic on the file without its checksum.
     let mut v1 = good[..good.len() - 8].to_vec();
     v1[..8].copy_from_slice(b"mcmcPX01");
     refused(&v1, "of an earlier format (mcmcPX01");
