@@ -247,6 +247,12 @@ fn open_checkpoint(
                 crate::markov::checkpoint::load(path, fingerprint, size, &filter)?.map(Arc::new);
         } else {
             checkpoint.resume = load(path, fingerprint, size)?.map(Arc::new);
+            // erpt's own words, checked here, before the ranks' handshake,
+            // so that a bad file stops every rank with one error.
+            if let (Some(p), "erpt") = (&checkpoint.resume, name) {
+                crate::integrators::erpt::check_checkpoint(p)
+                    .map_err(|e| format!("checkpoint {}: {e}", path.display()))?;
+            }
         }
     }
     Ok(checkpoint)
