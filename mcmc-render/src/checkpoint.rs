@@ -133,8 +133,9 @@ pub fn fingerprint(parts: &[String]) -> u64 {
 /// nine words, the integrator's words, the accumulators, then an FNV-1a
 /// checksum of all before it.
 pub fn save(path: &Path, fingerprint: u64, progress: &Progress) -> Result<(), String> {
-    let mut out =
-        Vec::with_capacity(FRAME_BYTES as usize + 8 * progress.extra.len() + 28 * progress.splats.len());
+    let mut out = Vec::with_capacity(
+        FRAME_BYTES as usize + 8 * progress.extra.len() + 28 * progress.splats.len(),
+    );
     out.extend_from_slice(MAGIC);
     let (w, h) = progress.size;
     for v in [

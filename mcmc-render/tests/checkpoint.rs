@@ -200,7 +200,10 @@ fn a_damaged_or_old_per_pixel_checkpoint_is_refused_with_one_line() {
     // Control: the file itself loads.
     std::fs::write(&path, &good).unwrap();
     let progress = load(&path, 42, size).unwrap().expect("a checkpoint");
-    assert_eq!((progress.pass, progress.spp_done, progress.nonfinite), (2, 3, 0));
+    assert_eq!(
+        (progress.pass, progress.spp_done, progress.nonfinite),
+        (2, 3, 0)
+    );
     std::fs::remove_file(&path).unwrap();
 }
 
@@ -249,16 +252,23 @@ fn a_stopped_erpt_render_resumed_from_its_checkpoint_ends_bit_identical() {
     let mut restarted = load(&path, 42, size).unwrap().expect("a checkpoint");
     (restarted.pass, restarted.spp_done) = (0, 0);
     let go = AtomicBool::new(false);
-    let resumed = erpt.render(&scene, &run(Some(saved)), &go, &NoObserver).unwrap();
+    let resumed = erpt
+        .render(&scene, &run(Some(saved)), &go, &NoObserver)
+        .unwrap();
     let whole_run = RunSettings {
         checkpoint: None,
         ..run(None)
     };
     let whole = erpt.render(&scene, &whole_run, &go, &NoObserver).unwrap();
-    let control = erpt.render(&scene, &run(Some(restarted)), &go, &NoObserver).unwrap();
+    let control = erpt
+        .render(&scene, &run(Some(restarted)), &go, &NoObserver)
+        .unwrap();
     std::fs::remove_file(&path).unwrap();
     assert!(!resumed.interrupted);
-    assert!(bits(&resumed.image) == bits(&whole.image), "resumed image differs");
+    assert!(
+        bits(&resumed.image) == bits(&whole.image),
+        "resumed image differs"
+    );
     for key in [
         "passes",
         "mutations",

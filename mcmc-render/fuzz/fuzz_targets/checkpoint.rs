@@ -85,8 +85,7 @@ fuzz_target!(|data: &[u8]| {
         )
     } else {
         let filter = Arc::new(Filter::new(scene.film.filter, size.0, size.1));
-        let Ok(progress) = chain_progress_from_bytes(data, path, fingerprint, size, &filter)
-        else {
+        let Ok(progress) = chain_progress_from_bytes(data, path, fingerprint, size, &filter) else {
             return;
         };
         checkpoint.chains = Some(Arc::new(progress));

@@ -256,7 +256,10 @@ impl IntegratorSettings for Erpt {
         let any_time_up = || crate::cluster::any_rank(time_up());
         let cluster = crate::cluster::current();
         let filter = Arc::new(Filter::new(scene.film.filter, w, h));
-        let names = self.kernel(None).map_err(RenderError::Invalid)?.component_names();
+        let names = self
+            .kernel(None)
+            .map_err(RenderError::Invalid)?
+            .component_names();
         let resumed = match &run.checkpoint {
             Some(c) => resume_point(c, cluster, &filter, &names).map_err(RenderError::Invalid)?,
             None => None,
@@ -595,7 +598,12 @@ fn band_of_counters(counts: &[u64]) -> Result<(u64, u64, ChainStatistics), Strin
 /// `erpt`'s words in a checkpoint ([`Progress::extra`]): the seeds and
 /// chains counted, the luminance estimate (walks, mean, standard error),
 /// then the chain statistics, bit-exactly.
-fn saved_words(seeds: u64, chains: u64, lum: &LuminanceEstimate, stats: &ChainStatistics) -> Vec<u64> {
+fn saved_words(
+    seeds: u64,
+    chains: u64,
+    lum: &LuminanceEstimate,
+    stats: &ChainStatistics,
+) -> Vec<u64> {
     let mut out = vec![
         seeds,
         chains,
@@ -700,14 +708,23 @@ fn resume_point(
                 k.name.clone_from(name);
             }
             let (w, h) = p.size;
-            let film =
-                Film::from_accumulators([w, h, 0, 0, w, h], filter.clone(), Vec::new(), p.splats.clone())?;
+            let film = Film::from_accumulators(
+                [w, h, 0, 0, w, h],
+                filter.clone(),
+                Vec::new(),
+                p.splats.clone(),
+            )?;
             Some((p.pass, saved, film))
         }
     };
     let words = local.as_ref().map_or(Vec::new(), |(pass, saved, _)| {
         let lum = &saved.lum;
-        vec![*pass, lum.walks as u64, lum.mean.to_bits(), lum.standard_error.to_bits()]
+        vec![
+            *pass,
+            lum.walks as u64,
+            lum.mean.to_bits(),
+            lum.standard_error.to_bits(),
+        ]
     });
     let words = match cluster {
         Some(c) => c.broadcast_u64s(words),

@@ -888,7 +888,11 @@ fn join_units(
         .filter(|(p, _)| mine(p))
         .map(|(p, unit)| {
             let camera = unit.camera.iter().flat_map(|c| [c.r, c.g, c.b]);
-            (p, &unit.splats, (camera.map(f64::from).collect(), Vec::new()))
+            (
+                p,
+                &unit.splats,
+                (camera.map(f64::from).collect(), Vec::new()),
+            )
         });
     for (numbers, _) in crate::cluster::reduce_units(film, parcels, filter) {
         for (a, c) in light.iter_mut().zip(numbers.chunks_exact(3)) {
@@ -1233,12 +1237,15 @@ impl McmcVcm {
         for &(kind, large) in self.kinds() {
             names[kind as usize] = self.algorithm(large).component_names();
         }
-        (cluster.gather(parcels, filter).unwrap_or_default().into_iter())
-            .map(|p| {
-                PairReport::from_counters((p.numbers, p.counts), &names)
-                    .expect("every rank runs the same binary (the start-up handshake)")
-            })
-            .collect()
+        (cluster
+            .gather(parcels, filter)
+            .unwrap_or_default()
+            .into_iter())
+        .map(|p| {
+            PairReport::from_counters((p.numbers, p.counts), &names)
+                .expect("every rank runs the same binary (the start-up handshake)")
+        })
+        .collect()
     }
 
     /// Whether `b_con` is estimated by `transfer` with a scale `k ≠ 1`

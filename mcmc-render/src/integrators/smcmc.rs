@@ -57,7 +57,9 @@
 
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
+use crate::cluster::Parcel;
 use crate::deadline::Deadline;
+use crate::film::Filter;
 use crate::integrators::bdpt::{Bdpt, MisHeuristic};
 use crate::integrators::guided::GuidedSettings;
 use crate::integrators::mcmc_pg::ProgressOnly;
@@ -86,8 +88,6 @@ use mcmc_core::sample::Sample;
 use mcmc_core::space::TorusPoint;
 use mcmc_core::stats::ChainStatistics;
 use rayon::prelude::*;
-use crate::cluster::Parcel;
-use crate::film::Filter;
 use serde_json::{Value, json};
 use std::collections::HashMap;
 use std::ops::{AddAssign, Range};
@@ -685,10 +685,10 @@ impl<S: TileShift> Sampler<'_, S> {
                 }
             }
         }
-        let decided: HashMap<usize, (f64, bool)> =
-            (crate::cluster::all_gather_words(decisions).chunks_exact(3))
-                .map(|d| (d[0] as usize, (f64::from_bits(d[1]), d[2] == 1)))
-                .collect();
+        let decided: HashMap<usize, (f64, bool)> = (crate::cluster::all_gather_words(decisions)
+            .chunks_exact(3))
+        .map(|d| (d[0] as usize, (f64::from_bits(d[1]), d[2] == 1)))
+        .collect();
         // Lower tiles: the upper rank's decision applied here.
         if let Some(y) = lower {
             for x in 0..w {
@@ -824,7 +824,11 @@ impl TileResults {
                 ..TileSums::default()
             };
             let mut words = p.counts.iter().copied();
-            let mut next = || words.next().ok_or_else(|| "a tile's counts are cut".to_string());
+            let mut next = || {
+                words
+                    .next()
+                    .ok_or_else(|| "a tile's counts are cut".to_string())
+            };
             // Every rank runs the same binary: a parcel that does not
             // decode is a bug, not an input error.
             let (steps, stats) = read_tile_counts(&mut next, &mut sums, names)
@@ -1085,7 +1089,11 @@ impl Smcmc {
         let names = (mutation.kernel::<TileValues>())
             .expect("the mutation was checked by validate")
             .component_names();
-        let filter = Arc::new(Filter::new(scene.film.filter, scene.film.width, scene.film.height));
+        let filter = Arc::new(Filter::new(
+            scene.film.filter,
+            scene.film.width,
+            scene.film.height,
+        ));
         let Some(results) = TileResults::gather(tiles, first, &names, &filter) else {
             // Not rank 0: only rank 0 develops and writes the image.
             let statistics = crate::cluster::with_ranks(json!({}), own);
