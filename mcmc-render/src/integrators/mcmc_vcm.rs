@@ -1237,15 +1237,13 @@ impl McmcVcm {
         for &(kind, large) in self.kinds() {
             names[kind as usize] = self.algorithm(large).component_names();
         }
-        (cluster
-            .gather(parcels, filter)
-            .unwrap_or_default()
-            .into_iter())
-        .map(|p| {
-            PairReport::from_counters((p.numbers, p.counts), &names)
-                .expect("every rank runs the same binary (the start-up handshake)")
-        })
-        .collect()
+        let all = cluster.gather(parcels, filter).unwrap_or_default();
+        all.into_iter()
+            .map(|p| {
+                PairReport::from_counters((p.numbers, p.counts), &names)
+                    .expect("every rank runs the same binary (the start-up handshake)")
+            })
+            .collect()
     }
 
     /// Whether `b_con` is estimated by `transfer` with a scale `k ≠ 1`

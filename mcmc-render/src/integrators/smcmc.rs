@@ -685,10 +685,10 @@ impl<S: TileShift> Sampler<'_, S> {
                 }
             }
         }
-        let decided: HashMap<usize, (f64, bool)> = (crate::cluster::all_gather_words(decisions)
-            .chunks_exact(3))
-        .map(|d| (d[0] as usize, (f64::from_bits(d[1]), d[2] == 1)))
-        .collect();
+        let decisions = crate::cluster::all_gather_words(decisions);
+        let decided: HashMap<usize, (f64, bool)> = (decisions.chunks_exact(3))
+            .map(|d| (d[0] as usize, (f64::from_bits(d[1]), d[2] == 1)))
+            .collect();
         // Lower tiles: the upper rank's decision applied here.
         if let Some(y) = lower {
             for x in 0..w {
