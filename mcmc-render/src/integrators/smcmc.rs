@@ -1053,7 +1053,7 @@ impl Smcmc {
                 last_preview = Instant::now();
                 let done = tiles.iter().map(|t| t.steps).sum();
                 let sums: Vec<TileSums> = tiles.iter().map(|t| t.sums.clone()).collect();
-                observer.snapshot(&|| develop_now(&sums).image, done);
+                observer.snapshot(&|| develop_now(&sums[..]).image, done);
                 profile[2] += t2.elapsed().as_secs_f64();
             }
         }
@@ -1111,7 +1111,7 @@ impl Smcmc {
         // Every tile steps once per iteration (a tile not started draws),
         // so a tile short of the plan means the run was stopped.
         let interrupted = planned.is_none_or(|m| results.steps.iter().any(|&s| s < m));
-        let developed = develop_now(&results.sums);
+        let developed = develop_now(&results.sums[..]);
         let develop_seconds = develop_start.elapsed().as_secs_f64();
         let mutations: u64 = results.steps.iter().sum();
         let seconds = start.elapsed().as_secs_f64();
