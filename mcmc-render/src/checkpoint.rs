@@ -42,7 +42,8 @@ const MAGIC_V1: &[u8; 8] = b"mcmcPX01";
 const FRAME_BYTES: u128 = 8 + 72 + 8;
 
 /// Most words an integrator may keep beside the film ([`Progress::extra`]:
-/// `erpt` keeps 12 + 3 per mutation type, at most 27).
+/// `erpt` keeps 12 + 3 per component of its mutation kernel, 60 with the
+/// path-space mixture's 16).
 pub const MAX_EXTRA_WORDS: u64 = 256;
 
 /// Where a render keeps its checkpoint, for which inputs, and the progress
