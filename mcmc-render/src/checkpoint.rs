@@ -1,10 +1,12 @@
 //! Checkpoints of the per-pixel driver ([`crate::render::render`]: `pt`,
-//! `lt`, `bdpt`): after every whole pass the film's accumulators, the pass
-//! count and the samples done go to a file, so that a run stopped by a
-//! time limit, Ctrl-C or a lost process continues where it was and ends
-//! with the bits an uninterrupted run gives (the passes that follow draw
-//! from the same `(seed, pass, unit)` streams and add into the same
-//! accumulators in the same order). See `docs/distributed.md`.
+//! `lt`, `bdpt`) and of `erpt`'s passes: after every whole pass the film's
+//! accumulators, the pass count and the samples done (and what else the
+//! integrator keeps: `erpt`'s counters, chain statistics and luminance
+//! estimate) go to a file, so that a run stopped by a time limit, Ctrl-C
+//! or a lost process continues where it was and ends with the bits an
+//! uninterrupted run gives (the passes that follow draw from the same
+//! `(seed, pass, unit)` streams and add into the same accumulators in the
+//! same order). See `docs/distributed.md`.
 //!
 //! A checkpoint is tied to its inputs by a fingerprint of the scene file,
 //! the defines, the integrator with its settings and the seed (not the
@@ -16,8 +18,9 @@ use crate::film::{Film, Filter};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-/// The integrators whose runs can be checkpointed on the per-pixel driver.
-pub const INTEGRATORS: [&str; 3] = ["pt", "lt", "bdpt"];
+/// The integrators whose runs can be checkpointed pass by pass in this
+/// format: the per-pixel driver's and `erpt`.
+pub const INTEGRATORS: [&str; 4] = ["pt", "lt", "bdpt", "erpt"];
 
 /// The integrators whose runs can be checkpointed on the Markov-chain
 /// driver (independent chains and replica sets on primary sample space;
@@ -25,8 +28,23 @@ pub const INTEGRATORS: [&str; 3] = ["pt", "lt", "bdpt"];
 pub const CHAIN_INTEGRATORS: [&str; 5] =
     ["pssmlt", "mmlt", "tempered-pssmlt", "tempered-mmlt", "relt"];
 
-/// First bytes of a checkpoint file (format version 1).
-const MAGIC: &[u8; 8] = b"mcmcPX01";
+/// First bytes of a checkpoint file (format version 2: version 1's eight
+/// words, the integrator's own words after a ninth word counting them,
+/// version 1's accumulators, then an FNV-1a checksum of everything before
+/// it).
+const MAGIC: &[u8; 8] = b"mcmcPX02";
+
+/// First bytes of a file of the earlier format (no checksum), refused.
+const MAGIC_V1: &[u8; 8] = b"mcmcPX01";
+
+/// Bytes of a checkpoint besides its accumulators and the integrator's
+/// words: the magic, nine words and the checksum.
+const FRAME_BYTES: u128 = 8 + 72 + 8;
+
+/// Most words an integrator may keep beside the film ([`Progress::extra`]:
+/// `erpt` keeps 12 + 3 per component of its mutation kernel, 60 with the
+/// path-space mixture's 16).
+pub const MAX_EXTRA_WORDS: u64 = 256;
 
 /// Where a render keeps its checkpoint, for which inputs, and the progress
 /// it resumes from.
@@ -59,6 +77,10 @@ pub struct Progress {
     pub samples: Vec<[f32; 4]>,
     /// Its splat accumulators.
     pub splats: Vec<[f32; 3]>,
+    /// What the integrator keeps beside the film (`erpt`: its counters,
+    /// chain statistics and luminance estimate; empty for the per-pixel
+    /// driver), at most [`MAX_EXTRA_WORDS`].
+    pub extra: Vec<u64>,
 }
 
 impl Progress {
@@ -72,6 +94,7 @@ impl Progress {
             size: (film.width, film.height),
             samples: samples.to_vec(),
             splats: splats.to_vec(),
+            extra: Vec::new(),
         }
     }
 
@@ -107,9 +130,13 @@ pub fn fingerprint(parts: &[String]) -> u64 {
 }
 
 /// Saves `progress` for the inputs `fingerprint` to `path` (atomically: a
-/// run killed while writing keeps the previous checkpoint).
+/// run killed while writing keeps the previous checkpoint): the magic,
+/// nine words, the integrator's words, the accumulators, then an FNV-1a
+/// checksum of all before it.
 pub fn save(path: &Path, fingerprint: u64, progress: &Progress) -> Result<(), String> {
-    let mut out = Vec::with_capacity(64 + 16 * progress.samples.len() + 12 * progress.splats.len());
+    let mut out = Vec::with_capacity(
+        FRAME_BYTES as usize + 8 * progress.extra.len() + 28 * progress.splats.len(),
+    );
     out.extend_from_slice(MAGIC);
     let (w, h) = progress.size;
     for v in [
@@ -121,7 +148,11 @@ pub fn save(path: &Path, fingerprint: u64, progress: &Progress) -> Result<(), St
         u64::from(h),
         progress.samples.len() as u64,
         progress.splats.len() as u64,
-    ] {
+        progress.extra.len() as u64,
+    ]
+    .into_iter()
+    .chain(progress.extra.iter().copied())
+    {
         out.extend_from_slice(&v.to_le_bytes());
     }
     for x in progress.samples.as_flattened() {
@@ -130,14 +161,20 @@ pub fn save(path: &Path, fingerprint: u64, progress: &Progress) -> Result<(), St
     for x in progress.splats.as_flattened() {
         out.extend_from_slice(&x.to_bits().to_le_bytes());
     }
+    let checksum = fnv1a(&out, FNV_OFFSET);
+    out.extend_from_slice(&checksum.to_le_bytes());
     crate::output::write_bytes(path, &out)
 }
 
-/// Bytes of a checkpoint of a `size` image: the magic, eight words, and
-/// 4 + 3 `f32` accumulators per pixel.
+/// Bytes of the accumulators of a `size` image: 4 + 3 `f32` per pixel.
+fn accumulator_bytes(size: (u32, u32)) -> u128 {
+    28 * u128::from(size.0) * u128::from(size.1)
+}
+
+/// Most bytes of a checkpoint of a `size` image: the frame, the most
+/// words an integrator keeps and the accumulators.
 fn file_bytes(size: (u32, u32)) -> u128 {
-    let pixels = u128::from(size.0) * u128::from(size.1);
-    (MAGIC.len() + 64) as u128 + 28 * pixels
+    FRAME_BYTES + 8 * u128::from(MAX_EXTRA_WORDS) + accumulator_bytes(size)
 }
 
 /// The largest count a checkpoint may hold (samples done in all, and
@@ -147,9 +184,9 @@ pub(crate) const MAX_COUNT: u64 = 1 << 53;
 
 /// The progress saved at `path` for the inputs `fingerprint` and an image
 /// of `size`: `None` when there is no file; an error (one line) when it is
-/// not a checkpoint or belongs to another render. A path that is not a
-/// regular file, or a file longer than a checkpoint of `size`, is refused
-/// before it is read.
+/// not a checkpoint, of the earlier format, damaged or belongs to another
+/// render. A path that is not a regular file, or a file longer than a
+/// checkpoint of `size`, is refused before it is read.
 pub fn load(path: &Path, fingerprint: u64, size: (u32, u32)) -> Result<Option<Progress>, String> {
     let len = match std::fs::metadata(path) {
         Ok(m) => m.len(),
@@ -160,7 +197,7 @@ pub fn load(path: &Path, fingerprint: u64, size: (u32, u32)) -> Result<Option<Pr
     let expected = file_bytes(size);
     if u128::from(len) > expected {
         return Err(format!(
-            "checkpoint {}: {len} bytes, more than the {expected} of a checkpoint of a {}×{} image",
+            "checkpoint {}: {len} bytes, more than the {expected} a checkpoint of a {}×{} image can have",
             path.display(),
             size.0,
             size.1
@@ -172,7 +209,10 @@ pub fn load(path: &Path, fingerprint: u64, size: (u32, u32)) -> Result<Option<Pr
 }
 
 /// The progress a checkpoint's bytes hold, checked as [`load`] checks a
-/// file (`path` names it in messages): the fingerprint, the image size,
+/// file (`path` names it in messages): the format (a file of format 1,
+/// `mcmcPX01`, has no checksum and is refused), the checksum (a flipped
+/// bit, a cut or a file written over is refused as damaged before
+/// anything in it is read), the fingerprint, the image size,
 /// one sample and one splat accumulator per pixel, every accumulator
 /// finite, at most one pass per sample per pixel and counts within
 /// [`MAX_COUNT`]. What it returns makes a film ([`Progress::film`]).
@@ -183,9 +223,20 @@ pub fn progress_from_bytes(
     size: (u32, u32),
 ) -> Result<Progress, String> {
     let bad = |why: &str| format!("checkpoint {}: {why}", path.display());
+    if bytes.starts_with(MAGIC_V1) {
+        return Err(bad(
+            "of an earlier format (mcmcPX01, without a checksum); delete it to start afresh",
+        ));
+    }
     let Some(body) = bytes.strip_prefix(MAGIC) else {
         return Err(bad("not a checkpoint of mcmc-render's per-pixel driver"));
     };
+    let Some((body, checksum)) = body.split_last_chunk::<8>() else {
+        return Err(bad("truncated"));
+    };
+    if fnv1a(&bytes[..bytes.len() - 8], FNV_OFFSET) != u64::from_le_bytes(*checksum) {
+        return Err(bad("damaged (its checksum does not match its contents)"));
+    }
     let word = |i: usize| {
         body.get(8 * i..8 * i + 8)
             .map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")))
@@ -198,7 +249,7 @@ pub fn progress_from_bytes(
     }
     let (pass, spp_done, nonfinite) = (word(1)?, word(2)?, word(3)?);
     let (w, h) = (word(4)?, word(5)?);
-    let (n_samples, n_splats) = (word(6)?, word(7)?);
+    let (n_samples, n_splats, n_extra) = (word(6)?, word(7)?, word(8)?);
     if (w, h) != (u64::from(size.0), u64::from(size.1)) {
         return Err(bad(&format!(
             "holds a {w}×{h} image, the scene is {}×{}",
@@ -212,8 +263,16 @@ pub fn progress_from_bytes(
             "holds {n_samples} sample and {n_splats} splat accumulators, a {w}×{h} image has {pixels} of each"
         )));
     }
-    let floats = &body[64.min(body.len())..];
-    if floats.len() as u128 != file_bytes(size) - 72 {
+    if n_extra > MAX_EXTRA_WORDS {
+        return Err(bad(&format!(
+            "holds {n_extra} words of the integrator's, more than the {MAX_EXTRA_WORDS} any keeps"
+        )));
+    }
+    let extra = (0..n_extra as usize)
+        .map(|i| word(9 + i))
+        .collect::<Result<Vec<u64>, String>>()?;
+    let floats = &body[(72 + 8 * extra.len()).min(body.len())..];
+    if floats.len() as u128 != accumulator_bytes(size) {
         return Err(bad("truncated or padded"));
     }
     let samples_done = u128::from(spp_done) * u128::from(pixels);
@@ -247,6 +306,7 @@ pub fn progress_from_bytes(
         size,
         samples,
         splats,
+        extra,
     })
 }
 
@@ -267,9 +327,12 @@ mod tests {
             crate::color::Rgb::new(0.1, -0.0, 3e-39),
         );
         assert!(load(&path, 7, (4, 3)).unwrap().is_none());
-        save(&path, 7, &Progress::of(3, 7, 2, &film)).unwrap();
+        let mut saved = Progress::of(3, 7, 2, &film);
+        saved.extra = vec![5, u64::MAX];
+        save(&path, 7, &saved).unwrap();
         let p = load(&path, 7, (4, 3)).unwrap().unwrap();
         assert_eq!((p.pass, p.spp_done, p.nonfinite), (3, 7, 2));
+        assert_eq!(p.extra, [5, u64::MAX]);
         let back = p.film(filter).unwrap();
         let bits = |f: &Film| {
             let (s, p) = f.accumulators();

@@ -240,6 +240,19 @@ pub fn evaluate_split(n: usize, width: usize, f: impl Fn(usize) -> Vec<f64> + Sy
     }
 }
 
+/// Every rank's `words`, concatenated in rank order, on every rank
+/// (bit-exactly: sent as the f64s of their bits, which MPI copies as
+/// bytes); without a cluster, `words` itself. Collective on a cluster.
+pub fn all_gather_words(words: Vec<u64>) -> Vec<u64> {
+    match current() {
+        Some(c) => (c.all_gather_f64s(words.into_iter().map(f64::from_bits).collect()))
+            .into_iter()
+            .map(f64::to_bits)
+            .collect(),
+        None => words,
+    }
+}
+
 /// Whether `flag` is set on this process or, on a cluster, on any rank: a
 /// decision (stop now, a pass was cut) every rank must take alike.
 /// Collective on a cluster: every rank calls it the same number of times.

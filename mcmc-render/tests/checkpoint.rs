@@ -7,7 +7,9 @@
 //!
 //! Control: resuming from the saved film but restarting the pass count at
 //! 0 (so the later passes reuse the first passes' random streams) must not
-//! give the uninterrupted image, or the comparison could not tell.
+//! give the uninterrupted image, or the comparison could not tell. A
+//! damaged checkpoint or one of the earlier format is refused with one
+//! line.
 //!
 //! The Markov-chain driver (`pssmlt`, `mmlt`, and the replica sets of
 //! `tempered-pssmlt`, `tempered-mmlt` and `relt`): a render stopped after
@@ -17,11 +19,15 @@
 //! kept) must differ. RELT's start-up (annealing, search) is not cut by
 //! the time budget when checkpointed (control: it is without), and
 //! damaged, foreign or misfitting checkpoints are refused with one line.
+//!
+//! `erpt` (pass by pass, in the per-pixel driver's format): stopped after
+//! two of four passes and resumed, the same bits and statistics as the
+//! uninterrupted render; control: the pass count put back to 0 differs.
 
 mod common;
 
 use common::{bdpt_of, lt_of, pt_of, repo_scene, repo_scene_tilted};
-use mcmc_render::checkpoint::{Checkpoint, load};
+use mcmc_render::checkpoint::{Checkpoint, Progress, load};
 use mcmc_render::color::Rgb;
 use mcmc_render::integrators::registry;
 use mcmc_render::integrators::{Integrator, Rendered, RunSettings};
@@ -135,6 +141,149 @@ fn a_stopped_render_resumed_from_its_checkpoint_ends_bit_identical() {
         assert!(resumed == whole, "{name}: resumed image differs");
         assert!(control != whole, "{name}: control agreed");
     }
+}
+
+/// The per-pixel driver's checkpoint (format 2, `mcmcPX02`) ends with an
+/// FNV-1a checksum: a flipped bit (here in the non-finite count, which the
+/// reader's consistency checks alone would accept), a flipped accumulator
+/// bit or a cut file is refused as damaged, and a file of format 1
+/// (`mcmcPX01`, no checksum) as of an earlier format, each with one line.
+/// Control: the intact file loads and holds the passes saved.
+#[test]
+fn a_damaged_or_old_per_pixel_checkpoint_is_refused_with_one_line() {
+    let scene = repo_scene("cornell-box.xml", 8);
+    let size = (scene.film.width, scene.film.height);
+    let path = std::env::temp_dir().join(format!(
+        "mcmc-render-checkpoint-pt-damaged-{}.ckpt",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_file(&path);
+    let settings = RenderSettings {
+        spp: Some(SPP),
+        time_budget: None,
+        seed: 11,
+    };
+    let fresh = Checkpoint {
+        path: path.clone(),
+        fingerprint: 42,
+        resume: None,
+        chains: None,
+    };
+    // A checkpoint after two passes (1 + 2 spp).
+    let stop = AtomicBool::new(false);
+    let observer = StopAfter {
+        stop: &stop,
+        after: 2,
+        seen: AtomicU32::new(0),
+    };
+    let pt = pt_of(&scene);
+    let first = render_checkpointed(&scene, &pt, &settings, Some(&fresh), &stop, &observer);
+    assert!(first.interrupted);
+    let good = std::fs::read(&path).unwrap();
+    let refused = |bytes: &[u8], why: &str| {
+        std::fs::write(&path, bytes).unwrap();
+        let e = load(&path, 42, size).unwrap_err();
+        assert!(e.contains(why) && !e.contains('\n'), "{why}: {e}");
+    };
+    // Word 3 (after the magic) is the non-finite count: 0 → 1.
+    let mut count = good.clone();
+    count[8 + 3 * 8] ^= 1;
+    refused(&count, "damaged");
+    let mut accumulator = good.clone();
+    accumulator[good.len() / 2] ^= 0x10;
+    refused(&accumulator, "damaged");
+    refused(&good[..good.len() - 8], "damaged");
+    // Format 1's magic on the file without its checksum.
+    let mut v1 = good[..good.len() - 8].to_vec();
+    v1[..8].copy_from_slice(b"mcmcPX01");
+    refused(&v1, "of an earlier format (mcmcPX01");
+    // Control: the file itself loads.
+    std::fs::write(&path, &good).unwrap();
+    let progress = load(&path, 42, size).unwrap().expect("a checkpoint");
+    assert_eq!(
+        (progress.pass, progress.spp_done, progress.nonfinite),
+        (2, 3, 0)
+    );
+    std::fs::remove_file(&path).unwrap();
+}
+
+/// `erpt` checkpointed after every pass (session 18): a render stopped
+/// after two of its four passes and resumed from its file ends with the
+/// uninterrupted render's image and statistics (passes, mutations, seeds,
+/// chains, acceptance, the luminance estimate) bit for bit. Control: the
+/// same file with the pass count put back to 0 (so the resumed passes
+/// redraw the first passes' streams) must give another image.
+#[test]
+fn a_stopped_erpt_render_resumed_from_its_checkpoint_ends_bit_identical() {
+    let scene = repo_scene("cornell-box.xml", 16);
+    let size = (scene.film.width, scene.film.height);
+    let sets: Vec<(String, String)> = [("luminance_samples", "2000"), ("chain_length", "10")]
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
+    let erpt = registry::configure(None, Some("erpt"), &sets).expect("erpt");
+    let path = std::env::temp_dir().join(format!(
+        "mcmc-render-checkpoint-erpt-{}.ckpt",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_file(&path);
+    let run = |resume: Option<Progress>| RunSettings {
+        spp: Some(4),
+        seed: 9,
+        checkpoint: Some(Checkpoint {
+            path: path.clone(),
+            fingerprint: 42,
+            resume: resume.map(Arc::new),
+            chains: None,
+        }),
+        ..RunSettings::default()
+    };
+    let stop = AtomicBool::new(false);
+    let observer = StopAfter {
+        stop: &stop,
+        after: 2,
+        seen: AtomicU32::new(0),
+    };
+    let first = erpt.render(&scene, &run(None), &stop, &observer).unwrap();
+    assert!(first.interrupted);
+    let saved = load(&path, 42, size).unwrap().expect("a checkpoint");
+    assert_eq!((saved.pass, saved.spp_done), (2, 2));
+    // The control's copy (the resumed run rewrites the file as it goes).
+    let mut restarted = load(&path, 42, size).unwrap().expect("a checkpoint");
+    (restarted.pass, restarted.spp_done) = (0, 0);
+    let go = AtomicBool::new(false);
+    let resumed = erpt
+        .render(&scene, &run(Some(saved)), &go, &NoObserver)
+        .unwrap();
+    let whole_run = RunSettings {
+        checkpoint: None,
+        ..run(None)
+    };
+    let whole = erpt.render(&scene, &whole_run, &go, &NoObserver).unwrap();
+    let control = erpt
+        .render(&scene, &run(Some(restarted)), &go, &NoObserver)
+        .unwrap();
+    std::fs::remove_file(&path).unwrap();
+    assert!(!resumed.interrupted);
+    assert!(
+        bits(&resumed.image) == bits(&whole.image),
+        "resumed image differs"
+    );
+    for key in [
+        "passes",
+        "mutations",
+        "seeds",
+        "chains",
+        "acceptance",
+        "acceptance_per_component",
+        "luminance_samples",
+        "mean_pixel_luminance",
+        "deposit_energy",
+    ] {
+        assert_eq!(resumed.statistics[key], whole.statistics[key], "{key}");
+    }
+    assert_eq!(resumed.statistics["checkpoint"]["resumed_from_passes"], 2);
+    assert!(bits(&control.image) != bits(&whole.image), "control agreed");
 }
 
 /// A Markov render as the command line runs it, with `sets` (the driver's

@@ -463,15 +463,26 @@ fn crc32(bytes: &[u8]) -> u32 {
     !c
 }
 
-/// A checkpoint's bytes: magic, the eight words, then `floats`.
+/// 64-bit FNV-1a (the checkpoints' checksum), byte by byte.
+fn fnv1a(bytes: &[u8]) -> u64 {
+    (bytes.iter()).fold(0xcbf2_9ce4_8422_2325, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
+/// A per-pixel checkpoint's bytes (format 2): magic, the eight words, a
+/// ninth (no words of the integrator's), `floats`, then the checksum of
+/// all before it (so that the reader gets past it to the words).
 fn checkpoint_bytes(words: [u64; 8], floats: &[f32]) -> Vec<u8> {
-    let mut b = b"mcmcPX01".to_vec();
-    for w in words {
+    let mut b = b"mcmcPX02".to_vec();
+    for w in words.into_iter().chain([0]) {
         b.extend_from_slice(&w.to_le_bytes());
     }
     for f in floats {
         b.extend_from_slice(&f.to_le_bytes());
     }
+    let checksum = fnv1a(&b);
+    b.extend_from_slice(&checksum.to_le_bytes());
     b
 }
 
@@ -492,6 +503,14 @@ fn checkpoints_whose_counts_do_not_fit_the_image_are_refused() {
     let floats = vec![0.5f32; 12 * 7];
     let good = progress_from_bytes(&checkpoint_bytes(ok, &floats), path, 7, (4, 3)).unwrap();
     assert_eq!((good.pass, good.spp_done, good.samples.len()), (2, 3, 12));
+    // The fuzz target's per-pixel seeds are of the current format and load.
+    for name in ["after-two-passes", "fresh", "nonfinite-counted"] {
+        let bytes = std::fs::read(seed("checkpoint", &format!("{name}.ckpt"))).unwrap();
+        let fingerprint = u64::from_le_bytes(bytes[8..16].try_into().unwrap());
+        if let Err(e) = progress_from_bytes(&bytes, path, fingerprint, (4, 3)) {
+            panic!("the seed {name}: {e}");
+        }
+    }
     let mut nan = floats.clone();
     nan[50] = f32::NAN;
     for (words, floats, needle) in [
@@ -543,20 +562,34 @@ fn checkpoints_whose_counts_do_not_fit_the_image_are_refused() {
         assert_clean_err(&err, "checkpoint x.ckpt: ");
         assert_clean_err(&err, needle);
     }
-    // A file longer than any checkpoint of the image is refused unread.
+    // More words of the integrator's than any keeps.
+    let mut many = b"mcmcPX02".to_vec();
+    for w in ok.into_iter().chain([257]) {
+        many.extend_from_slice(&w.to_le_bytes());
+    }
+    many.extend(std::iter::repeat_n(0u8, 8 * 257));
+    for f in &floats {
+        many.extend_from_slice(&f.to_le_bytes());
+    }
+    let checksum = fnv1a(&many);
+    many.extend_from_slice(&checksum.to_le_bytes());
+    let err = progress_from_bytes(&many, path, 7, (4, 3)).unwrap_err();
+    assert_clean_err(&err, "holds 257 words of the integrator's");
+    // A file longer than any checkpoint of the image (88 bytes of frame,
+    // 256 words of the integrator's, 28 bytes a pixel) is refused unread.
     let dir = std::env::temp_dir().join(format!("mcmc-fuzz-ckpt-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let file = dir.join("long.ckpt");
-    let mut long = checkpoint_bytes(ok, &floats);
-    long.push(0);
+    let good = checkpoint_bytes(ok, &floats);
+    let mut long = good.clone();
+    long.resize(88 + 8 * 256 + 28 * 12 + 1, 0);
     std::fs::write(&file, &long).unwrap();
     let err = load(&file, 7, (4, 3)).unwrap_err();
     assert_clean_err(
         &err,
-        "409 bytes, more than the 408 of a checkpoint of a 4×3 image",
+        "2473 bytes, more than the 2472 a checkpoint of a 4×3 image can have",
     );
-    long.pop();
-    std::fs::write(&file, &long).unwrap();
+    std::fs::write(&file, &good).unwrap();
     assert!(load(&file, 7, (4, 3)).unwrap().is_some());
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -8,10 +8,11 @@
 //! Each reader first compares the file's fingerprint and image size with
 //! the run's; the target takes the fingerprint from the input (the word
 //! after the magic) and the size from the scene, so that the fuzzer gets
-//! past them to the rest. A Markov-chain checkpoint ends with an FNV-1a
-//! checksum of what precedes it, which the target writes into the input
-//! before the reader sees it (damaged checksums are refused first and are
-//! tested in `tests/checkpoint.rs`).
+//! past them to the rest. Both formats (per-pixel `mcmcPX02`, Markov-chain
+//! `mcmcMC03`) end with an FNV-1a checksum of what precedes it, which the
+//! target writes into the input's last eight bytes before either reader
+//! sees it (damaged checksums are refused first and are tested in
+//! `tests/checkpoint.rs`).
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 use mcmc_render::checkpoint::{Checkpoint, progress_from_bytes};
@@ -42,7 +43,7 @@ fn scene() -> &'static Scene {
     })
 }
 
-/// 64-bit FNV-1a, the Markov-chain checkpoint's checksum.
+/// 64-bit FNV-1a, the checkpoints' checksum.
 fn fnv1a(bytes: &[u8]) -> u64 {
     (bytes.iter()).fold(0xcbf2_9ce4_8422_2325, |h, &b| {
         (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
@@ -56,6 +57,12 @@ fn out_dir() -> &'static Path {
 }
 
 fuzz_target!(|data: &[u8]| {
+    let mut data = data.to_vec();
+    if let Some(body) = data.len().checked_sub(8) {
+        let checksum = fnv1a(&data[..body]);
+        data[body..].copy_from_slice(&checksum.to_le_bytes());
+    }
+    let data = &data[..];
     let fingerprint = data
         .get(8..16)
         .map_or(0, |b| u64::from_le_bytes(b.try_into().expect("8 bytes")));
@@ -78,13 +85,7 @@ fuzz_target!(|data: &[u8]| {
         )
     } else {
         let filter = Arc::new(Filter::new(scene.film.filter, size.0, size.1));
-        let mut data = data.to_vec();
-        if let Some(body) = data.len().checked_sub(8) {
-            let checksum = fnv1a(&data[..body]);
-            data[body..].copy_from_slice(&checksum.to_le_bytes());
-        }
-        let Ok(progress) = chain_progress_from_bytes(&data, path, fingerprint, size, &filter)
-        else {
+        let Ok(progress) = chain_progress_from_bytes(data, path, fingerprint, size, &filter) else {
             return;
         };
         checkpoint.chains = Some(Arc::new(progress));

@@ -58,9 +58,19 @@
 //! of walks, before each pass and after it whether any rank was stopped,
 //! so all ranks end at the same pass and rank 0 writes the passes done:
 //! the image is the single process's for any number of ranks.
+//!
+//! With `--checkpoint FILE` (session 18) rank 0 saves after every pass, in
+//! the per-pixel driver's format ([`crate::checkpoint`]), the film's splats,
+//! the passes done and, as the integrator's words, the seeds and chains
+//! counted, the luminance estimate and the chain statistics; a resumed run
+//! takes the estimate from the file (its walks are not redrawn) and goes on
+//! from the next pass, whose streams `(seed, pass, band)` and additions are
+//! the uninterrupted run's, so it ends with its bits.
 
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
+use crate::checkpoint::{Checkpoint, Progress};
+use crate::cluster::Cluster;
 use crate::color::Rgb;
 use crate::deadline::Deadline;
 use crate::film::{Film, Filter};
@@ -75,7 +85,7 @@ use crate::scene::Scene;
 use crate::settings::check;
 use glam::Vec2;
 use mcmc_core::chain::{Algorithm, ChainState};
-use mcmc_core::kernel::Mixture;
+use mcmc_core::kernel::{Kernel, Mixture};
 use mcmc_core::mh::MetropolisHastings;
 use mcmc_core::rng::{ChainRng, splitmix64, stream_rng, uniform};
 use mcmc_core::sample::Sample;
@@ -245,33 +255,52 @@ impl IntegratorSettings for Erpt {
         // point (collective; without a cluster, `time_up` itself).
         let any_time_up = || crate::cluster::any_rank(time_up());
         let cluster = crate::cluster::current();
-        // L̄: mean pixel luminance from independent camera walks.
-        let lum = estimate_luminance(
-            self.luminance_samples,
-            splitmix64(run.seed ^ 0x4c55_4d49),
-            &any_time_up,
-            |mut rng| {
-                let (mut camera, mut light) = (Vec::new(), Vec::new());
-                let raster = in_pixel(
-                    (uniform(&mut rng) * w as f64) as u32 % w,
-                    (uniform(&mut rng) * h as f64) as u32 % h,
-                    &mut rng,
-                );
-                seeds(scene, raster, vertices, &mut rng, &mut camera, &mut light)
-                    .iter()
-                    .map(|s| s.1)
-                    .sum()
-            },
-        );
+        let filter = Arc::new(Filter::new(scene.film.filter, w, h));
+        let names = self
+            .kernel(None)
+            .map_err(RenderError::Invalid)?
+            .component_names();
+        let resumed = match &run.checkpoint {
+            Some(c) => resume_point(c, cluster, &filter, &names).map_err(RenderError::Invalid)?,
+            None => None,
+        };
+        // L̄: mean pixel luminance from independent camera walks (a resumed
+        // run's from its checkpoint, on every rank).
+        let lum = match &resumed {
+            Some(r) => r.lum,
+            None => estimate_luminance(
+                self.luminance_samples,
+                splitmix64(run.seed ^ 0x4c55_4d49),
+                &any_time_up,
+                |mut rng| {
+                    let (mut camera, mut light) = (Vec::new(), Vec::new());
+                    let raster = in_pixel(
+                        (uniform(&mut rng) * w as f64) as u32 % w,
+                        (uniform(&mut rng) * h as f64) as u32 % h,
+                        &mut rng,
+                    );
+                    seeds(scene, raster, vertices, &mut rng, &mut camera, &mut light)
+                        .iter()
+                        .map(|s| s.1)
+                        .sum()
+                },
+            ),
+        };
         let mean_lum = lum.mean;
         let e_d = mean_lum / (self.chain_length as f64 * self.num_chains);
-        let filter = Arc::new(Filter::new(scene.film.filter, w, h));
         let mut film = Film::new_splat_only(w, h, filter.clone());
-        let kernel_names = self.kernel(None).map_err(RenderError::Invalid)?;
         let clock = ProposalClock::new();
-        let mut stats =
-            ChainStatistics::new(mcmc_core::kernel::Kernel::component_names(&kernel_names));
+        let mut stats = ChainStatistics::new(names);
         let (mut passes, mut seeds_total, mut chains_total) = (0u64, 0u64, 0u64);
+        let resumed_from = resumed.as_ref().map(|r| r.passes);
+        if let Some(r) = resumed {
+            passes = r.passes;
+            // Rank 0's film and counters (the other ranks add nothing).
+            if let Some(saved) = r.sums {
+                (film, seeds_total, chains_total, stats) = saved;
+            }
+        }
+        let mut checkpoint_error: Option<String> = None;
         let planned = run.spp.map(u64::from);
         let mut interrupted = false;
         // Mutations of the pass the stop or the deadline cut (not in the
@@ -391,6 +420,21 @@ impl IntegratorSettings for Erpt {
                 chains_total += band_chains;
             }
             passes += 1;
+            if let Some(c) = &run.checkpoint
+                && crate::cluster::is_root()
+                && checkpoint_error.is_none()
+            {
+                let progress = Progress {
+                    pass: passes,
+                    spp_done: passes,
+                    nonfinite: stats.invalid_density,
+                    size: (w, h),
+                    samples: vec![[0.0; 4]; w as usize * h as usize],
+                    splats: film.accumulators().1.to_vec(),
+                    extra: saved_words(seeds_total, chains_total, &lum, &stats),
+                };
+                checkpoint_error = crate::checkpoint::save(&c.path, c.fingerprint, &progress).err();
+            }
             observer.progress(u64::from(w) * u64::from(h));
             observer.snapshot(&|| film.develop(passes as f64), stats.steps);
         }
@@ -400,7 +444,7 @@ impl IntegratorSettings for Erpt {
         } else {
             vec![Rgb::BLACK; (w * h) as usize]
         };
-        let statistics = json!({
+        let mut statistics = json!({
             "passes": passes,
             "seeds": seeds_total,
             "chains": chains_total,
@@ -427,6 +471,13 @@ impl IntegratorSettings for Erpt {
                 seconds,
             ),
         });
+        if let Some(c) = &run.checkpoint {
+            statistics["checkpoint"] = json!({
+                "path": c.path.display().to_string(),
+                "resumed_from_passes": resumed_from,
+                "error": checkpoint_error,
+            });
+        }
         // On a cluster, every rank's share (on rank 0; collective).
         let statistics = crate::cluster::with_ranks(
             statistics,
@@ -470,6 +521,7 @@ const LUMINANCE_BLOCK: usize = 1024;
 
 /// The estimate of the mean pixel luminance `L̄` that sets the deposited
 /// energy.
+#[derive(Clone, Copy, Debug)]
 struct LuminanceEstimate {
     /// Camera walks taken (fewer than asked when the time ran out).
     walks: usize,
@@ -541,6 +593,156 @@ fn band_of_counters(counts: &[u64]) -> Result<(u64, u64, ChainStatistics), Strin
         next()?,
         crate::markov::checkpoint::stats_from_words(&mut next)?,
     ))
+}
+
+/// `erpt`'s words in a checkpoint ([`Progress::extra`]): the seeds and
+/// chains counted, the luminance estimate (walks, mean, standard error),
+/// then the chain statistics, bit-exactly.
+fn saved_words(
+    seeds: u64,
+    chains: u64,
+    lum: &LuminanceEstimate,
+    stats: &ChainStatistics,
+) -> Vec<u64> {
+    let mut out = vec![
+        seeds,
+        chains,
+        lum.walks as u64,
+        lum.mean.to_bits(),
+        lum.standard_error.to_bits(),
+    ];
+    crate::markov::checkpoint::stats_words(stats, &mut out);
+    out
+}
+
+/// What an `erpt` checkpoint holds besides the passes and the film.
+struct Saved {
+    seeds: u64,
+    chains: u64,
+    lum: LuminanceEstimate,
+    /// Chain statistics, components unnamed.
+    stats: ChainStatistics,
+}
+
+impl Saved {
+    /// The state `progress` holds: refused (one line) unless an `erpt` run
+    /// could have written it: a splat-only film (camera-sample
+    /// accumulators all zero), as many samples per pixel as passes, the
+    /// words [`saved_words`] writes, counts within 2^53 and a finite,
+    /// non-negative luminance estimate.
+    fn of(progress: &Progress) -> Result<Saved, String> {
+        if progress.samples.iter().any(|s| *s != [0.0; 4]) {
+            return Err("holds camera samples: not a checkpoint of erpt".into());
+        }
+        if progress.spp_done != progress.pass {
+            return Err(format!(
+                "holds {} passes and {} samples per pixel: not a checkpoint of erpt (one sample a pass)",
+                progress.pass, progress.spp_done
+            ));
+        }
+        let mut words = progress.extra.iter().copied();
+        let mut next = || {
+            words
+                .next()
+                .ok_or_else(|| "erpt's words are cut: not a checkpoint of erpt".to_string())
+        };
+        let (seeds, chains, walks) = (next()?, next()?, next()?);
+        let (mean, standard_error) = (f64::from_bits(next()?), f64::from_bits(next()?));
+        let stats = crate::markov::checkpoint::stats_from_words(&mut next)?;
+        if next().is_ok() {
+            return Err("erpt's words run on: not a checkpoint of erpt".into());
+        }
+        let max = crate::checkpoint::MAX_COUNT;
+        if seeds > max || chains > max || walks > max || !(mean.is_finite() && mean >= 0.0) {
+            return Err(format!(
+                "impossible counts: {seeds} seeds, {chains} chains, {walks} walks of mean luminance {mean} (at most 2^53, a finite mean ≥ 0)"
+            ));
+        }
+        Ok(Saved {
+            seeds,
+            chains,
+            lum: LuminanceEstimate {
+                walks: walks as usize,
+                mean,
+                standard_error,
+            },
+            stats,
+        })
+    }
+}
+
+/// Checks that a checkpoint's `progress` is one an `erpt` run wrote (one
+/// line if not). The command line checks it on rank 0 before the ranks'
+/// start-up handshake, so that a bad file stops every rank with one error.
+pub fn check_checkpoint(progress: &Progress) -> Result<(), String> {
+    Saved::of(progress).map(|_| ())
+}
+
+/// What a resumed run continues from.
+struct Resumed {
+    passes: u64,
+    lum: LuminanceEstimate,
+    /// The film, seeds, chains and chain statistics: rank 0's (the only
+    /// rank that adds into them), `None` on the others.
+    sums: Option<(Film, u64, u64, ChainStatistics)>,
+}
+
+/// Where a checkpointed run starts: rank 0's checkpoint, read (its film
+/// rebuilt with `filter`, its statistics' components named `names`), and
+/// on a cluster every rank told the passes done and the luminance
+/// estimate (a broadcast). `None`: a fresh start. Collective on a cluster.
+fn resume_point(
+    checkpoint: &Checkpoint,
+    cluster: Option<&dyn Cluster>,
+    filter: &Arc<Filter>,
+    names: &[String],
+) -> Result<Option<Resumed>, String> {
+    let local = match &checkpoint.resume {
+        None => None,
+        Some(p) => {
+            let mut saved = Saved::of(p)?;
+            if saved.stats.components.len() != names.len() {
+                return Err("the checkpoint's chains ran another mutation mixture".into());
+            }
+            for (k, name) in saved.stats.components.iter_mut().zip(names) {
+                k.name.clone_from(name);
+            }
+            let (w, h) = p.size;
+            let film = Film::from_accumulators(
+                [w, h, 0, 0, w, h],
+                filter.clone(),
+                Vec::new(),
+                p.splats.clone(),
+            )?;
+            Some((p.pass, saved, film))
+        }
+    };
+    let words = local.as_ref().map_or(Vec::new(), |(pass, saved, _)| {
+        let lum = &saved.lum;
+        vec![
+            *pass,
+            lum.walks as u64,
+            lum.mean.to_bits(),
+            lum.standard_error.to_bits(),
+        ]
+    });
+    let words = match cluster {
+        Some(c) => c.broadcast_u64s(words),
+        None => words,
+    };
+    let (passes, walks, mean, standard_error) = match words[..] {
+        [p, w, m, s] => (p, w, m, s),
+        _ => return Ok(None),
+    };
+    Ok(Some(Resumed {
+        passes,
+        lum: LuminanceEstimate {
+            walks: walks as usize,
+            mean: f64::from_bits(mean),
+            standard_error: f64::from_bits(standard_error),
+        },
+        sums: local.map(|(_, s, film)| (film, s.seeds, s.chains, s.stats)),
+    }))
 }
 
 /// Empty statistics with the components of `like`.

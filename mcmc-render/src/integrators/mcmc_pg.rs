@@ -415,7 +415,7 @@ impl McmcPg {
             // On a cluster this rank's chains recorded only its share:
             // every rank merges every rank's (exact sums: any order).
             let parts = match crate::cluster::current() {
-                Some(c) if !last => all_exact_records(c, parts),
+                Some(_) if !last => all_exact_records(parts),
                 _ => parts,
             };
             phases.push(PhaseStats {
@@ -528,18 +528,11 @@ impl IntegratorSettings for McmcPg {
     }
 }
 
-/// Every rank's record sums, on every rank (bit-exact).
-fn all_exact_records(
-    cluster: &dyn crate::cluster::Cluster,
-    parts: Vec<ExactRecords>,
-) -> Vec<ExactRecords> {
+/// Every rank's record sums, on every rank (bit-exact). Collective.
+fn all_exact_records(parts: Vec<ExactRecords>) -> Vec<ExactRecords> {
     let mut words = Vec::new();
     parts.iter().for_each(|p| p.to_words(&mut words));
-    let all: Vec<u64> = cluster
-        .all_gather_f64s(words.into_iter().map(f64::from_bits).collect())
-        .into_iter()
-        .map(f64::to_bits)
-        .collect();
+    let all = crate::cluster::all_gather_words(words);
     let mut input = &all[..];
     let mut out = Vec::new();
     while !input.is_empty() {

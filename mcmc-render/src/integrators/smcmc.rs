@@ -38,10 +38,28 @@
 //!   seed and its index); tiles step in parallel, exchange pairs are
 //!   disjoint, and all sums are reduced in a fixed order, so a seed gives
 //!   the same image on any thread count.
+//! - **Distributed** ([`crate::cluster`], `mpirun`): rank `r` of `K` holds
+//!   the tiles of rows `⌊rH/K⌋..⌊(r+1)H/K⌋` (a contiguous block, so only
+//!   the blocks' edges pair across ranks), starts and steps them, and makes
+//!   the exchanges among them. A vertical pair across two blocks is
+//!   decided by the rank of its upper tile, with that tile's stream, once
+//!   the ranks have all-gathered the two boundary rows' chain states; the
+//!   lower tile's rank evaluates the upper state in its tile and applies
+//!   the decision (`r` and the outcome, a second all-gather), so both tiles
+//!   end as one process leaves them (`Sampler::cross_exchange`). The global
+//!   start-up (`init=global`) runs on every rank. At the end rank 0 gathers
+//!   every tile's sums, steps and chain statistics, aligns and develops the
+//!   image: the single process's for any number of ranks. The ranks agree
+//!   (an all-gather of a flag) before every iteration and every vertical
+//!   exchange round whether any is stopped. No snapshots on a cluster (a
+//!   develop needs every tile); the exchange statistics are summed per rank,
+//!   so `mean_alpha` may differ from one process's in the last bits.
 
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
+use crate::cluster::Parcel;
 use crate::deadline::Deadline;
+use crate::film::Filter;
 use crate::integrators::bdpt::{Bdpt, MisHeuristic};
 use crate::integrators::guided::GuidedSettings;
 use crate::integrators::mcmc_pg::ProgressOnly;
@@ -58,11 +76,11 @@ use crate::smcmc::mmlt_shift::MmltShift;
 use crate::smcmc::random_replay::RandomReplay;
 use crate::smcmc::rbdpt_shift::RbdptShift;
 use crate::smcmc::{
-    FilterSplat, TileShape, TileShift, TileSums, TileTarget, TileValues, Tiling, accumulate,
-    develop,
+    FilterSplat, MAX_TILE_PIXELS, TileShape, TileShift, TileSums, TileTarget, TileValues, Tiling,
+    accumulate, develop,
 };
 use mcmc_core::chain::Chain;
-use mcmc_core::kernel::Mixture;
+use mcmc_core::kernel::{Kernel, Mixture};
 use mcmc_core::mh::{MetropolisHastings, accept_probability};
 use mcmc_core::replica::swap_log_acceptance;
 use mcmc_core::rng::{ChainRng, splitmix64, stream_rng, uniform};
@@ -71,7 +89,9 @@ use mcmc_core::space::TorusPoint;
 use mcmc_core::stats::ChainStatistics;
 use rayon::prelude::*;
 use serde_json::{Value, json};
-use std::ops::AddAssign;
+use std::collections::HashMap;
+use std::ops::{AddAssign, Range};
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
@@ -452,14 +472,7 @@ impl<S: TileShift> Sampler<'_, S> {
                     (s, &mut a.sums, ca.current(), &xa),
                     (t, &mut b.sums, cb.current(), &xb),
                 ] {
-                    if r > 0.0 {
-                        self.splat(tile, sums, &swapped.payload, r / swapped.payload.total);
-                    }
-                    if r < 1.0 {
-                        let current = &current.payload;
-                        self.splat(tile, sums, current, (1.0 - r) / current.total);
-                    }
-                    sums.samples += 1;
+                    self.swap_splat(tile, sums, current, swapped, r);
                 }
                 if accepted {
                     ca.parts_mut().current = xa;
@@ -469,17 +482,39 @@ impl<S: TileShift> Sampler<'_, S> {
                 counts.accepted = u64::from(accepted);
                 counts.alpha_sum = r;
             }
-            (true, false) => counts.copies = self.copy_into(a, t, b),
-            (false, true) => counts.copies = self.copy_into(b, s, a),
+            (true, false) => counts.copies = self.copy_into(running(a), t, b),
+            (false, true) => counts.copies = self.copy_into(running(b), s, a),
             (false, false) => {}
         }
         counts
     }
 
-    /// Starts tile `t` at `from`'s state if it carries light there.
-    fn copy_into(&self, from: &Tile, t: usize, to: &mut Tile) -> u64 {
-        let state = from.chain.as_ref().expect("running").state().clone();
-        let x = Sample::evaluate(&self.target(t), state);
+    /// The splats of one side of an exchange with acceptance probability
+    /// `r` into tile `tile`'s `sums`: the `swapped` state (the partner's,
+    /// evaluated in this tile) with weight `r`, its `current` one with
+    /// `1 − r`.
+    fn swap_splat(
+        &self,
+        tile: usize,
+        sums: &mut TileSums,
+        current: &Sample<TorusPoint, TileValues>,
+        swapped: &Sample<TorusPoint, TileValues>,
+        r: f64,
+    ) {
+        if r > 0.0 {
+            self.splat(tile, sums, &swapped.payload, r / swapped.payload.total);
+        }
+        if r < 1.0 {
+            let current = &current.payload;
+            self.splat(tile, sums, current, (1.0 - r) / current.total);
+        }
+        sums.samples += 1;
+    }
+
+    /// Starts tile `t` at `state` (a running neighbour's) if it carries
+    /// light there.
+    fn copy_into(&self, state: &TorusPoint, t: usize, to: &mut Tile) -> u64 {
+        let x = Sample::evaluate(&self.target(t), state.clone());
         if x.log_density.is_finite() {
             to.chain = Some(self.start_chain(to, x));
             to.sums.active = true;
@@ -489,12 +524,15 @@ impl<S: TileShift> Sampler<'_, S> {
         }
     }
 
-    /// Exchange round `round`: horizontal pairs on even rounds, vertical on
-    /// odd ones, from even columns/rows on rounds `≡ 0, 1 (mod 4)`.
-    /// Pairs left when `halt()` turns true are skipped.
+    /// Exchange round `round` among `tiles`, the tiles of whole rows from
+    /// row `row0` on: horizontal pairs on even rounds, vertical on odd ones,
+    /// from even columns/rows on rounds `≡ 0, 1 (mod 4)`. Pairs left when
+    /// `halt()` turns true are skipped. A vertical pair whose lower row is
+    /// not among these rows is another rank's ([`Sampler::cross_exchange`]).
     fn exchange_round(
         &self,
         tiles: &mut [Tile],
+        row0: usize,
         round: u64,
         halt: &(dyn Fn() -> bool + Sync),
     ) -> ExchangeCounts {
@@ -509,7 +547,8 @@ impl<S: TileShift> Sampler<'_, S> {
             tiles
                 .par_chunks_mut(w)
                 .enumerate()
-                .map(|(y, row)| {
+                .map(|(i, row)| {
+                    let y = row0 + i;
                     let mut c = ExchangeCounts::default();
                     let mut x = parity;
                     while x + 1 < w && !halt() {
@@ -528,7 +567,9 @@ impl<S: TileShift> Sampler<'_, S> {
                 .into_iter()
                 .fold(ExchangeCounts::default(), sum)
         } else {
-            let first = (parity * w).min(tiles.len());
+            // The first of these rows `≡ parity (mod 2)`.
+            let skip = (parity + row0) % 2;
+            let first = (skip * w).min(tiles.len());
             tiles[first..]
                 .par_chunks_mut(2 * w)
                 .enumerate()
@@ -537,7 +578,7 @@ impl<S: TileShift> Sampler<'_, S> {
                     if rows.len() < 2 * w {
                         return c;
                     }
-                    let y = parity + 2 * i;
+                    let y = row0 + skip + 2 * i;
                     let (top, bottom) = rows.split_at_mut(w);
                     for x in (0..w).take_while(|_| !halt()) {
                         c += self.exchange_pair(
@@ -554,6 +595,273 @@ impl<S: TileShift> Sampler<'_, S> {
                 .fold(ExchangeCounts::default(), sum)
         }
     }
+
+    /// The vertical pairs of exchange round `round` whose tiles two ranks
+    /// hold: this rank's `tiles` are those of `rows`; its last row pairs
+    /// with the next rank's first, its first with the previous rank's
+    /// last, when the round pairs them. Each rank sends its rows' chain
+    /// states (an all-gather of words); the rank of the upper tile decides
+    /// the exchange with its tile's stream, as [`Sampler::exchange_pair`]
+    /// does, and sends `r` and the outcome (a second all-gather); the rank
+    /// of the lower tile evaluates the upper state in its tile and splats
+    /// as the pair does. So both tiles end as one process leaves them. A
+    /// copy into a tile not started is made by that tile's rank. Skipped on
+    /// every rank when any rank is stopped. Collective on a cluster: every
+    /// rank calls it every round; in one process there is no such pair.
+    fn cross_exchange(
+        &self,
+        tiles: &mut [Tile],
+        rows: &Range<usize>,
+        round: u64,
+        halt: &dyn Fn() -> bool,
+    ) -> ExchangeCounts {
+        let mut counts = ExchangeCounts::default();
+        let (w, h) = (self.tiling.width as usize, self.tiling.height as usize);
+        let parity = ((round / 2) % 2) as usize;
+        if round.is_multiple_of(2) {
+            return counts;
+        }
+        // Rows `y ≡ parity` pair with `y + 1`.
+        let upper = (!rows.is_empty() && rows.end < h && (rows.end - 1) % 2 == parity)
+            .then(|| rows.end - 1);
+        let lower = (!rows.is_empty() && rows.start > 0 && (rows.start - 1) % 2 == parity)
+            .then_some(rows.start);
+        if crate::cluster::any_rank(halt()) {
+            return counts;
+        }
+        let at = |y: usize, x: usize| (y - rows.start) * w + x;
+        // Every boundary tile: its index, whether it runs, then its current
+        // `ln π̃` and state.
+        let mut words = Vec::new();
+        for y in upper.into_iter().chain(lower) {
+            for x in 0..w {
+                words.push((y * w + x) as u64);
+                match &tiles[at(y, x)].chain {
+                    Some(c) => {
+                        words.extend([1, c.current().log_density.to_bits()]);
+                        c.state().to_words(&mut words);
+                    }
+                    None => words.push(0),
+                }
+            }
+        }
+        let remote = boundary_states(&crate::cluster::all_gather_words(words));
+        let partner = |t: usize| {
+            remote
+                .get(&t)
+                .expect("the neighbouring rank sends its boundary row")
+        };
+        // Upper tiles: the exchange decided here.
+        let mut decisions = Vec::new();
+        if let Some(y) = upper {
+            for x in 0..w {
+                let (s, t) = (y * w + x, (y + 1) * w + x);
+                let a = &mut tiles[at(y, x)];
+                match (a.chain.is_some(), partner(t)) {
+                    (true, Some((log_b, state_b))) => {
+                        let Tile { chain, sums, .. } = a;
+                        let ca = chain.as_mut().expect("running");
+                        // π̃_s(u_t) and π̃_t(u_s).
+                        let xa = Sample::evaluate(&self.target(s), state_b.clone());
+                        let xb = Sample::evaluate(&self.target(t), ca.state().clone());
+                        let log_r = swap_log_acceptance(
+                            ca.current().log_density,
+                            *log_b,
+                            xa.log_density,
+                            xb.log_density,
+                        );
+                        let (r, accepted) = accept_probability(log_r, ca.rng_mut());
+                        self.swap_splat(s, sums, ca.current(), &xa, r);
+                        if accepted {
+                            ca.parts_mut().current = xa;
+                        }
+                        counts.attempts += 1;
+                        counts.accepted += u64::from(accepted);
+                        counts.alpha_sum += r;
+                        decisions.extend([s as u64, r.to_bits(), u64::from(accepted)]);
+                    }
+                    (false, Some((_, state_b))) => counts.copies += self.copy_into(state_b, s, a),
+                    _ => {}
+                }
+            }
+        }
+        let decisions = crate::cluster::all_gather_words(decisions);
+        let decided: HashMap<usize, (f64, bool)> = (decisions.chunks_exact(3))
+            .map(|d| (d[0] as usize, (f64::from_bits(d[1]), d[2] == 1)))
+            .collect();
+        // Lower tiles: the upper rank's decision applied here.
+        if let Some(y) = lower {
+            for x in 0..w {
+                let (s, t) = ((y - 1) * w + x, y * w + x);
+                let b = &mut tiles[at(y, x)];
+                match (partner(s), b.chain.is_some()) {
+                    (Some((_, state_a)), true) => {
+                        let &(r, accepted) =
+                            decided.get(&s).expect("the upper rank decides every pair");
+                        let Tile { chain, sums, .. } = b;
+                        let cb = chain.as_mut().expect("running");
+                        let xb = Sample::evaluate(&self.target(t), state_a.clone());
+                        self.swap_splat(t, sums, cb.current(), &xb, r);
+                        if accepted {
+                            cb.parts_mut().current = xb;
+                        }
+                    }
+                    (Some((_, state_a)), false) => counts.copies += self.copy_into(state_a, t, b),
+                    _ => {}
+                }
+            }
+        }
+        counts
+    }
+}
+
+/// The state of a running tile's chain.
+fn running(tile: &Tile) -> &TorusPoint {
+    tile.chain.as_ref().expect("running").state()
+}
+
+/// The boundary tiles [`Sampler::cross_exchange`]'s words describe: tile
+/// index → its current `ln π̃` and state, `None` when it has not started.
+fn boundary_states(words: &[u64]) -> HashMap<usize, Option<(f64, TorusPoint)>> {
+    let mut input = words;
+    let mut out = HashMap::new();
+    // Every rank runs the same binary (checked at start-up): words that do
+    // not decode are a bug, not an input error.
+    while let Some((&s, rest)) = input.split_first() {
+        let (&started, rest) = rest.split_first().expect("a boundary tile's flag");
+        input = rest;
+        let state = (started == 1).then(|| {
+            let (&log_density, rest) = input.split_first().expect("a boundary tile's ln π");
+            input = rest;
+            let point = TorusPoint::from_words(&mut input).expect("a boundary tile's state");
+            (f64::from_bits(log_density), point)
+        });
+        out.insert(s as usize, state);
+    }
+    out
+}
+
+/// The rows of a `height`-row image this process renders: a contiguous
+/// block per rank (so only the blocks' edges pair across ranks), all of
+/// them in one process.
+fn own_rows(height: usize) -> Range<usize> {
+    let (rank, size) = crate::cluster::current().map_or((0, 1), |c| (c.rank(), c.size()));
+    height * rank / size..height * (rank + 1) / size
+}
+
+/// What the tiles hand to the image and the statistics at the end of a
+/// run, in tile order.
+struct TileResults {
+    sums: Vec<TileSums>,
+    steps: Vec<u64>,
+    /// The chains' statistics (`None`: the tile never started).
+    stats: Vec<Option<ChainStatistics>>,
+}
+
+impl TileResults {
+    /// The results of `tiles` (tiles `first..` of the image): in one
+    /// process, theirs; on a cluster every rank's, on rank 0 (`None` on the
+    /// other ranks), their chains' component names taken from `names`.
+    /// Collective on a cluster.
+    fn gather(
+        tiles: Vec<Tile>,
+        first: usize,
+        names: &[String],
+        filter: &Arc<Filter>,
+    ) -> Option<TileResults> {
+        let Some(cluster) = crate::cluster::current() else {
+            let mut out = TileResults {
+                sums: Vec::with_capacity(tiles.len()),
+                steps: Vec::with_capacity(tiles.len()),
+                stats: Vec::with_capacity(tiles.len()),
+            };
+            for t in tiles {
+                out.sums.push(t.sums);
+                out.steps.push(t.steps);
+                out.stats.push(t.chain.map(|c| c.stats().clone()));
+            }
+            return Some(out);
+        };
+        let parcels = (tiles.into_iter().enumerate())
+            .map(|(i, t)| {
+                let sums = &t.sums;
+                let mut numbers = sums.g.as_flattened().to_vec();
+                numbers.extend(sums.large.as_flattened());
+                numbers.extend(sums.filtered.as_flattened());
+                let stats = t.chain.as_ref().map(|c| c.stats());
+                let mut counts = vec![
+                    sums.samples,
+                    sums.large_samples,
+                    u64::from(sums.active),
+                    t.steps,
+                    u64::from(stats.is_some()),
+                ];
+                if let Some(stats) = stats {
+                    crate::markov::checkpoint::stats_words(stats, &mut counts);
+                }
+                Parcel {
+                    unit: first + i,
+                    films: Vec::new(),
+                    numbers,
+                    counts,
+                }
+            })
+            .collect();
+        let all = cluster.gather(parcels, filter)?;
+        let mut out = TileResults {
+            sums: Vec::with_capacity(all.len()),
+            steps: Vec::with_capacity(all.len()),
+            stats: Vec::with_capacity(all.len()),
+        };
+        for p in all {
+            // g, large, then the spread sums, three numbers a slot or cell.
+            let n = &p.numbers;
+            let triple = |i: usize| [n[3 * i], n[3 * i + 1], n[3 * i + 2]];
+            let mut sums = TileSums {
+                g: std::array::from_fn(triple),
+                large: std::array::from_fn(|k| triple(MAX_TILE_PIXELS + k)),
+                filtered: (2 * MAX_TILE_PIXELS..n.len() / 3).map(triple).collect(),
+                ..TileSums::default()
+            };
+            let mut words = p.counts.iter().copied();
+            let mut next = || {
+                words
+                    .next()
+                    .ok_or_else(|| "a tile's counts are cut".to_string())
+            };
+            // Every rank runs the same binary: a parcel that does not
+            // decode is a bug, not an input error.
+            let (steps, stats) = read_tile_counts(&mut next, &mut sums, names)
+                .unwrap_or_else(|e| panic!("a rank's tile results: {e}"));
+            out.sums.push(sums);
+            out.steps.push(steps);
+            out.stats.push(stats);
+        }
+        Some(out)
+    }
+}
+
+/// A tile's counters as [`TileResults::gather`] sends them, read into
+/// `sums`: its transition and uniform-sample counts and whether it runs;
+/// returns its steps and its chain's statistics (components named by
+/// `names`).
+fn read_tile_counts(
+    next: &mut impl FnMut() -> Result<u64, String>,
+    sums: &mut TileSums,
+    names: &[String],
+) -> Result<(u64, Option<ChainStatistics>), String> {
+    sums.samples = next()?;
+    sums.large_samples = next()?;
+    sums.active = next()? == 1;
+    let steps = next()?;
+    if next()? == 0 {
+        return Ok((steps, None));
+    }
+    let mut stats = crate::markov::checkpoint::stats_from_words(next)?;
+    for (c, name) in stats.components.iter_mut().zip(names) {
+        c.name.clone_from(name);
+    }
+    Ok((steps, Some(stats)))
 }
 
 impl Smcmc {
@@ -687,20 +995,24 @@ impl Smcmc {
             }
             .run(scene, shift, mutation, run.seed, &halt)
         });
-        let mut tiles: Vec<Tile> = (0..n)
+        // On a cluster this rank holds the tiles of a block of rows (module
+        // docs), tiles `first..` of the image; in one process all of them.
+        let cluster = crate::cluster::current();
+        let rows = own_rows(scene.film.height as usize);
+        let first = rows.start * scene.film.width as usize;
+        let mut tiles: Vec<Tile> = (first..rows.end * scene.film.width as usize)
             .into_par_iter()
             .map(|s| sampler.new_tile(run.seed, s, self.init_candidates, visits.as_ref(), &halt))
             .collect();
-        let started_at_init = tiles.iter().filter(|t| t.chain.is_some()).count();
+        let own_started_at_init = tiles.iter().filter(|t| t.chain.is_some()).count();
         let start_seconds = start.elapsed().as_secs_f64();
-        let develop_now = |tiles: &[Tile]| {
-            let sums: Vec<TileSums> = tiles.iter().map(|t| t.sums.clone()).collect();
+        let develop_now = |sums: &[TileSums]| {
             // Past the run's end (stop flag or deadline) the sweeps stop
             // after the default's count: 10^15 sweeps kept a run for ever
             // past `--time`, and no run has fewer sweeps than before.
             develop(
                 &sampler.tiling,
-                &sums,
+                sums,
                 self.alpha,
                 (self.solver_iterations, &|i| {
                     i < DEFAULT_SOLVER_ITERATIONS || !halt()
@@ -717,11 +1029,12 @@ impl Smcmc {
         // Wall-clock seconds in tile steps, exchange rounds and snapshots
         // (the observer's develop and whatever it does with the image).
         let mut profile = [0.0f64; 3];
-        while planned.is_none_or(|m| iterations < m) && !halt() {
+        // (On a cluster the ranks agree on stopping: a collective.)
+        while planned.is_none_or(|m| iterations < m) && !crate::cluster::any_rank(halt()) {
             let t0 = Instant::now();
-            tiles.par_iter_mut().enumerate().for_each(|(s, tile)| {
+            tiles.par_iter_mut().enumerate().for_each(|(i, tile)| {
                 if !halt() {
-                    sampler.step(s, tile);
+                    sampler.step(first + i, tile);
                     observer.progress(1);
                 }
             });
@@ -729,37 +1042,90 @@ impl Smcmc {
             let t1 = Instant::now();
             profile[0] += (t1 - t0).as_secs_f64();
             if self.exchange && iterations.is_multiple_of(u64::from(self.exchange_every)) {
-                exchange += sampler.exchange_round(&mut tiles, rounds, &halt);
+                exchange += sampler.exchange_round(&mut tiles, rows.start, rounds, &halt);
+                exchange += sampler.cross_exchange(&mut tiles, &rows, rounds, &halt);
                 rounds += 1;
             }
             let t2 = Instant::now();
             profile[1] += (t2 - t1).as_secs_f64();
-            if last_preview.elapsed() >= run.snapshot_every && !halt() {
+            // A snapshot needs every tile: not made on a cluster.
+            if cluster.is_none() && last_preview.elapsed() >= run.snapshot_every && !halt() {
                 last_preview = Instant::now();
                 let done = tiles.iter().map(|t| t.steps).sum();
-                observer.snapshot(&|| develop_now(&tiles).image, done);
+                let sums: Vec<TileSums> = tiles.iter().map(|t| t.sums.clone()).collect();
+                observer.snapshot(&|| develop_now(&sums[..]).image, done);
                 profile[2] += t2.elapsed().as_secs_f64();
             }
         }
         let develop_start = Instant::now();
+        // This rank's share (the sidecar's `ranks` on a cluster), then the
+        // counts every rank adds: the tiles started at start-up and the
+        // exchanges (a pair across ranks counted by one of them).
+        let own = json!({
+            "rows": rows.len(),
+            "mutations": tiles.iter().map(|t| t.steps).sum::<u64>(),
+            "seconds_in_steps": profile[0],
+            "seconds_in_exchange": profile[1],
+        });
+        let pooled = crate::cluster::all_gather_words(vec![
+            own_started_at_init as u64,
+            exchange.attempts,
+            exchange.accepted,
+            exchange.copies,
+            exchange.alpha_sum.to_bits(),
+        ]);
+        let mut started_at_init = 0u64;
+        exchange = ExchangeCounts::default();
+        for r in pooled.chunks_exact(5) {
+            started_at_init += r[0];
+            exchange += ExchangeCounts {
+                attempts: r[1],
+                accepted: r[2],
+                copies: r[3],
+                alpha_sum: f64::from_bits(r[4]),
+            };
+        }
+        // The chains' component names (not sent between ranks).
+        let names = (mutation.kernel::<TileValues>())
+            .expect("the mutation was checked by validate")
+            .component_names();
+        let filter = Arc::new(Filter::new(
+            scene.film.filter,
+            scene.film.width,
+            scene.film.height,
+        ));
+        let Some(results) = TileResults::gather(tiles, first, &names, &filter) else {
+            // Not rank 0: only rank 0 develops and writes the image.
+            let statistics = crate::cluster::with_ranks(json!({}), own);
+            return Ok(Rendered {
+                image: vec![crate::color::Rgb::BLACK; n],
+                seconds: start.elapsed().as_secs_f64(),
+                samples: 0,
+                interrupted: false,
+                statistics: statistics.as_object().cloned().unwrap_or_default(),
+                nonfinite_dump: None,
+                layers: Vec::new(),
+                summary: String::new(),
+            });
+        };
         // Every tile steps once per iteration (a tile not started draws),
         // so a tile short of the plan means the run was stopped.
-        let interrupted = planned.is_none_or(|m| tiles.iter().any(|t| t.steps < m));
-        let developed = develop_now(&tiles);
+        let interrupted = planned.is_none_or(|m| results.steps.iter().any(|&s| s < m));
+        let developed = develop_now(&results.sums[..]);
         let develop_seconds = develop_start.elapsed().as_secs_f64();
-        let mutations: u64 = tiles.iter().map(|t| t.steps).sum();
+        let mutations: u64 = results.steps.iter().sum();
         let seconds = start.elapsed().as_secs_f64();
 
         let mut stats: Option<ChainStatistics> = None;
-        for c in tiles.iter().filter_map(|t| t.chain.as_ref()) {
+        for c in results.stats.iter().flatten() {
             match stats.as_mut() {
-                Some(s) => s.merge(c.stats()),
-                None => stats = Some(c.stats().clone()),
+                Some(s) => s.merge(c),
+                None => stats = Some(c.clone()),
             }
         }
         let cs = stats.unwrap_or_else(|| ChainStatistics::new(Vec::new()));
-        let started = tiles.iter().filter(|t| t.chain.is_some()).count();
-        let large_samples: u64 = tiles.iter().map(|t| t.sums.large_samples).sum();
+        let started = results.stats.iter().filter(|s| s.is_some()).count();
+        let large_samples: u64 = results.sums.iter().map(|t| t.large_samples).sum();
         let mut density: Vec<f64> = developed.samples.iter().map(|c| f64::from(c.r)).collect();
         density.sort_by(f64::total_cmp);
         let median = density.get(density.len() / 2).copied().unwrap_or(0.0);
@@ -825,7 +1191,8 @@ impl Smcmc {
             "samples_per_pixel_max_over_median": if median > 0.0 { max / median } else { f64::NAN },
             "nonfinite_contributions": cs.invalid_density,
         });
-        let Value::Object(statistics) = statistics else {
+        // On a cluster, every rank's share (on rank 0; collective).
+        let Value::Object(statistics) = crate::cluster::with_ranks(statistics, own) else {
             unreachable!("json! of an object literal is an object")
         };
         Ok(Rendered {
