@@ -33,7 +33,7 @@ use mcmc_render::integrators::registry;
 use mcmc_render::integrators::{Integrator, Rendered, RunSettings};
 use mcmc_render::markov::checkpoint::{ChainProgress, load as load_chains};
 use mcmc_render::observer::{NoObserver, Observer};
-use mcmc_render::render::{RenderSettings, render, render_checkpointed};
+use mcmc_render::render::{RenderResult, RenderSettings, render, render_checkpointed};
 use mcmc_render::scene::Scene;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
@@ -64,34 +64,51 @@ fn bits(img: &[Rgb]) -> Vec<u32> {
         .collect()
 }
 
-/// The interrupted-and-resumed image, the uninterrupted one and the
-/// control's (resumed with the pass count reset).
-fn images(scene: &Scene, integ: &dyn Integrator, name: &str) -> [Vec<u32>; 3] {
-    let settings = RenderSettings {
+/// The settings of every per-pixel render here.
+fn settings() -> RenderSettings {
+    RenderSettings {
         spp: Some(SPP),
         time_budget: None,
         seed: 11,
-    };
+    }
+}
+
+/// `integ`'s render checkpointed to a fresh temporary file named for
+/// `name` and stopped after two passes (1 + 2 spp): the checkpoint (not
+/// resuming) and the stopped run.
+fn stopped_after_two_passes(
+    scene: &Scene,
+    integ: &dyn Integrator,
+    name: &str,
+) -> (Checkpoint, RenderResult) {
     let path = std::env::temp_dir().join(format!(
         "mcmc-render-checkpoint-{name}-{}.ckpt",
         std::process::id()
     ));
     let _ = std::fs::remove_file(&path);
-    let size = (scene.film.width, scene.film.height);
     let fresh = Checkpoint {
-        path: path.clone(),
+        path,
         fingerprint: 42,
         resume: None,
         chains: None,
     };
-    // Stopped after two passes (1 + 2 spp).
     let stop = AtomicBool::new(false);
     let observer = StopAfter {
         stop: &stop,
         after: 2,
         seen: AtomicU32::new(0),
     };
-    let first = render_checkpointed(scene, integ, &settings, Some(&fresh), &stop, &observer);
+    let first = render_checkpointed(scene, integ, &settings(), Some(&fresh), &stop, &observer);
+    (fresh, first)
+}
+
+/// The interrupted-and-resumed image, the uninterrupted one and the
+/// control's (resumed with the pass count reset).
+fn images(scene: &Scene, integ: &dyn Integrator, name: &str) -> [Vec<u32>; 3] {
+    let settings = settings();
+    let size = (scene.film.width, scene.film.height);
+    let (fresh, first) = stopped_after_two_passes(scene, integ, name);
+    let path = fresh.path.clone();
     assert!(first.interrupted, "{name}: the first run was not stopped");
     assert_eq!(first.spp_done, 3, "{name}");
     let progress = load(&path, 42, size).unwrap().expect("a checkpoint");
@@ -153,31 +170,8 @@ fn a_stopped_render_resumed_from_its_checkpoint_ends_bit_identical() {
 fn a_damaged_or_old_per_pixel_checkpoint_is_refused_with_one_line() {
     let scene = repo_scene("cornell-box.xml", 8);
     let size = (scene.film.width, scene.film.height);
-    let path = std::env::temp_dir().join(format!(
-        "mcmc-render-checkpoint-pt-damaged-{}.ckpt",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_file(&path);
-    let settings = RenderSettings {
-        spp: Some(SPP),
-        time_budget: None,
-        seed: 11,
-    };
-    let fresh = Checkpoint {
-        path: path.clone(),
-        fingerprint: 42,
-        resume: None,
-        chains: None,
-    };
-    // A checkpoint after two passes (1 + 2 spp).
-    let stop = AtomicBool::new(false);
-    let observer = StopAfter {
-        stop: &stop,
-        after: 2,
-        seen: AtomicU32::new(0),
-    };
-    let pt = pt_of(&scene);
-    let first = render_checkpointed(&scene, &pt, &settings, Some(&fresh), &stop, &observer);
+    let (fresh, first) = stopped_after_two_passes(&scene, &pt_of(&scene), "pt-damaged");
+    let path = fresh.path;
     assert!(first.interrupted);
     let good = std::fs::read(&path).unwrap();
     let refused = |bytes: &[u8], why: &str| {

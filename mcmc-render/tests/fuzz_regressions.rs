@@ -688,20 +688,31 @@ fn forged_markov_checkpoints_resume_or_are_refused() {
             .map_err(|e| e.to_string())
     };
     resume(&seed("checkpoint", "pssmlt-complete-mpp50.ckpt")).expect("the seed resumes");
-    let fuzz = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz");
-    let mut found = 0;
-    for entry in std::fs::read_dir(&fuzz).unwrap() {
-        let path = entry.unwrap().path();
-        let name = path.file_name().unwrap().to_string_lossy().to_string();
-        if !(name.starts_with("resumed-checkpoint-") && name.ends_with(".ckpt")) {
-            continue;
-        }
-        found += 1;
-        if let Err(err) = resume(&path) {
-            assert_clean_err(&err, "");
+    let found = fuzz_findings("resumed-checkpoint-");
+    assert_eq!(found.len(), 2, "the findings: {found:?}");
+    for (path, _) in &found {
+        if let Err(err) = resume(path) {
+            // Refused by the reader (the error names the file) or by the
+            // resume (it names the run's checkpoint).
+            assert_clean_err(&err, "checkpoint");
         }
     }
-    assert_eq!(found, 2, "the findings in {}", fuzz.display());
+}
+
+/// The committed findings `tests/data/fuzz/PREFIX*.ckpt`, with their names.
+fn fuzz_findings(prefix: &str) -> Vec<(PathBuf, String)> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz");
+    let mut found: Vec<(PathBuf, String)> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|entry| entry.unwrap().path())
+        .map(|path| {
+            let name = path.file_name().unwrap().to_string_lossy().to_string();
+            (path, name)
+        })
+        .filter(|(_, name)| name.starts_with(prefix) && name.ends_with(".ckpt"))
+        .collect();
+    found.sort();
+    found
 }
 
 /// The `checkpoint` target's findings in the Markov-chain driver's
@@ -720,17 +731,10 @@ fn forged_markov_checkpoints_are_refused_by_the_reader() {
     let (_, read) = checkpoint_target_box();
     let control = read(&seed("checkpoint", "pssmlt-complete-mpp50.ckpt")).expect("the seed loads");
     assert_eq!(control.mutations(), 600);
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz");
-    let mut found = 0;
-    for entry in std::fs::read_dir(&dir).unwrap() {
-        let path = entry.unwrap().path();
-        let name = path.file_name().unwrap().to_string_lossy().to_string();
-        if !(name.starts_with("checkpoint-") && name.ends_with(".ckpt")) {
-            continue;
-        }
-        found += 1;
-        let err = read(&path).map(|p| p.tasks.len()).expect_err(&name);
-        assert_clean_err(&err, &name);
+    let found = fuzz_findings("checkpoint-");
+    assert_eq!(found.len(), 11, "the findings: {found:?}");
+    for (path, name) in &found {
+        let err = read(path).map(|p| p.tasks.len()).expect_err(name);
+        assert_clean_err(&err, name);
     }
-    assert_eq!(found, 11, "the findings in {}", dir.display());
 }
