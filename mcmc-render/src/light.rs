@@ -476,6 +476,17 @@ impl Lights {
         1.0 / (PI * self.scene_radius * self.scene_radius)
     }
 
+    /// The origin of a light path entering the scene along unit `dir` from
+    /// an emitter at infinity: the point of `u_pos` on the disk of radius
+    /// `R` perpendicular to `dir`, `R` before the scene's centre (uniform,
+    /// density [`Lights::infinite_disk_pdf`]). Light walks and the
+    /// path-space walks that continue from a kept vertex at infinity share it.
+    pub fn infinite_origin(&self, dir: Vec3, u_pos: (f32, f32)) -> Vec3 {
+        let frame = Frame::from_normal(dir);
+        let d = warp::concentric_disk(u_pos) * self.scene_radius;
+        self.scene_center - dir * self.scene_radius + frame.s * d.x + frame.t * d.y
+    }
+
     /// A point beyond the scene's bounding sphere along `d` from `p`
     /// (stands in for a point of an emitter at infinity).
     fn far_point(&self, p: Vec3, d: Vec3) -> SurfacePoint {
@@ -492,7 +503,7 @@ impl Lights {
     }
 
     /// True when an emitter lies at infinity (`envmap`, `constant`,
-    /// `directional`): the path-space integrators refuse such scenes.
+    /// `directional`): `fused` refuses such scenes.
     pub fn has_emitter_at_infinity(&self) -> bool {
         self.lights
             .iter()
@@ -925,9 +936,7 @@ impl Lights {
         pdf_dir: f32,
         u_pos: (f32, f32),
     ) -> Option<EmissionSample> {
-        let frame = Frame::from_normal(dir);
-        let d = warp::concentric_disk(u_pos) * self.scene_radius;
-        let p = self.scene_center - dir * self.scene_radius + frame.s * d.x + frame.t * d.y;
+        let p = self.infinite_origin(dir, u_pos);
         let pdf_pos = pmf * self.infinite_disk_pdf();
         if !(pdf_pos > 0.0 && pdf_dir > 0.0) {
             return None;

@@ -667,3 +667,322 @@ fn bidirectional_density_through_a_dirac_vertex_matches_its_proposals() {
         );
     }
 }
+
+// ---------------------------------------------------------------------
+// At infinity.
+//
+// `common::sky_scene` (a constant sky and a directional sun over a
+// diffuse floor, a diffuse and a mirror sphere), 16×16, paths of 3
+// segments. (A constant sky, not an environment map with a sun: the
+// quadrature below must resolve the light walk's direction density, and
+// the map's own sampling density is tested with BDPT's, `bdpt_mis.rs`.) The start path is `x_0` (the environment,
+// at infinity) `x_1` `x_2` (diffuse, non-emitting) `x_3` (camera). From it
+// the fixed-length move is run `N` times; two of its records are
+// histogrammed from the same proposals:
+//
+// - `l = 0`, one edge pair deleted and added: `x_0` alone is regrown, by
+//   the light walk (the environment's direction sampling, `pdf_fwd(y_0) =
+//   P_env · p_env(ω)`) or by the camera walk from `x_1` escaping
+//   (`pdf_rev(y_0)`, the BSDF's solid-angle density at `x_1`): `T` is a
+//   density in the solid angle of `ω = y_0.wo`, the path state's measure
+//   at infinity, so the histogram bins `ω` in cells uniform in `(cos θ,
+//   φ)` about `x_1`'s normal and a cell's expectation is `N ∫_cell T dω`
+//   (no Jacobian). Counted: `y_0` on the environment (not the directional
+//   light, a Dirac direction of its own), seen from `x_1`.
+// - `l = 1`: `x_1` alone is regrown with `x_0` at infinity kept, by the
+//   light walk from `x_0`'s disk (`pdf_fwd(y_1) = |ng_1·ω| / (πR²)`) or
+//   the camera walk from `x_2`; binned by direction from `x_2` as the
+//   Cornell test above (expectation `T · d²/|cos θ_y|`). Counted: `y_1`
+//   on a non-Dirac, non-emitting surface, visible from `x_2` and seeing
+//   the environment along `x_0`'s `ω`.
+//
+// Controls, which the chi-square must reject: for `l = 0`, the light
+// walk's density taken per projected solid angle (times `|cos θ_1|`, the
+// cosine a disk-area or area-like measure at infinity would add) and the
+// camera walk's way alone (the sum over ways dropped); for `l = 1`, the
+// disk walk's cosine at `y_1` dropped. The ratio `T(x→y)/T(y→x)` of the
+// `l = 0` move: the same histogram from an accepted proposal `y`, the
+// counts' ratio in the cells of `y_0` and `x_0` against the code's
+// integrals, within 4σ.
+// ---------------------------------------------------------------------
+
+/// The sky scene, 16×16.
+fn environment_scene() -> &'static Scene {
+    static SCENE: OnceLock<Scene> = OnceLock::new();
+    SCENE.get_or_init(|| {
+        let scene = common::sky_scene(16, 3);
+        assert!(scene.lights.environment().is_some());
+        scene
+    })
+}
+
+/// True when `v` lies on a surface that is neither Dirac nor emitting.
+fn plain_surface(scene: &Scene, v: &Vertex) -> bool {
+    v.kind == VertexKind::Surface && !v.delta && !v.is_light() && !scene.bsdf_at(&v.sp).is_delta()
+}
+
+/// A three-segment path from the environment over two plain surfaces
+/// (the first such start-up candidate of a fixed seed).
+fn infinite_start_path(scene: &Scene) -> Path<'_> {
+    let env = scene.lights.environment().expect("an environment");
+    let family = PathFamily::new(scene, Some(3));
+    let mut rng = stream_rng(3, 0);
+    for _ in 0..100_000 {
+        let x = family.draw_candidate(&mut rng);
+        let v = &x.vertices;
+        if x.segments() == 3
+            && x.luminance() > 0.0
+            && x.all_visible()
+            && v[0].kind == VertexKind::Infinite
+            && v[0].light == env
+            && plain_surface(scene, &v[1])
+            && plain_surface(scene, &v[2])
+        {
+            return x;
+        }
+    }
+    panic!("no three-segment path from the environment found");
+}
+
+/// The regrowth of `x_0` alone, and of `x_1` alone.
+const REGROW_X0: MutationRecord = MutationRecord {
+    l: 0,
+    deleted: 2,
+    added: 2,
+    s: 0,
+};
+const REGROW_X1: MutationRecord = MutationRecord {
+    l: 1,
+    deleted: 2,
+    added: 2,
+    s: 0,
+};
+
+/// Which `T` the expectations at infinity integrate.
+#[derive(Clone, Copy, PartialEq)]
+enum InfiniteDensity {
+    /// The code's `T`.
+    Reported,
+    /// Control (`l = 0`): the light walk's term times `|cos θ_1|`.
+    ProjectedLightWay,
+    /// Control (`l = 0`): the camera walk's way alone.
+    CameraWayOnly,
+    /// Control (`l = 1`): the disk walk's cosine at `y_1` dropped.
+    DiskCosineDropped,
+}
+
+/// `ln T(x→y)` of `record` (one new vertex at `record.l`), or a control.
+fn infinite_log_t(
+    kernel: &Bidirectional,
+    x: &Path<'_>,
+    y: &Path<'_>,
+    record: &MutationRecord,
+    density: InfiniteDensity,
+) -> f64 {
+    let full = kernel.log_transition_density(x, y, record);
+    if full == f64::NEG_INFINITY || density == InfiniteDensity::Reported {
+        return full;
+    }
+    let i = record.l;
+    let ways = [
+        y.log_regrowth_density(i, i, 0),
+        y.log_regrowth_density(i, i, 1),
+    ];
+    let changed = match density {
+        InfiniteDensity::ProjectedLightWay => {
+            let cos = (y.vertices[1].sp.ng.dot(y.vertices[0].wo) as f64).abs();
+            [ways[0], ways[1] + cos.ln()]
+        }
+        InfiniteDensity::CameraWayOnly => [ways[0], f64::NEG_INFINITY],
+        InfiniteDensity::DiskCosineDropped => {
+            let cos = (y.vertices[1].sp.ng.dot(y.vertices[0].wo) as f64).abs();
+            [ways[0], ways[1] - cos.ln()]
+        }
+        InfiniteDensity::Reported => ways,
+    };
+    full - mcmc_core::math::log_sum_exp(&ways) + mcmc_core::math::log_sum_exp(&changed)
+}
+
+/// True when `x_1`'s environment direction `w` is counted for `l = 0`.
+fn sees_environment(scene: &Scene, from: &Vertex, w: glam::Vec3) -> bool {
+    !scene.geometry.occluded(&from.sp.spawn_ray(w))
+}
+
+/// Expected probability per cell of `ω = y_0.wo` about `x_1`'s normal.
+fn x0_masses(kernel: &Bidirectional, x: &Path<'_>, density: InfiniteDensity) -> Vec<f64> {
+    let scene = x.scene;
+    let env = x.vertices[0].light;
+    let x1 = &x.vertices[1];
+    let frame = Frame::from_normal(x1.sp.ng);
+    let mut masses = vec![0.0; NZ * NPHI];
+    let dz = 1.0 / (NZ * QUAD) as f64;
+    let dphi = 2.0 * PI / (NPHI * QUAD) as f64;
+    for iz in 0..NZ * QUAD {
+        for ip in 0..NPHI * QUAD {
+            let z = (iz as f64 + 0.5) * dz;
+            let phi = (ip as f64 + 0.5) * dphi;
+            let r = (1.0 - z * z).sqrt();
+            let local = glam::Vec3::new((r * phi.cos()) as f32, (r * phi.sin()) as f32, z as f32);
+            let w = frame.to_world(local).normalize();
+            if !sees_environment(scene, x1, w) {
+                continue;
+            }
+            let mut y = x.clone();
+            y.vertices[0] = Vertex::infinite(env, w, Rgb::WHITE, 0.0);
+            y.evaluate();
+            let ln_t = infinite_log_t(kernel, x, &y, &REGROW_X0, density);
+            if ln_t == f64::NEG_INFINITY {
+                continue;
+            }
+            let cell = cell_of(&frame, w).expect("upper hemisphere");
+            masses[cell] += ln_t.exp() * dz * dphi;
+        }
+    }
+    masses
+}
+
+/// Expected probability per cell of the direction `x_2 → y_1`.
+fn x1_masses(kernel: &Bidirectional, x: &Path<'_>, density: InfiniteDensity) -> Vec<f64> {
+    let scene = x.scene;
+    let (x0, x2) = (&x.vertices[0], &x.vertices[2]);
+    let frame = Frame::from_normal(x2.sp.ng);
+    let mut masses = vec![0.0; NZ * NPHI];
+    let dz = 1.0 / (NZ * QUAD) as f64;
+    let dphi = 2.0 * PI / (NPHI * QUAD) as f64;
+    for iz in 0..NZ * QUAD {
+        for ip in 0..NPHI * QUAD {
+            let z = (iz as f64 + 0.5) * dz;
+            let phi = (ip as f64 + 0.5) * dphi;
+            let r = (1.0 - z * z).sqrt();
+            let local = glam::Vec3::new((r * phi.cos()) as f32, (r * phi.sin()) as f32, z as f32);
+            let w = frame.to_world(local).normalize();
+            let Some(hit) = scene.intersect(&x2.sp.spawn_ray(w)) else {
+                continue;
+            };
+            let v = Vertex::surface(scene, hit.sp, -w, Rgb::WHITE);
+            if !plain_surface(scene, &v) || !sees_environment(scene, &v, x0.wo) {
+                continue;
+            }
+            let y = moved(x, v);
+            let ln_t = infinite_log_t(kernel, x, &y, &REGROW_X1, density);
+            if ln_t == f64::NEG_INFINITY {
+                continue;
+            }
+            let d2 = (hit.sp.p - x2.p()).length_squared() as f64;
+            let cos_y = (hit.sp.ng.dot(w) as f64).abs();
+            let cell = cell_of(&frame, w).expect("upper hemisphere");
+            masses[cell] += ln_t.exp() * d2 / cos_y * dz * dphi;
+        }
+    }
+    masses
+}
+
+/// Histograms of `N` proposals from `x`: the `l = 0` and `l = 1` records'
+/// counted proposals (see above), and one valid `l = 0` proposal.
+fn infinite_histograms<'s>(x: &Path<'s>, seed: u64) -> (Vec<u64>, Vec<u64>, Option<Path<'s>>) {
+    let scene = x.scene;
+    let env = x.vertices[0].light;
+    let mut kernel = Bidirectional::new(1, Some(3), true);
+    let current = sample_of(x);
+    let mut proposal = sample_of(x);
+    let mut rng = stream_rng(seed, 0);
+    let (x0, x1, x2) = (&x.vertices[0], &x.vertices[1], &x.vertices[2]);
+    let (frame1, frame2) = (Frame::from_normal(x1.sp.ng), Frame::from_normal(x2.sp.ng));
+    let mut counts0 = vec![0u64; NZ * NPHI];
+    let mut counts1 = vec![0u64; NZ * NPHI];
+    let mut some_y = None;
+    for _ in 0..N {
+        let p = kernel.propose(&current, &mut proposal, &mut rng);
+        let Some(rec) = kernel.last_record() else {
+            continue;
+        };
+        if p.failed && p.component == Invalid::WalkEnded as usize {
+            continue;
+        }
+        let y = &proposal.state;
+        let key = (rec.l, rec.deleted, rec.added);
+        if key == (REGROW_X0.l, REGROW_X0.deleted, REGROW_X0.added) {
+            let y0 = &y.vertices[0];
+            if y0.kind != VertexKind::Infinite || y0.light != env {
+                continue;
+            }
+            if !sees_environment(scene, x1, y0.wo) {
+                continue;
+            }
+            if let Some(c) = cell_of(&frame1, y0.wo) {
+                counts0[c] += 1;
+            }
+            if some_y.is_none() && !p.failed && y.luminance() > 0.0 {
+                some_y = Some(y.clone());
+            }
+        } else if key == (REGROW_X1.l, REGROW_X1.deleted, REGROW_X1.added) {
+            let y1 = &y.vertices[1];
+            if !plain_surface(scene, y1)
+                || !sees_environment(scene, y1, x0.wo)
+                || !scene.geometry.visible(&x2.sp, &y1.sp)
+            {
+                continue;
+            }
+            if let Some(w) = (y1.p() - x2.p()).try_normalize()
+                && let Some(c) = cell_of(&frame2, w)
+            {
+                counts1[c] += 1;
+            }
+        }
+    }
+    (counts0, counts1, some_y)
+}
+
+#[test]
+fn bidirectional_density_at_infinity_matches_its_proposals() {
+    let scene = environment_scene();
+    let x = infinite_start_path(scene);
+    let kernel = Bidirectional::new(1, Some(3), true);
+    let (counts0, counts1, y) = infinite_histograms(&x, 41);
+    eprintln!(
+        "counted: l = 0 {}, l = 1 {} of {N}",
+        counts0.iter().sum::<u64>(),
+        counts1.iter().sum::<u64>()
+    );
+    let masses0 = x0_masses(&kernel, &x, InfiniteDensity::Reported);
+    let p0 = common::chi_square_p_value(&counts0, &masses0, N);
+    assert!(p0 > 1e-4, "regrowing x_0 at infinity: p = {p0:.2e}");
+    let masses1 = x1_masses(&kernel, &x, InfiniteDensity::Reported);
+    let p1 = common::chi_square_p_value(&counts1, &masses1, N);
+    assert!(p1 > 1e-4, "regrowing x_1 from x_0 at infinity: p = {p1:.2e}");
+    for control in [
+        InfiniteDensity::ProjectedLightWay,
+        InfiniteDensity::CameraWayOnly,
+    ] {
+        let wrong = x0_masses(&kernel, &x, control);
+        let p = common::chi_square_p_value(&counts0, &wrong, N);
+        assert!(
+            p < 1e-4,
+            "a control density of x_0 passed (projected light way: {}): p = {p:.2e}",
+            control == InfiniteDensity::ProjectedLightWay
+        );
+    }
+    let wrong = x1_masses(&kernel, &x, InfiniteDensity::DiskCosineDropped);
+    let p = common::chi_square_p_value(&counts1, &wrong, N);
+    assert!(p < 1e-4, "the disk walk without its cosine passed: p = {p:.2e}");
+
+    // From the proposal y back: the ratio over the cells of y_0 and x_0.
+    let y = y.expect("a valid proposal regrowing x_0");
+    let masses0_y = x0_masses(&kernel, &y, InfiniteDensity::Reported);
+    let (counts0_y, _, _) = infinite_histograms(&y, 42);
+    let p_y = common::chi_square_p_value(&counts0_y, &masses0_y, N);
+    assert!(p_y > 1e-4, "T(y→·) at infinity: p = {p_y:.2e}");
+    let frame = Frame::from_normal(x.vertices[1].sp.ng);
+    let by = cell_of(&frame, y.vertices[0].wo).expect("y_0 above x_1");
+    let bx = cell_of(&frame, x.vertices[0].wo).expect("x_0 above x_1");
+    let (oa, ob) = (counts0[by] as f64, counts0_y[bx] as f64);
+    assert!(oa > 100.0 && ob > 100.0, "cells not resolved: {oa}, {ob}");
+    let observed = (oa / ob).ln();
+    let reported = (masses0[by] / masses0_y[bx]).ln();
+    let sigma = (1.0 / oa + 1.0 / ob).sqrt();
+    eprintln!("ln ratio at infinity: histograms {observed:.4}, code {reported:.4}, σ {sigma:.4}");
+    assert!(
+        (observed - reported).abs() < 4.0 * sigma,
+        "T(x→y)/T(y→x) at infinity: histograms {observed}, code {reported} (σ {sigma})"
+    );
+}

@@ -9,8 +9,9 @@
 //! in the pixel, no Russian roulette, at most `max_depth + 1` vertices;
 //! 64 when unbounded) and, at every prefix of it, the two paths path
 //! tracing with next-event estimation forms: the walk ending on an emitter
-//! (`s = 0`) and the walk connected to an emitter point drawn as BDPT
-//! draws it (`s = 1`). Each is a path state ([`crate::path_space::Path`])
+//! (`s = 0`; an escaped walk ends on the environment, at infinity) and the
+//! walk connected to an emitter point drawn as BDPT draws it (`s = 1`; at
+//! infinity, a direction). Each is a path state ([`crate::path_space::Path`])
 //! with energy `e(x) = lum f(x) / (p_0(x) + p_1(x))`, `p_s` the path's
 //! density under technique `s` ([`Path::log_regrowth_density`]): the
 //! balance heuristic over the two techniques, so the energies of one
@@ -79,7 +80,7 @@ use crate::integrators::path_vertex::{Vertex, VertexKind};
 use crate::observer::Observer;
 use crate::path_space::proposal_clock::{ProposalClock, mutation_types};
 use crate::path_space::walk::{ChainSource, light_walk};
-use crate::path_space::{Path, PathMutations, PathTarget, emitters_at_infinity_refusal};
+use crate::path_space::{Path, PathMutations, PathTarget};
 use crate::pss::PathSample;
 use crate::scene::Scene;
 use crate::settings::check;
@@ -176,14 +177,17 @@ fn seeds<'s>(
     let made = generate_camera_subpath(scene, raster, &mut source, vertices, None, camera);
     for t in 2..=made {
         let end = &camera[t - 1];
-        if end.kind != VertexKind::Surface {
+        // A walk that escaped into the environment ends there: its last
+        // vertex (at infinity) is an emitter, not a vertex to connect from.
+        let escaped = end.kind == VertexKind::Infinite;
+        if end.kind != VertexKind::Surface && !escaped {
             break;
         }
         let mut candidates = Vec::with_capacity(2);
         if end.is_light() {
             candidates.push(Path::from_subpaths(scene, &[], &camera[..t]));
         }
-        if t < vertices && light_walk(scene, &mut source, 1, light) == 1 {
+        if !escaped && t < vertices && light_walk(scene, &mut source, 1, light) == 1 {
             let path = Path::from_subpaths(scene, &light[..1], &camera[..t]);
             if path.connectible(0) && path.connectible(1) && path.edge_visible(0) {
                 candidates.push(path);
@@ -243,9 +247,6 @@ impl IntegratorSettings for Erpt {
         observer: &dyn Observer,
     ) -> Result<Rendered, RenderError> {
         IntegratorSettings::validate(self).map_err(RenderError::Invalid)?;
-        if scene.lights.has_emitter_at_infinity() {
-            return Err(RenderError::Invalid(emitters_at_infinity_refusal("erpt")));
-        }
         let start = Instant::now();
         let (w, h) = (scene.film.width, scene.film.height);
         let vertices = self.walk_vertices();

@@ -44,7 +44,6 @@ use super::registry::IntegratorSettings;
 use super::{RenderError, Rendered, RunSettings};
 use crate::markov::{ChainParams, Normalization};
 use crate::observer::Observer;
-use crate::path_space::emitters_at_infinity_refusal;
 use crate::scene::Scene;
 use std::sync::atomic::AtomicBool;
 
@@ -88,12 +87,6 @@ impl IntegratorSettings for Mept {
         stop: &AtomicBool,
         observer: &dyn Observer,
     ) -> Result<Rendered, RenderError> {
-        // Refused here so that the message names `mept`, not `mlt`.
-        if scene.lights.has_emitter_at_infinity() {
-            return Err(RenderError::Invalid(emitters_at_infinity_refusal(
-                Self::NAME,
-            )));
-        }
         IntegratorSettings::render(&self.mlt, scene, run, stop, observer)
     }
 }

@@ -38,8 +38,9 @@
 //! - **Snapshots** (previews, `convergence` checkpoints): the passes run
 //!   first and show none; every snapshot of the chains has the passes'
 //!   images added ([`WithPasses`]), so each is a whole estimate.
-//! - Emitters at infinity (environment maps, directional lights) are not
-//!   supported yet; such scenes are refused.
+//! - Emitters at infinity (environment maps, `constant`, directional
+//!   lights): `x_0` is then a vertex at infinity measured in solid angle
+//!   (`path_space::state`; since session 19).
 
 use super::pt::PathTracer;
 use super::registry::IntegratorSettings;
@@ -51,7 +52,7 @@ use crate::observer::Observer;
 use crate::path_space::family::PerturbationSizes;
 use crate::path_space::proposal_clock::{ProposalClock, mutation_types};
 use crate::path_space::specular_pass::SpecularChains;
-use crate::path_space::{PathFamily, PathMutations, emitters_at_infinity_refusal};
+use crate::path_space::{PathFamily, PathMutations};
 use crate::pss_dump::DumpSampler;
 use crate::scene::Scene;
 use crate::settings::check;
@@ -468,9 +469,6 @@ pub fn render_mlt(
     observer: &dyn Observer,
     clock: &Arc<ProposalClock>,
 ) -> Result<MltResult, MltError> {
-    if scene.lights.has_emitter_at_infinity() {
-        return Err(MltError::Setting(emitters_at_infinity_refusal("mlt")));
-    }
     let mut family = PathFamily::between(scene, settings.min_segments(), settings.max_segments())
         .timed(clock.clone());
     if settings.specular_pass().is_some() {

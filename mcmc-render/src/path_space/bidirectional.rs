@@ -25,8 +25,19 @@
 //!    light walk, `t = k_a − 1 − s` from `z_{l+k_d}` by a camera walk, `s`
 //!    uniform over `[s_min, s_max]` (`t ≥ 1` when the camera is regrown:
 //!    light walks never hit the camera; `s ≥ 1` when the emitter point is
-//!    regrown and the scene has no area light to hit), then the two walks'
-//!    ends are connected (visibility tested).
+//!    regrown and the scene has no area light or environment to hit), then
+//!    the two walks' ends are connected (visibility tested).
+//!
+//! # Emitters at infinity
+//!
+//! `x_0` at infinity (measured in solid angle, `path_space::state`) is
+//! regrown as any emitter vertex: by a light walk (the environment's
+//! direction sampling, or a directional light's one direction) or by a
+//! camera walk that escapes into the environment; its `pdf_fwd` and
+//! `pdf_rev` are solid-angle densities, so the sum over splits stays a sum
+//! of densities in one measure. Kept, it starts a light walk from its disk
+//! (`pdf_fwd(x_1) = |ng_1·ω|/(πR²)`). A camera walk that escapes anywhere
+//! but at `x_0` ended early ([`Invalid::WalkEnded`]).
 //!
 //! # Transition density
 //!
@@ -51,10 +62,9 @@
 
 use super::retrace::component_names;
 use super::state::Path;
-use super::walk::{ChainSource, camera_walk, extend_walk, light_walk};
+use super::walk::{ChainSource, camera_walk, camera_walks_reach_emitters, extend_walk, light_walk};
 use crate::bsdf::TransportMode;
 use crate::integrators::path_vertex::{Vertex, VertexKind};
-use crate::light::Light;
 use crate::pss::PathSample;
 use mcmc_core::kernel::{Kernel, Proposal};
 use mcmc_core::math::log_sum_exp;
@@ -433,13 +443,18 @@ impl Bidirectional {
         } else {
             vs.extend_from_slice(&x.vertices[m - 1..]);
         }
+        // A camera walk that escaped into the environment ends at infinity:
+        // a path's x_0 (l = s = 0), a walk that ended anywhere else.
+        if vs[1..].iter().any(|v| v.kind == VertexKind::Infinite) {
+            return Err(Invalid::WalkEnded);
+        }
         y.normalize_ends();
         y.evaluate();
         // The connection joins y_{l+s−1} and y_{l+s}; with l + s = 0 the
         // camera walk itself reached the emitter.
         let join = l + s;
         if join == 0 {
-            if y.vertices[0].kind != VertexKind::Light {
+            if !matches!(y.vertices[0].kind, VertexKind::Light | VertexKind::Infinite) {
                 return Err(Invalid::ZeroContribution);
             }
         } else {
@@ -458,8 +473,9 @@ impl Bidirectional {
 }
 
 /// True when virtual-node vertex `z_j` of `x` may stay as a regrowth's
-/// start: a virtual node, the emitter point, or a surface vertex that does
-/// not scatter through a Dirac lobe.
+/// start: a virtual node, the emitter point (at infinity too: a light walk
+/// continues from its disk), or a surface vertex that does not scatter
+/// through a Dirac lobe.
 fn keepable(x: &Path, j: usize) -> bool {
     let n = x.segments() + 2;
     if j == 0 || j == n {
@@ -467,9 +483,9 @@ fn keepable(x: &Path, j: usize) -> bool {
     }
     let v = &x.vertices[j - 1];
     match v.kind {
-        VertexKind::Light => true,
+        VertexKind::Light | VertexKind::Infinite => true,
         VertexKind::Surface => !v.delta,
-        VertexKind::Camera | VertexKind::Infinite => false,
+        VertexKind::Camera => false,
     }
 }
 
@@ -500,17 +516,8 @@ fn split_range(x: &Path, l: usize, m: usize, added: usize) -> Option<(usize, usi
         // The camera is regrown by the camera walk (t ≥ 1).
         hi = hi.checked_sub(1)?;
     }
-    let lo = usize::from(l == 0 && !has_area_light(x));
+    let lo = usize::from(l == 0 && !camera_walks_reach_emitters(x.scene));
     (lo <= hi).then_some((lo, hi))
-}
-
-/// True when a camera walk can hit an emitter of the path's scene.
-fn has_area_light(x: &Path) -> bool {
-    x.scene
-        .lights
-        .lights
-        .iter()
-        .any(|l| matches!(l, Light::Area { .. }))
 }
 
 impl<'s> Kernel<Path<'s>, PathSample> for Bidirectional {

@@ -11,7 +11,11 @@
 //! before it that can end a connection (an emitter point or a non-Dirac
 //! surface vertex), every `x_{l+1} … x_{k−2}` scatters through a Dirac
 //! lobe. `l = k − 2` (no chain: `(L|D) D E`) is allowed, as in Mitsuba.
-//! Other paths get a failed proposal ([`Invalid::Pattern`]).
+//! `x_l` may not be an emitter at infinity (`x_0` of an environment or a
+//! directional light: its walks leave a disk along a fixed direction, so
+//! there is no direction at a point to turn); the move keeps `x_0`, so the
+//! test gives the same answer from `x` and from every proposal. Other
+//! paths get a failed proposal ([`Invalid::Pattern`]).
 //!
 //! # The move
 //!
@@ -203,7 +207,9 @@ pub fn caustic_chain(x: &Path) -> Option<usize> {
         }
         l -= 1;
     }
-    Some(l)
+    // An emitter at infinity has no point to turn a direction about (its
+    // light walks leave a disk along the fixed `−ω`): not this pattern.
+    (x.vertices[l].kind != VertexKind::Infinite).then_some(l)
 }
 
 /// Veach's caustic perturbation as an `mcmc-core` kernel over [`Path`]s:

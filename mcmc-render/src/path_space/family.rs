@@ -27,8 +27,7 @@ use super::manifold_perturbation::{ManifoldPerturbation, selections as manifold_
 use super::multi_chain_perturbation::{MultiChainPerturbation, multi_chain};
 use super::proposal_clock::{ProposalClock, Timed};
 use super::state::{Path, PathTarget};
-use super::walk::{ChainSource, camera_walk, light_walk};
-use crate::light::Light;
+use super::walk::{ChainSource, camera_walk, camera_walks_reach_emitters, light_walk};
 use crate::markov::{CANDIDATE_STREAM, ChainFamily, MltError, Search};
 use crate::pss::PathSample;
 use crate::scene::Scene;
@@ -325,7 +324,7 @@ pub struct PathFamily<'s> {
     /// Shortest path in segments (≥ 1).
     pub min_segments: usize,
     target: PathTarget,
-    area_lights: bool,
+    hittable_emitters: bool,
     clock: Option<Arc<ProposalClock>>,
     bdpt_startup: u64,
 }
@@ -344,11 +343,7 @@ impl<'s> PathFamily<'s> {
             max_segments,
             min_segments: min_segments.max(1),
             target: PathTarget::default(),
-            area_lights: scene
-                .lights
-                .lights
-                .iter()
-                .any(|l| matches!(l, Light::Area { .. })),
+            hittable_emitters: camera_walks_reach_emitters(scene),
             clock: None,
             bdpt_startup: 0,
         }
@@ -409,7 +404,7 @@ impl<'s> PathFamily<'s> {
 
     /// Smallest split `s` of a candidate.
     pub(super) fn s_min(&self) -> usize {
-        usize::from(!self.area_lights)
+        usize::from(!self.hittable_emitters)
     }
 
     /// Draws a start-up candidate with `rng` (see the module docs); a

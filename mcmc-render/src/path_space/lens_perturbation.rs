@@ -8,8 +8,9 @@
 //! the camera-most vertex `x_j` (`j < k`) that does not scatter through a
 //! Dirac lobe, every `x_{j+1} … x_{k−1}` scatters through one, `x_j` is a
 //! surface vertex and both `x_{j−1}` and `x_j` can end a connection
-//! ([`Path::connectible`]). Other paths get a failed proposal
-//! ([`Invalid::Pattern`]).
+//! ([`Path::connectible`]; `x_{j−1}` may be an emitter at infinity, then
+//! the reconnection is the kept direction `ω`). Other paths get a failed
+//! proposal ([`Invalid::Pattern`]).
 //!
 //! # The move
 //!

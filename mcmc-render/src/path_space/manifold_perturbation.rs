@@ -20,7 +20,10 @@
 //! A specular vertex the manifold cannot describe (transmission through a
 //! `thindielectric`, a normal- or bump-mapped or masked BSDF, a vertex
 //! without a tangent frame) makes the proposal invalid
-//! ([`Invalid::Unsupported`], counted).
+//! ([`Invalid::Unsupported`], counted), and so does a move whose chain
+//! reaches an emitter at infinity (`x_0` as `a` or `c`: the manifold
+//! describes points, not directions). Such moves keep `x_0`, so the
+//! refusal holds from `x` and from every proposal alike.
 //!
 //! # Selection
 //!

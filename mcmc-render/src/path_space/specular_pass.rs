@@ -1,6 +1,7 @@
 //! The specular-chain pass of `mlt`/`mept`: path tracing of the paths
 //! whose every interior vertex scatters through a Dirac lobe
-//! (`L S* E`: emitters seen directly or through mirrors and glass), which
+//! (`L S* E`: emitters seen directly or through mirrors and glass, the
+//! environment included), which
 //! the chains then leave out ([`super::PathTarget::without_specular_chains`]).
 //!
 //! Why: the bidirectional mutation can keep no vertex of such a path (the
@@ -18,7 +19,7 @@
 
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
-use crate::integrators::pt::{ScatterOrigin, camera_ray, emitter_hit};
+use crate::integrators::pt::{ScatterOrigin, camera_ray, emitter_hit, environment_hit};
 use crate::integrators::{FilmSink, Integrator, SampleDomain, SampleStats};
 use crate::sampling::RandomSource;
 use crate::scene::Scene;
@@ -52,6 +53,10 @@ impl SpecularChains {
         let from = ScatterOrigin::CAMERA;
         for depth in 1..=self.max_depth.min(UNBOUNDED_CHAIN) {
             let Some(its) = scene.intersect(&ray) else {
+                // The environment seen through the chain (or directly).
+                if depth >= self.min_depth {
+                    l += environment_hit(scene, beta, ray.d, &from, false);
+                }
                 break;
             };
             let sp = its.sp;

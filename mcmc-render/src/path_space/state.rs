@@ -15,6 +15,24 @@
 //!   the density of the raster position being uniform over the image, so
 //!   that `f(x)` splatted at the path's raster position, times the number of
 //!   pixels, is the image (as PSSMLT's splats are);
+//! - an **emitter at infinity** (environment, `constant`, directional
+//!   light) makes `x_0` a [`VertexKind::Infinite`] vertex, a direction
+//!   `ω = x_0.wo` (from the scene towards the emitter) measured in **solid
+//!   angle** (pbrt-v4's and Mitsuba 0.6's convention; a directional light's
+//!   one direction with the counting measure, as a point light's position).
+//!   The edge `x_0 x_1` then has no area factor (`G` is 1: the solid angle
+//!   at `x_0` is the measure itself, and the cosine at `x_1` is its
+//!   scattering term's), `L_e` is the environment's radiance along `ω` (a
+//!   directional light's irradiance), and every density of `x_0` is per
+//!   unit solid angle: `pdf_fwd(x_0)` = selection × the environment's
+//!   direction density (selection alone for a directional light),
+//!   `pdf_rev(x_0)` = the camera walk's solid-angle density at `x_1` (or
+//!   the camera's). A light walk from `x_0` starts on the disk of radius
+//!   `R` perpendicular to `ω` ([`crate::light::Lights::infinite_origin`]),
+//!   so `pdf_fwd(x_1) = |ng_1·ω| / (πR²)`, an area density, and a ratio of
+//!   two paths' densities is formed vertex by vertex in the same measure
+//!   (solid angle at `x_0`, area elsewhere). Only `x_0` may be at
+//!   infinity; a path with a vertex at infinity elsewhere carries nothing;
 //! - at a vertex that scatters through a **Dirac lobe** (mirror, smooth
 //!   dielectric, smooth plastic's coating; [`Vertex::delta`]) `f` and the
 //!   densities hold the *coefficients* of the Dirac distribution: the lobe's
@@ -25,7 +43,7 @@
 //! radiance-mode BSDF `f_s(→camera, →light)`:
 //!
 //! ```text
-//! f(x) = L_e(x_0→x_1) · Π_{i<k} |ng_i·w_{i,i+1}| / d²_{i,i+1}           (no cosine at a point light)
+//! f(x) = L_e(x_0→x_1) · Π_{i<k} |ng_i·w_{i,i+1}| / d²_{i,i+1}           (no cosine at a point light; 1 after x_0 at infinity)
 //!      · Π_{0<i<k} f_s(x_i) |ns_i·w_{i→i−1}|                             (c_rad at Dirac vertices)
 //!      · W(x_k→x_{k−1})                                                 (the camera's solid-angle density)
 //! ```
@@ -70,6 +88,7 @@
 
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
+use crate::geometry::Ray;
 use crate::integrators::path_vertex::{Vertex, VertexKind, shading_correction};
 use crate::light::Light;
 use crate::pss::{PathSample, Splat};
@@ -87,8 +106,9 @@ use mcmc_core::target::{Evaluation, Target};
 pub struct Path<'s> {
     /// The scene the path lies in.
     pub scene: &'s Scene,
-    /// The vertices, light to camera: `x_0` has kind [`VertexKind::Light`],
-    /// `x_k` kind [`VertexKind::Camera`], the others
+    /// The vertices, light to camera: `x_0` has kind [`VertexKind::Light`]
+    /// (or [`VertexKind::Infinite`] on an emitter at infinity), `x_k` kind
+    /// [`VertexKind::Camera`], the others
     /// [`VertexKind::Surface`]. Field meanings as in the module docs.
     pub vertices: Vec<Vertex>,
     /// `f(x)`, RGB (zero when the path carries nothing or is malformed).
@@ -212,6 +232,16 @@ impl<'s> Path<'s> {
     pub fn edge_visible(&self, i: usize) -> bool {
         let scene = self.scene;
         let (a, b) = (&self.vertices[i], &self.vertices[i + 1]);
+        if a.kind == VertexKind::Infinite {
+            // `b` must see the emitter: nothing along `ω` (as a light
+            // sample at infinity is tested, `Scene::light_visible`).
+            let ray = if b.on_surface() {
+                b.sp.spawn_ray(a.wo)
+            } else {
+                Ray::new(b.p(), a.wo)
+            };
+            return !scene.geometry.occluded(&ray);
+        }
         if b.kind == VertexKind::Camera {
             return scene
                 .geometry
@@ -227,9 +257,10 @@ impl<'s> Path<'s> {
     }
 
     /// True when vertex `i` can end a deterministic connection: the camera,
-    /// an emitter point that is not a delta light, or a surface vertex that
-    /// does not scatter through a Dirac lobe and whose BSDF has a non-Dirac
-    /// part.
+    /// an emitter point, an emitter at infinity as `x_0` (the connection
+    /// is then the direction `ω` itself), or a surface vertex that does not
+    /// scatter through a Dirac lobe and whose BSDF has a non-Dirac part.
+    /// (A camera walk never ends on a delta emitter: its `pdf_rev` is 0.)
     pub fn connectible(&self, i: usize) -> bool {
         let scene = self.scene;
         let v = &self.vertices[i];
@@ -237,7 +268,7 @@ impl<'s> Path<'s> {
             VertexKind::Camera => true,
             VertexKind::Light => true,
             VertexKind::Surface => !v.delta && !scene.bsdf_at(&v.sp).is_delta(),
-            VertexKind::Infinite => false,
+            VertexKind::Infinite => i == 0,
         }
     }
 
@@ -276,8 +307,8 @@ impl<'s> Path<'s> {
     /// Recomputes the contribution, the raster position and every vertex's
     /// densities, directions and Dirac coefficients from the vertex
     /// positions, kinds, emitters and `delta` flags. Visibility is not
-    /// tested. A malformed path (fewer than two vertices, wrong end kinds)
-    /// gets a zero contribution.
+    /// tested. A malformed path (fewer than two vertices, wrong end kinds,
+    /// a vertex at infinity other than `x_0`) gets a zero contribution.
     pub fn evaluate(&mut self) {
         let scene = self.scene;
         self.contribution = Rgb::BLACK;
@@ -291,7 +322,10 @@ impl<'s> Path<'s> {
         for i in 0..n {
             vs[i].beta = Rgb::WHITE;
             vs[i].raster = Vec2::ZERO;
-            vs[i].wo = if i < k {
+            // A vertex at infinity keeps its direction `ω` in `wo`.
+            vs[i].wo = if vs[i].kind == VertexKind::Infinite {
+                vs[i].wo
+            } else if i < k {
                 vs[i].direction_to(&vs[i + 1]).unwrap_or(Vec3::ZERO)
             } else {
                 Vec3::ZERO
@@ -328,13 +362,26 @@ impl<'s> Path<'s> {
             vs[i].pdf_fwd = fwd;
             vs[i].pdf_rev = rev;
         }
-        if vs[0].kind != VertexKind::Light || vs[k].kind != VertexKind::Camera {
+        if !matches!(vs[0].kind, VertexKind::Light | VertexKind::Infinite)
+            || vs[k].kind != VertexKind::Camera
+            || vs[1..].iter().any(|v| v.kind == VertexKind::Infinite)
+        {
             return;
         }
         let Some(raster_dir) = vs[k].direction_to(&vs[k - 1]) else {
             return;
         };
-        let Some(cs) = scene.camera.connect(vs[k].p(), vs[k - 1].p()) else {
+        let raster = if vs[k - 1].kind == VertexKind::Infinite {
+            // The environment seen directly: no clip distance applies (a
+            // camera ray that escapes sees it, as path tracing's does).
+            scene.camera.raster_of_ray(vs[k].p(), raster_dir).map(|r| r.0)
+        } else {
+            scene
+                .camera
+                .connect(vs[k].p(), vs[k - 1].p())
+                .map(|cs| cs.raster)
+        };
+        let Some(raster) = raster else {
             return;
         };
         let camera = scene.camera.pdf_we(vs[k].p(), raster_dir).1 as f64;
@@ -359,14 +406,18 @@ impl<'s> Path<'s> {
             (f[1] * scale) as f32,
             (f[2] * scale) as f32,
         );
-        self.raster = cs.raster;
+        self.raster = raster;
     }
 }
 
 /// `|ng_a · w| / d²` for the segment `a b` (no cosine at a vertex off any
 /// surface): the area-measure factor of `f` on that edge, the cosine taken
 /// at the light-side end (the camera-side end's is in its scattering term).
+/// 1 from a vertex at infinity, which is measured in solid angle.
 fn edge_factor(a: &Vertex, b: &Vertex) -> f64 {
+    if a.kind == VertexKind::Infinite {
+        return 1.0;
+    }
     let d = b.p() - a.p();
     let d2 = d.length_squared() as f64;
     if !(d2 > 0.0) {
@@ -380,11 +431,19 @@ fn edge_factor(a: &Vertex, b: &Vertex) -> f64 {
     cos / d2
 }
 
-/// Radiance (area lights) or intensity (point lights) the path's emitter
-/// point `x0` sends towards `x1`.
+/// Radiance (area lights, environments), intensity (point lights) or
+/// irradiance (directional lights) the path's emitter vertex `x0` sends
+/// towards `x1`.
 pub fn emitted(scene: &Scene, x0: &Vertex, x1: &Vertex) -> Rgb {
     if !x0.is_light() {
         return Rgb::BLACK;
+    }
+    if x0.kind == VertexKind::Infinite {
+        return match &scene.lights.lights[x0.light as usize] {
+            Light::Environment(env) => env.eval(x0.wo),
+            Light::Directional { irradiance, .. } => *irradiance,
+            Light::Area { .. } | Light::Point { .. } => Rgb::BLACK,
+        };
     }
     let Some(w) = x0.direction_to(x1) else {
         return Rgb::BLACK;
@@ -394,6 +453,7 @@ pub fn emitted(scene: &Scene, x0: &Vertex, x1: &Vertex) -> Rgb {
         Light::Point {
             intensity, spot, ..
         } => *intensity * spot.map_or(1.0, |s| s.falloff(w)),
+        // Emitters at infinity are `Infinite` vertices (handled above).
         Light::Directional { .. } | Light::Environment(_) => Rgb::BLACK,
     }
 }

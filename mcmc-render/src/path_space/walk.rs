@@ -51,13 +51,19 @@ pub fn camera_walk(
     generate_camera_subpath(scene, raster, source, count, None, out)
 }
 
-/// A walk onward from the kept vertex `from` (an emitter point or a surface
-/// vertex; `behind` is its neighbour on the side the walk comes from,
-/// `None` at an emitter point): `out` gets `from` (with its `delta` flag
-/// set by the lobe sampled there) followed by up to `count` new vertices.
-/// `mode` is importance for walks towards the camera, radiance towards
-/// the emitters. Returns the number of new vertices (fewer than `count`
-/// when the walk escapes or is absorbed; 0 when `from` cannot start a walk).
+/// A walk onward from the kept vertex `from` (an emitter point, an emitter
+/// at infinity, or a surface vertex; `behind` is its neighbour on the side
+/// the walk comes from, `None` at an emitter): `out` gets `from` (with its
+/// `delta` flag set by the lobe sampled there) followed by up to `count`
+/// new vertices. `mode` is importance for walks towards the camera,
+/// radiance towards the emitters. From an emitter at infinity (a light
+/// walk only) the walk starts on the disk of
+/// [`crate::light::Lights::infinite_origin`] and travels along `−ω`, as a
+/// light walk from the emitters does. Returns the number of new vertices
+/// (fewer than `count` when the walk escapes or is absorbed; 0 when
+/// `from` cannot start a walk). A radiance walk that escapes into an
+/// environment ends with a vertex at infinity, counted: the caller
+/// decides whether it may stand where it is (only as `x_0`).
 pub fn extend_walk(
     scene: &Scene,
     from: &Vertex,
@@ -103,13 +109,26 @@ pub fn extend_walk(
             out[0].delta = bs.is_delta;
             (from.sp.spawn_ray(frame.to_world(bs.wi)), bs.weight)
         }
+        VertexKind::Infinite if mode == TransportMode::Importance => {
+            let dir = -from.wo;
+            let origin = scene.lights.infinite_origin(dir, source.next_2d());
+            (Ray::new(origin, dir), Rgb::WHITE)
+        }
         VertexKind::Camera | VertexKind::Infinite => return 0,
     };
-    let added = random_walk(scene, ray, source, mode, beta, 1.0, count, None, out);
-    if out.iter().any(|v| v.kind == VertexKind::Infinite) {
-        return 0;
-    }
-    added
+    random_walk(scene, ray, source, mode, beta, 1.0, count, None, out)
+}
+
+/// True when a camera walk can end on an emitter of `scene`: an area
+/// light, or the environment when the walk escapes. Otherwise every path
+/// needs a light-walk vertex (`s ≥ 1`).
+pub fn camera_walks_reach_emitters(scene: &Scene) -> bool {
+    scene.lights.environment().is_some()
+        || scene
+            .lights
+            .lights
+            .iter()
+            .any(|l| matches!(l, Light::Area { .. }))
 }
 
 /// A direction leaving emitter point `x0`, sampled as light walks sample

@@ -583,3 +583,41 @@ pub fn pixel_solid_angle(scene: &Scene, r: glam::Vec2) -> f64 {
         (dir(r + glam::Vec2::new(0.0, h)) - dir(r - glam::Vec2::new(0.0, h))) / (2.0 * h as f64);
     dx.cross(dy).length()
 }
+
+/// An open scene lit from infinity (issue 13's emitters at infinity in
+/// path space): a diffuse floor, a diffuse sphere and a mirror sphere
+/// (`conductor`, its default perfect mirror) under a constant sky and a directional
+/// sun, `res`×`res`, paths of at most `max_depth` segments. The camera sees
+/// the sky above the horizon, the floor and both spheres.
+pub fn sky_scene(res: u32, max_depth: u32) -> Scene {
+    load_str(&format!(
+        r#"<scene version="3.0.0">
+    <integrator type="path"><integer name="max_depth" value="{max_depth}"/></integrator>
+    <sensor type="perspective">
+        <float name="fov" value="45"/>
+        <transform name="to_world"><lookat origin="0, 1.2, 5" target="0, 0.6, 0" up="0, 1, 0"/></transform>
+        <sampler type="independent"><integer name="sample_count" value="4"/></sampler>
+        <film type="hdrfilm"><integer name="width" value="{res}"/><integer name="height" value="{res}"/><rfilter type="box"/></film>
+    </sensor>
+    <emitter type="constant"><rgb name="radiance" value="0.5, 0.6, 0.8"/></emitter>
+    <emitter type="directional">
+        <vector name="direction" value="0.4, -1, -0.3"/>
+        <rgb name="irradiance" value="1.0, 0.9, 0.7"/>
+    </emitter>
+    <shape type="rectangle">
+        <transform name="to_world"><rotate x="1" angle="-90"/><scale value="3"/></transform>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0.6, 0.6, 0.55"/></bsdf>
+    </shape>
+    <shape type="sphere">
+        <point name="center" value="-0.7, 0.6, 0"/>
+        <float name="radius" value="0.6"/>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0.7, 0.3, 0.2"/></bsdf>
+    </shape>
+    <shape type="sphere">
+        <point name="center" value="0.75, 0.5, 0.3"/>
+        <float name="radius" value="0.5"/>
+        <bsdf type="conductor"/>
+    </shape>
+</scene>"#
+    ))
+}
