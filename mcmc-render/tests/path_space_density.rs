@@ -677,7 +677,7 @@ fn bidirectional_density_through_a_dirac_vertex_matches_its_proposals() {
 // quadrature below must resolve the light walk's direction density, and
 // the map's own sampling density is tested with BDPT's, `bdpt_mis.rs`.) The start path is `x_0` (the environment,
 // at infinity) `x_1` `x_2` (diffuse, non-emitting) `x_3` (camera). From it
-// the fixed-length move is run `N` times; two of its records are
+// the fixed-length move is run `N_INF` (500 000) times; two of its records are
 // histogrammed from the same proposals:
 //
 // - `l = 0`, one edge pair deleted and added: `x_0` alone is regrown, by
@@ -691,10 +691,14 @@ fn bidirectional_density_through_a_dirac_vertex_matches_its_proposals() {
 //   light, a Dirac direction of its own), seen from `x_1`.
 // - `l = 1`: `x_1` alone is regrown with `x_0` at infinity kept, by the
 //   light walk from `x_0`'s disk (`pdf_fwd(y_1) = |ng_1·ω| / (πR²)`) or
-//   the camera walk from `x_2`; binned by direction from `x_2` as the
-//   Cornell test above (expectation `T · d²/|cos θ_y|`). Counted: `y_1`
-//   on a non-Dirac, non-emitting surface, visible from `x_2` and seeing
-//   the environment along `x_0`'s `ω`.
+//   the camera walk from `x_2`; `y_1` on the floor is binned by position
+//   in 12×12 cells of the floor, whose expectation is `N ∫_cell T dA` (`T`
+//   is an area density there; 16×16 midpoint points per cell). Counted:
+//   `y_1` on the floor, visible from `x_2` and seeing the sky along
+//   `x_0`'s `ω`. (Binning by direction from `x_2`, as the Cornell test
+//   does, fails here for the wrong reason: the floor's far edge, seen at
+//   grazing angles, holds much of the disk walk's mass per solid angle
+//   in slivers that a cell's quadrature does not resolve.)
 //
 // Controls, which the chi-square must reject: for `l = 0`, the light
 // walk's density taken per projected solid angle (times `|cos θ_1|`, the
@@ -705,6 +709,13 @@ fn bidirectional_density_through_a_dirac_vertex_matches_its_proposals() {
 // counts' ratio in the cells of `y_0` and `x_0` against the code's
 // integrals, within 4σ.
 // ---------------------------------------------------------------------
+
+/// Proposals per histogram at infinity: the disk-cosine control changes
+/// the light walk's share by `1/|ng·ω|` ≈ 13% on the floor (nearly
+/// constant there), so it takes this many (≈ 25 000 counted `l = 1`
+/// proposals) to reject it at p < 1e-4 with room (χ² excess ≈ 100 on 60
+/// dof; 200 000 gave p ≈ 1e-3).
+const N_INF: usize = 500_000;
 
 /// The sky scene, 16×16.
 fn environment_scene() -> &'static Scene {
@@ -841,43 +852,66 @@ fn x0_masses(kernel: &Bidirectional, x: &Path<'_>, density: InfiniteDensity) -> 
     masses
 }
 
-/// Expected probability per cell of the direction `x_2 → y_1`.
+/// Cells of the floor `[−3, 3]²` (the `l = 1` histogram), per axis.
+const FLOOR_CELLS: usize = 12;
+/// Midpoint-rule points per floor cell and axis.
+const FLOOR_QUAD: usize = 16;
+
+/// The floor cell of `v` (`None` off the floor's top).
+fn floor_cell(v: &Vertex) -> Option<usize> {
+    let p = v.p();
+    if v.kind != VertexKind::Surface || v.sp.ng.y < 0.99 || p.y.abs() > 1e-3 {
+        return None;
+    }
+    let cell = |c: f32| ((c + 3.0) / 6.0 * FLOOR_CELLS as f32).floor();
+    let (ix, iz) = (cell(p.x), cell(p.z));
+    let range = 0.0..FLOOR_CELLS as f32;
+    (range.contains(&ix) && range.contains(&iz)).then(|| iz as usize * FLOOR_CELLS + ix as usize)
+}
+
+/// True when a regrown `y_1` is counted for `l = 1`: on the floor, seeing
+/// the sky along `x_0`'s `ω` and visible from `x_2`.
+fn x1_counted(x: &Path<'_>, y1: &Vertex) -> bool {
+    let scene = x.scene;
+    floor_cell(y1).is_some()
+        && sees_environment(scene, y1, x.vertices[0].wo)
+        && scene.geometry.visible(&x.vertices[2].sp, &y1.sp)
+}
+
+/// Expected probability per floor cell of `y_1` (`T` is an area density
+/// there: midpoint rule over the floor, no Jacobian).
 fn x1_masses(kernel: &Bidirectional, x: &Path<'_>, density: InfiniteDensity) -> Vec<f64> {
     let scene = x.scene;
-    let (x0, x2) = (&x.vertices[0], &x.vertices[2]);
-    let frame = Frame::from_normal(x2.sp.ng);
-    let mut masses = vec![0.0; NZ * NPHI];
-    let dz = 1.0 / (NZ * QUAD) as f64;
-    let dphi = 2.0 * PI / (NPHI * QUAD) as f64;
-    for iz in 0..NZ * QUAD {
-        for ip in 0..NPHI * QUAD {
-            let z = (iz as f64 + 0.5) * dz;
-            let phi = (ip as f64 + 0.5) * dphi;
-            let r = (1.0 - z * z).sqrt();
-            let local = glam::Vec3::new((r * phi.cos()) as f32, (r * phi.sin()) as f32, z as f32);
-            let w = frame.to_world(local).normalize();
-            let Some(hit) = scene.intersect(&x2.sp.spawn_ray(w)) else {
+    let n = FLOOR_CELLS * FLOOR_QUAD;
+    let h = 6.0 / n as f64;
+    let mut masses = vec![0.0; FLOOR_CELLS * FLOOR_CELLS];
+    for iz in 0..n {
+        for ix in 0..n {
+            let (px, pz) = (-3.0 + (ix as f64 + 0.5) * h, -3.0 + (iz as f64 + 0.5) * h);
+            // The floor point from below (nothing lies under the floor).
+            let up = glam::Vec3::Y;
+            let ray = mcmc_render::geometry::Ray::new(glam::Vec3::new(px as f32, -1.0, pz as f32), up);
+            let Some(hit) = scene.intersect(&ray) else {
                 continue;
             };
-            let v = Vertex::surface(scene, hit.sp, -w, Rgb::WHITE);
-            if !plain_surface(scene, &v) || !sees_environment(scene, &v, x0.wo) {
+            let v = Vertex::surface(scene, hit.sp, up, Rgb::WHITE);
+            let Some(cell) = floor_cell(&v) else {
+                continue;
+            };
+            if !x1_counted(x, &v) {
                 continue;
             }
             let y = moved(x, v);
             let ln_t = infinite_log_t(kernel, x, &y, &REGROW_X1, density);
-            if ln_t == f64::NEG_INFINITY {
-                continue;
+            if ln_t > f64::NEG_INFINITY {
+                masses[cell] += ln_t.exp() * h * h;
             }
-            let d2 = (hit.sp.p - x2.p()).length_squared() as f64;
-            let cos_y = (hit.sp.ng.dot(w) as f64).abs();
-            let cell = cell_of(&frame, w).expect("upper hemisphere");
-            masses[cell] += ln_t.exp() * d2 / cos_y * dz * dphi;
         }
     }
     masses
 }
 
-/// Histograms of `N` proposals from `x`: the `l = 0` and `l = 1` records'
+/// Histograms of `N_INF` proposals from `x`: the `l = 0` and `l = 1` records'
 /// counted proposals (see above), and one valid `l = 0` proposal.
 fn infinite_histograms<'s>(x: &Path<'s>, seed: u64) -> (Vec<u64>, Vec<u64>, Option<Path<'s>>) {
     let scene = x.scene;
@@ -886,12 +920,12 @@ fn infinite_histograms<'s>(x: &Path<'s>, seed: u64) -> (Vec<u64>, Vec<u64>, Opti
     let current = sample_of(x);
     let mut proposal = sample_of(x);
     let mut rng = stream_rng(seed, 0);
-    let (x0, x1, x2) = (&x.vertices[0], &x.vertices[1], &x.vertices[2]);
-    let (frame1, frame2) = (Frame::from_normal(x1.sp.ng), Frame::from_normal(x2.sp.ng));
+    let x1 = &x.vertices[1];
+    let frame1 = Frame::from_normal(x1.sp.ng);
     let mut counts0 = vec![0u64; NZ * NPHI];
-    let mut counts1 = vec![0u64; NZ * NPHI];
+    let mut counts1 = vec![0u64; FLOOR_CELLS * FLOOR_CELLS];
     let mut some_y = None;
-    for _ in 0..N {
+    for _ in 0..N_INF {
         let p = kernel.propose(&current, &mut proposal, &mut rng);
         let Some(rec) = kernel.last_record() else {
             continue;
@@ -917,14 +951,8 @@ fn infinite_histograms<'s>(x: &Path<'s>, seed: u64) -> (Vec<u64>, Vec<u64>, Opti
             }
         } else if key == (REGROW_X1.l, REGROW_X1.deleted, REGROW_X1.added) {
             let y1 = &y.vertices[1];
-            if !plain_surface(scene, y1)
-                || !sees_environment(scene, y1, x0.wo)
-                || !scene.geometry.visible(&x2.sp, &y1.sp)
-            {
-                continue;
-            }
-            if let Some(w) = (y1.p() - x2.p()).try_normalize()
-                && let Some(c) = cell_of(&frame2, w)
+            if x1_counted(x, y1)
+                && let Some(c) = floor_cell(y1)
             {
                 counts1[c] += 1;
             }
@@ -940,22 +968,22 @@ fn bidirectional_density_at_infinity_matches_its_proposals() {
     let kernel = Bidirectional::new(1, Some(3), true);
     let (counts0, counts1, y) = infinite_histograms(&x, 41);
     eprintln!(
-        "counted: l = 0 {}, l = 1 {} of {N}",
+        "counted: l = 0 {}, l = 1 {} of {N_INF}",
         counts0.iter().sum::<u64>(),
         counts1.iter().sum::<u64>()
     );
     let masses0 = x0_masses(&kernel, &x, InfiniteDensity::Reported);
-    let p0 = common::chi_square_p_value(&counts0, &masses0, N);
+    let p0 = common::chi_square_p_value(&counts0, &masses0, N_INF);
     assert!(p0 > 1e-4, "regrowing x_0 at infinity: p = {p0:.2e}");
     let masses1 = x1_masses(&kernel, &x, InfiniteDensity::Reported);
-    let p1 = common::chi_square_p_value(&counts1, &masses1, N);
+    let p1 = common::chi_square_p_value(&counts1, &masses1, N_INF);
     assert!(p1 > 1e-4, "regrowing x_1 from x_0 at infinity: p = {p1:.2e}");
     for control in [
         InfiniteDensity::ProjectedLightWay,
         InfiniteDensity::CameraWayOnly,
     ] {
         let wrong = x0_masses(&kernel, &x, control);
-        let p = common::chi_square_p_value(&counts0, &wrong, N);
+        let p = common::chi_square_p_value(&counts0, &wrong, N_INF);
         assert!(
             p < 1e-4,
             "a control density of x_0 passed (projected light way: {}): p = {p:.2e}",
@@ -963,14 +991,14 @@ fn bidirectional_density_at_infinity_matches_its_proposals() {
         );
     }
     let wrong = x1_masses(&kernel, &x, InfiniteDensity::DiskCosineDropped);
-    let p = common::chi_square_p_value(&counts1, &wrong, N);
+    let p = common::chi_square_p_value(&counts1, &wrong, N_INF);
     assert!(p < 1e-4, "the disk walk without its cosine passed: p = {p:.2e}");
 
     // From the proposal y back: the ratio over the cells of y_0 and x_0.
     let y = y.expect("a valid proposal regrowing x_0");
     let masses0_y = x0_masses(&kernel, &y, InfiniteDensity::Reported);
     let (counts0_y, _, _) = infinite_histograms(&y, 42);
-    let p_y = common::chi_square_p_value(&counts0_y, &masses0_y, N);
+    let p_y = common::chi_square_p_value(&counts0_y, &masses0_y, N_INF);
     assert!(p_y > 1e-4, "T(y→·) at infinity: p = {p_y:.2e}");
     let frame = Frame::from_normal(x.vertices[1].sp.ng);
     let by = cell_of(&frame, y.vertices[0].wo).expect("y_0 above x_1");
@@ -986,3 +1014,4 @@ fn bidirectional_density_at_infinity_matches_its_proposals() {
         "T(x→y)/T(y→x) at infinity: histograms {observed}, code {reported} (σ {sigma})"
     );
 }
+
