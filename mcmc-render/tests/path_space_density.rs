@@ -721,7 +721,7 @@ const N_INF: usize = 500_000;
 fn environment_scene() -> &'static Scene {
     static SCENE: OnceLock<Scene> = OnceLock::new();
     SCENE.get_or_init(|| {
-        let scene = common::sky_scene(16, 3);
+        let scene = common::sky_scene(16, 3, true);
         assert!(scene.lights.environment().is_some());
         scene
     })

@@ -1512,5 +1512,5 @@ fn mutations_keep_exact_start_states_exact_under_a_sky() {
 /// The sky scene at the test resolution.
 fn sky() -> &'static Scene {
     static SCENE: OnceLock<Scene> = OnceLock::new();
-    SCENE.get_or_init(|| common::sky_scene(RES, 4))
+    SCENE.get_or_init(|| common::sky_scene(RES, 4, true))
 }

@@ -13,9 +13,11 @@
 //! walk connected to an emitter point drawn as BDPT draws it (`s = 1`; at
 //! infinity, a direction). Each is a path state ([`crate::path_space::Path`])
 //! with energy `e(x) = lum f(x) / (p_0(x) + p_1(x))`, `p_s` the path's
-//! density under technique `s` ([`Path::log_regrowth_density`]): the
-//! balance heuristic over the two techniques, so the energies of one
-//! camera walk sum to its pixel's path-traced luminance estimate.
+//! density under technique `s` ([`Path::log_regrowth_density`]; `p_1 = 0`
+//! for a path of one segment, which `s = 1` never forms: it connects to a
+//! camera-walk vertex, not to the camera): the balance heuristic over the
+//! two techniques, so the energies of one camera walk sum to its pixel's
+//! path-traced luminance estimate.
 //!
 //! # Chains and the equal-deposition rule
 //!
@@ -199,7 +201,13 @@ fn seeds<'s>(
                 continue;
             }
             let k = path.segments();
+            // The seeds' techniques only: `s = 1` connects to a camera-walk
+            // vertex (`t = k ≥ 2`), never to the camera itself, so a path
+            // of one segment (an emitter or the sky seen directly) has the
+            // camera walk's density alone (session 19: with `(s, t) = (1,
+            // 1)` counted, the sky's pixels were ≈ 5% dark).
             let p: f64 = (0..=1)
+                .filter(|&s| k + 1 - s >= 2)
                 .map(|s| path.log_regrowth_density(0, k, s).exp())
                 .sum();
             let e = i / p;
