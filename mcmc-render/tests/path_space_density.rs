@@ -890,7 +890,8 @@ fn x1_masses(kernel: &Bidirectional, x: &Path<'_>, density: InfiniteDensity) -> 
             let (px, pz) = (-3.0 + (ix as f64 + 0.5) * h, -3.0 + (iz as f64 + 0.5) * h);
             // The floor point from below (nothing lies under the floor).
             let up = glam::Vec3::Y;
-            let ray = mcmc_render::geometry::Ray::new(glam::Vec3::new(px as f32, -1.0, pz as f32), up);
+            let ray =
+                mcmc_render::geometry::Ray::new(glam::Vec3::new(px as f32, -1.0, pz as f32), up);
             let Some(hit) = scene.intersect(&ray) else {
                 continue;
             };
@@ -977,7 +978,10 @@ fn bidirectional_density_at_infinity_matches_its_proposals() {
     assert!(p0 > 1e-4, "regrowing x_0 at infinity: p = {p0:.2e}");
     let masses1 = x1_masses(&kernel, &x, InfiniteDensity::Reported);
     let p1 = common::chi_square_p_value(&counts1, &masses1, N_INF);
-    assert!(p1 > 1e-4, "regrowing x_1 from x_0 at infinity: p = {p1:.2e}");
+    assert!(
+        p1 > 1e-4,
+        "regrowing x_1 from x_0 at infinity: p = {p1:.2e}"
+    );
     for control in [
         InfiniteDensity::ProjectedLightWay,
         InfiniteDensity::CameraWayOnly,
@@ -992,7 +996,10 @@ fn bidirectional_density_at_infinity_matches_its_proposals() {
     }
     let wrong = x1_masses(&kernel, &x, InfiniteDensity::DiskCosineDropped);
     let p = common::chi_square_p_value(&counts1, &wrong, N_INF);
-    assert!(p < 1e-4, "the disk walk without its cosine passed: p = {p:.2e}");
+    assert!(
+        p < 1e-4,
+        "the disk walk without its cosine passed: p = {p:.2e}"
+    );
 
     // From the proposal y back: the ratio over the cells of y_0 and x_0.
     let y = y.expect("a valid proposal regrowing x_0");
@@ -1014,4 +1021,3 @@ fn bidirectional_density_at_infinity_matches_its_proposals() {
         "T(x→y)/T(y→x) at infinity: histograms {observed}, code {reported} (σ {sigma})"
     );
 }
-

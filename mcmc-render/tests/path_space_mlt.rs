@@ -494,7 +494,10 @@ fn check_sky(name: &str, pt: &[[f64; 3]], reps: &[[f64; 3]], bound: f64) {
         a.failures(t, bound).is_empty(),
         "{name} disagrees with PT under a sky: {a:?}"
     );
-    assert!(a.resolves(t, bound), "{name}: noise too large for {bound}: {a:?}");
+    assert!(
+        a.resolves(t, bound),
+        "{name}: noise too large for {bound}: {a:?}"
+    );
     let biased: Vec<[f64; 3]> = reps.iter().map(|m| m.map(|v| v * (1.0 + bound))).collect();
     let b = MeanAgreement::new(pt, &biased);
     assert!(

@@ -1506,7 +1506,10 @@ fn mutations_keep_exact_start_states_exact_under_a_sky() {
         900,
     );
     assert!(z < 4.0, "the chains drift from π under a sky: |z| = {z:.2}");
-    assert!(control > 4.0, "control passed under a sky: |z| = {control:.2}");
+    assert!(
+        control > 4.0,
+        "control passed under a sky: |z| = {control:.2}"
+    );
 }
 
 /// The sky scene at the test resolution.

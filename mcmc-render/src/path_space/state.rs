@@ -374,7 +374,10 @@ impl<'s> Path<'s> {
         let raster = if vs[k - 1].kind == VertexKind::Infinite {
             // The environment seen directly: no clip distance applies (a
             // camera ray that escapes sees it, as path tracing's does).
-            scene.camera.raster_of_ray(vs[k].p(), raster_dir).map(|r| r.0)
+            scene
+                .camera
+                .raster_of_ray(vs[k].p(), raster_dir)
+                .map(|r| r.0)
         } else {
             scene
                 .camera
