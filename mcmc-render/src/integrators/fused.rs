@@ -30,8 +30,8 @@ crate::settings! {
     /// Fused-space settings: MMLT's (the Gaussian small step) plus the
     /// path-space mutations and how often they run.
     pub struct Fused {
-        /// Probability of a path-space mutation per step (the rest: primary-sample mutations); auto: chosen per path depth by a pilot run, then fixed (docs/fused.md).
-        pub path_space_probability: Option<f64> = Some(0.5), check probability_or_auto;
+        /// Probability of a path-space mutation per step (the rest: primary-sample mutations); auto (the default): chosen per path depth by a pilot run, then fixed (docs/fused.md).
+        pub path_space_probability: Option<f64> = None, check probability_or_auto;
         /// Mutations per pixel of the pilot run that path_space_probability=auto chooses from (not in the image).
         pub adaptation_mutations_per_pixel: usize = 4, check check::count;
         /// Probability of a change of technique per step (the authors' default: 0).
@@ -63,7 +63,8 @@ fn probability_or_auto(v: &Option<f64>) -> Result<(), String> {
 }
 
 /// Path-space probability of the pilot run of `path_space_probability=auto`
-/// (the fixed default's, so the pilot sees both kinds of move equally).
+/// (the fixed default before Session 19, so the pilot sees both kinds of
+/// move equally).
 pub const PILOT_PATH_PROBABILITY: f64 = 0.5;
 /// Bounds of `auto`'s choice: each kind keeps at least 5% of the steps, so
 /// the chain stays a mixture (large steps for ergodicity and the running
