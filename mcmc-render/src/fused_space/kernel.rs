@@ -80,9 +80,11 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 /// Counters of the conversions between the two spaces, summed over every
-/// chain of a render. The image does not depend on them; the per-depth
-/// tallies decide `path_space_probability=auto` (`integrators::fused`),
-/// the timings do not.
+/// chain of a render (each kernel adds its counts when it is dropped, so
+/// they are complete once the driver has returned). The image does not
+/// depend on them; the per-depth tallies decide
+/// `path_space_probability=auto` (`integrators::fused`), the timings do
+/// not.
 #[derive(Debug, Default)]
 pub struct FusedCounters {
     /// Path → primary sample inversions (each followed by a re-trace).
@@ -110,12 +112,48 @@ impl FusedCounters {
             ..FusedCounters::default()
         }
     }
+}
 
-    /// Counts an inversion (with its re-trace), in all and for `depth`.
-    fn count_inversion(&self, depth: usize) {
-        self.inversions.fetch_add(1, Ordering::Relaxed);
-        if let Some(t) = self.per_depth.get(depth) {
-            t.path_inversions.fetch_add(1, Ordering::Relaxed);
+/// One kernel's counts, kept in the kernel and added to the shared
+/// [`FusedCounters`] when it is dropped (at the end of the run): atomic
+/// additions on every step, from both threads into the same cache lines,
+/// would cost each step a cache-line transfer. Integer sums, so the totals
+/// do not depend on the order of the additions.
+#[derive(Debug, Default)]
+struct LocalCounts {
+    inversions: u64,
+    rejected_before_conversion: u64,
+    conversion_nanos: u64,
+    propose_nanos: u64,
+    pss_nanos: u64,
+    path_nanos: u64,
+    pss_proposals: u64,
+    pss_jump: u64,
+    path_proposals: u64,
+    path_jump: u64,
+}
+
+impl LocalCounts {
+    /// Adds the counts of a kernel of `depth` to `c`.
+    fn flush(&self, c: &FusedCounters, depth: usize) {
+        let add = |a: &AtomicU64, v: u64| {
+            a.fetch_add(v, Ordering::Relaxed);
+        };
+        add(&c.inversions, self.inversions);
+        add(
+            &c.rejected_before_conversion,
+            self.rejected_before_conversion,
+        );
+        add(&c.conversion_nanos, self.conversion_nanos);
+        add(&c.propose_nanos, self.propose_nanos);
+        add(&c.pss_nanos, self.pss_nanos);
+        add(&c.path_nanos, self.path_nanos);
+        if let Some(t) = c.per_depth.get(depth) {
+            add(&t.pss_proposals, self.pss_proposals);
+            add(&t.pss_jump, self.pss_jump);
+            add(&t.path_proposals, self.path_proposals);
+            add(&t.path_inversions, self.inversions);
+            add(&t.path_jump, self.path_jump);
         }
     }
 }
@@ -253,6 +291,14 @@ pub struct FusedKernel<'s> {
     /// The last proposal: whether it was a path-space move, and its
     /// squared image jump (0 when it failed), weighted by `α` in `observe`.
     last_move: (bool, f64),
+    /// Counts not yet added to `counters`.
+    local: LocalCounts,
+}
+
+impl Drop for FusedKernel<'_> {
+    fn drop(&mut self) {
+        self.local.flush(&self.counters, self.depth.depth);
+    }
 }
 
 impl<'s> FusedKernel<'s> {
@@ -287,6 +333,7 @@ impl<'s> FusedKernel<'s> {
             current_invertible: None,
             proposal_invertible: None,
             last_move: (false, 0.0),
+            local: LocalCounts::default(),
         })
     }
 
@@ -444,9 +491,7 @@ impl<'s> FusedKernel<'s> {
         };
         let (log_alpha1, _) = mh_log_acceptance(log_pi_x, log_pi_y, p.log_q_ratio + jacobian);
         if !accept(log_alpha1, rng) {
-            self.counters
-                .rejected_before_conversion
-                .fetch_add(1, Ordering::Relaxed);
+            self.local.rejected_before_conversion += 1;
             // Counted as a rejection of the mutation that proposed.
             return Proposal::failed(offset + p.component);
         }
@@ -458,7 +503,7 @@ impl<'s> FusedKernel<'s> {
             None => {
                 let mut probe = FusedState::untraced(scene, TorusPoint::fresh(child_rng(rng)));
                 let ok = round_trip(scene, &depth, x_path, s, rng, &mut probe).is_ok();
-                self.counters.count_inversion(depth.depth);
+                self.local.inversions += 1;
                 self.current_invertible = Some(ok);
                 ok
             }
@@ -468,7 +513,7 @@ impl<'s> FusedKernel<'s> {
                 FusedState::untraced(scene, TorusPoint::fresh(child_rng(rng)))
             });
             let result = round_trip(scene, &depth, y, s, rng, out);
-            self.counters.count_inversion(depth.depth);
+            self.local.inversions += 1;
             match result {
                 Err(RoundTripFailure::Inverse(_)) => Some(fail[1]),
                 Err(RoundTripFailure::Retrace) => Some(fail[2]),
@@ -477,9 +522,7 @@ impl<'s> FusedKernel<'s> {
         } else {
             Some(fail[3])
         };
-        self.counters
-            .conversion_nanos
-            .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        self.local.conversion_nanos += start.elapsed().as_nanos() as u64;
         if let Some(component) = outcome {
             return Proposal::failed(component);
         }
@@ -517,17 +560,14 @@ impl<'s> Kernel<FusedState<'s>, PathSample> for FusedKernel<'s> {
             self.propose_path(current, proposal, rng)
         };
         let nanos = start.elapsed().as_nanos() as u64;
-        let c = &self.counters;
-        c.propose_nanos.fetch_add(nanos, Ordering::Relaxed);
-        let tally = c.per_depth.get(self.depth.depth);
-        let (kind_nanos, proposals) = if path_move {
-            (&c.path_nanos, tally.map(|t| &t.path_proposals))
+        let c = &mut self.local;
+        c.propose_nanos += nanos;
+        if path_move {
+            c.path_nanos += nanos;
+            c.path_proposals += 1;
         } else {
-            (&c.pss_nanos, tally.map(|t| &t.pss_proposals))
-        };
-        kind_nanos.fetch_add(nanos, Ordering::Relaxed);
-        if let Some(n) = proposals {
-            n.fetch_add(1, Ordering::Relaxed);
+            c.pss_nanos += nanos;
+            c.pss_proposals += 1;
         }
         let jump = match p.failed {
             true => 0.0,
@@ -542,16 +582,13 @@ impl<'s> Kernel<FusedState<'s>, PathSample> for FusedKernel<'s> {
             self.current_invertible = self.proposal_invertible;
         }
         let (path_move, jump) = std::mem::take(&mut self.last_move);
-        if let Some(tally) = self.counters.per_depth.get(self.depth.depth) {
-            // Rounded per step (not summed in f64 and rounded once), so the
-            // totals do not depend on how chains are spread over threads.
-            let fixed = (obs.alpha * jump * JUMP_SCALE).round() as u64;
-            let sum = if path_move {
-                &tally.path_jump
-            } else {
-                &tally.pss_jump
-            };
-            sum.fetch_add(fixed, Ordering::Relaxed);
+        // Rounded per step (not summed in f64 and rounded once), so the
+        // totals do not depend on how chains are spread over threads.
+        let fixed = (obs.alpha * jump * JUMP_SCALE).round() as u64;
+        if path_move {
+            self.local.path_jump += fixed;
+        } else {
+            self.local.pss_jump += fixed;
         }
         if obs.component < self.n_pss {
             self.pss.observe(&StepObservation {
