@@ -560,7 +560,7 @@ impl<'s> Kernel<FusedState<'s>, PathSample> for FusedKernel<'s> {
         proposal: &mut Sample<FusedState<'s>, PathSample>,
         rng: &mut ChainRng,
     ) -> Proposal {
-        self.timed = self.local.steps % TIMED_EVERY == 0;
+        self.timed = self.local.steps.is_multiple_of(TIMED_EVERY);
         self.local.steps += 1;
         let start = self.timed.then(Instant::now);
         self.proposal_invertible = None;
