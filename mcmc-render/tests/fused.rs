@@ -387,6 +387,168 @@ fn the_mixed_chain_is_exact_and_a_dropped_jacobian_is_not() {
     );
 }
 
+/// `k` runs of `fused` with `path_space_probability=auto` on
+/// [`oblique_plane`] (depths 1 and 2; depth 1 carries nothing), through
+/// [`Fused::run_chains`], the integrator's own sequence (pilot, then the
+/// run): image means, top-half fractions and the chosen probabilities.
+fn plane_auto_reps(
+    scene: &Scene,
+    drop_jacobian: bool,
+    (k, mpp): (u64, u64),
+) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    use mcmc_render::integrators::fused::Fused;
+    use mcmc_render::integrators::{DepthParams, RunSettings};
+    use mcmc_render::markov::ChainParams;
+    let stop = AtomicBool::new(false);
+    let (w, h) = scene.camera.resolution();
+    let fused = Fused {
+        path_space_probability: None,
+        adaptation_mutations_per_pixel: 16,
+        depth: DepthParams {
+            max_depth: 2,
+            ..DepthParams::default()
+        },
+        chain: ChainParams {
+            bootstrap: 2000,
+            chains: 32,
+            mutations_per_pixel: Some(mpp),
+            ..ChainParams::default()
+        },
+        ..Fused::default()
+    };
+    let mutation = FusedMutation {
+        drop_jacobian,
+        ..fused.fused_mutation().expect("valid")
+    };
+    let (mut means, mut fractions, mut chosen) = (Vec::new(), Vec::new(), Vec::new());
+    for seed in 0..k {
+        let run = RunSettings {
+            seed: 300 + seed,
+            ..RunSettings::default()
+        };
+        let (_, r, a) = fused
+            .run_chains(scene, mutation, &run, &stop, &NoObserver)
+            .expect("fused runs");
+        let a = a.expect("auto runs a pilot");
+        chosen.push(a.per_depth[1].path_space_probability);
+        let img = r.image();
+        let lum = |p: &Rgb| f64::from(p.luminance());
+        let total: f64 = img.iter().map(lum).sum();
+        let top: f64 = img
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| (*i as u32 / w) < h / 2)
+            .map(|(_, p)| lum(p))
+            .sum();
+        means.push(total / img.len() as f64);
+        fractions.push(top / total);
+    }
+    (means, fractions, chosen)
+}
+
+/// `path_space_probability=auto` keeps the chain exact: on the oblique
+/// plane, the image mean and the split between its halves agree with the
+/// closed form, with the probability the pilot chose; the control, the
+/// same with the inverse's Jacobian left out of the path-space moves
+/// (pilot and run), must fail.
+///
+/// Tolerance as in the test above: K = 8 replicates, SE from their
+/// spread, |Δ| < 5.4 SE (Student's t with 7 degrees of freedom, two-sided
+/// false-alarm rate 1e-3). The pilot chooses p ≈ 0.06–0.16 on this scene
+/// (measured), so the control's defect acts on a tenth of the steps: its
+/// split moves by ≈ 0.02 (0.57 − 0.38 at p = 0.9 in the test above), which
+/// 8 × 300 mutations per pixel resolved to only 4.4 SE (measured); the
+/// control runs 8 × 720 (SE ≈ 0.003, ≈ 7 SE), the agreement 8 × 200.
+#[test]
+fn auto_keeps_the_chain_exact_and_a_dropped_jacobian_still_fails() {
+    let scene = oblique_plane();
+    let (exact_mean, exact) = oblique_plane_exact(&scene);
+    let (means, fr, chosen) = plane_auto_reps(&scene, false, (8, 200));
+    let (f, f_se) = mean_se1(&fr);
+    let (m, m_se) = mean_se1(&means);
+    eprintln!(
+        "auto: chose {chosen:?}; top fraction {f:.5} ± {f_se:.5} (exact {exact:.5}), mean {m:.5} ± {m_se:.5} (exact {exact_mean:.5})"
+    );
+    assert!((f - exact).abs() < 5.4 * f_se, "fraction {f} vs {exact}");
+    assert!(
+        (m - exact_mean).abs() < 5.4 * m_se,
+        "mean {m} vs {exact_mean}"
+    );
+    let (_, fr, chosen) = plane_auto_reps(&scene, true, (8, 720));
+    let (fc, fc_se) = mean_se1(&fr);
+    eprintln!("control (no Jacobian): chose {chosen:?}; top fraction {fc:.5} ± {fc_se:.5}");
+    assert!(
+        (fc - exact).abs() > 5.4 * fc_se,
+        "the dropped Jacobian passed: {fc} ± {fc_se} vs {exact}"
+    );
+}
+
+/// `path_space_probability=auto` through the registry: the pilot's choice
+/// and the image are bit-identical for 1 and 2 threads, the choice is made
+/// (not the fallback) within its bounds, and it is reported.
+#[test]
+fn auto_is_bit_identical_across_thread_counts_and_reported() {
+    use mcmc_render::integrators::fused::AUTO_BOUNDS;
+    use mcmc_render::integrators::{RunSettings, registry};
+    let scene = repo_scene("cornell-glossy-glass.xml", 12);
+    let integ = registry::configure(
+        None,
+        Some("fused"),
+        &[
+            ("max_depth".into(), "4".into()),
+            ("bootstrap".into(), "2000".into()),
+            ("chains".into(), "64".into()),
+            ("mutations_per_pixel".into(), "8".into()),
+            ("path_space_probability".into(), "auto".into()),
+            ("adaptation_mutations_per_pixel".into(), "64".into()),
+        ],
+    )
+    .expect("fused configures");
+    let stop = AtomicBool::new(false);
+    let render = |threads: usize, seed: u64| {
+        let run = RunSettings {
+            seed,
+            ..RunSettings::default()
+        };
+        let out = with_threads(threads, || integ.render(&scene, &run, &stop, &NoObserver))
+            .expect("fused renders");
+        let bits: Vec<u32> = (out.image.iter())
+            .flat_map(|p| [p.r.to_bits(), p.g.to_bits(), p.b.to_bits()])
+            .collect();
+        let choice: Vec<f64> = out.statistics["fused"]["adaptation"]["per_depth"]
+            .as_array()
+            .expect("the pilot is reported")
+            .iter()
+            .map(|d| d["path_space_probability"].as_f64().expect("a probability"))
+            .collect();
+        let used: Vec<f64> = out.statistics["fused"]["per_depth"]
+            .as_array()
+            .expect("per-depth statistics")
+            .iter()
+            .map(|d| d["path_space_probability"].as_f64().expect("a probability"))
+            .collect();
+        (bits, choice, used)
+    };
+    let (one, choice, used) = render(1, 42);
+    eprintln!("chosen per depth: {choice:?}");
+    assert_eq!(choice, used, "the run uses the pilot's choice");
+    assert_eq!(choice.len(), 4);
+    assert!(
+        choice
+            .iter()
+            .all(|p| (AUTO_BOUNDS.0..=AUTO_BOUNDS.1).contains(p)),
+        "{choice:?}"
+    );
+    assert!(
+        choice.iter().any(|&p| p != 0.5),
+        "no depth was decided (all fell back to 0.5): {choice:?}"
+    );
+    let (two, choice2, _) = render(2, 42);
+    assert_eq!(choice, choice2, "1 vs 2 threads chose differently");
+    assert!(one == two, "1 vs 2 threads differ");
+    assert!(one != render(2, 43).0, "seed ignored");
+}
+
 #[test]
 fn fused_is_bit_identical_across_thread_counts() {
     let scene = repo_scene("cornell-glossy-glass.xml", 12);
@@ -447,6 +609,40 @@ fn fused_runs_from_the_registry_with_its_statistics() {
     assert!(fused["transitions_per_mutation"].as_f64().unwrap() > 0.0);
     assert!(fused["inversions"].as_u64().unwrap() > 0);
     assert!(fused["acceptance_path_space"].as_f64().unwrap() > 0.0);
+    // The default is `auto`: the pilot is reported, one choice per depth.
+    let pilot = fused["adaptation"]["per_depth"].as_array().unwrap();
+    let depths = fused["per_depth"].as_array().unwrap();
+    assert_eq!((pilot.len(), depths.len()), (4, 4));
+    assert!(fused["adaptation"]["pilot_mutations"].as_u64().unwrap() > 0);
+    // A fixed probability: no pilot, that probability at every depth.
+    let fixed = registry::configure(
+        None,
+        Some("fused"),
+        &[
+            ("max_depth".into(), "4".into()),
+            ("bootstrap".into(), "2000".into()),
+            ("chains".into(), "32".into()),
+            ("mutations_per_pixel".into(), "4".into()),
+            ("path_space_probability".into(), "0.3".into()),
+        ],
+    )
+    .expect("fused configures")
+    .render(
+        &scene,
+        &RunSettings::default(),
+        &AtomicBool::new(false),
+        &NoObserver,
+    )
+    .expect("fused renders");
+    let fused = &fixed.statistics["fused"];
+    assert!(fused["adaptation"].is_null());
+    let depths = fused["per_depth"].as_array().unwrap();
+    assert!(
+        depths
+            .iter()
+            .all(|d| d["path_space_probability"].as_f64() == Some(0.3)),
+        "{depths:?}"
+    );
     let env = load_str(
         r#"<scene version="3.0.0">
     <sensor type="perspective"><film type="hdrfilm"><integer name="width" value="4"/><integer name="height" value="4"/></film></sensor>

@@ -80,7 +80,11 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 /// Counters of the conversions between the two spaces, summed over every
-/// chain of a render (timings only: the image does not depend on them).
+/// chain of a render (each kernel adds its counts when it is dropped, so
+/// they are complete once the driver has returned). The image does not
+/// depend on them; the per-depth tallies decide
+/// `path_space_probability=auto` (`integrators::fused`), the timings do
+/// not.
 #[derive(Debug, Default)]
 pub struct FusedCounters {
     /// Path → primary sample inversions (each followed by a re-trace).
@@ -88,10 +92,170 @@ pub struct FusedCounters {
     /// Path-space proposals rejected by the first acceptance stage, before
     /// any conversion.
     pub rejected_before_conversion: AtomicU64,
-    /// Nanoseconds spent inverting and re-tracing.
+    /// Nanoseconds spent inverting and re-tracing (estimated, [`TIMED_EVERY`]).
     pub conversion_nanos: AtomicU64,
-    /// Nanoseconds spent in the kernel's proposals, conversions included.
+    /// Nanoseconds spent in the kernel's proposals, conversions included (estimated, [`TIMED_EVERY`]).
     pub propose_nanos: AtomicU64,
+    /// Of those, in primary-sample moves (small, large, technique change).
+    pub pss_nanos: AtomicU64,
+    /// Of those, in path-space moves.
+    pub path_nanos: AtomicU64,
+    /// Per path depth (index = depth), what each kind of move achieved.
+    pub per_depth: Vec<MoveTally>,
+}
+
+impl FusedCounters {
+    /// Zeroed counters with tallies for depths `0..=max_depth`.
+    pub fn new(max_depth: usize) -> Self {
+        FusedCounters {
+            per_depth: (0..=max_depth).map(|_| MoveTally::default()).collect(),
+            ..FusedCounters::default()
+        }
+    }
+}
+
+/// One step in this many is timed, and its time counted this many times:
+/// reading the clock on every step took 4% of a run (`perf`, glossy-glass
+/// box, 1 thread). The timings of the statistics are therefore estimates;
+/// counts and tallies are exact.
+pub const TIMED_EVERY: u64 = 16;
+
+/// One kernel's counts, kept in the kernel and added to the shared
+/// [`FusedCounters`] when it is dropped (at the end of the run): atomic
+/// additions on every step, from both threads into the same cache lines,
+/// would cost each step a cache-line transfer. Integer sums, so the totals
+/// do not depend on the order of the additions.
+#[derive(Debug, Default)]
+struct LocalCounts {
+    steps: u64,
+    inversions: u64,
+    rejected_before_conversion: u64,
+    conversion_nanos: u64,
+    propose_nanos: u64,
+    pss_nanos: u64,
+    path_nanos: u64,
+    pss_proposals: u64,
+    pss_jump: u64,
+    path_proposals: u64,
+    path_jump: u64,
+}
+
+impl LocalCounts {
+    /// Adds the counts of a kernel of `depth` to `c`.
+    fn flush(&self, c: &FusedCounters, depth: usize) {
+        let add = |a: &AtomicU64, v: u64| {
+            a.fetch_add(v, Ordering::Relaxed);
+        };
+        add(&c.inversions, self.inversions);
+        add(
+            &c.rejected_before_conversion,
+            self.rejected_before_conversion,
+        );
+        add(&c.conversion_nanos, self.conversion_nanos);
+        add(&c.propose_nanos, self.propose_nanos);
+        add(&c.pss_nanos, self.pss_nanos);
+        add(&c.path_nanos, self.path_nanos);
+        if let Some(t) = c.per_depth.get(depth) {
+            add(&t.pss_proposals, self.pss_proposals);
+            add(&t.pss_jump, self.pss_jump);
+            add(&t.path_proposals, self.path_proposals);
+            add(&t.path_inversions, self.inversions);
+            add(&t.path_jump, self.path_jump);
+        }
+    }
+}
+
+/// Fixed-point scale of [`MoveTally`]'s jumps: a squared jump is a
+/// fraction of the squared image diagonal, in units of `2⁻³²`, so that
+/// the sums are integers and the same whatever order threads add them in
+/// (a chain of `10⁹` proposals stays below `2⁶²`).
+pub const JUMP_SCALE: f64 = 4_294_967_296.0;
+
+/// What one depth's primary-sample moves and path-space moves achieved:
+/// proposals, the expected squared jump of the splat in the image plane
+/// (`Σ α · |Δ raster|² / (w² + h²)`, fixed point, [`JUMP_SCALE`]) and
+/// the conversions the path-space moves paid for. Integers only, summed
+/// atomically: the totals are a function of the chains, not of threads.
+#[derive(Debug, Default)]
+pub struct MoveTally {
+    /// Primary-sample proposals (small, large, technique change).
+    pub pss_proposals: AtomicU64,
+    /// Their `Σ α · jump²` (fixed point).
+    pub pss_jump: AtomicU64,
+    /// Path-space proposals (failed ones included).
+    pub path_proposals: AtomicU64,
+    /// Inversions (each with a re-trace) they made.
+    pub path_inversions: AtomicU64,
+    /// Their `Σ α · jump²` (fixed point).
+    pub path_jump: AtomicU64,
+}
+
+/// One depth's [`MoveTally`], read out.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct MoveTotals {
+    /// Primary-sample proposals.
+    pub pss_proposals: u64,
+    /// Their `Σ α · jump²` (fraction of the squared diagonal).
+    pub pss_jump: f64,
+    /// Path-space proposals.
+    pub path_proposals: u64,
+    /// Their inversions.
+    pub path_inversions: u64,
+    /// Their `Σ α · jump²` (fraction of the squared diagonal).
+    pub path_jump: f64,
+}
+
+/// Cost of a path-space proposal's mutation and first-stage test, in
+/// primary-sample steps (one trace each). From Session 13's profile
+/// (`docs/fused.md`; door, 1 thread, half the steps of each kind): the
+/// mutations took 17% and stage 1 8% of the time over 921 k path-space
+/// proposals, the primary-sample proposals 27% over as many steps, so
+/// `(17 + 8) / 27 ≈ 0.93`.
+pub const MUTATION_COST: f64 = 0.93;
+/// Cost of one inversion with its re-trace, in primary-sample steps: the
+/// round trips took 32% of that profile's time over 525 k inversions,
+/// against 27% over 921 k primary-sample steps: `(32/525)/(27/921) ≈ 2.08`.
+pub const ROUND_TRIP_COST: f64 = 2.08;
+
+impl MoveTally {
+    /// The totals so far.
+    pub fn totals(&self) -> MoveTotals {
+        let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        MoveTotals {
+            pss_proposals: get(&self.pss_proposals),
+            pss_jump: get(&self.pss_jump) as f64 / JUMP_SCALE,
+            path_proposals: get(&self.path_proposals),
+            path_inversions: get(&self.path_inversions),
+            path_jump: get(&self.path_jump) as f64 / JUMP_SCALE,
+        }
+    }
+}
+
+impl MoveTotals {
+    /// Expected squared jump per unit of cost (primary-sample steps) of
+    /// the primary-sample moves and of the path-space moves (`NaN` for a
+    /// kind without proposals). The cost is a deterministic model
+    /// ([`MUTATION_COST`], [`ROUND_TRIP_COST`]), not a clock, so that a
+    /// choice made from it is the same on every machine and thread count.
+    pub fn efficiencies(&self) -> (f64, f64) {
+        let pss = self.pss_jump / self.pss_proposals as f64;
+        let cost = MUTATION_COST * self.path_proposals as f64
+            + ROUND_TRIP_COST * self.path_inversions as f64;
+        (pss, self.path_jump / cost)
+    }
+}
+
+/// Squared distance between the first splats of two paths in the image
+/// plane, as a fraction of the squared image diagonal (0 when either has
+/// none: it carries nothing, so the move is not accepted).
+fn image_jump(scene: &Scene, a: &PathSample, b: &PathSample) -> f64 {
+    match (a.splats.first(), b.splats.first()) {
+        (Some(a), Some(b)) => {
+            let (w, h) = (scene.film.width as f64, scene.film.height as f64);
+            f64::from((a.p - b.p).length_squared()) / (w * w + h * h)
+        }
+        _ => 0.0,
+    }
 }
 
 /// Probability of a primary-sample (small or large step) mutation.
@@ -131,6 +295,19 @@ pub struct FusedKernel<'s> {
     /// What `current_invertible` becomes if the last proposal is accepted
     /// (`Some(true)` after a path-space proposal's successful round trip).
     proposal_invertible: Option<bool>,
+    /// The last proposal: whether it was a path-space move, and its
+    /// squared image jump (0 when it failed), weighted by `α` in `observe`.
+    last_move: (bool, f64),
+    /// Counts not yet added to `counters`.
+    local: LocalCounts,
+    /// Whether the current step is timed ([`TIMED_EVERY`]).
+    timed: bool,
+}
+
+impl Drop for FusedKernel<'_> {
+    fn drop(&mut self) {
+        self.local.flush(&self.counters, self.depth.depth);
+    }
 }
 
 impl<'s> FusedKernel<'s> {
@@ -164,6 +341,9 @@ impl<'s> FusedKernel<'s> {
             scratch: None,
             current_invertible: None,
             proposal_invertible: None,
+            last_move: (false, 0.0),
+            local: LocalCounts::default(),
+            timed: false,
         })
     }
 
@@ -321,21 +501,19 @@ impl<'s> FusedKernel<'s> {
         };
         let (log_alpha1, _) = mh_log_acceptance(log_pi_x, log_pi_y, p.log_q_ratio + jacobian);
         if !accept(log_alpha1, rng) {
-            self.counters
-                .rejected_before_conversion
-                .fetch_add(1, Ordering::Relaxed);
+            self.local.rejected_before_conversion += 1;
             // Counted as a rejection of the mutation that proposed.
             return Proposal::failed(offset + p.component);
         }
         // Stage 2: the current path's round trip (once per state), then the
         // proposal's; either failing rejects the move (module docs).
-        let start = Instant::now();
+        let start = self.timed.then(Instant::now);
         let current_ok = match self.current_invertible {
             Some(ok) => ok,
             None => {
                 let mut probe = FusedState::untraced(scene, TorusPoint::fresh(child_rng(rng)));
                 let ok = round_trip(scene, &depth, x_path, s, rng, &mut probe).is_ok();
-                self.counters.inversions.fetch_add(1, Ordering::Relaxed);
+                self.local.inversions += 1;
                 self.current_invertible = Some(ok);
                 ok
             }
@@ -345,7 +523,7 @@ impl<'s> FusedKernel<'s> {
                 FusedState::untraced(scene, TorusPoint::fresh(child_rng(rng)))
             });
             let result = round_trip(scene, &depth, y, s, rng, out);
-            self.counters.inversions.fetch_add(1, Ordering::Relaxed);
+            self.local.inversions += 1;
             match result {
                 Err(RoundTripFailure::Inverse(_)) => Some(fail[1]),
                 Err(RoundTripFailure::Retrace) => Some(fail[2]),
@@ -354,9 +532,9 @@ impl<'s> FusedKernel<'s> {
         } else {
             Some(fail[3])
         };
-        self.counters
-            .conversion_nanos
-            .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        if let Some(start) = start {
+            self.local.conversion_nanos += start.elapsed().as_nanos() as u64 * TIMED_EVERY;
+        }
         if let Some(component) = outcome {
             return Proposal::failed(component);
         }
@@ -382,25 +560,49 @@ impl<'s> Kernel<FusedState<'s>, PathSample> for FusedKernel<'s> {
         proposal: &mut Sample<FusedState<'s>, PathSample>,
         rng: &mut ChainRng,
     ) -> Proposal {
-        let start = Instant::now();
+        self.timed = self.local.steps.is_multiple_of(TIMED_EVERY);
+        self.local.steps += 1;
+        let start = self.timed.then(Instant::now);
         self.proposal_invertible = None;
         let r = uniform(rng);
+        let path_move = r >= self.p_pss + self.p_tc;
         let p = if r < self.p_pss {
             self.propose_pss(current, proposal, rng)
-        } else if r < self.p_pss + self.p_tc {
+        } else if !path_move {
             self.propose_technique(current, proposal, rng)
         } else {
             self.propose_path(current, proposal, rng)
         };
-        self.counters
-            .propose_nanos
-            .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        let nanos = start.map_or(0, |s| s.elapsed().as_nanos() as u64 * TIMED_EVERY);
+        let c = &mut self.local;
+        c.propose_nanos += nanos;
+        if path_move {
+            c.path_nanos += nanos;
+            c.path_proposals += 1;
+        } else {
+            c.pss_nanos += nanos;
+            c.pss_proposals += 1;
+        }
+        let jump = match p.failed {
+            true => 0.0,
+            false => image_jump(self.scene, &current.payload, &proposal.payload),
+        };
+        self.last_move = (path_move, jump);
         p
     }
 
     fn observe(&mut self, obs: &StepObservation<'_, FusedState<'s>>) {
         if obs.accepted {
             self.current_invertible = self.proposal_invertible;
+        }
+        let (path_move, jump) = std::mem::take(&mut self.last_move);
+        // Rounded per step (not summed in f64 and rounded once), so the
+        // totals do not depend on how chains are spread over threads.
+        let fixed = (obs.alpha * jump * JUMP_SCALE).round() as u64;
+        if path_move {
+            self.local.path_jump += fixed;
+        } else {
+            self.local.pss_jump += fixed;
         }
         if obs.component < self.n_pss {
             self.pss.observe(&StepObservation {

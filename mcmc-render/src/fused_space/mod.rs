@@ -193,19 +193,36 @@ pub struct FusedFamily<'s> {
     pub targets: Vec<FusedTarget<'s>>,
     /// Conversion counters shared by every chain's kernel.
     pub counters: Arc<FusedCounters>,
+    /// Per member, the probability of a path-space move, in place of the
+    /// mutation's (`path_space_probability=auto`'s choice, fixed before
+    /// the chains start); empty: the mutation's for every member.
+    pub path_probabilities: Vec<f64>,
 }
 
 impl<'s> FusedFamily<'s> {
     /// The family of `depths` (MMLT's, [`crate::integrators::mmlt::Mmlt::depths`]).
     pub fn new(scene: &'s Scene, depths: Vec<MmltDepth>) -> Self {
+        let max_depth = depths.iter().map(|d| d.depth).max().unwrap_or(0);
         FusedFamily {
             scene,
             targets: depths
                 .into_iter()
                 .map(|depth| FusedTarget { scene, depth })
                 .collect(),
-            counters: Arc::new(FusedCounters::default()),
+            counters: Arc::new(FusedCounters::new(max_depth)),
+            path_probabilities: Vec::new(),
         }
+    }
+
+    /// The mutation of `member`'s chains: `mutation` with the member's own
+    /// path-space probability, if it has one (never above what the change
+    /// of technique leaves).
+    pub fn member_mutation(&self, mutation: &FusedMutation, member: usize) -> FusedMutation {
+        let mut m = *mutation;
+        if let Some(&p) = self.path_probabilities.get(member) {
+            m.path_probability = p.min(1.0 - m.technique_change);
+        }
+        m
     }
 }
 
@@ -222,15 +239,19 @@ impl<'s> ChainFamily for FusedFamily<'s> {
         &self.targets[member]
     }
     fn kernel(&self, mutation: &FusedMutation, member: usize) -> Result<Self::Kernel, MltError> {
+        let mutation = self.member_mutation(mutation, member);
         mutation.check().map_err(MltError::Setting)?;
         FusedKernel::new(
             self.scene,
             self.targets[member].depth,
-            mutation,
+            &mutation,
             self.counters.clone(),
         )
         .map_err(MltError::Setting)
     }
+    /// One probability for all members: with per-member path-space
+    /// probabilities it is not that of every member, so the integrator
+    /// refuses Kelemen's MIS (its only user) with them.
     fn independent_probability(&self, mutation: &FusedMutation) -> f64 {
         kernel::pss_probability(mutation) * mutation.pss.large_step_probability
     }
