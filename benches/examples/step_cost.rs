@@ -9,8 +9,10 @@
 //! valgrind --tool=callgrind target/release/examples/step_cost mh 1 1000000
 //! ```
 //!
-//! Cases: `target`, `mh`, `mtm` (k = 8); targets `1` (standard normal 1-d),
-//! `100` (standard normal 100-d), `dense` (dense Gaussian 100-d).
+//! Cases: `target`, `mh`, `mtm` (k = 8), `uniform` (MH with the uniform
+//! box walk of the same variance per coordinate as `mh`'s Gaussian walk);
+//! targets `1` (standard normal 1-d), `100` (standard normal 100-d),
+//! `dense` (dense Gaussian 100-d).
 //!
 //! With a fourth argument `B` it times instead: `B` batches of `N`
 //! operations each (one chain throughout), and prints the fastest batch's
@@ -63,6 +65,13 @@ fn run<T: Fn(&[f64]) -> f64>(
             let mut chain = Chain::new(&target, vec![0.0; d], mh, stream_rng(1, 0)).ok()?;
             timed(n, batches, || black_box(chain.step(&target)).alpha)
         }
+        "uniform" => {
+            // Half-width σ√3: the variance σ² of the Gaussian walk's steps.
+            let walk = UniformRandomWalk::new(scale * 3f64.sqrt()).ok()?;
+            let mh = MetropolisHastings::new(walk);
+            let mut chain = Chain::new(&target, vec![0.0; d], mh, stream_rng(1, 0)).ok()?;
+            timed(n, batches, || black_box(chain.step(&target)).alpha)
+        }
         "mtm" => {
             let kernel = GaussianRandomWalk::isotropic(scale).ok()?;
             let mtm = MultipleTry::new(kernel, 8, Lambda::InverseProposal).ok()?;
@@ -75,7 +84,7 @@ fn run<T: Fn(&[f64]) -> f64>(
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().collect();
-    let usage = "usage: step_cost target|mh|mtm 1|100|dense N [BATCHES]";
+    let usage = "usage: step_cost target|mh|uniform|mtm 1|100|dense N [BATCHES]";
     let (Some(case), Some(which), Some(n)) = (
         args.get(1),
         args.get(2),
