@@ -14,7 +14,9 @@
 //! `copy` (MH whose kernel proposes the current state: a step's cost
 //! without a random walk's draws), `chained` (the target, each evaluation
 //! waiting for the previous one's result, as a chain's next step waits
-//! for the acceptance: its latency, where `target` gives its throughput);
+//! for the acceptance: its latency, where `target` gives its throughput),
+//! `words` (only the ⌈d/2⌉ generator words a `uniform` step draws, from a
+//! local generator);
 //! targets `1` (standard normal 1-d), `100` (standard normal 100-d),
 //! `dense` (dense Gaussian 100-d).
 //!
@@ -102,6 +104,15 @@ fn run<T: Fn(&[f64]) -> f64>(
                 last
             })
         }
+        "words" => {
+            use rand::Rng;
+            let mut rng = stream_rng(1, 0);
+            let mut words = vec![0u64; d.div_ceil(2)];
+            timed(n, batches, || {
+                words.iter_mut().for_each(|w| *w = rng.next_u64());
+                black_box(&words)[0] as f64
+            })
+        }
         "copy" => {
             let mh = MetropolisHastings::new(CopyState);
             let mut chain = Chain::new(&target, vec![0.0; d], mh, stream_rng(1, 0)).ok()?;
@@ -131,7 +142,7 @@ fn run<T: Fn(&[f64]) -> f64>(
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().collect();
-    let usage = "usage: step_cost target|chained|copy|mh|uniform|mtm 1|100|dense N [BATCHES]";
+    let usage = "usage: step_cost target|chained|words|copy|mh|uniform|mtm 1|100|dense N [BATCHES]";
     let (Some(case), Some(which), Some(n)) = (
         args.get(1),
         args.get(2),
