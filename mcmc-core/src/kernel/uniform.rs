@@ -21,6 +21,12 @@ use crate::sample::Sample;
 /// Metropolis–Hastings kernel with a symmetric proposal, just as every
 /// other kernel's continuous draws are made from finitely many bits.
 ///
+/// It reports no proposal density ([`Kernel::log_proposal_density`] is
+/// `None`): in [`MultipleTry`](crate::mtm::MultipleTry) use
+/// `Lambda::InverseProposal`, which needs only the symmetry; as the first
+/// kernel of [`DelayedRejection`](crate::delayed_rejection::DelayedRejection)
+/// its second stage never runs (counted as failed).
+///
 /// ```
 /// use mcmc_core::kernel::UniformRandomWalk;
 /// use mcmc_core::prelude::*;
