@@ -3,7 +3,8 @@
 //! docs/performance.md).
 //!
 //! For each target the group holds `target` (one evaluation), `mh step`
-//! (Gaussian random walk, one evaluation per step) and `mtm k=8 step`
+//! (Gaussian random walk, one evaluation per step), `uniform mh step` (the
+//! uniform box walk of the same variance per coordinate) and `mtm k=8 step`
 //! (λ = 1/q, 15 evaluations per step). The sampler's overhead per step is
 //! `step − evaluations × target`.
 //!
@@ -15,7 +16,8 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use mcmc_benches::{DENSE_SCALE, dense_gaussian, dense_precision, standard_normal, standard_scale};
 use mcmc_core::prelude::*;
 
-/// Benchmarks `target`, an MH step and an MTM (k = 8) step on it.
+/// Benchmarks `target`, MH steps with the Gaussian and the uniform walk and
+/// an MTM (k = 8) step on it.
 fn group<T: Fn(&[f64]) -> f64>(c: &mut Criterion, name: &str, d: usize, scale: f64, target: T) {
     let mut g = c.benchmark_group(name);
     let state = vec![0.3; d];
@@ -24,6 +26,19 @@ fn group<T: Fn(&[f64]) -> f64>(c: &mut Criterion, name: &str, d: usize, scale: f
     let mh = MetropolisHastings::new(GaussianRandomWalk::isotropic(scale).unwrap());
     let mut chain = Chain::new(&target, vec![0.0; d], mh, stream_rng(1, 0)).unwrap();
     g.bench_function("mh step", |b| b.iter(|| black_box(chain.step(&target))));
+
+    // Half-width σ√3: the variance σ² of the Gaussian walk's steps.
+    let walk = UniformRandomWalk::new(scale * 3f64.sqrt()).unwrap();
+    let mut chain = Chain::new(
+        &target,
+        vec![0.0; d],
+        MetropolisHastings::new(walk),
+        stream_rng(1, 0),
+    )
+    .unwrap();
+    g.bench_function("uniform mh step", |b| {
+        b.iter(|| black_box(chain.step(&target)))
+    });
 
     let kernel = GaussianRandomWalk::isotropic(scale).unwrap();
     let mtm = MultipleTry::new(kernel, 8, Lambda::InverseProposal).unwrap();

@@ -9,8 +9,16 @@
 //! valgrind --tool=callgrind target/release/examples/step_cost mh 1 1000000
 //! ```
 //!
-//! Cases: `target`, `mh`, `mtm` (k = 8); targets `1` (standard normal 1-d),
-//! `100` (standard normal 100-d), `dense` (dense Gaussian 100-d).
+//! Cases: `target`, `mh`, `mtm` (k = 8), `uniform` (MH with the uniform
+//! box walk of the same variance per coordinate as `mh`'s Gaussian walk),
+//! `copy` (MH whose kernel proposes the current state: a step's cost
+//! without a random walk's draws), `chained` (the target, each evaluation
+//! waiting for the previous one's result, as a chain's next step waits
+//! for the acceptance: its latency, where `target` gives its throughput),
+//! `words` (only the ⌈d/2⌉ generator words a `uniform` step draws, from a
+//! local generator);
+//! targets `1` (standard normal 1-d), `100` (standard normal 100-d),
+//! `dense` (dense Gaussian 100-d).
 //!
 //! With a fourth argument `B` it times instead: `B` batches of `N`
 //! operations each (one chain throughout), and prints the fastest batch's
@@ -26,6 +34,7 @@ use std::hint::black_box;
 use std::process::ExitCode;
 
 use mcmc_benches::{DENSE_SCALE, dense_gaussian, dense_precision, standard_normal, standard_scale};
+use mcmc_core::kernel::Proposal;
 use mcmc_core::prelude::*;
 
 /// `batches` batches of `n` calls of `op`; the checksum of its results and
@@ -44,6 +53,32 @@ fn timed(n: u64, batches: u64, mut op: impl FnMut() -> f64) -> (f64, f64) {
     (acc, fastest)
 }
 
+/// Proposes the current state itself (a valid MH kernel that never
+/// moves): a step with it costs all but a random walk's draws and
+/// arithmetic, the floor under any random walk's step.
+struct CopyState;
+
+impl Kernel<Vec<f64>> for CopyState {
+    #[inline(always)]
+    fn propose(
+        &mut self,
+        current: &Sample<Vec<f64>>,
+        proposal: &mut Sample<Vec<f64>>,
+        _rng: &mut ChainRng,
+    ) -> Proposal {
+        proposal.state.clone_from(&current.state);
+        Proposal::symmetric(0)
+    }
+
+    fn is_symmetric(&self) -> bool {
+        true
+    }
+
+    fn component_names(&self) -> Vec<String> {
+        vec!["copy".into()]
+    }
+}
+
 /// Runs `batches` batches of `n` operations of `case`; returns the checksum
 /// and the fastest batch's seconds per operation.
 fn run<T: Fn(&[f64]) -> f64>(
@@ -58,8 +93,40 @@ fn run<T: Fn(&[f64]) -> f64>(
             let state = vec![0.3; d];
             timed(n, batches, || target(black_box(&state)))
         }
+        "chained" => {
+            // 0.3 + (≈ −4.5·10⁻³⁰⁰) is 0.3: the same evaluation every time,
+            // but the compiler cannot know it and must wait for `last`.
+            let mut state = vec![0.3; d];
+            let mut last = 0.0;
+            timed(n, batches, || {
+                state[0] = 0.3 + last * 1e-300;
+                last = target(&state);
+                last
+            })
+        }
+        "words" => {
+            use rand::Rng;
+            let mut rng = stream_rng(1, 0);
+            let mut words = vec![0u64; d.div_ceil(2)];
+            timed(n, batches, || {
+                words.iter_mut().for_each(|w| *w = rng.next_u64());
+                black_box(&words)[0] as f64
+            })
+        }
+        "copy" => {
+            let mh = MetropolisHastings::new(CopyState);
+            let mut chain = Chain::new(&target, vec![0.0; d], mh, stream_rng(1, 0)).ok()?;
+            timed(n, batches, || black_box(chain.step(&target)).alpha)
+        }
         "mh" => {
             let mh = MetropolisHastings::new(GaussianRandomWalk::isotropic(scale).ok()?);
+            let mut chain = Chain::new(&target, vec![0.0; d], mh, stream_rng(1, 0)).ok()?;
+            timed(n, batches, || black_box(chain.step(&target)).alpha)
+        }
+        "uniform" => {
+            // Half-width σ√3: the variance σ² of the Gaussian walk's steps.
+            let walk = UniformRandomWalk::new(scale * 3f64.sqrt()).ok()?;
+            let mh = MetropolisHastings::new(walk);
             let mut chain = Chain::new(&target, vec![0.0; d], mh, stream_rng(1, 0)).ok()?;
             timed(n, batches, || black_box(chain.step(&target)).alpha)
         }
@@ -75,7 +142,7 @@ fn run<T: Fn(&[f64]) -> f64>(
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().collect();
-    let usage = "usage: step_cost target|mh|mtm 1|100|dense N [BATCHES]";
+    let usage = "usage: step_cost target|chained|words|copy|mh|uniform|mtm 1|100|dense N [BATCHES]";
     let (Some(case), Some(which), Some(n)) = (
         args.get(1),
         args.get(2),

@@ -74,7 +74,7 @@ pub mod prelude {
     pub use crate::expected::RaoBlackwellMean;
     pub use crate::kernel::{
         AdaptiveCovariance, AdaptiveTorusStep, GaussianRandomWalk, Independent, Kernel, Mixture,
-        TorusStep,
+        TorusStep, UniformRandomWalk,
     };
     pub use crate::mh::MetropolisHastings;
     pub use crate::mtm::{Lambda, MultipleTry};

@@ -14,7 +14,7 @@ use mcmc_core::chain::{Algorithm, Chain};
 use mcmc_core::delayed_rejection::DelayedRejection;
 use mcmc_core::kernel::{
     AdaptiveCovariance, AdaptiveTorusStep, GaussianRandomWalk, Independent, Kernel, Mixture,
-    TorusStep,
+    TorusStep, UniformRandomWalk,
 };
 use mcmc_core::mh::MetropolisHastings;
 use mcmc_core::mtm::{Lambda, MultipleTry};
@@ -151,6 +151,15 @@ fn correlated_gaussian_multiple_try_and_delayed_rejection() {
         )
     });
     check_gaussian("delayed rejection", &r);
+}
+
+/// The uniform box walk (steps uniform on (−1, 1) in every coordinate).
+#[test]
+fn correlated_gaussian_uniform_random_walk() {
+    let r = gaussian_moments(16, 40_000, 0, || {
+        MetropolisHastings::new(UniformRandomWalk::new(1.0).unwrap())
+    });
+    check_gaussian("uniform random walk", &r);
 }
 
 /// π(u) ∝ 1 + a·cos(2πu₀) on the torus [0,1)^3: E[cos 2πu₀] = a/2, and

@@ -95,16 +95,24 @@ impl GaussianRandomWalk {
         // has the right length after the first step (no memcpy call and no
         // capacity check: in 1-d those cost more than the arithmetic).
         out.resize(current.len(), 0.0);
+        // The normals are drawn through a local copy of the generator (the
+        // same words in the same order, so the same bits): through `rng`
+        // the compiler must store its state after every draw, as `out`
+        // might alias it (the uniform walk's note, `uniform.rs`).
         match &self.shape {
             Shape::Isotropic(s) => {
+                let mut words = rng.clone();
                 for (o, c) in out.iter_mut().zip(current) {
-                    *o = c + s * standard_normal(rng);
+                    *o = c + s * standard_normal(&mut words);
                 }
+                *rng = words;
             }
             Shape::Diagonal(s) => {
+                let mut words = rng.clone();
                 for ((o, c), s) in out.iter_mut().zip(current).zip(s) {
-                    *o = c + s * standard_normal(rng);
+                    *o = c + s * standard_normal(&mut words);
                 }
+                *rng = words;
             }
             Shape::Full { lower, .. } => full_step_into(lower, &mut self.z, current, out, rng),
         }

@@ -19,6 +19,7 @@ mod mixture;
 pub mod nuts;
 mod phase_pool;
 mod torus_step;
+mod uniform;
 
 pub use adaptive_covariance::AdaptiveCovariance;
 pub use finite::FiniteProposal;
@@ -31,6 +32,7 @@ pub use metric::Metric;
 pub use mixture::Mixture;
 pub use nuts::{MIN_INITIAL_STEP, Nuts, NutsDrawStatistics};
 pub use torus_step::{AdaptiveTorusStep, TorusStep};
+pub use uniform::UniformRandomWalk;
 
 use crate::rng::ChainRng;
 use crate::sample::Sample;
