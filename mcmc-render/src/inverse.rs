@@ -22,7 +22,8 @@
 //! [`crate::camera::Camera::invert`]; the spot light's cone is
 //! [`crate::light::SpotProfile::invert`]; the tabulated environment map's
 //! is [`crate::distribution::Distribution2d::invert`] (emitters at infinity
-//! are refused by the fused integrator, as by `mlt`); next-event
+//! are refused by the fused integrator: the inverses of their emission,
+//! direction and starting disk, are not built); next-event
 //! estimation's cone sampling of sphere emitters seen from outside is
 //! [`crate::light::Lights::sphere_cone_to_square`].
 
