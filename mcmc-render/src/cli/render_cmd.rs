@@ -51,7 +51,7 @@ pub struct RenderArgs {
     /// Re-trace one primary-sample vector (a NaN/inf dump) and print it.
     #[arg(long, value_name = "FILE")]
     replay: Option<PathBuf>,
-    /// Save progress to FILE after every pass (pt, lt, bdpt, erpt) or round
+    /// Save progress to FILE after every pass (pt, lt, bdpt, erpt, vcm) or round
     /// (pssmlt, mmlt, tempered-pssmlt, tempered-mmlt, relt) and, if FILE
     /// exists, continue from it (docs/distributed.md).
     #[arg(long, value_name = "FILE")]
@@ -248,11 +248,15 @@ fn open_checkpoint(
                 crate::markov::checkpoint::load(path, fingerprint, size, &filter)?.map(Arc::new);
         } else {
             checkpoint.resume = load(path, fingerprint, size)?.map(Arc::new);
-            // erpt's own words, checked here, before the ranks' handshake,
-            // so that a bad file stops every rank with one error.
-            if let (Some(p), "erpt") = (&checkpoint.resume, name) {
-                crate::integrators::erpt::check_checkpoint(p)
-                    .map_err(|e| format!("checkpoint {}: {e}", path.display()))?;
+            // erpt's and vcm's own words, checked here, before the ranks'
+            // handshake, so that a bad file stops every rank with one error.
+            let check = match name {
+                "erpt" => Some(crate::integrators::erpt::check_checkpoint as fn(&_) -> _),
+                "vcm" => Some(crate::integrators::vcm::check_checkpoint as fn(&_) -> _),
+                _ => None,
+            };
+            if let (Some(p), Some(check)) = (&checkpoint.resume, check) {
+                check(p).map_err(|e| format!("checkpoint {}: {e}", path.display()))?;
             }
         }
     }
