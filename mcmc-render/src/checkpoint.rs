@@ -27,9 +27,15 @@ pub const INTEGRATORS: [&str; 6] = ["pt", "lt", "bdpt", "erpt", "vcm", "guided"]
 
 /// The integrators whose runs can be checkpointed on the Markov-chain
 /// driver (independent chains and replica sets on primary sample space;
-/// see [`crate::markov::checkpoint`]).
-pub const CHAIN_INTEGRATORS: [&str; 5] =
-    ["pssmlt", "mmlt", "tempered-pssmlt", "tempered-mmlt", "relt"];
+/// see [`crate::markov::checkpoint`]; `mcmc-pg` pre-trained).
+pub const CHAIN_INTEGRATORS: [&str; 6] = [
+    "pssmlt",
+    "mmlt",
+    "tempered-pssmlt",
+    "tempered-mmlt",
+    "relt",
+    "mcmc-pg",
+];
 
 /// First bytes of a checkpoint file (format version 2: version 1's eight
 /// words, the integrator's own words after a ninth word counting them,

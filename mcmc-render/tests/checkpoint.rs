@@ -24,7 +24,8 @@
 //! two of four passes and resumed, the same bits and statistics as the
 //! uninterrupted render; control: the pass count put back to 0 differs.
 //! The same for `vcm`'s iterations and the passes of `guided`'s last
-//! iteration (session 19; control for `guided`: the pass count two back).
+//! iteration (session 19; control for `guided`: the pass count two back),
+//! and pre-trained `mcmc-pg`'s chains (session 19, as `pssmlt`'s).
 
 mod common;
 
@@ -455,6 +456,45 @@ fn a_stopped_guided_render_resumed_from_its_checkpoint_ends_bit_identical() {
     }
     assert_eq!(resumed.statistics["checkpoint"]["resumed_from_spp"], 63);
     assert!(bits(&control.image) != bits(&whole.image), "control agreed");
+}
+
+/// `mcmc-pg` pre-trained (session 19): its chains saved as `pssmlt`'s
+/// between rounds, the SD-tree trained again on resume. 24×24 × 32
+/// mutations per pixel: 4 spp of training (1/8), then 28 a pixel over 12
+/// chains, 1344 a chain: rounds of 256 (five) and 64. Stopped after two
+/// rounds and resumed: image and statistics as the uninterrupted run's;
+/// control: every chain's stream put back to its start. Online training
+/// is refused with one line.
+#[test]
+fn a_stopped_pretrained_mcmc_pg_render_resumed_from_its_checkpoint_ends_bit_identical() {
+    let scene = repo_scene("cornell-box.xml", 24);
+    let sets = [
+        ("bootstrap", "2000"),
+        ("chains", "12"),
+        ("mutations_per_pixel", "32"),
+    ];
+    check_markov_resume(&scene, ("mcmc-pg", &sets), 12 * 256, 24 * 24 * 28);
+    let online = registry::configure(
+        None,
+        Some("mcmc-pg"),
+        &[("training".to_string(), "online".to_string())],
+    )
+    .expect("mcmc-pg");
+    let run = RunSettings {
+        spp: Some(4),
+        checkpoint: Some(Checkpoint {
+            path: std::env::temp_dir().join("mcmc-render-never-written.ckpt"),
+            fingerprint: 7,
+            resume: None,
+            chains: None,
+        }),
+        ..RunSettings::default()
+    };
+    let e = online
+        .render(&scene, &run, &AtomicBool::new(false), &NoObserver)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("training=pretrained") && !e.contains('\n'), "{e}");
 }
 
 /// A Markov render as the command line runs it, with `sets` (the driver's

@@ -53,7 +53,8 @@ pub struct RenderArgs {
     replay: Option<PathBuf>,
     /// Save progress to FILE after every pass (pt, lt, bdpt, erpt, vcm, and
     /// guided's last iteration) or round
-    /// (pssmlt, mmlt, tempered-pssmlt, tempered-mmlt, relt) and, if FILE
+    /// (pssmlt, mmlt, tempered-pssmlt, tempered-mmlt, relt, pre-trained
+    /// mcmc-pg) and, if FILE
     /// exists, continue from it (docs/distributed.md).
     #[arg(long, value_name = "FILE")]
     checkpoint: Option<PathBuf>,
