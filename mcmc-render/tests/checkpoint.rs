@@ -494,7 +494,10 @@ fn a_stopped_pretrained_mcmc_pg_render_resumed_from_its_checkpoint_ends_bit_iden
         .render(&scene, &run, &AtomicBool::new(false), &NoObserver)
         .unwrap_err()
         .to_string();
-    assert!(e.contains("training=pretrained") && !e.contains('\n'), "{e}");
+    assert!(
+        e.contains("training=pretrained") && !e.contains('\n'),
+        "{e}"
+    );
 }
 
 /// A Markov render as the command line runs it, with `sets` (the driver's
