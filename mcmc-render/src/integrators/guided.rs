@@ -438,15 +438,25 @@ pub fn check_checkpoint(progress: &Progress, budget: Option<u64>) -> Result<(), 
     LastIteration::of(progress, budget).map(|_| ())
 }
 
-/// Where a checkpointed run resumes: the last iteration's position, the
-/// pass count, and on rank 0 (the only rank that adds into them) its film
-/// and the non-finite count; on a cluster every rank is told the rest (a
-/// broadcast). `None`: a fresh start. Collective on a cluster.
+/// Where a checkpointed run resumes.
+struct Resumed {
+    /// The position in the last iteration.
+    at: LastIteration,
+    /// Passes done.
+    pass: u64,
+    /// The last iteration's film and the non-finite count: rank 0's (the
+    /// only rank that adds into them), `None` on the others.
+    sums: Option<(Film, u64)>,
+}
+
+/// Where a checkpointed run resumes, from rank 0's checkpoint; on a
+/// cluster every rank is told the position and passes (a broadcast).
+/// `None`: a fresh start. Collective on a cluster.
 fn resume_point(
     run: &RunSettings,
     budget: Option<u64>,
     filter: &Arc<Filter>,
-) -> Result<Option<(LastIteration, u64, Option<(Film, u64)>)>, RenderError> {
+) -> Result<Option<Resumed>, RenderError> {
     let Some(checkpoint) = &run.checkpoint else {
         return Ok(None);
     };
@@ -470,13 +480,16 @@ fn resume_point(
     let [k, start, length, done, pass] = words[..] else {
         return Ok(None);
     };
-    let at = LastIteration {
-        k,
-        start,
-        length,
-        done,
-    };
-    Ok(Some((at, pass, local.map(|(.., film, n)| (film, n)))))
+    Ok(Some(Resumed {
+        at: LastIteration {
+            k,
+            start,
+            length,
+            done,
+        },
+        pass,
+        sums: local.map(|(.., film, n)| (film, n)),
+    }))
 }
 
 /// One finished (or interrupted) iteration, for the statistics.
@@ -561,7 +574,7 @@ impl GuidedSettings {
         } else {
             None
         };
-        let resumed_from = resume.as_ref().map(|r| r.0.start + r.0.done);
+        let resumed_from = resume.as_ref().map(|r| r.at.start + r.at.done);
         let mut checkpoint_error: Option<String> = None;
         for k in 1u32.. {
             // Is this the last iteration, and how long is it? (On a
@@ -582,7 +595,12 @@ impl GuidedSettings {
             // a resumed run continues it after its saved passes.
             let saving = saves && last && iteration_spp.is_some();
             let resumed_here = if saving { resume.take() } else { None };
-            if let Some((at, saved_pass, saved)) = resumed_here {
+            if let Some(Resumed {
+                at,
+                pass: saved_pass,
+                sums: saved,
+            }) = resumed_here
+            {
                 let here = (u64::from(k), spp_done, iteration_spp.unwrap_or(0));
                 if here != (at.k, at.start, at.length) {
                     return Err(RenderError::Invalid(format!(
