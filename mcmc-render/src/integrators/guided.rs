@@ -574,7 +574,8 @@ impl GuidedSettings {
         } else {
             None
         };
-        let resumed_from = resume.as_ref().map(|r| r.at.start + r.at.done);
+        // The samples per pixel resumed from, once the run got there.
+        let mut resumed_from = None;
         let mut checkpoint_error: Option<String> = None;
         for k in 1u32.. {
             // Is this the last iteration, and how long is it? (On a
@@ -611,6 +612,7 @@ impl GuidedSettings {
                 done = at.done;
                 spp_done += at.done;
                 pass = saved_pass;
+                resumed_from = Some(spp_done);
                 if let Some((saved_film, nonfinite)) = saved {
                     film = saved_film;
                     stats.nonfinite = nonfinite;
