@@ -2284,6 +2284,63 @@ impl IntegratorSettings for McmcVcmSettings {
 mod tests {
     use super::*;
 
+    /// A chain pair's report and normalisation sums cross ranks as
+    /// numbers and counts; they must come back with the same bits (the
+    /// image and statistics of a distributed run are the single process's
+    /// only then). Values with awkward bits (−0, a subnormal, 1/3); the
+    /// visibility chain absent, as with `light_chains = contribution`. A
+    /// report cut by one word is refused.
+    #[test]
+    fn a_pair_report_and_its_sums_cross_ranks_bit_exactly() {
+        let mut stats = ChainStatistics::new(vec!["small".into(), "large".into()]);
+        (stats.steps, stats.accepted, stats.evaluations) = (7, 3, 9);
+        (stats.invalid_density, stats.outside_support, stats.failed) = (1, 2, 4);
+        stats.components[1].proposed = 5;
+        stats.components[1].accepted = 2;
+        stats.components[1].sum_alpha = 1.0 / 3.0;
+        let report = PairReport {
+            tally: Tally {
+                energy: [-0.0, 1e-310, 1.0 / 3.0, 2.5, f64::MAX],
+                nonfinite: 6,
+                light_vertices: 11,
+            },
+            swaps: 13,
+            swaps_accepted: 8,
+            swap_alpha: 0.1 + 0.2,
+            invalid: 3,
+            chains: [Some(stats.clone()), None],
+        };
+        let names = [vec!["small".to_string(), "large".to_string()], Vec::new()];
+        let back = PairReport::from_counters(report.to_counters(), &names).unwrap();
+        let bits = |e: &[f64]| e.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&back.tally.energy), bits(&report.tally.energy));
+        assert_eq!((back.tally.nonfinite, back.tally.light_vertices), (6, 11));
+        assert_eq!((back.swaps, back.swaps_accepted, back.invalid), (13, 8, 3));
+        assert_eq!(back.swap_alpha.to_bits(), report.swap_alpha.to_bits());
+        let chain = back.chains[0].as_ref().expect("the contribution chain");
+        assert_eq!((chain.steps, chain.accepted, chain.evaluations), (7, 3, 9));
+        assert_eq!(
+            (chain.invalid_density, chain.outside_support, chain.failed),
+            (1, 2, 4)
+        );
+        let c = &chain.components[1];
+        assert_eq!((c.name.as_str(), c.proposed, c.accepted), ("large", 5, 2));
+        assert_eq!(c.sum_alpha.to_bits(), (1.0f64 / 3.0).to_bits());
+        assert!(back.chains[1].is_none());
+        let (numbers, mut counts) = report.to_counters();
+        counts.pop();
+        assert!(PairReport::from_counters((numbers, counts), &names).is_err());
+
+        let mut n = Normalisation::default();
+        n.add(1.0 / 3.0, 0.1);
+        n.add(0.0, 0.0);
+        n.add_cameras(6144.0, -1e-300);
+        n.add_chain(0.7);
+        n.weigh_chain(1.0 / 7.0);
+        let back = Normalisation::from_batch(&n.batch());
+        assert_eq!(bits(&back.batch()), bits(&n.batch()));
+    }
+
     /// The batch ratio and its standard error against values worked by
     /// hand: batches (num, den) = (1, 2), (3, 2): r = 4/4 = 1; residuals
     /// −1, 1; s = 2; SE = √(2 · 2/1)/4 = 0.5.
