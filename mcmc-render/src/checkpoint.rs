@@ -1,5 +1,6 @@
 //! Checkpoints of the per-pixel driver ([`crate::render::render`]: `pt`,
-//! `lt`, `bdpt`) and of `erpt`'s passes: after every whole pass the film's
+//! `lt`, `bdpt`), of `erpt`'s passes, of `vcm`'s iterations and of the
+//! passes of `guided`'s last iteration: after every whole pass the film's
 //! accumulators, the pass count and the samples done (and what else the
 //! integrator keeps: `erpt`'s counters, chain statistics and luminance
 //! estimate) go to a file, so that a run stopped by a time limit, Ctrl-C
@@ -19,14 +20,22 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 /// The integrators whose runs can be checkpointed pass by pass in this
-/// format: the per-pixel driver's and `erpt`.
-pub const INTEGRATORS: [&str; 4] = ["pt", "lt", "bdpt", "erpt"];
+/// format: the per-pixel driver's, `erpt`, `vcm` (iteration by iteration)
+/// and `guided` (the passes of its last iteration; the SD-tree is trained
+/// again on resume).
+pub const INTEGRATORS: [&str; 6] = ["pt", "lt", "bdpt", "erpt", "vcm", "guided"];
 
 /// The integrators whose runs can be checkpointed on the Markov-chain
 /// driver (independent chains and replica sets on primary sample space;
-/// see [`crate::markov::checkpoint`]).
-pub const CHAIN_INTEGRATORS: [&str; 5] =
-    ["pssmlt", "mmlt", "tempered-pssmlt", "tempered-mmlt", "relt"];
+/// see [`crate::markov::checkpoint`]; `mcmc-pg` pre-trained).
+pub const CHAIN_INTEGRATORS: [&str; 6] = [
+    "pssmlt",
+    "mmlt",
+    "tempered-pssmlt",
+    "tempered-mmlt",
+    "relt",
+    "mcmc-pg",
+];
 
 /// First bytes of a checkpoint file (format version 2: version 1's eight
 /// words, the integrator's own words after a ninth word counting them,
@@ -43,7 +52,7 @@ const FRAME_BYTES: u128 = 8 + 72 + 8;
 
 /// Most words an integrator may keep beside the film ([`Progress::extra`]:
 /// `erpt` keeps 12 + 3 per component of its mutation kernel, 60 with the
-/// path-space mixture's 16).
+/// path-space mixture's 16; `vcm` keeps 6, `guided` 4).
 pub const MAX_EXTRA_WORDS: u64 = 256;
 
 /// Where a render keeps its checkpoint, for which inputs, and the progress

@@ -23,6 +23,9 @@
 //! `erpt` (pass by pass, in the per-pixel driver's format): stopped after
 //! two of four passes and resumed, the same bits and statistics as the
 //! uninterrupted render; control: the pass count put back to 0 differs.
+//! The same for `vcm`'s iterations and the passes of `guided`'s last
+//! iteration (session 19; control for `guided`: the pass count two back),
+//! and pre-trained `mcmc-pg`'s chains (session 19, as `pssmlt`'s).
 
 mod common;
 
@@ -278,6 +281,223 @@ fn a_stopped_erpt_render_resumed_from_its_checkpoint_ends_bit_identical() {
     }
     assert_eq!(resumed.statistics["checkpoint"]["resumed_from_passes"], 2);
     assert!(bits(&control.image) != bits(&whole.image), "control agreed");
+}
+
+/// `vcm` checkpointed after every iteration (session 19): a render stopped
+/// after two of its four iterations and resumed from its file ends with
+/// the uninterrupted render's image and statistics (iterations, technique
+/// energies, light vertices, the last radius) bit for bit. Control: the
+/// same file with the iteration count put back to 0 (so the resumed
+/// iterations redraw the first iterations' streams and radii) must give
+/// another image. A file whose vcm words are cut is refused with one line.
+#[test]
+fn a_stopped_vcm_render_resumed_from_its_checkpoint_ends_bit_identical() {
+    let scene = repo_scene("cornell-box.xml", 24);
+    let size = (scene.film.width, scene.film.height);
+    let vcm = registry::configure(None, Some("vcm"), &[]).expect("vcm");
+    let path = std::env::temp_dir().join(format!(
+        "mcmc-render-checkpoint-vcm-{}.ckpt",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_file(&path);
+    let run = |resume: Option<Progress>| RunSettings {
+        spp: Some(4),
+        seed: 9,
+        checkpoint: Some(Checkpoint {
+            path: path.clone(),
+            fingerprint: 42,
+            resume: resume.map(Arc::new),
+            chains: None,
+        }),
+        ..RunSettings::default()
+    };
+    let stop = AtomicBool::new(false);
+    let observer = StopAfter {
+        stop: &stop,
+        after: 2,
+        seen: AtomicU32::new(0),
+    };
+    let first = vcm.render(&scene, &run(None), &stop, &observer).unwrap();
+    assert!(first.interrupted);
+    let saved = load(&path, 42, size).unwrap().expect("a checkpoint");
+    assert_eq!((saved.pass, saved.spp_done, saved.extra.len()), (2, 2, 6));
+    // The control's copy and a cut one (the resumed run rewrites the file).
+    let mut restarted = load(&path, 42, size).unwrap().expect("a checkpoint");
+    (restarted.pass, restarted.spp_done) = (0, 0);
+    let mut cut = load(&path, 42, size).unwrap().expect("a checkpoint");
+    cut.extra.pop();
+    let go = AtomicBool::new(false);
+    let resumed = vcm
+        .render(&scene, &run(Some(saved)), &go, &NoObserver)
+        .unwrap();
+    let whole_run = RunSettings {
+        checkpoint: None,
+        ..run(None)
+    };
+    let whole = vcm.render(&scene, &whole_run, &go, &NoObserver).unwrap();
+    let control = vcm
+        .render(&scene, &run(Some(restarted)), &go, &NoObserver)
+        .unwrap();
+    let refused = vcm
+        .render(&scene, &run(Some(cut)), &go, &NoObserver)
+        .unwrap_err()
+        .to_string();
+    std::fs::remove_file(&path).unwrap();
+    assert!(!resumed.interrupted);
+    assert!(
+        bits(&resumed.image) == bits(&whole.image),
+        "resumed image differs"
+    );
+    for key in [
+        "iterations",
+        "energy_shares",
+        "light_vertices_per_iteration",
+        "nonfinite_samples",
+        "radius_final",
+    ] {
+        assert_eq!(resumed.statistics[key], whole.statistics[key], "{key}");
+    }
+    assert_eq!(
+        resumed.statistics["checkpoint"]["resumed_from_iterations"],
+        2
+    );
+    assert!(bits(&control.image) != bits(&whole.image), "control agreed");
+    assert!(
+        refused.contains("not a checkpoint of vcm") && !refused.contains('\n'),
+        "{refused}"
+    );
+}
+
+/// `guided` checkpointed after every pass of its last iteration (session
+/// 19): 100 spp on a 16×16 box are iterations of 1, 2, 4, 8 and 16 spp
+/// (one pass each) and a last one of 69 in passes of 16. A render stopped
+/// after its 7th pass (two of the last iteration's) and resumed — the
+/// SD-tree trained again — ends with the uninterrupted render's image and
+/// sample counts bit for bit. Control: the same file with its pass count
+/// two back (the resumed passes redraw the streams of the saved ones; the
+/// samples per pixel are unchanged) must give another image. A checkpoint
+/// given to a run of another budget, or to a run without one, is refused
+/// with one line.
+#[test]
+fn a_stopped_guided_render_resumed_from_its_checkpoint_ends_bit_identical() {
+    let scene = repo_scene("cornell-box.xml", 16);
+    let size = (scene.film.width, scene.film.height);
+    let guided = registry::configure(None, Some("guided"), &[]).expect("guided");
+    let path = std::env::temp_dir().join(format!(
+        "mcmc-render-checkpoint-guided-{}.ckpt",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_file(&path);
+    let run = |resume: Option<Progress>| RunSettings {
+        spp: Some(100),
+        seed: 9,
+        checkpoint: Some(Checkpoint {
+            path: path.clone(),
+            fingerprint: 42,
+            resume: resume.map(Arc::new),
+            chains: None,
+        }),
+        ..RunSettings::default()
+    };
+    let stop = AtomicBool::new(false);
+    let observer = StopAfter {
+        stop: &stop,
+        after: 7,
+        seen: AtomicU32::new(0),
+    };
+    let first = guided.render(&scene, &run(None), &stop, &observer).unwrap();
+    assert!(first.interrupted);
+    let saved = load(&path, 42, size).unwrap().expect("a checkpoint");
+    // 7 passes, 31 + 32 spp; iteration 6 from 31 spp, 69 long, 32 done.
+    assert_eq!((saved.pass, saved.spp_done), (7, 63));
+    assert_eq!(saved.extra, [6, 31, 69, 32]);
+    let one_line = |e: String, why: &str| {
+        assert!(e.contains(why) && !e.contains('\n'), "{why}: {e}");
+    };
+    use mcmc_render::integrators::guided::check_checkpoint;
+    one_line(
+        check_checkpoint(&saved, Some(99)).unwrap_err(),
+        "resume with the --spp",
+    );
+    one_line(
+        check_checkpoint(&saved, None).unwrap_err(),
+        "only with a sample budget",
+    );
+    // The control's copy (the resumed run rewrites the file as it goes).
+    let mut back = load(&path, 42, size).unwrap().expect("a checkpoint");
+    back.pass -= 2;
+    let go = AtomicBool::new(false);
+    let resumed = guided
+        .render(&scene, &run(Some(saved)), &go, &NoObserver)
+        .unwrap();
+    let whole_run = RunSettings {
+        checkpoint: None,
+        ..run(None)
+    };
+    let whole = guided.render(&scene, &whole_run, &go, &NoObserver).unwrap();
+    let control = guided
+        .render(&scene, &run(Some(back)), &go, &NoObserver)
+        .unwrap();
+    std::fs::remove_file(&path).unwrap();
+    assert!(!resumed.interrupted);
+    assert!(
+        bits(&resumed.image) == bits(&whole.image),
+        "resumed image differs"
+    );
+    for key in [
+        "spp",
+        "spp_total",
+        "spp_per_iteration",
+        "records_per_iteration",
+        "nonfinite_samples",
+        "tree_nodes",
+    ] {
+        assert_eq!(resumed.statistics[key], whole.statistics[key], "{key}");
+    }
+    assert_eq!(resumed.statistics["checkpoint"]["resumed_from_spp"], 63);
+    assert!(bits(&control.image) != bits(&whole.image), "control agreed");
+}
+
+/// `mcmc-pg` pre-trained (session 19): its chains saved as `pssmlt`'s
+/// between rounds, the SD-tree trained again on resume. 24×24 × 32
+/// mutations per pixel: 4 spp of training (1/8), then 28 a pixel over 12
+/// chains, 1344 a chain: rounds of 256 (five) and 64. Stopped after two
+/// rounds and resumed: image and statistics as the uninterrupted run's;
+/// control: every chain's stream put back to its start. Online training
+/// is refused with one line.
+#[test]
+fn a_stopped_pretrained_mcmc_pg_render_resumed_from_its_checkpoint_ends_bit_identical() {
+    let scene = repo_scene("cornell-box.xml", 24);
+    let sets = [
+        ("bootstrap", "2000"),
+        ("chains", "12"),
+        ("mutations_per_pixel", "32"),
+    ];
+    check_markov_resume(&scene, ("mcmc-pg", &sets), 12 * 256, 24 * 24 * 28);
+    let online = registry::configure(
+        None,
+        Some("mcmc-pg"),
+        &[("training".to_string(), "online".to_string())],
+    )
+    .expect("mcmc-pg");
+    let run = RunSettings {
+        spp: Some(4),
+        checkpoint: Some(Checkpoint {
+            path: std::env::temp_dir().join("mcmc-render-never-written.ckpt"),
+            fingerprint: 7,
+            resume: None,
+            chains: None,
+        }),
+        ..RunSettings::default()
+    };
+    let e = online
+        .render(&scene, &run, &AtomicBool::new(false), &NoObserver)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("training=pretrained") && !e.contains('\n'),
+        "{e}"
+    );
 }
 
 /// A Markov render as the command line runs it, with `sets` (the driver's

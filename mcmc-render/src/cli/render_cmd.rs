@@ -51,8 +51,10 @@ pub struct RenderArgs {
     /// Re-trace one primary-sample vector (a NaN/inf dump) and print it.
     #[arg(long, value_name = "FILE")]
     replay: Option<PathBuf>,
-    /// Save progress to FILE after every pass (pt, lt, bdpt, erpt) or round
-    /// (pssmlt, mmlt, tempered-pssmlt, tempered-mmlt, relt) and, if FILE
+    /// Save progress to FILE after every pass (pt, lt, bdpt, erpt, vcm, and
+    /// guided's last iteration) or round
+    /// (pssmlt, mmlt, tempered-pssmlt, tempered-mmlt, relt, pre-trained
+    /// mcmc-pg) and, if FILE
     /// exists, continue from it (docs/distributed.md).
     #[arg(long, value_name = "FILE")]
     checkpoint: Option<PathBuf>,
@@ -136,13 +138,22 @@ pub fn run(args: RenderArgs) -> Result<(), Failure> {
             &args.params.assignments()?,
         )?;
         let checkpoint = match &args.checkpoint {
-            Some(path) => Some(open_checkpoint(
-                path,
-                &scene,
-                &args,
-                &defines,
-                integrator.as_ref(),
-            )?),
+            Some(path) => {
+                let run = RunSettings {
+                    spp,
+                    time_budget,
+                    ..RunSettings::default()
+                };
+                let budget = run.samples_per_pixel(scene.sample_count).map(u64::from);
+                Some(open_checkpoint(
+                    path,
+                    &scene,
+                    &args,
+                    &defines,
+                    integrator.as_ref(),
+                    budget,
+                )?)
+            }
             None => None,
         };
         Ok((scene, integrator, checkpoint))
@@ -208,13 +219,15 @@ fn input_parts(
 /// be checkpointed only (the per-pixel ones and some on the Markov-chain
 /// driver), tied to the scene text, defines, integrator, settings and
 /// seed; rank 0 loads the progress it holds, if any (one line when it
-/// belongs to another render).
+/// belongs to another render). `budget`: the run's samples per pixel
+/// (`None`: a time budget alone), which `guided`'s schedule follows.
 fn open_checkpoint(
     path: &Path,
     scene: &Scene,
     args: &RenderArgs,
     defines: &std::collections::HashMap<String, String>,
     integrator: &dyn Configured,
+    budget: Option<u64>,
 ) -> Result<crate::checkpoint::Checkpoint, String> {
     use crate::checkpoint::{CHAIN_INTEGRATORS, Checkpoint, INTEGRATORS, fingerprint, load};
     let name = integrator.name();
@@ -225,6 +238,12 @@ fn open_checkpoint(
             INTEGRATORS.join(", "),
             CHAIN_INTEGRATORS.join(", ")
         ));
+    }
+    if name == "guided" && budget.is_none() {
+        return Err(
+            "--checkpoint: guided needs a sample budget (--spp): a time budget alone sets its iterations by the clock, so a resumed run could not repeat them"
+                .into(),
+        );
     }
     if let Some(output) = shares_an_output(path, &args.out) {
         return Err(format!(
@@ -248,11 +267,16 @@ fn open_checkpoint(
                 crate::markov::checkpoint::load(path, fingerprint, size, &filter)?.map(Arc::new);
         } else {
             checkpoint.resume = load(path, fingerprint, size)?.map(Arc::new);
-            // erpt's own words, checked here, before the ranks' handshake,
-            // so that a bad file stops every rank with one error.
-            if let (Some(p), "erpt") = (&checkpoint.resume, name) {
-                crate::integrators::erpt::check_checkpoint(p)
-                    .map_err(|e| format!("checkpoint {}: {e}", path.display()))?;
+            // The integrators' own words, checked here, before the ranks'
+            // handshake, so that a bad file stops every rank with one error.
+            if let Some(p) = &checkpoint.resume {
+                let checked = match name {
+                    "erpt" => crate::integrators::erpt::check_checkpoint(p),
+                    "vcm" => crate::integrators::vcm::check_checkpoint(p),
+                    "guided" => crate::integrators::guided::check_checkpoint(p, budget),
+                    _ => Ok(()),
+                };
+                checked.map_err(|e| format!("checkpoint {}: {e}", path.display()))?;
             }
         }
     }

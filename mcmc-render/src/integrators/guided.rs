@@ -20,6 +20,26 @@
 //! it holds at least as many samples per pixel as the one before, else the
 //! one before; stopped passes are discarded as in [`crate::render`].
 //!
+//! # Checkpoints
+//! With `--checkpoint FILE` (session 19) rank 0 saves after every pass of
+//! the **last** iteration, in the per-pixel driver's format
+//! ([`crate::checkpoint`]): that iteration's film (the image is made of it
+//! alone), the passes and samples per pixel done, the non-finite count
+//! and, as the integrator's words, the iteration's index, the samples per
+//! pixel before it, its length and the samples of it done. The SD-tree is
+//! not saved (it is megabytes, far beyond the format's 256 words): a
+//! resumed run trains it again — the training iterations are fixed by the
+//! sample budget and seed alone, so it is the same tree bit for bit — and
+//! then continues the last iteration after its saved passes, with the
+//! same `(seed, pass, tile)` streams, into the saved accumulators. So a
+//! resumed run ends with the uninterrupted run's bits, at the cost of
+//! repeating the training (under half the samples of a budget of
+//! `2^K − 1`), and a run stopped during the training has saved nothing.
+//! The schedule must be the same: checkpoints need a sample budget
+//! (`--spp` or the scene's; a time budget alone decides the iterations by
+//! the clock), and a resumed run with another budget is refused
+//! ([`check_checkpoint`]).
+//!
 //! # Radiance records
 //! Every vertex whose direction was not sampled from a delta lobe records,
 //! into the spatial leaf at its position, the radiance the path collected
@@ -49,6 +69,7 @@
 use super::pt::{ScatterOrigin, camera_ray, emitter_hit, environment_hit, next_event};
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings, SampleStats, rr_probability};
+use crate::checkpoint::Progress;
 use crate::color::Rgb;
 use crate::deadline::Deadline;
 use crate::film::{Film, Filter};
@@ -313,12 +334,8 @@ pub fn next_iteration(
 ) -> (Option<u64>, bool) {
     match budget {
         Some(n) => {
-            let left = n.saturating_sub(done);
-            if nominal.saturating_mul(3) > left {
-                (Some(left), true)
-            } else {
-                (Some(nominal), false)
-            }
+            let (length, last) = spp_iteration(n, done, nominal);
+            (Some(length), last)
         }
         None => {
             let left = deadline.time_left().map_or(0.0, |d| d.as_secs_f64());
@@ -329,6 +346,150 @@ pub fn next_iteration(
             }
         }
     }
+}
+
+/// [`next_iteration`] under a budget of `n` samples per pixel: the
+/// iteration's length and whether it is the last.
+fn spp_iteration(n: u64, done: u64, nominal: u64) -> (u64, bool) {
+    let left = n.saturating_sub(done);
+    if nominal.saturating_mul(3) > left {
+        (left, true)
+    } else {
+        (nominal, false)
+    }
+}
+
+/// The last iteration of a run of `n` samples per pixel (the doubling
+/// schedule of [`next_iteration`]): its index `k` (from 1), the samples
+/// per pixel before it and its length.
+fn last_iteration(n: u64) -> (u64, u64, u64) {
+    let (mut k, mut done, mut nominal) = (1, 0, 1u64);
+    loop {
+        match spp_iteration(n, done, nominal) {
+            (length, true) => return (k, done, length),
+            (length, false) => {
+                done += length;
+                k += 1;
+                nominal = nominal.saturating_mul(2);
+            }
+        }
+    }
+}
+
+/// Where a checkpoint stands in the last iteration: its index, the
+/// samples per pixel before it, its length and the samples of it done
+/// (`guided`'s words in the file, [`Progress::extra`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct LastIteration {
+    k: u64,
+    start: u64,
+    length: u64,
+    done: u64,
+}
+
+impl LastIteration {
+    /// The words a checkpoint keeps.
+    fn words(&self) -> Vec<u64> {
+        vec![self.k, self.start, self.length, self.done]
+    }
+
+    /// What `progress` holds: refused (one line) unless a `guided` run of
+    /// `budget` samples per pixel could have written it: four words, the
+    /// last iteration of that budget's schedule, no more of it done than
+    /// its length, and the samples per pixel the film holds.
+    fn of(progress: &Progress, budget: Option<u64>) -> Result<LastIteration, String> {
+        let Some(n) = budget else {
+            return Err("guided resumes only with a sample budget (--spp or the scene's): a time budget alone sets its iterations by the clock".into());
+        };
+        let [k, start, length, done] = progress.extra[..] else {
+            return Err(format!(
+                "holds {} words of the integrator's, guided keeps 4: not a checkpoint of guided",
+                progress.extra.len()
+            ));
+        };
+        let planned = last_iteration(n);
+        if (k, start, length) != planned {
+            return Err(format!(
+                "holds iteration {k} from {start} spp, {length} spp long; the last iteration of a {n}-spp run is iteration {} from {} spp, {} long: resume with the --spp the checkpoint was written with",
+                planned.0, planned.1, planned.2
+            ));
+        }
+        if done > length || progress.spp_done != start + done {
+            return Err(format!(
+                "impossible counts: {done} of the last iteration's {length} spp done, {} spp in all from {start}",
+                progress.spp_done
+            ));
+        }
+        Ok(LastIteration {
+            k,
+            start,
+            length,
+            done,
+        })
+    }
+}
+
+/// Checks that a checkpoint's `progress` is one a `guided` run of
+/// `budget` samples per pixel (`None`: a time budget alone) wrote (one
+/// line if not). The command line checks it on rank 0 before the ranks'
+/// start-up handshake, so that a bad file stops every rank with one
+/// error; the render checks it too.
+pub fn check_checkpoint(progress: &Progress, budget: Option<u64>) -> Result<(), String> {
+    LastIteration::of(progress, budget).map(|_| ())
+}
+
+/// Where a checkpointed run resumes.
+struct Resumed {
+    /// The position in the last iteration.
+    at: LastIteration,
+    /// Passes done.
+    pass: u64,
+    /// The last iteration's film and the non-finite count: rank 0's (the
+    /// only rank that adds into them), `None` on the others.
+    sums: Option<(Film, u64)>,
+}
+
+/// Where a checkpointed run resumes, from rank 0's checkpoint; on a
+/// cluster every rank is told the position and passes (a broadcast).
+/// `None`: a fresh start. Collective on a cluster.
+fn resume_point(
+    run: &RunSettings,
+    budget: Option<u64>,
+    filter: &Arc<Filter>,
+) -> Result<Option<Resumed>, RenderError> {
+    let Some(checkpoint) = &run.checkpoint else {
+        return Ok(None);
+    };
+    let local = match &checkpoint.resume {
+        Some(p) => {
+            let at = LastIteration::of(p, budget).map_err(RenderError::Invalid)?;
+            let film = p.film(filter.clone()).map_err(RenderError::Invalid)?;
+            Some((at, p.pass, film, p.nonfinite))
+        }
+        None => None,
+    };
+    let words = local.as_ref().map_or(Vec::new(), |(at, pass, ..)| {
+        let mut w = at.words();
+        w.push(*pass);
+        w
+    });
+    let words = match crate::cluster::current() {
+        Some(c) => c.broadcast_u64s(words),
+        None => words,
+    };
+    let [k, start, length, done, pass] = words[..] else {
+        return Ok(None);
+    };
+    Ok(Some(Resumed {
+        at: LastIteration {
+            k,
+            start,
+            length,
+            done,
+        },
+        pass,
+        sums: local.map(|(.., film, n)| (film, n)),
+    }))
 }
 
 /// One finished (or interrupted) iteration, for the statistics.
@@ -406,6 +567,16 @@ impl GuidedSettings {
         let mut interrupted = false;
         let mut nominal = 1u64;
         let cluster = crate::cluster::current();
+        // A checkpoint is written in the last iteration only (module docs).
+        let saves = run.checkpoint.is_some() && !train_last;
+        let mut resume = if saves {
+            resume_point(run, budget_spp, &filter)?
+        } else {
+            None
+        };
+        // The samples per pixel resumed from, once the run got there.
+        let mut resumed_from = None;
+        let mut checkpoint_error: Option<String> = None;
         for k in 1u32.. {
             // Is this the last iteration, and how long is it? (On a
             // cluster rank 0's clock decides for every rank.)
@@ -421,6 +592,32 @@ impl GuidedSettings {
             let mut film = Film::new(width, height, filter.clone());
             let mut done = 0u64;
             let mut records = 0u64;
+            // The planned last iteration of a sample budget is saved, and
+            // a resumed run continues it after its saved passes.
+            let saving = saves && last && iteration_spp.is_some();
+            let resumed_here = if saving { resume.take() } else { None };
+            if let Some(Resumed {
+                at,
+                pass: saved_pass,
+                sums: saved,
+            }) = resumed_here
+            {
+                let here = (u64::from(k), spp_done, iteration_spp.unwrap_or(0));
+                if here != (at.k, at.start, at.length) {
+                    return Err(RenderError::Invalid(format!(
+                        "checkpoint: holds iteration {} from {} spp, this run's last is iteration {} from {} spp",
+                        at.k, at.start, here.0, here.1
+                    )));
+                }
+                done = at.done;
+                spp_done += at.done;
+                pass = saved_pass;
+                resumed_from = Some(spp_done);
+                if let Some((saved_film, nonfinite)) = saved {
+                    film = saved_film;
+                    stats.nonfinite = nonfinite;
+                }
+            }
             loop {
                 if iteration_spp.is_some_and(|n| done >= n) {
                     break;
@@ -495,6 +692,22 @@ impl GuidedSettings {
                 done += u64::from(spp);
                 spp_done += u64::from(spp);
                 pass += 1;
+                if let Some(c) = &run.checkpoint
+                    && saving
+                    && crate::cluster::is_root()
+                    && checkpoint_error.is_none()
+                {
+                    let at = LastIteration {
+                        k: u64::from(k),
+                        start: spp_done - done,
+                        length: iteration_spp.unwrap_or(0),
+                        done,
+                    };
+                    let mut progress = Progress::of(pass, spp_done, stats.nonfinite, &film);
+                    progress.extra = at.words();
+                    checkpoint_error =
+                        crate::checkpoint::save(&c.path, c.fingerprint, &progress).err();
+                }
                 let best = |film: &Film| match &previous {
                     Some((img, n)) if *n > done => img.clone(),
                     _ => film.develop(0.0),
@@ -531,7 +744,7 @@ impl GuidedSettings {
         } else {
             0.0
         };
-        let statistics = serde_json::json!({
+        let mut statistics = serde_json::json!({
             "samples_per_second": samples_per_second,
             "spp": image_spp,
             "spp_total": spp_done,
@@ -546,6 +759,13 @@ impl GuidedSettings {
             "bvh_build_seconds": scene.geometry.build_time.as_secs_f64(),
             "triangles": scene.geometry.triangles,
         });
+        if let (Some(c), true) = (&run.checkpoint, saves) {
+            statistics["checkpoint"] = serde_json::json!({
+                "path": c.path.display().to_string(),
+                "resumed_from_spp": resumed_from,
+                "error": checkpoint_error,
+            });
+        }
         let rendered = Rendered {
             image,
             seconds,

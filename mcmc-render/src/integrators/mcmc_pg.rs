@@ -58,6 +58,16 @@
 //! do not depend on order: one seed gives the same trees and image on any
 //! thread count.
 //!
+//! # Checkpoints
+//! With `--checkpoint FILE` (session 19; `training = pretrained` and a
+//! mutation budget only) the chains save and resume as `pssmlt`'s do on
+//! the Markov driver ([`crate::markov::checkpoint`]); the SD-tree is not
+//! saved: a resumed run trains it again, which gives the same tree bit for
+//! bit (the training's samples per pixel follow from the budget, its
+//! streams from the seed), so the chains' targets, start-up and the image
+//! are the uninterrupted run's. A run stopped in the training has saved
+//! nothing. Online training changes the tree every iteration: refused.
+//!
 //! # Random numbers per state
 //! Coordinates 0–1 the raster position (2–3 the lens of a thin-lens
 //! camera), then 8 per scattering vertex as [`super::guided`] documents.
@@ -65,6 +75,7 @@
 use super::guided::{GuidedPathTracer, GuidedSettings, Training, agreed_iteration, next_iteration};
 use super::registry::IntegratorSettings;
 use super::{RenderError, Rendered, RunSettings};
+use crate::checkpoint::Checkpoint;
 use crate::deadline::Deadline;
 use crate::guiding::{ExactRecords, SdTree};
 use crate::markov::{self, ChainParams, MltResult};
@@ -275,12 +286,15 @@ impl McmcPg {
         scene: &Scene,
         sampler: GuidedPss<'_>,
         (mutations_per_pixel, deadline, seed): (Option<u64>, Deadline, u64),
+        (snapshot_every, checkpoint): (Duration, Option<Checkpoint>),
         stop: &AtomicBool,
         observer: &dyn Observer,
     ) -> Result<MltResult, RenderError> {
         let mutation = self.mutation.mutation().map_err(RenderError::Invalid)?;
         let run = RunSettings {
             seed,
+            snapshot_every,
+            checkpoint,
             ..RunSettings::default()
         };
         let mut settings = self.chain.chain_settings(mutation, &run);
@@ -335,10 +349,14 @@ impl McmcPg {
         )?;
         let training_seconds = start.elapsed().as_secs_f64();
         let sampler = GuidedPss::frozen(self.guiding.tracer(), &tree);
+        // With a checkpoint the chains save and resume as `pssmlt`'s; the
+        // tree is trained again on resume, the same bits (a sample budget
+        // fixes the training).
         let result = self.chains(
             scene,
             sampler,
             (chain_mpp, deadline, run.seed),
+            (run.snapshot_every, run.checkpoint.clone()),
             stop,
             observer,
         )?;
@@ -406,7 +424,14 @@ impl McmcPg {
             let seed = splitmix64(run.seed ^ splitmix64(ONLINE_STREAM + u64::from(k)));
             let progress = ProgressOnly(observer);
             let shown: &dyn Observer = if last { observer } else { &progress };
-            let result = self.chains(scene, sampler, (mpp, deadline, seed), stop, shown)?;
+            let result = self.chains(
+                scene,
+                sampler,
+                (mpp, deadline, seed),
+                (run.snapshot_every, None),
+                stop,
+                shown,
+            )?;
             let seconds = iteration_start.elapsed().as_secs_f64();
             let (small, large) = acceptances(&result);
             let interrupted = result.interrupted && !last;
@@ -476,6 +501,17 @@ impl IntegratorSettings for McmcPg {
         observer: &dyn Observer,
     ) -> Result<Rendered, RenderError> {
         let start = Instant::now();
+        // Checkpoints: the pre-trained variant's chains (module docs).
+        if run.checkpoint.is_some() && self.training == TrainingMode::Online {
+            return Err(RenderError::Invalid(
+                "--checkpoint: mcmc-pg saves only with training=pretrained (online, the tree changes every iteration and is not saved)".into(),
+            ));
+        }
+        if run.checkpoint.is_some() && self.chain.mutations_per_pixel(run).is_none() {
+            return Err(RenderError::Invalid(
+                "--checkpoint: mcmc-pg needs a mutation budget (--spp or mutations_per_pixel): a time budget alone sets its training by the clock, so a resumed run could not repeat it".into(),
+            ));
+        }
         let Outcome {
             result,
             tree,

@@ -153,6 +153,22 @@
 //! the iteration and the unit (tile, candidate block, chain pair), and
 //! results are joined in unit order: one seed gives the same image on any
 //! thread count.
+//!
+//! Distributed ([`crate::cluster`], `mpirun`): every rank makes every
+//! iteration's camera pass, the pilot, the restart candidates and the
+//! fresh visible subpath (every chain pair reads them all; the pool's
+//! restart weight `W` follows from them, so every rank holds it) but runs
+//! only the chain pairs dealt to it (pair `p` on rank `p mod K`; its
+//! chains live there for the whole run). After each iteration every rank
+//! gets every pair's normalisation sums, the visibility chain's already
+//! weighted by `W` (an all-gather, bit-exact), and merges them in pair
+//! order, so all hold the single process's `b_vis`, `b_con` for the next
+//! iteration; rank 0 gets every pair's splat film and camera-sample
+//! estimates and adds them in pair order into the light side's own film,
+//! the additions one process makes. The ranks agree (an all-gather of a
+//! flag) wherever a stop is checked between the phases, so all drop the
+//! same iteration: the image is the single process's for any number of
+//! ranks, with either restart rule.
 
 use super::bdpt::SubpathBuffers;
 use super::path_vertex::{Vertex, VertexKind};
@@ -162,6 +178,7 @@ use super::vcm::{
     VcmMode, VcmSettings, connections_at,
 };
 use super::{RenderError, Rendered, RunSettings};
+use crate::cluster::{Counters, Parcel, owns};
 use crate::color::Rgb;
 use crate::deadline::Deadline;
 use crate::film::{Film, Filter};
@@ -172,13 +189,14 @@ use crate::render::unit_source;
 use crate::sampling::RandomSource;
 use crate::scene::Scene;
 use glam::Vec2;
-use mcmc_core::chain::{Chain, Transition};
+use mcmc_core::chain::{Algorithm, Chain, Transition};
 use mcmc_core::kernel::{AdaptiveTorusStep, Independent, Kernel, Mixture};
 use mcmc_core::mh::{MetropolisHastings, accept};
 use mcmc_core::replica::swap_log_acceptance;
 use mcmc_core::rng::{ChainRng, child_rng, stream_rng, uniform};
 use mcmc_core::sample::Sample;
 use mcmc_core::space::{PrimarySampleSpace, TorusPoint};
+use mcmc_core::stats::ChainStatistics;
 use mcmc_core::target::{Evaluation, Target};
 use rayon::prelude::*;
 use std::cell::RefCell;
@@ -704,6 +722,22 @@ impl Normalisation {
         b
     }
 
+    /// The running sums a [`Normalisation::batch`] holds (no batches of
+    /// its own): how a chain pair's sums travel between ranks.
+    fn from_batch(b: &[f64]) -> Normalisation {
+        Normalisation {
+            count: b[COUNT],
+            vis: b[VIS],
+            con: b[CON],
+            con_unscaled: b[CON_UNSCALED],
+            chain_steps: b[CHAIN_STEPS],
+            chain_lum: b[CHAIN_LUM],
+            cameras: b[CAMERAS],
+            transfer: b[TRANSFER],
+            batches: Vec::new(),
+        }
+    }
+
     /// One visibility-chain step whose next state has expected luminance
     /// `luminance`.
     fn add_chain(&mut self, luminance: f64) {
@@ -898,6 +932,166 @@ fn deposit(
     }
 }
 
+/// What one chain pair adds to a run's statistics.
+struct PairReport {
+    tally: Tally,
+    swaps: u64,
+    swaps_accepted: u64,
+    swap_alpha: f64,
+    invalid: u64,
+    /// Its chains' statistics, indexed by [`ChainKind`] (`None`: not run).
+    chains: [Option<ChainStatistics>; 2],
+}
+
+impl PairReport {
+    /// The report of `unit`.
+    fn of(unit: &Unit) -> PairReport {
+        PairReport {
+            tally: unit.tally.clone(),
+            swaps: unit.swaps,
+            swaps_accepted: unit.swaps_accepted,
+            swap_alpha: unit.swap_alpha,
+            invalid: unit.invalid,
+            chains: unit
+                .chains
+                .each_ref()
+                .map(|c| c.as_ref().map(|c| c.stats().clone())),
+        }
+    }
+
+    /// The report as a distributed run sends it, bit-exactly: the tally's
+    /// counters followed by the swap sum, and the swap and invalid counts,
+    /// each chain's presence and statistics.
+    fn to_counters(&self) -> Counters {
+        let (mut numbers, mut counts) = self.tally.to_counters();
+        numbers.push(self.swap_alpha);
+        counts.extend([self.swaps, self.swaps_accepted, self.invalid]);
+        for chain in &self.chains {
+            counts.push(u64::from(chain.is_some()));
+            if let Some(stats) = chain {
+                crate::markov::checkpoint::stats_words(stats, &mut counts);
+            }
+        }
+        (numbers, counts)
+    }
+
+    /// The report [`PairReport::to_counters`] sent, its chains' component
+    /// names from `names` (by kind).
+    fn from_counters(
+        (numbers, counts): Counters,
+        names: &[Vec<String>; 2],
+    ) -> Result<PairReport, String> {
+        let cut = || "a chain pair's report is cut".to_string();
+        // The tally's counts: non-finite samples and light vertices.
+        let tallied = 2;
+        let (&swap_alpha, energies) = numbers.split_last().ok_or_else(cut)?;
+        if energies.len() != TECHNIQUE_NAMES.len() || counts.len() < tallied + 3 {
+            return Err(cut());
+        }
+        let tally = Tally::from_counters((energies.to_vec(), counts[..tallied].to_vec()));
+        let mut words = counts[tallied..].iter().copied();
+        let mut next = || words.next().ok_or_else(cut);
+        let (swaps, swaps_accepted, invalid) = (next()?, next()?, next()?);
+        let mut chains: [Option<ChainStatistics>; 2] = [None, None];
+        for (chain, names) in chains.iter_mut().zip(names) {
+            if next()? == 1 {
+                let mut stats = crate::markov::checkpoint::stats_from_words(&mut next)?;
+                for (c, name) in stats.components.iter_mut().zip(names) {
+                    c.name.clone_from(name);
+                }
+                *chain = Some(stats);
+            }
+        }
+        Ok(PairReport {
+            tally,
+            swaps,
+            swaps_accepted,
+            swap_alpha,
+            invalid,
+            chains,
+        })
+    }
+}
+
+/// Adds the iteration's chain pairs' sums in pair order and clears them
+/// for the next iteration: their normalisation sums, the visibility
+/// chain's weighted by the iteration's restart weight `weight`, into
+/// `norm` and `batch` (every rank: they set the next iteration's `b`),
+/// their splat films into the light side's film `light_film` and their
+/// camera-sample estimates into the returned light-side estimate per
+/// camera sample (rank 0; on the other ranks of a cluster it stays black
+/// and the film unchanged, as neither is written). Collective on a
+/// cluster (module docs).
+fn join_units(
+    units: &mut [Unit],
+    light_film: &mut Film,
+    norm: &mut Normalisation,
+    batch: &mut Normalisation,
+    weight: f64,
+    filter: &Arc<Filter>,
+) -> Vec<Rgb> {
+    let mut light = vec![Rgb::BLACK; light_film.width as usize * light_film.height as usize];
+    let Some(cluster) = crate::cluster::current() else {
+        for unit in units {
+            for (a, c) in light.iter_mut().zip(&mut unit.camera) {
+                *a += *c;
+                *c = Rgb::BLACK;
+            }
+            light_film.add_film(&unit.splats);
+            unit.splats.clear();
+            // Large steps of this iteration join the running sums, the
+            // visibility chain's states with their restart weight.
+            unit.norm.weigh_chain(weight);
+            norm.merge(&unit.norm);
+            batch.merge(&unit.norm);
+            unit.norm = Normalisation::default();
+        }
+        return light;
+    };
+    let mine = |p: &usize| owns(Some(cluster), *p);
+    // Every pair's normalisation sums (weighted where they are made: the
+    // same product) to every rank, each after its pair's index (exact in
+    // an f64), merged in pair order.
+    let mut tagged = Vec::new();
+    for (p, unit) in units.iter_mut().enumerate().filter(|(p, _)| mine(p)) {
+        unit.norm.weigh_chain(weight);
+        tagged.push(p as f64);
+        tagged.extend(unit.norm.batch());
+    }
+    let mut sums: Vec<(f64, Normalisation)> = (cluster.all_gather_f64s(tagged))
+        .chunks_exact(COLUMNS + 1)
+        .map(|c| (c[0], Normalisation::from_batch(&c[1..])))
+        .collect();
+    sums.sort_by(|a, b| a.0.total_cmp(&b.0));
+    for (_, n) in &sums {
+        norm.merge(n);
+        batch.merge(n);
+    }
+    // Splat films and camera-sample estimates (as f64: exact) to rank 0,
+    // added in pair order.
+    let parcels = (units.iter().enumerate())
+        .filter(|(p, _)| mine(p))
+        .map(|(p, unit)| {
+            let camera = unit.camera.iter().flat_map(|c| [c.r, c.g, c.b]);
+            (
+                p,
+                &unit.splats,
+                (camera.map(f64::from).collect(), Vec::new()),
+            )
+        });
+    for (numbers, _) in crate::cluster::reduce_units(light_film, parcels, filter) {
+        for (a, c) in light.iter_mut().zip(numbers.chunks_exact(3)) {
+            *a += Rgb::new(c[0] as f32, c[1] as f32, c[2] as f32);
+        }
+    }
+    for (_, unit) in units.iter_mut().enumerate().filter(|(p, _)| mine(p)) {
+        unit.camera.fill(Rgb::BLACK);
+        unit.splats.clear();
+        unit.norm = Normalisation::default();
+    }
+    light
+}
+
 /// The integrator.
 pub struct McmcVcm {
     /// VCM (techniques, radius, MIS, depth).
@@ -1088,15 +1282,21 @@ impl McmcVcm {
         let mut pilot_done = false;
         let mut iterations = 0u64;
         let mut interrupted = false;
+        // On a cluster this rank runs the chain pairs dealt to it (module
+        // docs), and every stop below is decided by all ranks alike (a
+        // collective; in one process the flag itself).
+        let cluster = crate::cluster::current();
+        let any_abort = || crate::cluster::any_rank(abort());
+        let mut busy = 0.0f64;
         while target.is_none_or(|t| iterations < t) && vcm.max_depth > 0 && pixels > 0 {
-            if abort() {
+            if any_abort() {
                 interrupted = true;
                 break;
             }
             let radius = vcm.radius_at(iterations);
 
             self.camera_pass(scene, radius, light_scale, run.seed, iterations, &mut pass);
-            if abort() {
+            if any_abort() {
                 interrupted = true;
                 break;
             }
@@ -1116,6 +1316,12 @@ impl McmcVcm {
                     self.candidates,
                     &abort,
                 );
+                // A pilot cut short on one rank would give it another
+                // scale: the ranks agree before using it.
+                if any_abort() {
+                    interrupted = true;
+                    break;
+                }
                 let visible = c.iter().filter(|c| c.luminance > 0.0).count();
                 if visible > 0 {
                     let b_vis = visible as f64 / c.len() as f64;
@@ -1148,7 +1354,7 @@ impl McmcVcm {
                 if independent { 0 } else { self.candidates },
                 &abort,
             );
-            if abort() {
+            if any_abort() {
                 interrupted = true;
                 break;
             }
@@ -1190,47 +1396,48 @@ impl McmcVcm {
                     self.fresh_visible(scene, &it, run.seed, iterations, tries, &abort)
                 })
                 .flatten();
-            // The chains need a visible candidate to restart from.
+            // The chains need a visible candidate to restart from. (A rank
+            // whose fresh subpath was cut by a stop runs no pair: `run_unit`
+            // checks the stop first, and the iteration is dropped below.)
+            let t = Instant::now();
             if batch.vis > 0.0 || independent {
-                units.par_iter_mut().enumerate().for_each(|(p, unit)| {
-                    self.run_unit(
-                        scene,
-                        &it,
-                        unscaled.as_ref(),
-                        &pool,
-                        &restarts,
-                        fresh.as_ref(),
-                        weight,
-                        b,
-                        unit,
-                        p,
-                        run.seed,
-                        iterations,
-                        &abort,
-                    );
-                });
+                units
+                    .par_iter_mut()
+                    .enumerate()
+                    .filter(|(p, _)| owns(cluster, *p))
+                    .for_each(|(p, unit)| {
+                        self.run_unit(
+                            scene,
+                            &it,
+                            unscaled.as_ref(),
+                            &pool,
+                            &restarts,
+                            fresh.as_ref(),
+                            weight,
+                            b,
+                            unit,
+                            p,
+                            run.seed,
+                            iterations,
+                            &abort,
+                        );
+                    });
             } else {
                 totals.skipped_iterations += 1;
             }
-            if aborted.load(Ordering::Relaxed) {
+            busy += t.elapsed().as_secs_f64();
+            if crate::cluster::any_rank(aborted.load(Ordering::Relaxed)) {
                 interrupted = true;
                 break;
             }
-            let mut light = vec![Rgb::BLACK; pixels];
-            for unit in &mut units {
-                for (a, c) in light.iter_mut().zip(&mut unit.camera) {
-                    *a += *c;
-                    *c = Rgb::BLACK;
-                }
-                light_film.add_film(&unit.splats);
-                unit.splats.clear();
-                // Large steps of this iteration join the running sums, the
-                // visibility chain's states with their restart weight.
-                unit.norm.weigh_chain(weight);
-                norm.merge(&unit.norm);
-                batch.merge(&unit.norm);
-                unit.norm = Normalisation::default();
-            }
+            let light = join_units(
+                &mut units,
+                &mut light_film,
+                &mut norm,
+                &mut batch,
+                weight,
+                &filter,
+            );
             norm.batches.push(batch.batch());
             for ((&raster, &pt), &l) in pass.rasters.iter().zip(&pass.estimates).zip(&light) {
                 film.add_sample(raster, pt);
@@ -1251,19 +1458,20 @@ impl McmcVcm {
         } else {
             0.0
         };
-        for unit in &units {
-            let mut tally = unit.tally.clone();
+        let reports = self.pair_reports(&units, &filter);
+        for r in &reports {
+            let mut tally = r.tally.clone();
             tally.energy.iter_mut().for_each(|e| *e *= scale);
             totals.tally.add(&tally);
-            totals.swaps += unit.swaps;
-            totals.swaps_accepted += unit.swaps_accepted;
-            totals.swap_alpha += unit.swap_alpha;
-            totals.invalid += unit.invalid;
+            totals.swaps += r.swaps;
+            totals.swaps_accepted += r.swaps_accepted;
+            totals.swap_alpha += r.swap_alpha;
+            totals.invalid += r.invalid;
         }
         let seconds = start.elapsed().as_secs_f64();
-        self.report(
+        let mut rendered = self.report(
             develop(&film, &light_film, &weights, iterations),
-            &units,
+            &reports,
             &norm,
             &totals,
             &weights,
@@ -1272,7 +1480,49 @@ impl McmcVcm {
             seconds,
             interrupted,
             pixels,
-        )
+        );
+        // On a cluster, every rank's share (on rank 0; collective).
+        let pairs = (0..self.units).filter(|&p| owns(cluster, p)).count();
+        if let serde_json::Value::Object(m) = crate::cluster::with_ranks(
+            serde_json::Value::Object(std::mem::take(&mut rendered.statistics)),
+            serde_json::json!({"pairs": pairs, "busy_seconds": busy, "seconds": seconds}),
+        ) {
+            rendered.statistics = m;
+        }
+        rendered
+    }
+
+    /// Every chain pair's report in pair order: this process's pairs, or
+    /// on a cluster every rank's, on rank 0 (the other ranks get none:
+    /// only rank 0 writes the statistics). Collective on a cluster.
+    fn pair_reports(&self, units: &[Unit], filter: &Arc<Filter>) -> Vec<PairReport> {
+        let Some(cluster) = crate::cluster::current() else {
+            return units.iter().map(PairReport::of).collect();
+        };
+        let parcels = (units.iter().enumerate())
+            .filter(|(p, _)| owns(Some(cluster), *p))
+            .map(|(p, unit)| {
+                let (numbers, counts) = PairReport::of(unit).to_counters();
+                Parcel {
+                    unit: p,
+                    films: Vec::new(),
+                    numbers,
+                    counts,
+                }
+            })
+            .collect();
+        // The kernels' component names (not sent).
+        let mut names: [Vec<String>; 2] = Default::default();
+        for &(kind, large) in self.kinds() {
+            names[kind as usize] = self.algorithm(large).component_names();
+        }
+        let all = cluster.gather(parcels, filter).unwrap_or_default();
+        all.into_iter()
+            .map(|p| {
+                PairReport::from_counters((p.numbers, p.counts), &names)
+                    .expect("every rank runs the same binary (the start-up handshake)")
+            })
+            .collect()
     }
 
     /// Whether the chains' restarts carry their pool's weight
@@ -1644,7 +1894,7 @@ impl McmcVcm {
     fn report(
         &self,
         image: Vec<Rgb>,
-        units: &[Unit],
+        reports: &[PairReport],
         norm: &Normalisation,
         totals: &Totals,
         weights: &RestartWeights,
@@ -1667,12 +1917,12 @@ impl McmcVcm {
             .collect();
         let mut chains = serde_json::Map::new();
         for &(kind, _) in self.kinds() {
-            let mut stats: Option<mcmc_core::stats::ChainStatistics> = None;
-            for unit in units {
-                if let Some(chain) = &unit.chains[kind as usize] {
+            let mut stats: Option<ChainStatistics> = None;
+            for r in reports {
+                if let Some(chain) = &r.chains[kind as usize] {
                     match &mut stats {
-                        Some(s) => s.merge(chain.stats()),
-                        None => stats = Some(chain.stats().clone()),
+                        Some(s) => s.merge(chain),
+                        None => stats = Some(chain.clone()),
                     }
                 }
             }
@@ -2033,6 +2283,63 @@ impl IntegratorSettings for McmcVcmSettings {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A chain pair's report and normalisation sums cross ranks as
+    /// numbers and counts; they must come back with the same bits (the
+    /// image and statistics of a distributed run are the single process's
+    /// only then). Values with awkward bits (−0, a subnormal, 1/3); the
+    /// visibility chain absent, as with `light_chains = contribution`. A
+    /// report cut by one word is refused.
+    #[test]
+    fn a_pair_report_and_its_sums_cross_ranks_bit_exactly() {
+        let mut stats = ChainStatistics::new(vec!["small".into(), "large".into()]);
+        (stats.steps, stats.accepted, stats.evaluations) = (7, 3, 9);
+        (stats.invalid_density, stats.outside_support, stats.failed) = (1, 2, 4);
+        stats.components[1].proposed = 5;
+        stats.components[1].accepted = 2;
+        stats.components[1].sum_alpha = 1.0 / 3.0;
+        let report = PairReport {
+            tally: Tally {
+                energy: [-0.0, 1e-310, 1.0 / 3.0, 2.5, f64::MAX],
+                nonfinite: 6,
+                light_vertices: 11,
+            },
+            swaps: 13,
+            swaps_accepted: 8,
+            swap_alpha: 0.1 + 0.2,
+            invalid: 3,
+            chains: [Some(stats.clone()), None],
+        };
+        let names = [vec!["small".to_string(), "large".to_string()], Vec::new()];
+        let back = PairReport::from_counters(report.to_counters(), &names).unwrap();
+        let bits = |e: &[f64]| e.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&back.tally.energy), bits(&report.tally.energy));
+        assert_eq!((back.tally.nonfinite, back.tally.light_vertices), (6, 11));
+        assert_eq!((back.swaps, back.swaps_accepted, back.invalid), (13, 8, 3));
+        assert_eq!(back.swap_alpha.to_bits(), report.swap_alpha.to_bits());
+        let chain = back.chains[0].as_ref().expect("the contribution chain");
+        assert_eq!((chain.steps, chain.accepted, chain.evaluations), (7, 3, 9));
+        assert_eq!(
+            (chain.invalid_density, chain.outside_support, chain.failed),
+            (1, 2, 4)
+        );
+        let c = &chain.components[1];
+        assert_eq!((c.name.as_str(), c.proposed, c.accepted), ("large", 5, 2));
+        assert_eq!(c.sum_alpha.to_bits(), (1.0f64 / 3.0).to_bits());
+        assert!(back.chains[1].is_none());
+        let (numbers, mut counts) = report.to_counters();
+        counts.pop();
+        assert!(PairReport::from_counters((numbers, counts), &names).is_err());
+
+        let mut n = Normalisation::default();
+        n.add(1.0 / 3.0, 0.1);
+        n.add(0.0, 0.0);
+        n.add_cameras(6144.0, -1e-300);
+        n.add_chain(0.7);
+        n.weigh_chain(1.0 / 7.0);
+        let back = Normalisation::from_batch(&n.batch());
+        assert_eq!(bits(&back.batch()), bits(&n.batch()));
+    }
 
     /// The batch ratio and its standard error against values worked by
     /// hand: batches (num, den) = (1, 2), (3, 2): r = 4/4 = 1; residuals

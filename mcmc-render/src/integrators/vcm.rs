@@ -24,6 +24,17 @@
 //! joined in unit order: one seed gives the same image on any thread
 //! count.
 //!
+//! # Checkpoints
+//! With `--checkpoint FILE` (session 19) rank 0 saves after every
+//! iteration, in the per-pixel driver's format ([`crate::checkpoint`]),
+//! the film (camera samples and light-tracing splats), the iterations
+//! done and, as the integrator's words, the technique tally (its five
+//! energies as bits and the light vertices; the non-finite count in the
+//! format's own word). An iteration depends on nothing earlier but its
+//! index (its radius, its streams `(seed, 2i)`, `(seed, 2i + 1)`), so a
+//! resumed run renders the next iteration into the saved accumulators in
+//! the same order and ends with the uninterrupted run's bits.
+//!
 //! # Radius
 //! `radius = auto` takes SmallVCM's rule, `radius_factor` (0.003) times
 //! the radius of the scene's bounding sphere. Iteration `i` (from 1)
@@ -83,6 +94,7 @@ use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
 use crate::bsdf::TransportMode;
 use crate::bsdf::textured::BsdfAt;
+use crate::checkpoint::{Checkpoint, Progress};
 use crate::color::Rgb;
 use crate::deadline::Deadline;
 use crate::film::{Film, Filter};
@@ -634,7 +646,7 @@ impl Tally {
     }
 
     /// The counters as a distributed run sends them.
-    fn to_counters(&self) -> crate::cluster::Counters {
+    pub(crate) fn to_counters(&self) -> crate::cluster::Counters {
         (
             self.energy.to_vec(),
             vec![self.nonfinite, self.light_vertices],
@@ -642,7 +654,7 @@ impl Tally {
     }
 
     /// The counters [`Self::to_counters`] sent.
-    fn from_counters((energy, counts): crate::cluster::Counters) -> Tally {
+    pub(crate) fn from_counters((energy, counts): crate::cluster::Counters) -> Tally {
         Tally {
             energy: std::array::from_fn(|i| energy[i]),
             nonfinite: counts[0],
@@ -921,7 +933,10 @@ impl Vcm {
     }
 
     /// Renders to `run`'s budget: whole iterations, one camera sample per
-    /// pixel each; stopping discards the iteration in flight.
+    /// pixel each; stopping discards the iteration in flight. With a
+    /// checkpoint, saves after every iteration and continues from the
+    /// progress it holds, which must have passed [`check_checkpoint`] (the
+    /// command line and [`VcmSettings`]' render check it).
     pub fn render(
         &self,
         scene: &Scene,
@@ -955,13 +970,21 @@ impl Vcm {
         let mut ends: Vec<u32> = Vec::with_capacity(pixels);
         let mut grid = HashGrid::default();
         let mut tally = Tally::default();
-        let mut iterations = 0u64;
         let mut interrupted = false;
         // Distributed (`crate::cluster`): every rank traces every light
         // subpath (the camera pass needs them all) but keeps the splats of
         // its light units only, renders its tiles, and rank 0 adds the
         // units' films in unit order (light units, then tiles), as here.
         let cluster = crate::cluster::current();
+        let resumed_from = run.checkpoint.as_ref().and_then(|c| {
+            let (done, saved) = resume_point(c, &filter);
+            if let Some((f, t)) = saved {
+                (film, tally) = (f, t);
+            }
+            done
+        });
+        let mut iterations = resumed_from.unwrap_or(0);
+        let mut checkpoint_error: Option<String> = None;
         let mut rank_units = 0u64;
         while target.is_none_or(|t| iterations < t) && self.max_depth > 0 {
             let stopping = stop.load(Ordering::Relaxed) || out_of_time();
@@ -1094,6 +1117,14 @@ impl Vcm {
                 tally.add(&Tally::from_counters(c));
             }
             iterations += 1;
+            if let Some(c) = &run.checkpoint
+                && crate::cluster::is_root()
+                && checkpoint_error.is_none()
+            {
+                let mut progress = Progress::of(iterations, iterations, tally.nonfinite, &film);
+                progress.extra = saved_words(&tally);
+                checkpoint_error = crate::checkpoint::save(&c.path, c.fingerprint, &progress).err();
+            }
             observer.snapshot(
                 &|| film.develop(iterations as f64),
                 iterations * pixels as u64,
@@ -1109,6 +1140,16 @@ impl Vcm {
             &tally,
             scene,
         );
+        if let Some(c) = &run.checkpoint {
+            rendered.statistics.insert(
+                "checkpoint".into(),
+                serde_json::json!({
+                    "path": c.path.display().to_string(),
+                    "resumed_from_iterations": resumed_from,
+                    "error": checkpoint_error,
+                }),
+            );
+        }
         if let serde_json::Value::Object(m) = crate::cluster::with_ranks(
             serde_json::Value::Object(std::mem::take(&mut rendered.statistics)),
             serde_json::json!({"units": rank_units, "seconds": seconds}),
@@ -1178,6 +1219,80 @@ impl Vcm {
     }
 }
 
+/// `vcm`'s words in a checkpoint ([`Progress::extra`]): the tally's
+/// technique energies (as bits, in [`Technique`] order) and its light
+/// vertices (the non-finite count is the format's own word).
+fn saved_words(tally: &Tally) -> Vec<u64> {
+    let mut out: Vec<u64> = tally.energy.iter().map(|e| e.to_bits()).collect();
+    out.push(tally.light_vertices);
+    out
+}
+
+/// The tally a `vcm` checkpoint's `progress` holds: refused (one line)
+/// unless a `vcm` run could have written it: one sample per pixel an
+/// iteration, the words [`saved_words`] writes, finite energies and
+/// counts within 2^53.
+fn saved_tally(progress: &Progress) -> Result<Tally, String> {
+    if progress.spp_done != progress.pass {
+        return Err(format!(
+            "holds {} iterations and {} samples per pixel: not a checkpoint of vcm (one sample an iteration)",
+            progress.pass, progress.spp_done
+        ));
+    }
+    let words = &progress.extra;
+    if words.len() != TECHNIQUE_NAMES.len() + 1 {
+        return Err(format!(
+            "holds {} words of the integrator's, vcm keeps {}: not a checkpoint of vcm",
+            words.len(),
+            TECHNIQUE_NAMES.len() + 1
+        ));
+    }
+    let energy: [f64; 5] = std::array::from_fn(|i| f64::from_bits(words[i]));
+    let light_vertices = words[TECHNIQUE_NAMES.len()];
+    if energy.iter().any(|e| !e.is_finite()) || light_vertices > crate::checkpoint::MAX_COUNT {
+        return Err(format!(
+            "impossible tally: energies {energy:?}, {light_vertices} light vertices (finite energies, at most 2^53 vertices)"
+        ));
+    }
+    Ok(Tally {
+        energy,
+        nonfinite: progress.nonfinite,
+        light_vertices,
+    })
+}
+
+/// Checks that a checkpoint's `progress` is one a `vcm` run wrote (one
+/// line if not). The command line checks it on rank 0 before the ranks'
+/// start-up handshake, so that a bad file stops every rank with one
+/// error; [`VcmSettings`]' render checks it too.
+pub fn check_checkpoint(progress: &Progress) -> Result<(), String> {
+    saved_tally(progress).map(|_| ())
+}
+
+/// Where a checkpointed run starts: the iterations done (`None`: a fresh
+/// start), and on rank 0 (the only rank that adds into them) the film
+/// rebuilt with `filter` and the tally; on a cluster every rank is told
+/// the iterations (a broadcast). Collective on a cluster. The progress
+/// must have passed [`check_checkpoint`].
+fn resume_point(
+    checkpoint: &Checkpoint,
+    filter: &Arc<Filter>,
+) -> (Option<u64>, Option<(Film, Tally)>) {
+    let local = checkpoint.resume.as_ref().map(|p| {
+        let film = p
+            .film(filter.clone())
+            .expect("the command line checked the checkpoint against the scene");
+        let tally = saved_tally(p).expect("checked before the render (check_checkpoint)");
+        (p.pass, film, tally)
+    });
+    let words = local.as_ref().map_or(Vec::new(), |l| vec![l.0]);
+    let words = match crate::cluster::current() {
+        Some(c) => c.broadcast_u64s(words),
+        None => words,
+    };
+    (words.first().copied(), local.map(|(_, f, t)| (f, t)))
+}
+
 /// `radius` is `auto` or > 0.
 fn check_radius(v: &Option<f64>) -> Result<(), String> {
     match v {
@@ -1244,6 +1359,9 @@ impl IntegratorSettings for VcmSettings {
         stop: &AtomicBool,
         observer: &dyn Observer,
     ) -> Result<Rendered, RenderError> {
+        if let Some(p) = run.checkpoint.as_ref().and_then(|c| c.resume.as_ref()) {
+            check_checkpoint(p).map_err(RenderError::Invalid)?;
+        }
         Ok(self.integrator(scene).render(scene, run, stop, observer))
     }
 }
