@@ -10,6 +10,8 @@
 mod adaptive_covariance;
 mod finite;
 mod gaussian;
+#[cfg(test)]
+mod geweke;
 pub mod hessian;
 pub mod hmc;
 mod independent;

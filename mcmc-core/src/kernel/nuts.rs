@@ -919,11 +919,9 @@ mod tests {
     // E x₁x₂ = ½ E[x₁³] − 2 E[x₁] = 0.
     const BANANA_MOMENTS: [f64; 5] = [0.0, 0.0, 4.0, 9.0, 0.0];
 
-    /// Geweke-style exact-invariance test: `n` exact draws, each moved by
-    /// `transitions` NUTS transitions; returns the z-scores of
-    /// `x₁, x₂, x₁², x₂², x₁x₂` against their exact means. Each z uses the
-    /// sample standard deviation over the `n` independent end points, so
-    /// under invariance it is N(0, 1) up to O(1/√n).
+    /// Geweke-style exact-invariance test (`super::geweke`): `n` exact
+    /// draws, each moved by `transitions` NUTS transitions; returns the
+    /// z-scores of `x₁, x₂, x₁², x₂², x₁x₂` against their exact means.
     fn geweke<G: GradientTarget + Copy>(
         g: G,
         make: impl Fn() -> Nuts<G>,
@@ -933,36 +931,13 @@ mod tests {
         transitions: usize,
         seed: u64,
     ) -> [f64; 5] {
-        let t = Differentiable(g);
-        let mut rng = stream_rng(seed, 0);
-        let (mut sum, mut sq) = ([0.0; 5], [0.0; 5]);
-        for r in 0..n {
-            let x0 = draw(&mut rng);
-            let mut chain = Chain::new(
-                &t,
-                x0,
-                MetropolisHastings::new(make()),
-                stream_rng(seed, 1 + r as u64),
-            )
-            .unwrap();
-            for _ in 0..transitions {
-                chain.step(&t);
-            }
-            let x = chain.state();
-            let f = [x[0], x[1], x[0] * x[0], x[1] * x[1], x[0] * x[1]];
-            for k in 0..5 {
-                sum[k] += f[k];
-                sq[k] += f[k] * f[k];
-            }
-        }
-        let nf = n as f64;
-        let mut z = [0.0; 5];
-        for k in 0..5 {
-            let mean = sum[k] / nf;
-            let var = (sq[k] / nf - mean * mean) * nf / (nf - 1.0);
-            z[k] = (mean - exact[k]) / (var / nf).sqrt();
-        }
-        z
+        super::super::geweke::moment_z_scores(
+            &Differentiable(g),
+            make,
+            draw,
+            exact,
+            (n, transitions, seed),
+        )
     }
 
     // |z| < 4.5: a correct kernel fails one check with probability 6.8e-6;

@@ -146,8 +146,6 @@ impl<P> Kernel<Vec<f64>, P> for UniformRandomWalk {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::chain::Chain;
-    use crate::mh::MetropolisHastings;
     use crate::rng::{standard_normal, stream_rng};
     use rand::Rng;
 
@@ -240,35 +238,18 @@ mod tests {
     /// `E x₁ = E x₀²/2 = ½`, `E x₁² = 1 + E x₀⁴/4 = 7/4`, `E x₀x₁ = E x₀³/2 = 0`.
     const BANANA_MOMENTS: [f64; 5] = [0.0, 0.5, 1.0, 1.75, 0.0];
 
-    /// Geweke's joint-distribution test: `n` exact draws of the banana,
-    /// each moved by `transitions` steps of `kernel`; returns the z-scores of
-    /// the five moments against their exact values. A kernel that leaves
-    /// the banana invariant ends at the banana: each z is standard normal
-    /// (the `n` replicates are independent, their sample sd gives the
-    /// standard error).
+    /// Geweke's joint-distribution test on the banana (`super::geweke`):
+    /// the z-scores of its five moments after `transitions` steps of
+    /// `kernel` from each of `n` exact draws.
     fn geweke<K: Kernel<Vec<f64>> + Clone>(kernel: K, n: usize, transitions: usize) -> [f64; 5] {
-        let mut rng = stream_rng(2026, 0);
-        let (mut sum, mut sq) = ([0.0; 5], [0.0; 5]);
-        for r in 0..n {
-            let x0 = banana_draw(&mut rng);
-            let mh = MetropolisHastings::new(kernel.clone());
-            let mut chain = Chain::new(&banana, x0, mh, stream_rng(2026, 1 + r as u64)).unwrap();
-            for _ in 0..transitions {
-                chain.step(&banana);
-            }
-            let x = chain.state();
-            let f = [x[0], x[1], x[0] * x[0], x[1] * x[1], x[0] * x[1]];
-            for k in 0..5 {
-                sum[k] += f[k];
-                sq[k] += f[k] * f[k];
-            }
-        }
-        let nf = n as f64;
-        std::array::from_fn(|k| {
-            let mean = sum[k] / nf;
-            let var = (sq[k] / nf - mean * mean) * nf / (nf - 1.0);
-            (mean - BANANA_MOMENTS[k]) / (var / nf).sqrt()
-        })
+        let target = banana;
+        super::super::geweke::moment_z_scores(
+            &target,
+            || kernel.clone(),
+            banana_draw,
+            BANANA_MOMENTS,
+            (n, transitions, 2026),
+        )
     }
 
     // 40 000 replicates of 5 transitions with a = 1.5 (acceptance ≈ 0.5 on
