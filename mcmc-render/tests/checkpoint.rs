@@ -204,28 +204,34 @@ fn a_damaged_or_old_per_pixel_checkpoint_is_refused_with_one_line() {
     std::fs::remove_file(&path).unwrap();
 }
 
-/// `erpt` checkpointed after every pass (session 18): a render stopped
-/// after two of its four passes and resumed from its file ends with the
-/// uninterrupted render's image and statistics (passes, mutations, seeds,
-/// chains, acceptance, the luminance estimate) bit for bit. Control: the
-/// same file with the pass count put back to 0 (so the resumed passes
-/// redraw the first passes' streams) must give another image.
-#[test]
-fn a_stopped_erpt_render_resumed_from_its_checkpoint_ends_bit_identical() {
-    let scene = repo_scene("cornell-box.xml", 16);
+/// An integrator's own render (`name` configured with `sets`), `spp`
+/// samples per pixel, checkpointed to a fresh temporary file and stopped
+/// at its `after`-th snapshot; then resumed from that file. Asserts that
+/// the resumed render ends with the uninterrupted render's image and
+/// `keys` of its statistics bit for bit and records `resumed_from`, and
+/// that the control — the saved file changed by `rewind` — gives another
+/// image. Returns the saved progress and the integrator, for the callers'
+/// checks of what the file holds and of refusals.
+fn check_per_pixel_resume(
+    scene: &Scene,
+    (name, sets): (&str, &[(&str, &str)]),
+    (spp, after): (u32, u32),
+    rewind: impl Fn(&mut Progress),
+    keys: &[&str],
+    (resumed_from, at): (&str, u64),
+) -> (Progress, Box<dyn registry::Configured>) {
     let size = (scene.film.width, scene.film.height);
-    let sets: Vec<(String, String)> = [("luminance_samples", "2000"), ("chain_length", "10")]
-        .iter()
+    let sets: Vec<(String, String)> = (sets.iter())
         .map(|(k, v)| (k.to_string(), v.to_string()))
         .collect();
-    let erpt = registry::configure(None, Some("erpt"), &sets).expect("erpt");
+    let integ = registry::configure(None, Some(name), &sets).expect(name);
     let path = std::env::temp_dir().join(format!(
-        "mcmc-render-checkpoint-erpt-{}.ckpt",
+        "mcmc-render-checkpoint-{name}-{}.ckpt",
         std::process::id()
     ));
     let _ = std::fs::remove_file(&path);
     let run = |resume: Option<Progress>| RunSettings {
-        spp: Some(4),
+        spp: Some(spp),
         seed: 9,
         checkpoint: Some(Checkpoint {
             path: path.clone(),
@@ -238,35 +244,59 @@ fn a_stopped_erpt_render_resumed_from_its_checkpoint_ends_bit_identical() {
     let stop = AtomicBool::new(false);
     let observer = StopAfter {
         stop: &stop,
-        after: 2,
+        after,
         seen: AtomicU32::new(0),
     };
-    let first = erpt.render(&scene, &run(None), &stop, &observer).unwrap();
-    assert!(first.interrupted);
-    let saved = load(&path, 42, size).unwrap().expect("a checkpoint");
-    assert_eq!((saved.pass, saved.spp_done), (2, 2));
-    // The control's copy (the resumed run rewrites the file as it goes).
-    let mut restarted = load(&path, 42, size).unwrap().expect("a checkpoint");
-    (restarted.pass, restarted.spp_done) = (0, 0);
+    let first = integ.render(scene, &run(None), &stop, &observer).unwrap();
+    assert!(first.interrupted, "{name}: the first run was not stopped");
+    let saved = || load(&path, 42, size).unwrap().expect("a checkpoint");
+    // Copies for the control and the caller (the resumed run rewrites the
+    // file as it goes).
+    let (kept, mut rewound) = (saved(), saved());
+    rewind(&mut rewound);
     let go = AtomicBool::new(false);
-    let resumed = erpt
-        .render(&scene, &run(Some(saved)), &go, &NoObserver)
+    let resumed = integ
+        .render(scene, &run(Some(saved())), &go, &NoObserver)
         .unwrap();
     let whole_run = RunSettings {
         checkpoint: None,
         ..run(None)
     };
-    let whole = erpt.render(&scene, &whole_run, &go, &NoObserver).unwrap();
-    let control = erpt
-        .render(&scene, &run(Some(restarted)), &go, &NoObserver)
+    let whole = integ.render(scene, &whole_run, &go, &NoObserver).unwrap();
+    let control = integ
+        .render(scene, &run(Some(rewound)), &go, &NoObserver)
         .unwrap();
     std::fs::remove_file(&path).unwrap();
-    assert!(!resumed.interrupted);
+    assert!(!resumed.interrupted, "{name}");
     assert!(
         bits(&resumed.image) == bits(&whole.image),
-        "resumed image differs"
+        "{name}: resumed image differs"
     );
-    for key in [
+    for key in keys {
+        assert_eq!(
+            resumed.statistics[*key], whole.statistics[*key],
+            "{name}: {key}"
+        );
+    }
+    assert_eq!(resumed.statistics["checkpoint"][resumed_from], at, "{name}");
+    assert!(
+        bits(&control.image) != bits(&whole.image),
+        "{name}: control agreed"
+    );
+    (kept, integ)
+}
+
+/// `erpt` checkpointed after every pass (session 18): a render stopped
+/// after two of its four passes and resumed from its file ends with the
+/// uninterrupted render's image and statistics (passes, mutations, seeds,
+/// chains, acceptance, the luminance estimate) bit for bit. Control: the
+/// same file with the pass count put back to 0 (so the resumed passes
+/// redraw the first passes' streams) must give another image.
+#[test]
+fn a_stopped_erpt_render_resumed_from_its_checkpoint_ends_bit_identical() {
+    let scene = repo_scene("cornell-box.xml", 16);
+    let sets = [("luminance_samples", "2000"), ("chain_length", "10")];
+    let keys = [
         "passes",
         "mutations",
         "seeds",
@@ -276,11 +306,17 @@ fn a_stopped_erpt_render_resumed_from_its_checkpoint_ends_bit_identical() {
         "luminance_samples",
         "mean_pixel_luminance",
         "deposit_energy",
-    ] {
-        assert_eq!(resumed.statistics[key], whole.statistics[key], "{key}");
-    }
-    assert_eq!(resumed.statistics["checkpoint"]["resumed_from_passes"], 2);
-    assert!(bits(&control.image) != bits(&whole.image), "control agreed");
+    ];
+    let restart = |p: &mut Progress| (p.pass, p.spp_done) = (0, 0);
+    let (saved, _) = check_per_pixel_resume(
+        &scene,
+        ("erpt", &sets),
+        (4, 2),
+        restart,
+        &keys,
+        ("resumed_from_passes", 2),
+    );
+    assert_eq!((saved.pass, saved.spp_done), (2, 2));
 }
 
 /// `vcm` checkpointed after every iteration (session 19): a render stopped
@@ -293,75 +329,43 @@ fn a_stopped_erpt_render_resumed_from_its_checkpoint_ends_bit_identical() {
 #[test]
 fn a_stopped_vcm_render_resumed_from_its_checkpoint_ends_bit_identical() {
     let scene = repo_scene("cornell-box.xml", 24);
-    let size = (scene.film.width, scene.film.height);
-    let vcm = registry::configure(None, Some("vcm"), &[]).expect("vcm");
-    let path = std::env::temp_dir().join(format!(
-        "mcmc-render-checkpoint-vcm-{}.ckpt",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_file(&path);
-    let run = |resume: Option<Progress>| RunSettings {
-        spp: Some(4),
-        seed: 9,
-        checkpoint: Some(Checkpoint {
-            path: path.clone(),
-            fingerprint: 42,
-            resume: resume.map(Arc::new),
-            chains: None,
-        }),
-        ..RunSettings::default()
-    };
-    let stop = AtomicBool::new(false);
-    let observer = StopAfter {
-        stop: &stop,
-        after: 2,
-        seen: AtomicU32::new(0),
-    };
-    let first = vcm.render(&scene, &run(None), &stop, &observer).unwrap();
-    assert!(first.interrupted);
-    let saved = load(&path, 42, size).unwrap().expect("a checkpoint");
-    assert_eq!((saved.pass, saved.spp_done, saved.extra.len()), (2, 2, 6));
-    // The control's copy and a cut one (the resumed run rewrites the file).
-    let mut restarted = load(&path, 42, size).unwrap().expect("a checkpoint");
-    (restarted.pass, restarted.spp_done) = (0, 0);
-    let mut cut = load(&path, 42, size).unwrap().expect("a checkpoint");
-    cut.extra.pop();
-    let go = AtomicBool::new(false);
-    let resumed = vcm
-        .render(&scene, &run(Some(saved)), &go, &NoObserver)
-        .unwrap();
-    let whole_run = RunSettings {
-        checkpoint: None,
-        ..run(None)
-    };
-    let whole = vcm.render(&scene, &whole_run, &go, &NoObserver).unwrap();
-    let control = vcm
-        .render(&scene, &run(Some(restarted)), &go, &NoObserver)
-        .unwrap();
-    let refused = vcm
-        .render(&scene, &run(Some(cut)), &go, &NoObserver)
-        .unwrap_err()
-        .to_string();
-    std::fs::remove_file(&path).unwrap();
-    assert!(!resumed.interrupted);
-    assert!(
-        bits(&resumed.image) == bits(&whole.image),
-        "resumed image differs"
-    );
-    for key in [
+    let keys = [
         "iterations",
         "energy_shares",
         "light_vertices_per_iteration",
         "nonfinite_samples",
         "radius_final",
-    ] {
-        assert_eq!(resumed.statistics[key], whole.statistics[key], "{key}");
-    }
-    assert_eq!(
-        resumed.statistics["checkpoint"]["resumed_from_iterations"],
-        2
+    ];
+    let restart = |p: &mut Progress| (p.pass, p.spp_done) = (0, 0);
+    let (saved, vcm) = check_per_pixel_resume(
+        &scene,
+        ("vcm", &[]),
+        (4, 2),
+        restart,
+        &keys,
+        ("resumed_from_iterations", 2),
     );
-    assert!(bits(&control.image) != bits(&whole.image), "control agreed");
+    assert_eq!((saved.pass, saved.spp_done, saved.extra.len()), (2, 2, 6));
+    let mut cut = saved;
+    cut.extra.pop();
+    let run = RunSettings {
+        spp: Some(4),
+        seed: 9,
+        checkpoint: Some(Checkpoint {
+            path: std::env::temp_dir().join(format!(
+                "mcmc-render-checkpoint-vcm-cut-{}.ckpt",
+                std::process::id()
+            )),
+            fingerprint: 42,
+            resume: Some(Arc::new(cut)),
+            chains: None,
+        }),
+        ..RunSettings::default()
+    };
+    let refused = vcm
+        .render(&scene, &run, &AtomicBool::new(false), &NoObserver)
+        .unwrap_err()
+        .to_string();
     assert!(
         refused.contains("not a checkpoint of vcm") && !refused.contains('\n'),
         "{refused}"
@@ -381,33 +385,22 @@ fn a_stopped_vcm_render_resumed_from_its_checkpoint_ends_bit_identical() {
 #[test]
 fn a_stopped_guided_render_resumed_from_its_checkpoint_ends_bit_identical() {
     let scene = repo_scene("cornell-box.xml", 16);
-    let size = (scene.film.width, scene.film.height);
-    let guided = registry::configure(None, Some("guided"), &[]).expect("guided");
-    let path = std::env::temp_dir().join(format!(
-        "mcmc-render-checkpoint-guided-{}.ckpt",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_file(&path);
-    let run = |resume: Option<Progress>| RunSettings {
-        spp: Some(100),
-        seed: 9,
-        checkpoint: Some(Checkpoint {
-            path: path.clone(),
-            fingerprint: 42,
-            resume: resume.map(Arc::new),
-            chains: None,
-        }),
-        ..RunSettings::default()
-    };
-    let stop = AtomicBool::new(false);
-    let observer = StopAfter {
-        stop: &stop,
-        after: 7,
-        seen: AtomicU32::new(0),
-    };
-    let first = guided.render(&scene, &run(None), &stop, &observer).unwrap();
-    assert!(first.interrupted);
-    let saved = load(&path, 42, size).unwrap().expect("a checkpoint");
+    let keys = [
+        "spp",
+        "spp_total",
+        "spp_per_iteration",
+        "records_per_iteration",
+        "nonfinite_samples",
+        "tree_nodes",
+    ];
+    let (saved, _) = check_per_pixel_resume(
+        &scene,
+        ("guided", &[]),
+        (100, 7),
+        |p: &mut Progress| p.pass -= 2,
+        &keys,
+        ("resumed_from_spp", 63),
+    );
     // 7 passes, 31 + 32 spp; iteration 6 from 31 spp, 69 long, 32 done.
     assert_eq!((saved.pass, saved.spp_done), (7, 63));
     assert_eq!(saved.extra, [6, 31, 69, 32]);
@@ -423,39 +416,6 @@ fn a_stopped_guided_render_resumed_from_its_checkpoint_ends_bit_identical() {
         check_checkpoint(&saved, None).unwrap_err(),
         "only with a sample budget",
     );
-    // The control's copy (the resumed run rewrites the file as it goes).
-    let mut back = load(&path, 42, size).unwrap().expect("a checkpoint");
-    back.pass -= 2;
-    let go = AtomicBool::new(false);
-    let resumed = guided
-        .render(&scene, &run(Some(saved)), &go, &NoObserver)
-        .unwrap();
-    let whole_run = RunSettings {
-        checkpoint: None,
-        ..run(None)
-    };
-    let whole = guided.render(&scene, &whole_run, &go, &NoObserver).unwrap();
-    let control = guided
-        .render(&scene, &run(Some(back)), &go, &NoObserver)
-        .unwrap();
-    std::fs::remove_file(&path).unwrap();
-    assert!(!resumed.interrupted);
-    assert!(
-        bits(&resumed.image) == bits(&whole.image),
-        "resumed image differs"
-    );
-    for key in [
-        "spp",
-        "spp_total",
-        "spp_per_iteration",
-        "records_per_iteration",
-        "nonfinite_samples",
-        "tree_nodes",
-    ] {
-        assert_eq!(resumed.statistics[key], whole.statistics[key], "{key}");
-    }
-    assert_eq!(resumed.statistics["checkpoint"]["resumed_from_spp"], 63);
-    assert!(bits(&control.image) != bits(&whole.image), "control agreed");
 }
 
 /// `mcmc-pg` pre-trained (session 19): its chains saved as `pssmlt`'s
