@@ -229,6 +229,9 @@ fn mept_images_are_bit_identical_across_thread_counts() {
     assert!(one != bits(2, 43), "seed ignored");
 }
 
+/// Image means of the PT replicates and of the tested integrator's.
+type Replicates = (Vec<[f64; 3]>, Vec<[f64; 3]>);
+
 /// The tilted glossy-glass box (gold glossy, glass sphere: caustics and
 /// paths seen through the sphere, where the manifold walk and the
 /// generalised geometry term enter the ratio) with its PT replicates and
@@ -250,8 +253,8 @@ fn mept_images_are_bit_identical_across_thread_counts() {
 /// start-up is `mept`'s own), with which the Cornell test needed 64
 /// replicates where 48 had sufficed, so blue's σ here may be up to 15%
 /// larger than this sizing assumes.
-fn glossy_glass() -> &'static (Vec<[f64; 3]>, Vec<[f64; 3]>) {
-    static REPS: OnceLock<(Vec<[f64; 3]>, Vec<[f64; 3]>)> = OnceLock::new();
+fn glossy_glass() -> &'static Replicates {
+    static REPS: OnceLock<Replicates> = OnceLock::new();
     REPS.get_or_init(|| {
         let scene = repo_scene_tilted("cornell-glossy-glass.xml", RES, DEPTH);
         let pt = mc_reps(&scene, &pt_of(&scene), 2048, 128, 1000);
@@ -264,7 +267,7 @@ fn glossy_glass() -> &'static (Vec<[f64; 3]>, Vec<[f64; 3]>) {
 /// 5σ < 1%; sizing at `glossy_glass`). Ignored for its run time
 /// (`cargo test -p mcmc-render --profile test --test path_space_mept --
 /// --ignored on_the_glossy_glass_box --nocapture` runs it with its
-/// control). Passed once (session 19, 2026-11-27, 2 cores, load 6–7.6
+/// control). Passed once (session 19, 2026-11-27, 2 cores, load 1.7 → 7.6
 /// from other builds): rel −0.17%, −0.24%, −0.16% (R/G/B), σ of the
 /// difference 0.13%, 0.13%, 0.15% (PT 0.05/0.05/0.07%, `mept`
 /// 0.12/0.12/0.14%: blue spreads 2.3% per replicate, less than the 2.8%

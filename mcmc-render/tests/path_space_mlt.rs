@@ -161,6 +161,9 @@ fn every_mutation_is_accepted_and_bad_weights_are_refused_with_one_line() {
     }
 }
 
+/// Image means of the PT replicates and of the tested integrator's.
+type Replicates = (Vec<[f64; 3]>, Vec<[f64; 3]>);
+
 /// The tilted glossy-glass box (gold glossy, glass sphere: Dirac vertices
 /// in the paths) with its PT replicates and `mlt`'s, shared by the
 /// agreement test and its control below.
@@ -181,8 +184,8 @@ fn every_mutation_is_accepted_and_bad_weights_are_refused_with_one_line() {
 /// mutations per pixel): a cheaper one with more replicates would be
 /// cheaper only if its start-up bias did not grow, which this session
 /// had no time to measure.
-fn glossy_glass() -> &'static (Vec<[f64; 3]>, Vec<[f64; 3]>) {
-    static REPS: OnceLock<(Vec<[f64; 3]>, Vec<[f64; 3]>)> = OnceLock::new();
+fn glossy_glass() -> &'static Replicates {
+    static REPS: OnceLock<Replicates> = OnceLock::new();
     REPS.get_or_init(|| {
         let scene = repo_scene_tilted("cornell-glossy-glass.xml", RES, DEPTH);
         let pt = mc_reps(&scene, &pt_of(&scene), 2048, 128, 1000);
