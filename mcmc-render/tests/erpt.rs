@@ -95,6 +95,81 @@ fn a_one_percent_bias_is_rejected() {
     assert!(!a.failures(4.0, 0.01).is_empty(), "a 1% bias passed: {a:?}");
 }
 
+/// Image means of the PT replicates and of the tested integrator's.
+type Replicates = (Vec<[f64; 3]>, Vec<[f64; 3]>);
+
+/// The tilted glossy-glass box (gold glossy, glass sphere: Dirac
+/// vertices in the seeds and the chains) with 128 PT replicates of 2048
+/// spp (blue's SE ≈ 0.07%, as in `path_space_mlt.rs`) and `GLOSSY_REPS`
+/// `erpt` replicates of `GLOSSY_PASSES` passes, shared by the agreement
+/// test and its control. A pass is an unbiased image for any deposit
+/// energy (module docs of `erpt`: chains start in proportion to `lum f`
+/// and MH keeps it), so replicates of few passes add no start-up bias and
+/// only the total number of passes sets σ.
+fn glossy_glass() -> &'static Replicates {
+    static REPS: OnceLock<Replicates> = OnceLock::new();
+    REPS.get_or_init(|| {
+        let scene = repo_scene_tilted("cornell-glossy-glass.xml", RES, DEPTH);
+        let pt = mc_reps(&scene, &pt_of(&scene), 2048, 128, 1000);
+        let reps = (0..GLOSSY_REPS)
+            .map(|k| {
+                let out = erpt(&scene, GLOSSY_PASSES, 41_000 + k);
+                assert_eq!(out.statistics["nonfinite_contributions"], 0);
+                image_mean(&out.image)
+            })
+            .collect();
+        (pt, reps)
+    })
+}
+
+/// `erpt` replicates on the glossy-glass box: sized from session 19's
+/// probe of 256 replicates (4096 passes), where `erpt`'s blue spread
+/// 29.7% per pass (red 22%, green 24%). A total σ of 0.18% (5σ = 0.9%)
+/// with PT's 0.07% needs 0.166% from `erpt`, i.e. (29.7 / 0.166)² ≈
+/// 32 000 passes: 2048 replicates of 16 (the probe's 256 are its first).
+const GLOSSY_REPS: u64 = 2048;
+/// Passes per glossy-glass replicate.
+const GLOSSY_PASSES: u32 = 16;
+
+/// `erpt` agrees with PT on the glossy-glass box to 1% (4σ and 1%, 5σ <
+/// 1%). Ignored for its run time (`cargo test -p mcmc-render --profile
+/// test --test erpt -- --ignored on_the_glossy_glass_box --nocapture` runs
+/// it with its control). **Not run at this size** (≈ 16 min of CPU: the
+/// probe took 157 s of CPU, ≈ 36 s of it PT's). Session 19's probes
+/// (2026-11-27, 2 cores, load 6.5–9) failed, as they had to, on the
+/// resolution check: 64 replicates (1024 passes) read rel −0.77%,
+/// −0.98%, −1.14% (R/G/B), σ 0.64%, 0.70%, 0.90% (66 s CPU; blue beyond
+/// 1%, so the agreement check failed too); 256 replicates (4096 passes,
+/// the first 64 the same) −0.46%, −0.63%, −0.82%, σ 0.35%, 0.37%, 0.47%
+/// (within 4σ and 1%; 157 s CPU): 1.3–1.7σ low
+/// on every channel (the channels are correlated), so a bias of ≈ −0.5%
+/// is suspected, not shown.
+#[test]
+#[ignore]
+fn erpt_agrees_with_pt_on_the_glossy_glass_box() {
+    let (pt, reps) = glossy_glass();
+    let a = MeanAgreement::new(pt, reps);
+    eprintln!("erpt glossy-glass: rel {:?}\n  {a:?}", a.rel());
+    assert!(
+        a.failures(4.0, 0.01).is_empty(),
+        "erpt disagrees with PT: {a:?}"
+    );
+    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
+}
+
+/// The control of the glossy-glass agreement: the same `erpt` replicates
+/// scaled by 1.01 must fail it. Ignored with the replicates it scales.
+#[test]
+#[ignore]
+fn a_one_percent_bias_is_rejected_on_the_glossy_glass_box() {
+    let (pt, reps) = glossy_glass();
+    let biased: Vec<[f64; 3]> = reps.iter().map(|m| m.map(|v| v * 1.01)).collect();
+    let a = MeanAgreement::new(pt, &biased);
+    eprintln!("erpt glossy-glass x1.01: rel {:?}\n  {a:?}", a.rel());
+    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
+    assert!(!a.failures(4.0, 0.01).is_empty(), "a 1% bias passed: {a:?}");
+}
+
 #[test]
 fn erpt_images_are_bit_identical_across_thread_counts() {
     let scene = repo_scene_tilted("cornell-glossy-glass.xml", RES, DEPTH);

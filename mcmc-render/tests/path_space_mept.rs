@@ -229,28 +229,78 @@ fn mept_images_are_bit_identical_across_thread_counts() {
     assert!(one != bits(2, 43), "seed ignored");
 }
 
-/// The glossy-glass box (gold glossy, glass sphere: caustics and paths
-/// seen through the sphere, where the manifold walk and the generalised
-/// geometry term enter the ratio). Ignored: minutes
-/// (`cargo test -p mcmc-render --test path_space_mept -- --ignored`).
-/// Run once (2026-11-25, 260 s on the loaded machine): rel −0.16%,
-/// −0.18%, −0.16% (R/G/B) with σ of the difference 0.23%, 0.24%, 0.35%:
-/// within 1σ, but 5σ on blue is 1.7% > 1.5%, so the resolution assertion
-/// fails (as `mlt`'s own glossy-glass test would at this budget: blue is
-/// the noisiest channel for both); it needs about twice the replicates.
+/// Image means of the PT replicates and of the tested integrator's.
+type Replicates = (Vec<[f64; 3]>, Vec<[f64; 3]>);
+
+/// The tilted glossy-glass box (gold glossy, glass sphere: caustics and
+/// paths seen through the sphere, where the manifold walk and the
+/// generalised geometry term enter the ratio) with its PT replicates and
+/// `mept`'s, shared by the agreement test and its control below.
+///
+/// Sizing (session 19). Run once (2026-11-25, 260 s on the loaded
+/// machine) with 128 PT replicates at 256 spp and 96 `mept` replicates of
+/// the budget below: rel −0.16%, −0.18%, −0.16% (R/G/B), σ of the
+/// difference 0.23%, 0.24%, 0.35%, so 5σ = 1.75% on blue. PT's blue
+/// spreads 2.25% per replicate of 256 spp (`path_space_mlt.rs`,
+/// `glossy_glass`), an SE of 0.20% at 128 replicates, which leaves
+/// √(0.35² − 0.20²) = 0.29% to `mept` (2.8% per replicate). Replicates
+/// scale as σ²: PT at 128 × 2048 spp gives 0.07%, and `mept` needs
+/// √(0.18² − 0.07²) = 0.166% for a total σ of 0.18% (5σ = 0.9%, a 10%
+/// margin for the noise of σ's estimate): 96 × (0.29 / 0.166)² ≈ 290
+/// replicates, 288 here. Caveat: that run started from 300 000 ordinary
+/// candidates; since 2026-11-26 `mept` starts from 40 000 BDPT draws (the
+/// budget below, the Cornell test's, kept so that the per-replicate
+/// start-up is `mept`'s own), with which the Cornell test needed 64
+/// replicates where 48 had sufficed, so blue's σ here may be up to 15%
+/// larger than this sizing assumes.
+fn glossy_glass() -> &'static Replicates {
+    static REPS: OnceLock<Replicates> = OnceLock::new();
+    REPS.get_or_init(|| {
+        let scene = repo_scene_tilted("cornell-glossy-glass.xml", RES, DEPTH);
+        let pt = mc_reps(&scene, &pt_of(&scene), 2048, 128, 1000);
+        let mept = mept_reps(&scene, 40_000, 512, 1024, 288, 23_000);
+        (pt, mept)
+    })
+}
+
+/// `mept` agrees with PT on the glossy-glass box to 1% (4σ and 1%, and
+/// 5σ < 1%; sizing at `glossy_glass`). Ignored for its run time
+/// (`cargo test -p mcmc-render --profile test --test path_space_mept --
+/// --ignored on_the_glossy_glass_box --nocapture` runs it with its
+/// control). Passed once (session 19, 2026-11-27, 2 cores, load 1.7 → 7.6
+/// from other builds): rel −0.17%, −0.24%, −0.16% (R/G/B), σ of the
+/// difference 0.13%, 0.13%, 0.15% (PT 0.05/0.05/0.07%, `mept`
+/// 0.12/0.12/0.14%: blue spreads 2.3% per replicate, less than the 2.8%
+/// assumed), so 5σ = 0.77% on blue; the ×1.01 control fails on every
+/// channel (5.4–6.4σ). Both tests together: 462 s wall, 306 s CPU
+/// (`/usr/bin/time -v`). The means sit 1.0–1.8σ low on every channel, as
+/// on 2026-11-25 (−0.16%, −0.18%, −0.16%, with the ordinary start-up and
+/// the first 96 of these seeds): not significant, but a bias of ≈ −0.2%
+/// is not excluded.
 #[test]
 #[ignore]
 fn mept_agrees_with_pt_on_the_glossy_glass_box() {
-    let scene = repo_scene_tilted("cornell-glossy-glass.xml", RES, DEPTH);
-    let pt = mc_reps(&scene, &pt_of(&scene), 256, 128, 1000);
-    let reps = mept_reps(&scene, 40_000, 512, 1024, 96, 23_000);
-    let a = MeanAgreement::new(&pt, &reps);
+    let (pt, mept) = glossy_glass();
+    let a = MeanAgreement::new(pt, mept);
     eprintln!("mept glossy-glass: rel {:?}\n  {a:?}", a.rel());
     assert!(
-        a.failures(4.0, 0.015).is_empty(),
+        a.failures(4.0, 0.01).is_empty(),
         "mept disagrees with PT: {a:?}"
     );
-    assert!(a.resolves(5.0, 0.015), "noise too large for 1.5%: {a:?}");
+    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
+}
+
+/// The control of the glossy-glass agreement: the same `mept` replicates
+/// scaled by 1.01 must fail it. Ignored with the replicates it scales.
+#[test]
+#[ignore]
+fn a_one_percent_bias_is_rejected_on_the_glossy_glass_box() {
+    let (pt, mept) = glossy_glass();
+    let biased: Vec<[f64; 3]> = mept.iter().map(|m| m.map(|v| v * 1.01)).collect();
+    let a = MeanAgreement::new(pt, &biased);
+    eprintln!("mept glossy-glass x1.01: rel {:?}\n  {a:?}", a.rel());
+    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
+    assert!(!a.failures(4.0, 0.01).is_empty(), "a 1% bias passed: {a:?}");
 }
 
 /// `mept`'s start-up (`bdpt_startup`, `path_space::bdpt_startup`): the
