@@ -19,6 +19,7 @@
 
 use crate::color::Rgb;
 use crate::distribution::Distribution2d;
+use crate::sampling::to_unit_f32;
 use crate::warp;
 use glam::{Mat3, Vec3};
 use std::f32::consts::PI;
@@ -197,6 +198,33 @@ impl Environment {
                 }
                 let d = (self.to_world * local).normalize();
                 Some((d, self.eval(d), pdf))
+            }
+        }
+    }
+
+    /// Inverse of [`Environment::sample`]: the numbers `u` that sample the
+    /// unit world direction `d` (towards the emitter), or `None` where the
+    /// density vanishes (a zero-mass cell of the map, or a pole, which the
+    /// forward map refuses). `constant`: the uniform-sphere inverse;
+    /// `envmap`: the lat-long coordinates of `d` through
+    /// [`crate::distribution::Distribution2d::invert`] (one-to-one inside
+    /// cells of positive mass).
+    pub fn invert(&self, d: Vec3) -> Option<(f32, f32)> {
+        match &self.radiance {
+            EnvRadiance::Constant(_) => Some(crate::inverse::uniform_sphere_to_square(d)),
+            EnvRadiance::Map(map) => {
+                let local = self.to_local * d;
+                let (u, v) = direction_to_uv(local);
+                let (u, v) = (f64::from(u), f64::from(v));
+                let sin_t = local.x.hypot(local.z);
+                if !(sin_t > 0.0 && map.dist.pdf(u, v) > 0.0) {
+                    return None;
+                }
+                let (a, b) = map.dist.invert(u, v);
+                Some((
+                    to_unit_f32(a.clamp(0.0, 1.0)),
+                    to_unit_f32(b.clamp(0.0, 1.0)),
+                ))
             }
         }
     }

@@ -21,9 +21,11 @@
 //! The BSDF inverses are [`crate::bsdf::Bsdf::invert`]; the camera's is
 //! [`crate::camera::Camera::invert`]; the spot light's cone is
 //! [`crate::light::SpotProfile::invert`]; the tabulated environment map's
-//! is [`crate::distribution::Distribution2d::invert`] (emitters at infinity
-//! are refused by the fused integrator: the inverses of their emission,
-//! direction and starting disk, are not built); next-event
+//! is [`crate::distribution::Distribution2d::invert`], through
+//! [`crate::environment::Environment::invert`] for an environment's
+//! direction ([`infinite_direction_to_square`]); the disk a light walk from
+//! an emitter at infinity starts on is
+//! [`crate::light::Lights::infinite_origin_to_square`]; next-event
 //! estimation's cone sampling of sphere emitters seen from outside is
 //! [`crate::light::Lights::sphere_cone_to_square`].
 
@@ -248,5 +250,25 @@ pub fn direct_point_to_square(
         },
         Light::Area { .. } => area_point_to_square(scene, light, sp).map(Some),
         Light::Directional { .. } | Light::Environment(_) => None,
+    }
+}
+
+/// Inverse of the direction sampling of emitter at infinity `light`, both
+/// as a light walk's emission (`u_dir` of [`Lights::sample_emission`]) and
+/// as next-event estimation's light sample (`u_pos` of
+/// [`Lights::sample_direct`]), which draw it with the same numbers: the
+/// numbers that sample the unit direction `w` from the scene towards the
+/// emitter. A directional light ignores them (`Some(None)`: the caller
+/// draws fresh ones); `None` when `light` is not at infinity or the
+/// environment's density vanishes at `w`.
+pub fn infinite_direction_to_square(
+    scene: &Scene,
+    light: u32,
+    w: Vec3,
+) -> Option<Option<(f32, f32)>> {
+    match scene.lights.lights.get(light as usize)? {
+        Light::Directional { .. } => Some(None),
+        Light::Environment(env) => env.invert(w).map(Some),
+        Light::Area { .. } | Light::Point { .. } => None,
     }
 }

@@ -487,6 +487,22 @@ impl Lights {
         self.scene_center - dir * self.scene_radius + frame.s * d.x + frame.t * d.y
     }
 
+    /// Inverse of [`Lights::infinite_origin`]: the numbers `u_pos` whose
+    /// origin's ray along unit `dir` passes through `p` (the orthogonal
+    /// projection of `p` onto the disk, in the same frame), or `None` when
+    /// that projection lies outside the disk (beyond `f32` rounding).
+    pub fn infinite_origin_to_square(&self, dir: Vec3, p: Vec3) -> Option<(f32, f32)> {
+        let frame = Frame::from_normal(dir);
+        let q = (p - self.scene_center).as_dvec3() / f64::from(self.scene_radius);
+        let d = glam::DVec2::new(q.dot(frame.s.as_dvec3()), q.dot(frame.t.as_dvec3()));
+        let r2 = d.length_squared();
+        if !(r2 <= 1.0 + 1e-5) {
+            return None;
+        }
+        let d = if r2 > 1.0 { d / r2.sqrt() } else { d };
+        Some(crate::inverse::disk_to_square(d.as_vec2()))
+    }
+
     /// A point beyond the scene's bounding sphere along `d` from `p`
     /// (stands in for a point of an emitter at infinity).
     fn far_point(&self, p: Vec3, d: Vec3) -> SurfacePoint {
@@ -503,7 +519,7 @@ impl Lights {
     }
 
     /// True when an emitter lies at infinity (`envmap`, `constant`,
-    /// `directional`): `fused` refuses such scenes.
+    /// `directional`).
     pub fn has_emitter_at_infinity(&self) -> bool {
         self.lights
             .iter()

@@ -9,9 +9,9 @@
 //! floor and sphere, a rough-plastic mesh with interpolated normals, an
 //! environment map), issue 12's combined check, where `guided`, `relt`,
 //! `tempered-pssmlt`, `mcmc-vcm` and (with merging, radius reduced)
-//! `vcm` and `mcmc-vcm` agree too and `fused` refuses the scene with one
-//! line (`mlt`, `mept` and `erpt` handle emitters at infinity since
-//! session 19: `path_space_mlt.rs`, under a sky). (Agreement with
+//! `vcm` and `mcmc-vcm` agree too (`mlt`, `mept`, `erpt` and `fused`
+//! handle emitters at infinity since session 19: `path_space_mlt.rs`,
+//! under a sky; `fused.rs`, its inverses' round trips). (Agreement with
 //! Mitsuba 3: `mitsuba_scenes.rs`; BDPT's MIS weights with an environment
 //! are checked exactly in `bdpt_mis.rs`.)
 //!
@@ -403,8 +403,8 @@ fn mmlt_agrees_with_pt_through_alpha_cut_outs() {
 /// `guided` (path guiding over PT) agrees with PT as above. (`vcm` is
 /// checked against BDPT on this scene in `vcm.rs` and against PT below;
 /// `relt`,
-/// `tempered-pssmlt`, `mcmc-vcm`, `mept`, `erpt` and `fused` in the next
-/// test.)
+/// `tempered-pssmlt` and `mcmc-vcm` in the next test; `mlt`, `mept`,
+/// `erpt` and `fused` under a sky in `path_space_mlt.rs`.)
 #[test]
 fn guided_agrees_on_the_textured_plastic_scene() {
     use mcmc_render::integrators::registry;
@@ -490,13 +490,13 @@ fn registered_reps(
 /// `tempered-pssmlt` (tempered replicas over BDPT) and `mcmc-vcm` (MCMC
 /// over VCM's light subpaths) handle the environment and agree with PT
 /// as above (each asserted to resolve 1% at 5σ; the control: RELT's
-/// replicates scaled by 1.01 are rejected); `fused` cannot, and refuses
-/// the scene with one line naming emitters at infinity (`mlt`, `mept` and
-/// `erpt` handle them since session 19). (`mcmc-vcm` runs in its `bpt`
+/// replicates scaled by 1.01 are rejected). (`fused`, `mlt`, `mept` and
+/// `erpt` handle emitters at infinity since session 19: `fused.rs`,
+/// `path_space_mlt.rs`.) (`mcmc-vcm` runs in its `bpt`
 /// mode, without merging: its merges have a fixed radius, whose bias
 /// `vcm.rs` bounds against BDPT but which is no part of this check.)
 #[test]
-fn relt_tempered_and_mcmc_vcm_agree_and_fused_refuses() {
+fn relt_tempered_and_mcmc_vcm_agree() {
     let pt = combined_pt();
     let chain = [
         ("bootstrap", "10000"),
@@ -553,14 +553,6 @@ fn relt_tempered_and_mcmc_vcm_agree_and_fused_refuses() {
             MCMC_VCM_REPS.0,
             MCMC_VCM_REPS.1,
         ),
-    );
-    let Err(e) = render_registered(combined_scene(), "fused", &[], Some(4), 1) else {
-        panic!("fused rendered a scene with an environment map");
-    };
-    eprintln!("fused: {e}");
-    assert!(
-        e.contains("fused does not support emitters at infinity") && !e.contains('\n'),
-        "fused: {e}"
     );
 }
 

@@ -4,14 +4,18 @@
 //! emission directions), and where the forward map is many-to-one (light
 //! selection, roulette) the inverse's pushforward of uniform numbers is
 //! uniform (chi-square), with a control inverse that is not and must fail.
+//! Emitters at infinity (issue 18 × 13): the environment's direction
+//! (tabulated map, `constant`), a directional light's (no numbers) and the
+//! disk a light walk from infinity starts on.
 
 mod common;
 
-use common::{chi_square_p_value, load_str};
+use common::{chi_square_p_value, load_str, repo_scene, sky_scene};
 use glam::{Vec2, Vec3};
 use mcmc_render::inverse::{
     area_point_to_square, direct_point_to_square, disk_to_square, emission_direction_to_square,
-    light_selection, raster_to_square, roulette, triangle_to_square, uniform_sphere_to_square,
+    infinite_direction_to_square, light_selection, raster_to_square, roulette, triangle_to_square,
+    uniform_sphere_to_square,
 };
 use mcmc_render::light::Light;
 use mcmc_render::sampling::{IndependentSource, ONE_MINUS_EPSILON, RandomSource};
@@ -193,6 +197,117 @@ fn emission_round_trips_on_every_emitter_kind() {
     eprintln!("samples per light {per_light:?}, max |u' - u| {worst:e}");
     assert!(per_light.iter().all(|&n| n > 1000), "{per_light:?}");
     assert!(worst < 2e-4, "{worst}");
+}
+
+/// Emitters at infinity: light walks from the environment map and the
+/// directional light of `envmap-spheres.xml` and from the `constant` sky
+/// and sun of the sky scene, and next-event samples of both environments
+/// from points in the scene. The inverses give the same light, direction
+/// and disk origin back, and the forward numbers on the dimensions used:
+/// the disk point for every emitter at infinity (recovered from a point
+/// `x_1` anywhere along the walk's first ray, as the inverse path sampler
+/// sees it), the direction numbers for the environments (a directional
+/// light ignores them: fresh numbers must give its one direction). The
+/// map's inverse is exact inside a cell (piecewise linear CDFs); what
+/// remains is `f32` rounding of the lat-long angles, ~1e-6 of a turn,
+/// amplified near the poles, where `u₁` (the azimuth) is ill-defined and
+/// not compared. Tolerances: directions and origins to 5e-5 (relative to
+/// the disk radius; the f32 warps, as for area lights), numbers to 2e-4.
+#[test]
+fn emitters_at_infinity_round_trip() {
+    let sky = sky_scene(8, 4, false);
+    let map = repo_scene("envmap-spheres.xml", 8);
+    let mut counts = [0usize; 4];
+    let mut worst = 0.0f32;
+    for (scene, seed) in [(&map, 21u64), (&sky, 22)] {
+        let lights = &scene.lights;
+        let r = lights.scene_radius();
+        let mut src = IndependentSource::new(Xoshiro256PlusPlus::seed_from_u64(seed));
+        let dirs = inputs(seed + 100);
+        for (k, &u_pos) in inputs(seed).iter().enumerate() {
+            let u_sel = src.next_1d();
+            let u_dir = dirs[k];
+            let (i, _) = lights.select(u_sel).unwrap();
+            let directional = matches!(lights.lights[i as usize], Light::Directional { .. });
+            // Light walks (s ≥ 2): origin on the disk, direction −ω.
+            if let Some(es) = lights.sample_emission(&scene.geometry, u_sel, u_pos, u_dir) {
+                assert!(es.at_infinity, "light {i} is not at infinity");
+                let omega = -es.dir;
+                let x1 = es.p.p + es.dir * (2.0 * r * src.next_1d());
+                let pos = lights
+                    .infinite_origin_to_square(es.dir, x1)
+                    .unwrap_or_else(|| panic!("no disk inverse for {u_pos:?}"));
+                let dir = match infinite_direction_to_square(scene, i, omega) {
+                    Some(Some(d)) => d,
+                    Some(None) => {
+                        assert!(directional, "light {i} ignores its direction numbers");
+                        src.next_2d()
+                    }
+                    None => panic!("light {i}: no direction inverse for {u_dir:?}"),
+                };
+                let sel = light_selection(lights, i, f64::from(src.next_1d())).unwrap();
+                let back = lights
+                    .sample_emission(&scene.geometry, sel, pos, dir)
+                    .expect("forward of the inverse");
+                let dp = (back.p.p - es.p.p).length() / r;
+                let dd = (back.dir - es.dir).length();
+                assert!(
+                    dp < 5e-5 && dd < 5e-5,
+                    "light {i}: {u_pos:?} {u_dir:?} -> {pos:?} {dir:?}: origin moved {dp:e}, direction {dd:e}"
+                );
+                if warp::concentric_disk(u_pos).length() > 1e-3 {
+                    worst = worst
+                        .max((pos.0 - u_pos.0).abs())
+                        .max((pos.1 - u_pos.1).abs());
+                }
+                // Away from the poles (the map's ±y, the sphere's ±z) the
+                // azimuth number is defined; it wraps (the map's u₀, the
+                // sphere's u₁); for the polar one `circ` equals |u' − u|
+                // below ½, far above the bound.
+                if !directional && omega.y.abs() < 0.999 && omega.z.abs() < 0.999 {
+                    worst = worst.max(circ(dir.0, u_dir.0)).max(circ(dir.1, u_dir.1));
+                }
+                counts[usize::from(directional)] += 1;
+            }
+            // Next-event estimation (s = 1) from a point in the scene.
+            let from = Vec3::new(
+                2.0 * src.next_1d() - 1.0,
+                src.next_1d(),
+                2.0 * src.next_1d() - 1.0,
+            );
+            let Some(ds) = lights.sample_direct(&scene.geometry, from, u_sel, u_pos) else {
+                continue;
+            };
+            assert!(ds.at_infinity);
+            match infinite_direction_to_square(scene, i, ds.wi) {
+                Some(Some(b)) => {
+                    let back = lights
+                        .sample_direct(&scene.geometry, from, u_sel, b)
+                        .expect("forward of the inverse");
+                    assert!((back.wi - ds.wi).length() < 5e-5, "{u_pos:?} -> {b:?}");
+                    counts[2] += 1;
+                }
+                Some(None) => {
+                    assert!(directional);
+                    counts[3] += 1;
+                }
+                None => panic!("light {i}: no next-event inverse for {u_pos:?}"),
+            }
+        }
+    }
+    eprintln!(
+        "emission from environments {}, from directional lights {}, next-event environment {}, directional {}; max |u' - u| {worst:e}",
+        counts[0], counts[1], counts[2], counts[3]
+    );
+    assert!(counts.iter().all(|&n| n > 10_000), "{counts:?}");
+    assert!(worst < 2e-4, "{worst}");
+    // A point outside the disk's cylinder has no origin.
+    let r = map.lights.scene_radius();
+    assert!(
+        map.lights
+            .infinite_origin_to_square(Vec3::Y, Vec3::new(3.0 * r, 0.0, 0.0))
+            .is_none()
+    );
 }
 
 /// Next-event estimation's light points (BDPT's `s = 1`): area lights

@@ -17,23 +17,26 @@
 //! | camera 2–3 | lens point (thin lens, `t ≥ 2`) | [`crate::camera::Camera::invert`] |
 //! | camera, 4 per surface vertex `x_{k−j}`, `1 ≤ j ≤ t − 2` | lobe, direction, roulette | `BsdfAt::invert_in` (importance mode on the light side): lobe uniform in its interval, direction numbers (fresh for Dirac lobes); roulette fresh (off) |
 //! | light 0 | emitter choice (`s ≥ 2`) | uniform in the emitter's interval |
-//! | light 1–2 | position (`s ≥ 2`) | area inverse (fresh for point lights) |
-//! | light 3–4 | direction (`s ≥ 2`) | cosine / sphere / spot inverse |
+//! | light 1–2 | position (`s ≥ 2`) | area inverse (fresh for point lights); at infinity the disk point below `x_1` ([`crate::light::Lights::infinite_origin_to_square`]) |
+//! | light 3–4 | direction (`s ≥ 2`) | cosine / sphere / spot inverse; at infinity the environment's ([`crate::inverse::infinite_direction_to_square`]; fresh for a directional light) |
 //! | light, 4 per surface vertex `x_j`, `1 ≤ j ≤ s − 2` | lobe, direction, roulette | as on the camera side |
-//! | connection 1–3 | next-event emitter and point (`s = 1`) | as light 0–2, from `x_1` |
+//! | connection 1–3 | next-event emitter and point (`s = 1`) | as light 0–2, from `x_1`; at infinity the environment's direction (fresh for a directional light) |
 //! | connection 1–2 | lens point (`t = 1`, thin lens) | camera inverse |
 //!
-//! Every other coordinate is a fresh uniform (the camera stream when
+//! A camera walk that escapes to the environment (`s = 0`, `x_0` at
+//! infinity) needs nothing more: its last direction is the scattering at
+//! `x_1` towards `ω`, inverted as any other. Every other coordinate is a
+//! fresh uniform (the camera stream when
 //! `t = 1`, the light stream when `s ≤ 1`, and the unread tail), which is
 //! the reversible-jump fill of spec seed001 §4.
 
 use crate::bsdf::TransportMode;
 use crate::fused_space::FusedState;
 use crate::integrators::bdpt::SubpathBuffers;
-use crate::integrators::path_vertex::Vertex;
+use crate::integrators::path_vertex::{Vertex, VertexKind};
 use crate::inverse::{
     area_point_to_square, direct_point_to_square, emission_direction_to_square, in_interval,
-    light_selection, raster_to_square,
+    infinite_direction_to_square, light_selection, raster_to_square,
 };
 use crate::light::Light;
 use crate::path_space::Path;
@@ -48,14 +51,15 @@ use std::cell::RefCell;
 /// Why a path has no multiplexed primary sample.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum InverseFailure {
-    /// The path's length or technique does not belong to this depth, or it
-    /// starts on an emitter at infinity.
+    /// The path's length or technique does not belong to this depth.
     Technique,
     /// The sampled direction is not one the BSDF along the path samples
     /// (`BsdfAt::invert_in` returns `None`).
     Bsdf,
     /// The emitter's choice, point or direction cannot be inverted (a
-    /// sphere light's cone sampling for `s = 1`, a point off the emitter).
+    /// sphere light's cone sampling for `s = 1`, a point off the emitter,
+    /// an environment direction of zero density, `x_1` off the disk of an
+    /// emitter at infinity).
     Emitter,
     /// The camera ray misses the image.
     Camera,
@@ -302,35 +306,52 @@ fn invert_numbers(
     if s >= 1 {
         let x0 = &vs[0];
         let light = x0.light;
-        if !x0.is_light()
-            || matches!(
-                scene.lights.lights.get(light as usize),
-                None | Some(Light::Directional { .. } | Light::Environment(_))
-            )
-        {
+        if !x0.is_light() || scene.lights.lights.get(light as usize).is_none() {
             return Err(InverseFailure::Technique);
         }
+        // x_0 on an emitter at infinity holds only its direction ω = wo.
+        let at_infinity = x0.kind == VertexKind::Infinite;
         let u_sel =
             light_selection(&scene.lights, light, uniform(rng)).ok_or(InverseFailure::Emitter)?;
-        let is_area = matches!(scene.lights.lights[light as usize], Light::Area { .. });
         if s == 1 {
             numbers.set(Stream::Connection, 1, u_sel);
-            match direct_point_to_square(scene, light, vs[1].p(), &x0.sp) {
+            let u = if at_infinity {
+                infinite_direction_to_square(scene, light, x0.wo)
+            } else {
+                direct_point_to_square(scene, light, vs[1].p(), &x0.sp)
+            };
+            match u {
                 Some(Some(u)) => numbers.set2(Stream::Connection, 2, u),
                 Some(None) => {}
                 None => return Err(InverseFailure::Emitter),
             }
         } else {
             numbers.set(Stream::Light, 0, u_sel);
-            if is_area {
-                let u =
-                    area_point_to_square(scene, light, &x0.sp).ok_or(InverseFailure::Emitter)?;
+            if at_infinity {
+                // The walk enters along −ω from the point of the disk whose
+                // ray passes through x_1; the direction is ω's (none for a
+                // directional light).
+                let u = scene
+                    .lights
+                    .infinite_origin_to_square(-x0.wo, vs[1].p())
+                    .ok_or(InverseFailure::Emitter)?;
                 numbers.set2(Stream::Light, 1, u);
+                if let Some(u) = infinite_direction_to_square(scene, light, x0.wo)
+                    .ok_or(InverseFailure::Emitter)?
+                {
+                    numbers.set2(Stream::Light, 3, u);
+                }
+            } else {
+                if matches!(scene.lights.lights[light as usize], Light::Area { .. }) {
+                    let u = area_point_to_square(scene, light, &x0.sp)
+                        .ok_or(InverseFailure::Emitter)?;
+                    numbers.set2(Stream::Light, 1, u);
+                }
+                let d = dir(x0, &vs[1]).ok_or(InverseFailure::Emitter)?;
+                let u = emission_direction_to_square(scene, light, &x0.sp, d)
+                    .ok_or(InverseFailure::Emitter)?;
+                numbers.set2(Stream::Light, 3, u);
             }
-            let d = dir(x0, &vs[1]).ok_or(InverseFailure::Emitter)?;
-            let u = emission_direction_to_square(scene, light, &x0.sp, d)
-                .ok_or(InverseFailure::Emitter)?;
-            numbers.set2(Stream::Light, 3, u);
             for j in 1..s - 1 {
                 invert_scattering(
                     scene,

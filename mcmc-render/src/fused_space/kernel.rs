@@ -67,6 +67,7 @@
 use super::inverse_path::{RoundTripFailure, round_trip, trace};
 use super::technique::{log_target, log_technique_density};
 use super::{FusedMutation, FusedState};
+use crate::integrators::path_vertex::VertexKind;
 use crate::path_space::Path;
 use crate::pss::{MmltDepth, PathSample};
 use crate::scene::Scene;
@@ -460,7 +461,9 @@ impl<'s> FusedKernel<'s> {
         // contribution are evaluated here, once per current path (a state
         // sees several path-space proposals while it is current). The copy
         // is reused while its vertices are the current path's: a content
-        // check, so nothing depends on how the driver moves states.
+        // check, so nothing depends on how the driver moves states. A
+        // vertex at infinity is its direction `wo` (its position is 0);
+        // other vertices' `wo` is rewritten by `evaluate`, so not compared.
         let cur = self.path_cur.get_or_insert_with(|| Sample {
             state: Path::new(scene),
             log_density: f64::NEG_INFINITY,
@@ -470,7 +473,12 @@ impl<'s> FusedKernel<'s> {
             && !cur.state.vertices.is_empty()
             && (cur.state.vertices.iter())
                 .zip(&x.path.vertices)
-                .all(|(a, b)| a.p() == b.p() && a.light == b.light && a.kind == b.kind);
+                .all(|(a, b)| {
+                    a.p() == b.p()
+                        && a.light == b.light
+                        && a.kind == b.kind
+                        && (a.kind != VertexKind::Infinite || a.wo == b.wo)
+                });
         if !same_path {
             cur.state.clone_from(&x.path);
             cur.state.evaluate();

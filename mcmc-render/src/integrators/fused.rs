@@ -15,7 +15,7 @@ use crate::fused_space::kernel::{MUTATION_COST, MoveTotals, ROUND_TRIP_COST};
 use crate::fused_space::{FusedFamily, FusedMutation};
 use crate::markov::{self, ChainParams, MltResult};
 use crate::observer::{NoObserver, Observer};
-use crate::path_space::{PathMutations, emitters_at_infinity_refusal};
+use crate::path_space::PathMutations;
 use crate::pss::MutationParams;
 use crate::pss_dump::DumpSampler;
 use crate::scene::Scene;
@@ -283,11 +283,6 @@ impl IntegratorSettings for Fused {
         observer: &dyn Observer,
     ) -> Result<Rendered, RenderError> {
         IntegratorSettings::validate(self).map_err(RenderError::Invalid)?;
-        if scene.lights.has_emitter_at_infinity() {
-            return Err(RenderError::Invalid(emitters_at_infinity_refusal(
-                Self::NAME,
-            )));
-        }
         let mutation = self.fused_mutation().map_err(RenderError::Invalid)?;
         let (family, result, adaptation) = self.run_chains(scene, mutation, run, stop, observer)?;
         let mut out =

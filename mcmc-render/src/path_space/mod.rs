@@ -63,14 +63,6 @@ pub mod specular_pass;
 pub mod state;
 pub mod walk;
 
-/// The one-line refusal of an integrator `name` on a scene with an emitter
-/// at infinity ([`crate::light::Lights::has_emitter_at_infinity`]). The
-/// path space itself handles them since session 19 (`x_0` at infinity,
-/// [`state`]); `fused` still refuses them.
-pub fn emitters_at_infinity_refusal(name: &str) -> String {
-    format!("{name} does not support emitters at infinity (environment, directional) yet")
-}
-
 pub use bidirectional::Bidirectional;
 pub use family::{PathFamily, PathMutations};
 pub use state::{Path, PathTarget};
