@@ -13,7 +13,7 @@
 
 mod common;
 
-use common::{MeanAgreement, image_mean, mc_reps, pt_of, repo_scene_tilted};
+use common::{image_mean, mc_reps, pt_of, repo_scene_tilted};
 use mcmc_core::runner::with_threads;
 use mcmc_render::color::Rgb;
 use mcmc_render::integrators::RunSettings;
@@ -73,26 +73,14 @@ fn erpt_replicates() -> &'static [[f64; 3]] {
 #[test]
 #[ignore]
 fn erpt_agrees_with_pt_on_the_cornell_box() {
-    let a = MeanAgreement::new(pt_reference(), erpt_replicates());
-    eprintln!("erpt: rel {:?}\n  {a:?}", a.rel());
-    assert!(
-        a.failures(4.0, 0.01).is_empty(),
-        "erpt disagrees with PT: {a:?}"
-    );
-    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
+    common::assert_agrees_to_one_percent("erpt", pt_reference(), erpt_replicates());
 }
 
 /// Ignored with the agreement test whose replicates it scales.
 #[test]
 #[ignore]
 fn a_one_percent_bias_is_rejected() {
-    let biased: Vec<[f64; 3]> = erpt_replicates()
-        .iter()
-        .map(|m| m.map(|v| v * 1.01))
-        .collect();
-    let a = MeanAgreement::new(pt_reference(), &biased);
-    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
-    assert!(!a.failures(4.0, 0.01).is_empty(), "a 1% bias passed: {a:?}");
+    common::assert_one_percent_bias_is_rejected("erpt", pt_reference(), erpt_replicates());
 }
 
 /// Image means of the PT replicates and of the tested integrator's.
@@ -148,13 +136,7 @@ const GLOSSY_PASSES: u32 = 16;
 #[ignore]
 fn erpt_agrees_with_pt_on_the_glossy_glass_box() {
     let (pt, reps) = glossy_glass();
-    let a = MeanAgreement::new(pt, reps);
-    eprintln!("erpt glossy-glass: rel {:?}\n  {a:?}", a.rel());
-    assert!(
-        a.failures(4.0, 0.01).is_empty(),
-        "erpt disagrees with PT: {a:?}"
-    );
-    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
+    common::assert_agrees_to_one_percent("erpt glossy-glass", pt, reps);
 }
 
 /// The control of the glossy-glass agreement: the same `erpt` replicates
@@ -163,11 +145,7 @@ fn erpt_agrees_with_pt_on_the_glossy_glass_box() {
 #[ignore]
 fn a_one_percent_bias_is_rejected_on_the_glossy_glass_box() {
     let (pt, reps) = glossy_glass();
-    let biased: Vec<[f64; 3]> = reps.iter().map(|m| m.map(|v| v * 1.01)).collect();
-    let a = MeanAgreement::new(pt, &biased);
-    eprintln!("erpt glossy-glass x1.01: rel {:?}\n  {a:?}", a.rel());
-    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
-    assert!(!a.failures(4.0, 0.01).is_empty(), "a 1% bias passed: {a:?}");
+    common::assert_one_percent_bias_is_rejected("erpt glossy-glass", pt, reps);
 }
 
 #[test]

@@ -281,13 +281,7 @@ fn glossy_glass() -> &'static Replicates {
 #[ignore]
 fn mept_agrees_with_pt_on_the_glossy_glass_box() {
     let (pt, mept) = glossy_glass();
-    let a = MeanAgreement::new(pt, mept);
-    eprintln!("mept glossy-glass: rel {:?}\n  {a:?}", a.rel());
-    assert!(
-        a.failures(4.0, 0.01).is_empty(),
-        "mept disagrees with PT: {a:?}"
-    );
-    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
+    common::assert_agrees_to_one_percent("mept glossy-glass", pt, mept);
 }
 
 /// The control of the glossy-glass agreement: the same `mept` replicates
@@ -296,11 +290,7 @@ fn mept_agrees_with_pt_on_the_glossy_glass_box() {
 #[ignore]
 fn a_one_percent_bias_is_rejected_on_the_glossy_glass_box() {
     let (pt, mept) = glossy_glass();
-    let biased: Vec<[f64; 3]> = mept.iter().map(|m| m.map(|v| v * 1.01)).collect();
-    let a = MeanAgreement::new(pt, &biased);
-    eprintln!("mept glossy-glass x1.01: rel {:?}\n  {a:?}", a.rel());
-    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
-    assert!(!a.failures(4.0, 0.01).is_empty(), "a 1% bias passed: {a:?}");
+    common::assert_one_percent_bias_is_rejected("mept glossy-glass", pt, mept);
 }
 
 /// `mept`'s start-up (`bdpt_startup`, `path_space::bdpt_startup`): the

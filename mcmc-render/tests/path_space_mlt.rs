@@ -64,28 +64,12 @@ fn mlt_replicates() -> &'static [[f64; 3]] {
 
 #[test]
 fn mlt_agrees_with_pt_on_the_cornell_box() {
-    let a = MeanAgreement::new(pt_reference(), mlt_replicates());
-    eprintln!("mlt: rel {:?}\n  {a:?}", a.rel());
-    assert!(
-        a.failures(4.0, 0.01).is_empty(),
-        "mlt disagrees with PT: {a:?}"
-    );
-    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
+    common::assert_agrees_to_one_percent("mlt", pt_reference(), mlt_replicates());
 }
 
 #[test]
 fn a_one_percent_bias_is_rejected() {
-    let biased: Vec<[f64; 3]> = mlt_replicates()
-        .iter()
-        .map(|m| m.map(|v| v * 1.01))
-        .collect();
-    let a = MeanAgreement::new(pt_reference(), &biased);
-    eprintln!("mlt x1.01: rel {:?}\n  {a:?}", a.rel());
-    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
-    assert!(
-        !a.failures(4.0, 0.01).is_empty(),
-        "a 1% bias passed the check: {a:?}"
-    );
+    common::assert_one_percent_bias_is_rejected("mlt", pt_reference(), mlt_replicates());
 }
 
 #[test]
@@ -215,13 +199,7 @@ fn glossy_glass() -> &'static Replicates {
 #[ignore]
 fn mlt_agrees_with_pt_on_the_glossy_glass_box() {
     let (pt, mlt) = glossy_glass();
-    let a = MeanAgreement::new(pt, mlt);
-    eprintln!("mlt glossy-glass: rel {:?}\n  {a:?}", a.rel());
-    assert!(
-        a.failures(4.0, 0.01).is_empty(),
-        "mlt disagrees with PT: {a:?}"
-    );
-    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
+    common::assert_agrees_to_one_percent("mlt glossy-glass", pt, mlt);
 }
 
 /// The control of the glossy-glass agreement: the same `mlt` replicates
@@ -230,14 +208,7 @@ fn mlt_agrees_with_pt_on_the_glossy_glass_box() {
 #[ignore]
 fn a_one_percent_bias_is_rejected_on_the_glossy_glass_box() {
     let (pt, mlt) = glossy_glass();
-    let biased: Vec<[f64; 3]> = mlt.iter().map(|m| m.map(|v| v * 1.01)).collect();
-    let a = MeanAgreement::new(pt, &biased);
-    eprintln!("mlt glossy-glass x1.01: rel {:?}\n  {a:?}", a.rel());
-    assert!(a.resolves(5.0, 0.01), "noise too large for 1%: {a:?}");
-    assert!(
-        !a.failures(4.0, 0.01).is_empty(),
-        "a 1% bias passed the check: {a:?}"
-    );
+    common::assert_one_percent_bias_is_rejected("mlt glossy-glass", pt, mlt);
 }
 
 #[test]

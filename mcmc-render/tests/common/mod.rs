@@ -369,6 +369,35 @@ impl MeanAgreement {
     }
 }
 
+/// Asserts that `name`'s replicate means agree with `reference`'s to 1%:
+/// every channel within 4σ and 1%, and the comparison resolves 1% at 5σ
+/// (so a 1% bias cannot pass as noise).
+pub fn assert_agrees_to_one_percent(name: &str, reference: &[[f64; 3]], test: &[[f64; 3]]) {
+    let a = MeanAgreement::new(reference, test);
+    eprintln!("{name}: rel {:?}\n  {a:?}", a.rel());
+    assert!(a.failures(4.0, 0.01).is_empty(), "{name} disagrees: {a:?}");
+    assert!(
+        a.resolves(5.0, 0.01),
+        "{name}: noise too large for 1%: {a:?}"
+    );
+}
+
+/// The control of [`assert_agrees_to_one_percent`]: the same replicates
+/// scaled by 1.01 must fail the check, which must still resolve 1%.
+pub fn assert_one_percent_bias_is_rejected(name: &str, reference: &[[f64; 3]], test: &[[f64; 3]]) {
+    let biased: Vec<[f64; 3]> = test.iter().map(|m| m.map(|v| v * 1.01)).collect();
+    let a = MeanAgreement::new(reference, &biased);
+    eprintln!("{name} x1.01: rel {:?}\n  {a:?}", a.rel());
+    assert!(
+        a.resolves(5.0, 0.01),
+        "{name}: noise too large for 1%: {a:?}"
+    );
+    assert!(
+        !a.failures(4.0, 0.01).is_empty(),
+        "{name}: a 1% bias passed: {a:?}"
+    );
+}
+
 /// A closed sphere seen from inside: diffuse albedo `a`, uniform emission
 /// `le` on its inner side, so every pixel is `le / (1 − a)` (unbounded
 /// depth with Russian roulette).
