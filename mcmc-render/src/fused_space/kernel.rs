@@ -219,20 +219,46 @@ pub const MUTATION_COST: f64 = 0.93;
 pub const ROUND_TRIP_COST: f64 = 2.08;
 
 impl MoveTally {
+    /// The tallies so far as integers (the jumps in fixed point), in the
+    /// order [`MoveTotals::from_words`] reads: integers, so that sums over
+    /// ranks equal a single process's tallies bit for bit.
+    pub fn words(&self) -> [u64; 5] {
+        let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        [
+            get(&self.pss_proposals),
+            get(&self.pss_jump),
+            get(&self.path_proposals),
+            get(&self.path_inversions),
+            get(&self.path_jump),
+        ]
+    }
+
     /// The totals so far.
     pub fn totals(&self) -> MoveTotals {
-        let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
-        MoveTotals {
-            pss_proposals: get(&self.pss_proposals),
-            pss_jump: get(&self.pss_jump) as f64 / JUMP_SCALE,
-            path_proposals: get(&self.path_proposals),
-            path_inversions: get(&self.path_inversions),
-            path_jump: get(&self.path_jump) as f64 / JUMP_SCALE,
-        }
+        MoveTotals::from_words(self.words())
     }
 }
 
 impl MoveTotals {
+    /// The totals of tallies given as [`MoveTally::words`].
+    pub fn from_words(
+        [
+            pss_proposals,
+            pss_jump,
+            path_proposals,
+            path_inversions,
+            path_jump,
+        ]: [u64; 5],
+    ) -> MoveTotals {
+        MoveTotals {
+            pss_proposals,
+            pss_jump: pss_jump as f64 / JUMP_SCALE,
+            path_proposals,
+            path_inversions,
+            path_jump: path_jump as f64 / JUMP_SCALE,
+        }
+    }
+
     /// Expected squared jump per unit of cost (primary-sample steps) of
     /// the primary-sample moves and of the path-space moves (`NaN` for a
     /// kind without proposals). The cost is a deterministic model

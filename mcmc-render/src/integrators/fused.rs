@@ -184,12 +184,26 @@ impl Fused {
         pilot.seed = splitmix64(run.seed ^ PILOT_SEED_SALT);
         pilot.checkpoint = None;
         let result = markov::run(scene, &family, &pilot, stop, &NoObserver)?;
+        // On a cluster each rank ran some of the pilot's chains: every
+        // rank sums all ranks' tallies (integers, so the sums are a single
+        // process's) and so chooses what a single process would.
+        let local: Vec<u64> = (family.targets.iter())
+            .flat_map(|t| family.counters.per_depth[t.depth.depth].words())
+            .collect();
+        let gathered = crate::cluster::all_gather_words(local.clone());
+        let summed: Vec<u64> = (0..local.len())
+            .map(|i| {
+                (gathered.iter().skip(i).step_by(local.len()))
+                    .fold(0, |a: u64, w| a.wrapping_add(*w))
+            })
+            .collect();
         let per_depth = family
             .targets
             .iter()
-            .map(|t| {
+            .zip(summed.chunks_exact(5))
+            .map(|(t, words)| {
                 let depth = t.depth.depth;
-                let totals = family.counters.per_depth[depth].totals();
+                let totals = MoveTotals::from_words(words.try_into().expect("five words a depth"));
                 let (pss_efficiency, path_efficiency) = totals.efficiencies();
                 DepthChoice {
                     depth,
