@@ -99,6 +99,10 @@ fn mept_is_mlt_with_the_manifold_perturbation_on() {
     assert_eq!(m.manifold_perturbation, 1.0);
     assert_eq!(m.independent, 0.3);
     assert_eq!(m.lens_perturbation, 0.0);
+    // `mlt`'s caustic and multi-chain perturbations (on since session 20)
+    // stay off in `mept`, whose measured mixture is without them.
+    assert_eq!(m.caustic_perturbation, 0.0);
+    assert_eq!(m.multi_chain_perturbation, 0.0);
     assert_eq!(Mept::default().mlt.chain.bootstrap, 200_000);
     assert!(Mept::default().mlt.bdpt_startup);
     // The draws' b alone (session 12): the running estimate merges the
@@ -151,6 +155,8 @@ fn mept_is_mlt_with_the_manifold_perturbation_on() {
             manifold_perturbation: 0.0,
             independent: 0.0,
             lens_perturbation: 1.0,
+            caustic_perturbation: 1.0,
+            multi_chain_perturbation: 1.0,
             ..m
         },
         mcmc_render::integrators::mlt::Mlt::default().mutations()

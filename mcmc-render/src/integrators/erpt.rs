@@ -40,9 +40,15 @@
 //!
 //! `numChains` 1, `maxChains` 0 (no cap), `chainLength` 100 (its code;
 //! its doc block says 1), `luminanceSamples` 15 000, `bidirectionalMutation`
-//! off, lens perturbation on, manifold perturbation off. Mitsuba also turns
-//! on the caustic and multi-chain perturbations and a 16-spp direct pass:
-//! not available here (see `docs/path-space.md`).
+//! off, the lens, caustic and multi-chain perturbations on (the last two
+//! since session 20), manifold perturbation off. Mitsuba's 16-spp direct
+//! pass (`directSamples`) is not built here (see `docs/path-space.md`).
+//!
+//! Each chain draws from its own stream, seeded by one draw of its band's
+//! stream (session 20): the band's stream then gives the same seeds and
+//! chain counts whatever the mutations consume, so two mixtures run on the
+//! same seeds differ by their redistribution alone (the paired agreement
+//! test in `tests/erpt.rs`).
 //!
 //! Work units are bands of rows with their own streams, summed in order,
 //! so an image is bit-identical for any thread count; Ctrl-C and `--time`
@@ -90,7 +96,7 @@ use glam::Vec2;
 use mcmc_core::chain::{Algorithm, ChainState};
 use mcmc_core::kernel::{Kernel, Mixture};
 use mcmc_core::mh::MetropolisHastings;
-use mcmc_core::rng::{ChainRng, splitmix64, stream_rng, uniform};
+use mcmc_core::rng::{ChainRng, child_rng, splitmix64, stream_rng, uniform};
 use mcmc_core::sample::Sample;
 use mcmc_core::stats::ChainStatistics;
 use rayon::prelude::*;
@@ -116,10 +122,10 @@ crate::settings! {
         pub lens_perturbation: f64 = 1.0, check check::non_negative;
         /// Selection weight of the manifold perturbation (Mitsuba: off; MEPT turns it on).
         pub manifold_perturbation: f64 = 0.0, check check::non_negative;
-        /// Selection weight of the caustic perturbation (Mitsuba: on; ours 0 until measured in erpt).
-        pub caustic_perturbation: f64 = 0.0, check check::non_negative;
-        /// Selection weight of the multi-chain perturbation (Mitsuba: on; ours 0 until measured in erpt).
-        pub multi_chain_perturbation: f64 = 0.0, check check::non_negative;
+        /// Selection weight of the caustic perturbation (Mitsuba: on; 1 here since session 20).
+        pub caustic_perturbation: f64 = 1.0, check check::non_negative;
+        /// Selection weight of the multi-chain perturbation (Mitsuba: on; 1 here since session 20).
+        pub multi_chain_perturbation: f64 = 1.0, check check::non_negative;
         flatten {
             /// Path depth (rr_depth is not used: seeds are walked without roulette).
             pub depth: DepthParams = DepthParams::default();
@@ -364,7 +370,7 @@ impl IntegratorSettings for Erpt {
                                 out.chains += 1;
                                 let mut chain = ChainState {
                                     current: seed.clone(),
-                                    rng,
+                                    rng: child_rng(&mut rng),
                                     stats: std::mem::take(&mut out.stats),
                                 };
                                 let film = &mut out.film;
@@ -384,7 +390,6 @@ impl IntegratorSettings for Erpt {
                                         }
                                     });
                                 }
-                                rng = chain.rng;
                                 out.stats = chain.stats;
                             }
                         }

@@ -10,11 +10,15 @@
 //! defaults: the settings are exactly `mlt`'s (every parameter, same
 //! names), with `manifold_perturbation` = 1 instead of 0,
 //! `independent_mutation` = 0.3 instead of 0, `lens_perturbation` = 0
-//! instead of 1 (`mept` was measured on caustic-sds without it) and the
+//! instead of 1 (`mept` was measured on caustic-sds without it),
+//! `caustic_perturbation` = `multi_chain_perturbation` = 0 instead of 1
+//! (`mlt`'s defaults since session 20; `mept`'s mixture, its agreement
+//! tests and its caustic-sds figures are the ones without them) and the
 //! BDPT start-up (`bdpt_startup` = true, `bootstrap` = 200 000 draws)
 //! instead of 100 000 one-technique candidates. `--integrator mlt --set
 //! manifold_perturbation=1 --set independent_mutation=0.3 --set
-//! lens_perturbation=0 --set bdpt_startup=true --set bootstrap=200000
+//! lens_perturbation=0 --set caustic_perturbation=0 --set
+//! multi_chain_perturbation=0 --set bdpt_startup=true --set bootstrap=200000
 //! --set normalization=bootstrap` runs the same thing.
 //!
 //! Why the independent proposal (a fresh start-up path as a large step)
@@ -51,11 +55,13 @@ crate::settings! {
     /// `mlt`'s settings with the manifold perturbation on.
     pub struct Mept {
         flatten {
-            /// Every `mlt` parameter (manifold_perturbation defaults to 1, independent_mutation to 0.3, lens_perturbation to 0, bdpt_startup to true with bootstrap 200 000 draws, normalization to bootstrap: the draws' b alone).
+            /// Every `mlt` parameter (manifold_perturbation defaults to 1, independent_mutation to 0.3, lens_perturbation, caustic_perturbation and multi_chain_perturbation to 0, bdpt_startup to true with bootstrap 200 000 draws, normalization to bootstrap: the draws' b alone).
             pub mlt: Mlt = Mlt {
                 manifold_perturbation: 1.0,
                 independent_mutation: 0.3,
                 lens_perturbation: 0.0,
+                caustic_perturbation: 0.0,
+                multi_chain_perturbation: 0.0,
                 bdpt_startup: true,
                 chain: ChainParams {
                     bootstrap: 200_000,
@@ -70,7 +76,7 @@ crate::settings! {
 
 impl IntegratorSettings for Mept {
     const NAME: &'static str = "mept";
-    const DESCRIPTION: &'static str = "Path-space MLT with the manifold perturbation on (manifold exploration, Jakob & Marschner 2012): mlt with manifold_perturbation = 1, independent_mutation = 0.3, lens_perturbation = 0 and the BDPT start-up (bdpt_startup, 200 000 draws) giving b alone (normalization = bootstrap).";
+    const DESCRIPTION: &'static str = "Path-space MLT with the manifold perturbation on (manifold exploration, Jakob & Marschner 2012): mlt with manifold_perturbation = 1, independent_mutation = 0.3, lens_perturbation = caustic_perturbation = multi_chain_perturbation = 0 and the BDPT start-up (bdpt_startup, 200 000 draws) giving b alone (normalization = bootstrap).";
 
     fn validate(&self) -> Result<(), String> {
         IntegratorSettings::validate(&self.mlt)

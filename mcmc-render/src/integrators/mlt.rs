@@ -4,11 +4,11 @@
 //!
 //! - **State and target**: a path `x_0 … x_k` and `ln lum f(x)`.
 //! - **Mutations**: `mcmc-core`'s mixture of the path-space mutations with
-//!   the selection weights of the settings: Veach's bidirectional
-//!   mutation and the lens perturbation (weight 1 each by default), the
-//!   caustic and multi-chain perturbations (on in Mitsuba 0.6, off by
-//!   default here: their agreement with PT does not resolve 1% yet), the
-//!   manifold perturbation (off in Mitsuba 0.6; on in `mept`).
+//!   the selection weights of the settings: Mitsuba 0.6's selection by
+//!   default, Veach's bidirectional mutation and the lens, caustic and
+//!   multi-chain perturbations at weight 1 each (the last two since
+//!   session 20, when their agreement with PT was resolved to 1%), the
+//!   manifold perturbation off (on in `mept`).
 //! - **Start-up and normalisation**: `bootstrap` candidates (Mitsuba's
 //!   `luminanceSamples`, 100 000), each one sample of a BDPT technique with
 //!   its one-sample-MIS weight ([`crate::path_space::family`]), give `b`
@@ -72,10 +72,10 @@ crate::settings! {
         pub independent_mutation: f64 = 0.0, check check::non_negative;
         /// Selection weight of the lens perturbation (Mitsuba: on; 1 here since session 10: it cut door-ajar's relMSE at equal time in every seed, and agrees with PT to 1%).
         pub lens_perturbation: f64 = 1.0, check check::non_negative;
-        /// Selection weight of the caustic perturbation (Mitsuba: on; 0 here until the agreement test with it passes).
-        pub caustic_perturbation: f64 = 0.0, check check::non_negative;
-        /// Selection weight of the multi-chain perturbation (Mitsuba: on; 0 here until the agreement test with it passes).
-        pub multi_chain_perturbation: f64 = 0.0, check check::non_negative;
+        /// Selection weight of the caustic perturbation (Mitsuba: on; 1 here since session 20, when the agreement with PT of the mixture with it resolved 1%).
+        pub caustic_perturbation: f64 = 1.0, check check::non_negative;
+        /// Selection weight of the multi-chain perturbation (Mitsuba: on; 1 here since session 20, as the caustic perturbation).
+        pub multi_chain_perturbation: f64 = 1.0, check check::non_negative;
         /// Selection weight of the manifold perturbation (Jakob & Marschner 2012; Mitsuba: off; on in `mept`).
         pub manifold_perturbation: f64 = 0.0, check check::non_negative;
         /// Selection weight of Veach's lens subpath mutation (not in Mitsuba; 0 by default).
@@ -203,7 +203,7 @@ fn direct_samples(v: &i64) -> Result<(), String> {
 
 impl IntegratorSettings for Mlt {
     const NAME: &'static str = "mlt";
-    const DESCRIPTION: &'static str = "Path-space Metropolis light transport (Veach 1997): the bidirectional mutation on the Markov-chain driver.";
+    const DESCRIPTION: &'static str = "Path-space Metropolis light transport (Veach 1997): the bidirectional mutation and the lens, caustic and multi-chain perturbations (Mitsuba 0.6's selection) on the Markov-chain driver.";
 
     fn validate(&self) -> Result<(), String> {
         if self.depth.max_depth == 0 {

@@ -346,6 +346,27 @@ impl MeanAgreement {
         }
     }
 
+    /// From paired replicate image means: replicate `i` of `test` ran on
+    /// the same random numbers as replicate `i` of `reference` where the
+    /// two estimators share them, so `σ` is the standard error of the mean
+    /// per-replicate difference (the shared noise cancels).
+    pub fn paired(reference: &[[f64; 3]], test: &[[f64; 3]]) -> MeanAgreement {
+        assert_eq!(reference.len(), test.len(), "unpaired replicates");
+        let d: Vec<[f64; 3]> = reference
+            .iter()
+            .zip(test)
+            .map(|(r, t)| [0, 1, 2].map(|c| t[c] - r[c]))
+            .collect();
+        let (mr, sr) = mean_se(reference);
+        let (mt, st) = mean_se(test);
+        MeanAgreement {
+            reference: mr,
+            test: mt,
+            se: (sr, st),
+            sigma: mean_se(&d).1,
+        }
+    }
+
     /// Relative difference per channel.
     pub fn rel(&self) -> [f64; 3] {
         [0, 1, 2].map(|c| (self.test[c] - self.reference[c]) / self.reference[c])
@@ -373,7 +394,42 @@ impl MeanAgreement {
 /// every channel within 4σ and 1%, and the comparison resolves 1% at 5σ
 /// (so a 1% bias cannot pass as noise).
 pub fn assert_agrees_to_one_percent(name: &str, reference: &[[f64; 3]], test: &[[f64; 3]]) {
-    let a = MeanAgreement::new(reference, test);
+    assert_one_percent(name, &MeanAgreement::new(reference, test));
+}
+
+/// The control of [`assert_agrees_to_one_percent`]: the same replicates
+/// scaled by 1.01 must fail the check, which must still resolve 1%.
+pub fn assert_one_percent_bias_is_rejected(name: &str, reference: &[[f64; 3]], test: &[[f64; 3]]) {
+    let biased = times_1_01(test);
+    assert_one_percent_rejected(name, &MeanAgreement::new(reference, &biased));
+}
+
+/// [`assert_agrees_to_one_percent`] for paired replicates
+/// ([`MeanAgreement::paired`]).
+pub fn assert_paired_agreement_to_one_percent(
+    name: &str,
+    reference: &[[f64; 3]],
+    test: &[[f64; 3]],
+) {
+    assert_one_percent(name, &MeanAgreement::paired(reference, test));
+}
+
+/// The control of [`assert_paired_agreement_to_one_percent`]: the tested
+/// replicates scaled by 1.01 must fail it.
+pub fn assert_paired_one_percent_bias_is_rejected(
+    name: &str,
+    reference: &[[f64; 3]],
+    test: &[[f64; 3]],
+) {
+    let biased = times_1_01(test);
+    assert_one_percent_rejected(name, &MeanAgreement::paired(reference, &biased));
+}
+
+fn times_1_01(test: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    test.iter().map(|m| m.map(|v| v * 1.01)).collect()
+}
+
+fn assert_one_percent(name: &str, a: &MeanAgreement) {
     eprintln!("{name}: rel {:?}\n  {a:?}", a.rel());
     assert!(a.failures(4.0, 0.01).is_empty(), "{name} disagrees: {a:?}");
     assert!(
@@ -382,11 +438,7 @@ pub fn assert_agrees_to_one_percent(name: &str, reference: &[[f64; 3]], test: &[
     );
 }
 
-/// The control of [`assert_agrees_to_one_percent`]: the same replicates
-/// scaled by 1.01 must fail the check, which must still resolve 1%.
-pub fn assert_one_percent_bias_is_rejected(name: &str, reference: &[[f64; 3]], test: &[[f64; 3]]) {
-    let biased: Vec<[f64; 3]> = test.iter().map(|m| m.map(|v| v * 1.01)).collect();
-    let a = MeanAgreement::new(reference, &biased);
+fn assert_one_percent_rejected(name: &str, a: &MeanAgreement) {
     eprintln!("{name} x1.01: rel {:?}\n  {a:?}", a.rel());
     assert!(
         a.resolves(5.0, 0.01),
@@ -396,86 +448,6 @@ pub fn assert_one_percent_bias_is_rejected(name: &str, reference: &[[f64; 3]], t
         !a.failures(4.0, 0.01).is_empty(),
         "{name}: a 1% bias passed: {a:?}"
     );
-}
-
-/// A closed sphere seen from inside: diffuse albedo `a`, uniform emission
-/// `le` on its inner side, so every pixel is `le / (1 − a)` (unbounded
-/// depth with Russian roulette).
-pub fn furnace_sphere(center: [f64; 3], radius: f64, albedo: f32, le: f32) -> String {
-    let [x, y, z] = center;
-    format!(
-        r#"<scene version="3.0.0">
-    <integrator type="path"><integer name="max_depth" value="-1"/></integrator>
-    <sensor type="perspective">
-        <float name="fov" value="70"/>
-        <float name="near_clip" value="{near}"/>
-        <float name="far_clip" value="{far}"/>
-        <transform name="to_world">
-            <lookat origin="{x},{y},{z}" target="{x},{y},{z2}" up="0,1,0"/>
-        </transform>
-        <film type="hdrfilm">
-            <integer name="width" value="16"/><integer name="height" value="12"/>
-            <rfilter type="box"/>
-        </film>
-    </sensor>
-    <shape type="sphere">
-        <point name="center" x="{x}" y="{y}" z="{z}"/>
-        <float name="radius" value="{radius}"/>
-        <boolean name="flip_normals" value="true"/>
-        <bsdf type="diffuse"><rgb name="reflectance" value="{albedo}"/></bsdf>
-        <emitter type="area"><rgb name="radiance" value="{le}"/></emitter>
-    </shape>
-</scene>"#,
-        z2 = z + radius * 0.5,
-        near = radius * 1e-3,
-        far = radius * 10.0
-    )
-}
-
-/// A diffuse plane (albedo ρ = 0.5) under a point light (intensity 3, height
-/// h = 2), seen by a narrow camera, direct light only, and its exact image
-/// mean: the closed form `L = ρ/π · I cos θ / d² = ρ/π · I h / d³` at the
-/// plane point each pixel sees, averaged over each pixel by a 16×16
-/// midpoint rule (smooth integrand: error far below 1e-4).
-pub fn point_light_on_a_plane() -> (Scene, f64) {
-    let (rho, intensity, h) = (0.5f64, 3.0f64, 2.0f64);
-    let scene = load_str(&format!(
-        r#"<scene version="3.0.0">
-    <integrator type="path"><integer name="max_depth" value="2"/></integrator>
-    <sensor type="perspective">
-        <float name="fov" value="30"/>
-        <transform name="to_world"><lookat origin="0.3,0.2,4" target="0.3,0.2,0" up="0,1,0"/></transform>
-        <film type="hdrfilm">
-            <integer name="width" value="12"/><integer name="height" value="10"/>
-            <rfilter type="box"/>
-        </film>
-    </sensor>
-    <shape type="rectangle">
-        <transform name="to_world"><scale value="5"/></transform>
-        <bsdf type="diffuse"><rgb name="reflectance" value="{rho}"/></bsdf>
-    </shape>
-    <emitter type="point">
-        <rgb name="intensity" value="{intensity}"/>
-        <point name="position" x="0" y="0" z="{h}"/>
-    </emitter>
-</scene>"#
-    ));
-    // Expected image mean: the closed form averaged over each pixel by a
-    // 16×16 midpoint rule (smooth integrand: error far below 1e-4).
-    let (w, hgt) = scene.camera.resolution();
-    let mut expected = 0.0f64;
-    for y in 0..hgt * 16 {
-        for x in 0..w * 16 {
-            let raster = glam::Vec2::new((x as f32 + 0.5) / 16.0, (y as f32 + 0.5) / 16.0);
-            let ray = scene.camera.generate_ray(raster);
-            let t = -ray.o.z / ray.d.z;
-            let p = ray.o + ray.d * t;
-            let d = ((p.x as f64).powi(2) + (p.y as f64).powi(2) + h * h).sqrt();
-            expected += rho / std::f64::consts::PI * intensity * h / (d * d * d);
-        }
-    }
-    expected /= (w * hgt * 256) as f64;
-    (scene, expected)
 }
 
 pub mod tempered;
