@@ -1051,12 +1051,14 @@ fn chain_means<'s, K: Kernel<Path<'s>, PathSample>>(
 }
 
 /// The reference and the exact start states of one set of paths: two
-/// independent importance estimates of `M` = 200 000 start-up candidates
-/// each (seeds `seed`, `seed + 1`), the second's candidates the chains'
-/// start pool. Built once per set and shared by a kernel and its control.
+/// independent importance estimates of `m` start-up candidates each
+/// (seeds `seed`, `seed + 1`), the second's candidates the chains' start
+/// pool. Built once per set and shared by a kernel and its control.
 struct Pools<'s> {
     /// Seed of the first pool; the chains run on `seed + 2`.
     seed: u64,
+    /// Chains run from the start pool.
+    chains: usize,
     /// The reference estimate of the statistics and its standard error.
     truth: ([f64; 4], [f64; 4]),
     /// The start pool's estimate and its standard error.
@@ -1066,12 +1068,24 @@ struct Pools<'s> {
 }
 
 impl<'s> Pools<'s> {
+    /// Pools of 200 000 candidates for 2 000 chains.
     fn new(family: &PathFamily<'s>, set: &dyn Fn(&Path) -> bool, seed: u64) -> Self {
-        const M: usize = 200_000;
-        let (truth, truth_se, _) = reference(family, set, M, seed);
-        let (start_mean, start_se, starts) = reference(family, set, M, seed + 1);
+        Self::sized(family, set, seed, 200_000, 2_000)
+    }
+
+    /// Pools of `m` candidates for `chains` chains.
+    fn sized(
+        family: &PathFamily<'s>,
+        set: &dyn Fn(&Path) -> bool,
+        seed: u64,
+        m: usize,
+        chains: usize,
+    ) -> Self {
+        let (truth, truth_se, _) = reference(family, set, m, seed);
+        let (start_mean, start_se, starts) = reference(family, set, m, seed + 1);
         Pools {
             seed,
+            chains,
             truth: (truth, truth_se),
             start: (start_mean, start_se),
             starts,
@@ -1080,17 +1094,16 @@ impl<'s> Pools<'s> {
 }
 
 /// Largest |z| over statistics 1–3 (raster x, y, radius²) between a
-/// kernel's chains (2 000 from `pools`' starts, 300 steps) and `pools`'
+/// kernel's chains (from `pools`' starts, 300 steps) and `pools`'
 /// reference.
 fn stationarity_z<'s, K: Kernel<Path<'s>, PathSample>>(
     name: &str,
     kernel: &mut K,
     pools: &Pools<'s>,
 ) -> f64 {
-    const K: usize = 2_000;
     const STEPS: usize = 300;
     let ((truth, truth_se), (start_mean, start_se)) = (pools.truth, pools.start);
-    let (mean, se) = chain_means(kernel, &pools.starts, K, STEPS, pools.seed + 2);
+    let (mean, se) = chain_means(kernel, &pools.starts, pools.chains, STEPS, pools.seed + 2);
     let mut worst = 0.0f64;
     for d in 1..4 {
         // The chains' mean carries the start pool's error too (the starts
@@ -1175,12 +1188,20 @@ fn perturbations_keep_exact_start_states_exact() {
 /// the turned segment barely changes its Jacobians and the control cannot
 /// fail at this budget): the kernel's ratio holds for any sizes (its
 /// density test runs at 0.01°–1°), and here its control, the ratio
-/// replaced by 0, must fail.
+/// replaced by 0, must fail. Its paths (`L D S D E`) are rare among the
+/// start-up candidates, so the two pools' errors dominated σ with the
+/// default test's 200 000 candidates (control |z| 2.28, the chains 0.010
+/// off on the squared radius with σ 0.005, session 20): here 2 000 000
+/// candidates per pool and 4 000 chains (expected σ ≈ 0.0018). Ignored
+/// for its run time (≈ 10 s): `cargo test -p mcmc-render --test
+/// path_space_perturbations -- --ignored wide_angles --nocapture`.
 #[test]
+#[ignore]
 fn multi_chain_perturbation_keeps_exact_start_states_exact_at_wide_angles() {
     let scene = mirror_box();
     let family = PathFamily::new(scene, Some(4));
-    let multi = Pools::new(&family, &|x: &Path| multi_chain(x).is_some(), 300);
+    let set = |x: &Path| multi_chain(x).is_some();
+    let multi = Pools::sized(&family, &set, 300, 2_000_000, 4_000);
     let wide = || {
         let mut k = MultiChainPerturbation::default();
         k.angles = AngleKernel {
