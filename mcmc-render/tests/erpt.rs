@@ -260,11 +260,7 @@ fn a_one_percent_bias_is_rejected_paired() {
     for (r, name) in REGIONS.iter().enumerate() {
         let a: Vec<[f64; 3]> = lens.iter().map(|x| x[r]).collect();
         let b: Vec<[f64; 3]> = all.iter().map(|x| x[r]).collect();
-        common::assert_paired_one_percent_bias_is_rejected(
-            &format!("erpt paired, {name}"),
-            &a,
-            &b,
-        );
+        common::assert_paired_one_percent_bias_is_rejected(&format!("erpt paired, {name}"), &a, &b);
     }
 }
 

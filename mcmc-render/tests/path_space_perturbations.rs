@@ -1128,11 +1128,7 @@ fn assert_stationary_with_control<'s, K: Kernel<Path<'s>, PathSample>>(
     pools: &Pools<'s>,
 ) {
     let z = stationarity_z(name, &mut kernel(), pools);
-    let control = stationarity_z(
-        &format!("{name}, ratio 0"),
-        &mut Symmetric(kernel()),
-        pools,
-    );
+    let control = stationarity_z(&format!("{name}, ratio 0"), &mut Symmetric(kernel()), pools);
     assert!(z < 4.0, "{name}: the chains drift from π: |z| = {z:.2}");
     assert!(
         control > 4.0,
@@ -1163,7 +1159,11 @@ fn perturbations_keep_exact_start_states_exact() {
     let all = Pools::new(&family, &|_: &Path| true, 400);
     assert_stationary_with_control("lens", LensPerturbation::default, &lens);
     assert_stationary_with_control("caustic", CausticPerturbation::default, &caustic);
-    let z_multi = stationarity_z("multi-chain", &mut MultiChainPerturbation::default(), &multi);
+    let z_multi = stationarity_z(
+        "multi-chain",
+        &mut MultiChainPerturbation::default(),
+        &multi,
+    );
     assert!(
         z_multi < 4.0,
         "multi-chain: the chains drift from π: |z| = {z_multi:.2}"

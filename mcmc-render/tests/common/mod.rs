@@ -425,10 +425,12 @@ pub fn assert_paired_one_percent_bias_is_rejected(
     assert_one_percent_rejected(name, &MeanAgreement::paired(reference, &biased));
 }
 
+/// The replicates scaled by 1.01 (a 1% bias).
 fn times_1_01(test: &[[f64; 3]]) -> Vec<[f64; 3]> {
     test.iter().map(|m| m.map(|v| v * 1.01)).collect()
 }
 
+/// Every channel within 4σ and 1%, and 5σ < 1%.
 fn assert_one_percent(name: &str, a: &MeanAgreement) {
     eprintln!("{name}: rel {:?}\n  {a:?}", a.rel());
     assert!(a.failures(4.0, 0.01).is_empty(), "{name} disagrees: {a:?}");
@@ -438,6 +440,7 @@ fn assert_one_percent(name: &str, a: &MeanAgreement) {
     );
 }
 
+/// 5σ < 1%, and some channel outside 4σ or 1%.
 fn assert_one_percent_rejected(name: &str, a: &MeanAgreement) {
     eprintln!("{name} x1.01: rel {:?}\n  {a:?}", a.rel());
     assert!(
@@ -448,6 +451,86 @@ fn assert_one_percent_rejected(name: &str, a: &MeanAgreement) {
         !a.failures(4.0, 0.01).is_empty(),
         "{name}: a 1% bias passed: {a:?}"
     );
+}
+
+/// A closed sphere seen from inside: diffuse albedo `a`, uniform emission
+/// `le` on its inner side, so every pixel is `le / (1 − a)` (unbounded
+/// depth with Russian roulette).
+pub fn furnace_sphere(center: [f64; 3], radius: f64, albedo: f32, le: f32) -> String {
+    let [x, y, z] = center;
+    format!(
+        r#"<scene version="3.0.0">
+    <integrator type="path"><integer name="max_depth" value="-1"/></integrator>
+    <sensor type="perspective">
+        <float name="fov" value="70"/>
+        <float name="near_clip" value="{near}"/>
+        <float name="far_clip" value="{far}"/>
+        <transform name="to_world">
+            <lookat origin="{x},{y},{z}" target="{x},{y},{z2}" up="0,1,0"/>
+        </transform>
+        <film type="hdrfilm">
+            <integer name="width" value="16"/><integer name="height" value="12"/>
+            <rfilter type="box"/>
+        </film>
+    </sensor>
+    <shape type="sphere">
+        <point name="center" x="{x}" y="{y}" z="{z}"/>
+        <float name="radius" value="{radius}"/>
+        <boolean name="flip_normals" value="true"/>
+        <bsdf type="diffuse"><rgb name="reflectance" value="{albedo}"/></bsdf>
+        <emitter type="area"><rgb name="radiance" value="{le}"/></emitter>
+    </shape>
+</scene>"#,
+        z2 = z + radius * 0.5,
+        near = radius * 1e-3,
+        far = radius * 10.0
+    )
+}
+
+/// A diffuse plane (albedo ρ = 0.5) under a point light (intensity 3, height
+/// h = 2), seen by a narrow camera, direct light only, and its exact image
+/// mean: the closed form `L = ρ/π · I cos θ / d² = ρ/π · I h / d³` at the
+/// plane point each pixel sees, averaged over each pixel by a 16×16
+/// midpoint rule (smooth integrand: error far below 1e-4).
+pub fn point_light_on_a_plane() -> (Scene, f64) {
+    let (rho, intensity, h) = (0.5f64, 3.0f64, 2.0f64);
+    let scene = load_str(&format!(
+        r#"<scene version="3.0.0">
+    <integrator type="path"><integer name="max_depth" value="2"/></integrator>
+    <sensor type="perspective">
+        <float name="fov" value="30"/>
+        <transform name="to_world"><lookat origin="0.3,0.2,4" target="0.3,0.2,0" up="0,1,0"/></transform>
+        <film type="hdrfilm">
+            <integer name="width" value="12"/><integer name="height" value="10"/>
+            <rfilter type="box"/>
+        </film>
+    </sensor>
+    <shape type="rectangle">
+        <transform name="to_world"><scale value="5"/></transform>
+        <bsdf type="diffuse"><rgb name="reflectance" value="{rho}"/></bsdf>
+    </shape>
+    <emitter type="point">
+        <rgb name="intensity" value="{intensity}"/>
+        <point name="position" x="0" y="0" z="{h}"/>
+    </emitter>
+</scene>"#
+    ));
+    // Expected image mean: the closed form averaged over each pixel by a
+    // 16×16 midpoint rule (smooth integrand: error far below 1e-4).
+    let (w, hgt) = scene.camera.resolution();
+    let mut expected = 0.0f64;
+    for y in 0..hgt * 16 {
+        for x in 0..w * 16 {
+            let raster = glam::Vec2::new((x as f32 + 0.5) / 16.0, (y as f32 + 0.5) / 16.0);
+            let ray = scene.camera.generate_ray(raster);
+            let t = -ray.o.z / ray.d.z;
+            let p = ray.o + ray.d * t;
+            let d = ((p.x as f64).powi(2) + (p.y as f64).powi(2) + h * h).sqrt();
+            expected += rho / std::f64::consts::PI * intensity * h / (d * d * d);
+        }
+    }
+    expected /= (w * hgt * 256) as f64;
+    (scene, expected)
 }
 
 pub mod tempered;
