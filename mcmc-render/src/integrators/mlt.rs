@@ -4,11 +4,13 @@
 //!
 //! - **State and target**: a path `x_0 … x_k` and `ln lum f(x)`.
 //! - **Mutations**: `mcmc-core`'s mixture of the path-space mutations with
-//!   the selection weights of the settings: Mitsuba 0.6's selection by
+//!   the selection weights of the settings: Mitsuba 0.6's mutations by
 //!   default, Veach's bidirectional mutation and the lens, caustic and
 //!   multi-chain perturbations at weight 1 each (the last two since
 //!   session 20, when their agreement with PT was resolved to 1%), the
-//!   manifold perturbation off (on in `mept`).
+//!   manifold perturbation off (on in `mept`); fixed weights unless
+//!   `suitability` (Mitsuba's renormalisation over the mutations a path
+//!   admits) is set.
 //! - **Start-up and normalisation**: `bootstrap` candidates (Mitsuba's
 //!   `luminanceSamples`, 100 000), each one sample of a BDPT technique with
 //!   its one-sample-MIS weight ([`crate::path_space::family`]), give `b`
