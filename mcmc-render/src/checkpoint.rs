@@ -133,12 +133,19 @@ impl Progress {
 
     /// The whole-image film these accumulators make.
     pub fn film(&self, filter: Arc<Filter>) -> Result<Film, String> {
-        film_of(self.size, filter, (self.samples.clone(), self.splats.clone()))
+        film_of(
+            self.size,
+            filter,
+            (self.samples.clone(), self.splats.clone()),
+        )
     }
 
     /// The whole-image film of [`Progress::more_films`]`[i]`.
     pub fn more_film(&self, i: usize, filter: Arc<Filter>) -> Result<Film, String> {
-        let acc = self.more_films.get(i).ok_or("the checkpoint holds no such film")?;
+        let acc = self
+            .more_films
+            .get(i)
+            .ok_or("the checkpoint holds no such film")?;
         film_of(self.size, filter, acc.clone())
     }
 }
@@ -197,7 +204,9 @@ pub fn save(path: &Path, fingerprint: u64, progress: &Progress) -> Result<(), St
         out.extend_from_slice(&v.to_le_bytes());
     }
     let more = progress.more_films.iter().map(|(s, p)| (&s[..], &p[..]));
-    for (samples, splats) in std::iter::once((&progress.samples[..], &progress.splats[..])).chain(more) {
+    for (samples, splats) in
+        std::iter::once((&progress.samples[..], &progress.splats[..])).chain(more)
+    {
         for x in samples.as_flattened().iter().chain(splats.as_flattened()) {
             out.extend_from_slice(&x.to_bits().to_le_bytes());
         }
@@ -288,7 +297,8 @@ pub fn progress_from_bytes(
         ));
     }
     // Format 2 lacks the tenth word (one film) and keeps fewer words.
-    let (body, header, max_extra) = match (bytes.strip_prefix(MAGIC), bytes.strip_prefix(MAGIC_V2)) {
+    let (body, header, max_extra) = match (bytes.strip_prefix(MAGIC), bytes.strip_prefix(MAGIC_V2))
+    {
         (Some(body), _) => (body, 10, MAX_EXTRA_WORDS),
         (None, Some(body)) => (body, 9, MAX_EXTRA_WORDS_V2),
         (None, None) => return Err(bad("not a checkpoint of mcmc-render's per-pixel driver")),

@@ -456,7 +456,10 @@ fn a_stopped_mcmc_vcm_render_resumed_from_its_checkpoint_ends_bit_identical() {
     };
     check_per_pixel_resume(&scene, job, (4, 2), fresh_steps, &keys, at);
     // Two films, and more words than format 2's 256 (8 pairs of two chains).
-    assert_eq!((saved.pass, saved.spp_done, saved.more_films.len()), (2, 2, 1));
+    assert_eq!(
+        (saved.pass, saved.spp_done, saved.more_films.len()),
+        (2, 2, 1)
+    );
     assert_eq!(mcmc_vcm_chains(&saved.extra).len(), 16);
     assert!(saved.extra.len() > 256, "{}", saved.extra.len());
     use mcmc_render::integrators::mcmc_vcm::check_checkpoint;
@@ -464,7 +467,10 @@ fn a_stopped_mcmc_vcm_render_resumed_from_its_checkpoint_ends_bit_identical() {
     let mut cut = saved;
     cut.extra.pop();
     let e = check_checkpoint(&cut, integ.as_any(), &scene).unwrap_err();
-    assert!(e.contains("not a checkpoint of mcmc-vcm") && !e.contains('\n'), "{e}");
+    assert!(
+        e.contains("not a checkpoint of mcmc-vcm") && !e.contains('\n'),
+        "{e}"
+    );
     let run = RunSettings {
         spp: Some(4),
         seed: 9,
@@ -831,7 +837,14 @@ fn a_forged_or_foreign_path_space_checkpoint_is_refused_with_one_line() {
     let saved = after_one("mlt");
     let go = AtomicBool::new(false);
     let resume = |progress: ChainProgress, name: &str| {
-        try_chains_render(&scene, (name, &MLT), &path, Some(progress), &go, &NoObserver)
+        try_chains_render(
+            &scene,
+            (name, &MLT),
+            &path,
+            Some(progress),
+            &go,
+            &NoObserver,
+        )
     };
     let refused = |progress: ChainProgress, name: &str, why: &str| {
         let e = resume(progress, name).map(|_| ()).unwrap_err();

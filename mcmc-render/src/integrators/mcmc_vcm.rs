@@ -1215,6 +1215,9 @@ struct Resumed {
     tally: Tally,
     norm: Normalisation,
     units: Vec<SavedUnit>,
+    /// The path-tracing and light-side films (rank 0 only: the only rank
+    /// that adds into them).
+    films: Option<(Film, Film)>,
 }
 
 /// A chain pair as a checkpoint holds it: its report, and per chain kind
@@ -1471,10 +1474,13 @@ impl McmcVcm {
         let mut iterations = 0u64;
         let mut interrupted = false;
         // A checkpoint's progress replaces the fresh state (module docs).
-        let resumed = run.checkpoint.as_ref().and_then(|c| self.resume_point(c, &filter));
+        let resumed = run
+            .checkpoint
+            .as_ref()
+            .and_then(|c| self.resume_point(c, &filter));
         let resumed_from = resumed.as_ref().map(|r| r.0);
-        if let Some((done, saved, films)) = resumed {
-            if let Some(films) = films {
+        if let Some((done, saved)) = resumed {
+            if let Some(films) = saved.films {
                 (film, light_film) = films;
             }
             iterations = done;
@@ -1795,7 +1801,11 @@ impl McmcVcm {
             return Err(w.bad());
         }
         let tally = Tally::from_counters((energy, counts));
-        let sums: Vec<f64> = w.take(COLUMNS as u64)?.iter().map(|&x| f64::from_bits(x)).collect();
+        let sums: Vec<f64> = w
+            .take(COLUMNS as u64)?
+            .iter()
+            .map(|&x| f64::from_bits(x))
+            .collect();
         let mut norm = Normalisation::from_batch(&sums);
         let batches = w.next()?;
         if batches != iterations {
@@ -1839,6 +1849,7 @@ impl McmcVcm {
             tally,
             norm,
             units,
+            films: None,
         })
     }
 
@@ -1858,7 +1869,9 @@ impl McmcVcm {
         while !tail.0.is_empty() {
             let kind = tail.next()?;
             let Some(&(k, large)) = self.kinds().iter().find(|k| k.0 as u64 == kind) else {
-                return Err(format!("holds a chain of kind {kind}, which the run does not have"));
+                return Err(format!(
+                    "holds a chain of kind {kind}, which the run does not have"
+                ));
             };
             let rng = rng_from_words([tail.next()?, tail.next()?, tail.next()?, tail.next()?])
                 .ok_or("a chain's stream is all zero")?;
@@ -1894,7 +1907,7 @@ impl McmcVcm {
         &self,
         checkpoint: &Checkpoint,
         filter: &Arc<Filter>,
-    ) -> Option<(u64, Resumed, Option<(Film, Film)>)> {
+    ) -> Option<(u64, Resumed)> {
         let local = checkpoint.resume.as_ref();
         let words = local.map_or(Vec::new(), |p| {
             let mut w = vec![p.pass];
@@ -1906,13 +1919,16 @@ impl McmcVcm {
             None => words,
         };
         let (&iterations, extra) = words.split_first()?;
-        let resumed = (self.decode(iterations, extra))
+        let mut resumed = (self.decode(iterations, extra))
             .expect("rank 0 checked the checkpoint (check_checkpoint)");
-        let films = local.map(|p| {
+        resumed.films = local.map(|p| {
             let film = |f: Result<Film, String>| f.expect("checked against the scene");
-            (film(p.film(filter.clone())), film(p.more_film(0, filter.clone())))
+            (
+                film(p.film(filter.clone())),
+                film(p.more_film(0, filter.clone())),
+            )
         });
-        Some((iterations, resumed, films))
+        Some((iterations, resumed))
     }
 
     /// Whether the chains' restarts carry their pool's weight
