@@ -31,7 +31,10 @@
 //! for bit; control: the chains' streams put back), a forged or foreign
 //! path-space checkpoint refused with one line, and `mcmc-vcm` (format 3:
 //! two films, its chains' streams and adaptive small steps; controls: the
-//! streams replaced, the small steps put back to their start).
+//! streams replaced, the small steps put back to their start), and
+//! `pssmlt`/`mmlt` with the adaptive small step (each chain's adaptation
+//! saved with it, format `mcmcMC04`; controls: the streams, the small
+//! steps put back).
 
 mod common;
 
@@ -725,6 +728,68 @@ fn a_stopped_markov_render_resumed_from_its_checkpoint_ends_bit_identical() {
     ];
     for name in ["pssmlt", "mmlt"] {
         check_markov_resume(&scene, (name, &sets), 48 * 256, 40 * 40 * 24);
+    }
+}
+
+/// The adaptive small step (session 20): `pssmlt` and `mmlt` with
+/// `small_step=adaptive`, each chain's adaptation (θ, proposals,
+/// acceptances) saved with it (`ChainRecord::kernel`), stopped after two
+/// of four rounds and resumed: image and statistics as the uninterrupted
+/// run's; controls: every chain's stream put back to its start, and every
+/// chain's θ put back to its start (0.5) with its counts (all else kept):
+/// each must differ.
+#[test]
+fn a_stopped_adaptive_markov_render_resumed_from_its_checkpoint_ends_bit_identical() {
+    let scene = repo_scene("cornell-box.xml", 24);
+    // 24×24 × 16 mutations per pixel over 9 chains: 1024 a chain, i.e.
+    // four rounds of 256.
+    let sets = [
+        ("bootstrap", "2000"),
+        ("chains", "9"),
+        ("mutations_per_pixel", "16"),
+        ("max_depth", "5"),
+        ("small_step", "adaptive"),
+    ];
+    let (w, h) = (scene.film.width, scene.film.height);
+    let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
+    for name in ["pssmlt", "mmlt"] {
+        check_markov_resume(&scene, (name, &sets), 9 * 256, 24 * 24 * 16);
+        let path = std::env::temp_dir().join(format!(
+            "mcmc-render-checkpoint-adaptive-{name}-{}.ckpt",
+            std::process::id()
+        ));
+        let _ = std::fs::remove_file(&path);
+        let stop = AtomicBool::new(false);
+        let observer = StopAfter {
+            stop: &stop,
+            after: 2,
+            seen: AtomicU32::new(0),
+        };
+        chains_render(&scene, (name, &sets), &path, None, &stop, &observer);
+        let mut fresh_steps = load_chains(&path, 7, (w, h), &filter)
+            .unwrap()
+            .expect("a checkpoint");
+        for chain in fresh_steps.tasks.iter_mut().flat_map(|t| &mut t.chains) {
+            // θ, proposals, acceptances, frozen: the small step's words.
+            assert_eq!(chain.kernel.len(), 4, "{name}");
+            chain.kernel[..3].copy_from_slice(&[0.5f64.to_bits(), 0, 0]);
+        }
+        let go = AtomicBool::new(false);
+        let control = chains_render(
+            &scene,
+            (name, &sets),
+            &path,
+            Some(fresh_steps),
+            &go,
+            &NoObserver,
+        );
+        let _ = std::fs::remove_file(&path);
+        let whole = chains_render(&scene, (name, &sets), &path, None, &go, &NoObserver);
+        std::fs::remove_file(&path).unwrap();
+        assert!(
+            bits(&control.image) != bits(&whole.image),
+            "{name}: the small steps' control agreed"
+        );
     }
 }
 

@@ -854,7 +854,7 @@ pub fn run<F: ChainFamily>(
         && (unsaved_move() || !family.checkpointable(&settings.mutation))
     {
         return Err(MltError::Setting(format!(
-            "these chains cannot be checkpointed (only those of {}, without the adaptive small step)",
+            "these chains cannot be checkpointed (only those of {}, without the adaptive small step in replica sets)",
             crate::checkpoint::CHAIN_INTEGRATORS.join(", ")
         )));
     }
