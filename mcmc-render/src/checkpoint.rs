@@ -1,9 +1,9 @@
 //! Checkpoints of the per-pixel driver ([`crate::render::render`]: `pt`,
-//! `lt`, `bdpt`), of `erpt`'s passes, of `vcm`'s iterations and of the
-//! passes of `guided`'s last iteration: after every whole pass the film's
-//! accumulators, the pass count and the samples done (and what else the
-//! integrator keeps: `erpt`'s counters, chain statistics and luminance
-//! estimate) go to a file, so that a run stopped by a time limit, Ctrl-C
+//! `lt`, `bdpt`), of `erpt`'s passes, of `vcm`'s and `mcmc-vcm`'s
+//! iterations and of the passes of `guided`'s last iteration: after every
+//! whole pass the films' accumulators, the pass count and the samples done
+//! (and what else the integrator keeps: `erpt`'s counters, chain
+//! statistics and luminance estimate) go to a file, so that a run stopped by a time limit, Ctrl-C
 //! or a lost process continues where it was and ends with the bits an
 //! uninterrupted run gives (the passes that follow draw from the same
 //! `(seed, pass, unit)` streams and add into the same accumulators in the
@@ -20,40 +20,60 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 /// The integrators whose runs can be checkpointed pass by pass in this
-/// format: the per-pixel driver's, `erpt`, `vcm` (iteration by iteration)
-/// and `guided` (the passes of its last iteration; the SD-tree is trained
-/// again on resume).
-pub const INTEGRATORS: [&str; 6] = ["pt", "lt", "bdpt", "erpt", "vcm", "guided"];
+/// format: the per-pixel driver's, `erpt`, `vcm` and `mcmc-vcm`
+/// (iteration by iteration) and `guided` (the passes of its last
+/// iteration; the SD-tree is trained again on resume).
+pub const INTEGRATORS: [&str; 7] = ["pt", "lt", "bdpt", "erpt", "vcm", "mcmc-vcm", "guided"];
 
 /// The integrators whose runs can be checkpointed on the Markov-chain
-/// driver (independent chains and replica sets on primary sample space;
-/// see [`crate::markov::checkpoint`]; `mcmc-pg` pre-trained).
-pub const CHAIN_INTEGRATORS: [&str; 6] = [
+/// driver (independent chains and replica sets on primary sample space,
+/// and path space's chains; see [`crate::markov::checkpoint`]; `mcmc-pg`
+/// pre-trained).
+pub const CHAIN_INTEGRATORS: [&str; 8] = [
     "pssmlt",
     "mmlt",
     "tempered-pssmlt",
     "tempered-mmlt",
     "relt",
     "mcmc-pg",
+    "mlt",
+    "mept",
 ];
 
-/// First bytes of a checkpoint file (format version 2: version 1's eight
-/// words, the integrator's own words after a ninth word counting them,
-/// version 1's accumulators, then an FNV-1a checksum of everything before
-/// it).
-const MAGIC: &[u8; 8] = b"mcmcPX02";
+/// First bytes of a checkpoint file (format version 3, session 20:
+/// version 2's nine words and a tenth counting the films after the first,
+/// the integrator's own words (up to [`MAX_EXTRA_WORDS`]), every film's
+/// accumulators, then an FNV-1a checksum of everything before it).
+const MAGIC: &[u8; 8] = b"mcmcPX03";
 
-/// First bytes of a file of the earlier format (no checksum), refused.
+/// First bytes of a file of format version 2 (one film, at most
+/// [`MAX_EXTRA_WORDS_V2`] words of the integrator's): still read.
+const MAGIC_V2: &[u8; 8] = b"mcmcPX02";
+
+/// First bytes of a file of format version 1 (no checksum), refused.
 const MAGIC_V1: &[u8; 8] = b"mcmcPX01";
 
 /// Bytes of a checkpoint besides its accumulators and the integrator's
-/// words: the magic, nine words and the checksum.
-const FRAME_BYTES: u128 = 8 + 72 + 8;
+/// words: the magic, ten words (nine in version 2) and the checksum.
+const FRAME_BYTES: u128 = 8 + 80 + 8;
 
-/// Most words an integrator may keep beside the film ([`Progress::extra`]:
+/// Most words an integrator may keep beside the films ([`Progress::extra`]:
 /// `erpt` keeps 12 + 3 per component of its mutation kernel, 60 with the
-/// path-space mixture's 16; `vcm` keeps 6, `guided` 4).
-pub const MAX_EXTRA_WORDS: u64 = 256;
+/// path-space mixture's 16; `vcm` keeps 6, `guided` 4; `mcmc-vcm` 8 per
+/// iteration, its running normalisation's batches, and about 60 per chain
+/// pair): 2^24 (128 MiB), e.g. two million iterations of `mcmc-vcm`.
+pub const MAX_EXTRA_WORDS: u64 = 1 << 24;
+
+/// Most words of the integrator's in a file of format version 2.
+const MAX_EXTRA_WORDS_V2: u64 = 256;
+
+/// Most films a checkpoint holds after the first ([`Progress::more_films`]:
+/// `mcmc-vcm`'s light side beside its path tracing).
+pub const MAX_MORE_FILMS: u64 = 1;
+
+/// A whole-image film's accumulators: the camera-sample ones (4 `f32` a
+/// pixel) and the splat ones (3 a pixel).
+pub type Accumulators = (Vec<[f32; 4]>, Vec<[f32; 3]>);
 
 /// Where a render keeps its checkpoint, for which inputs, and the progress
 /// it resumes from.
@@ -90,6 +110,9 @@ pub struct Progress {
     /// chain statistics and luminance estimate; empty for the per-pixel
     /// driver), at most [`MAX_EXTRA_WORDS`].
     pub extra: Vec<u64>,
+    /// Whole-image films after the first, if the integrator keeps more
+    /// than one (at most [`MAX_MORE_FILMS`]; empty for the others).
+    pub more_films: Vec<Accumulators>,
 }
 
 impl Progress {
@@ -104,19 +127,33 @@ impl Progress {
             samples: samples.to_vec(),
             splats: splats.to_vec(),
             extra: Vec::new(),
+            more_films: Vec::new(),
         }
     }
 
     /// The whole-image film these accumulators make.
     pub fn film(&self, filter: Arc<Filter>) -> Result<Film, String> {
-        let (w, h) = self.size;
-        Film::from_accumulators(
-            [w, h, 0, 0, w, h],
+        film_of(
+            self.size,
             filter,
-            self.samples.clone(),
-            self.splats.clone(),
+            (self.samples.clone(), self.splats.clone()),
         )
     }
+
+    /// The whole-image film of [`Progress::more_films`]`[i]`.
+    pub fn more_film(&self, i: usize, filter: Arc<Filter>) -> Result<Film, String> {
+        let acc = self
+            .more_films
+            .get(i)
+            .ok_or("the checkpoint holds no such film")?;
+        film_of(self.size, filter, acc.clone())
+    }
+}
+
+/// The whole-image film of a `size` image with accumulators `acc`.
+fn film_of(size: (u32, u32), filter: Arc<Filter>, acc: Accumulators) -> Result<Film, String> {
+    let (w, h) = size;
+    Film::from_accumulators([w, h, 0, 0, w, h], filter, acc.0, acc.1)
 }
 
 /// Start value of [`fnv1a`].
@@ -139,12 +176,13 @@ pub fn fingerprint(parts: &[String]) -> u64 {
 }
 
 /// Saves `progress` for the inputs `fingerprint` to `path` (atomically: a
-/// run killed while writing keeps the previous checkpoint): the magic,
-/// nine words, the integrator's words, the accumulators, then an FNV-1a
-/// checksum of all before it.
+/// run killed while writing keeps the previous checkpoint): the magic, ten
+/// words, the integrator's words, the accumulators of every film, then an
+/// FNV-1a checksum of all before it.
 pub fn save(path: &Path, fingerprint: u64, progress: &Progress) -> Result<(), String> {
+    let films = 1 + progress.more_films.len();
     let mut out = Vec::with_capacity(
-        FRAME_BYTES as usize + 8 * progress.extra.len() + 28 * progress.splats.len(),
+        FRAME_BYTES as usize + 8 * progress.extra.len() + 28 * films * progress.splats.len(),
     );
     out.extend_from_slice(MAGIC);
     let (w, h) = progress.size;
@@ -158,17 +196,20 @@ pub fn save(path: &Path, fingerprint: u64, progress: &Progress) -> Result<(), St
         progress.samples.len() as u64,
         progress.splats.len() as u64,
         progress.extra.len() as u64,
+        progress.more_films.len() as u64,
     ]
     .into_iter()
     .chain(progress.extra.iter().copied())
     {
         out.extend_from_slice(&v.to_le_bytes());
     }
-    for x in progress.samples.as_flattened() {
-        out.extend_from_slice(&x.to_bits().to_le_bytes());
-    }
-    for x in progress.splats.as_flattened() {
-        out.extend_from_slice(&x.to_bits().to_le_bytes());
+    let more = progress.more_films.iter().map(|(s, p)| (&s[..], &p[..]));
+    for (samples, splats) in
+        std::iter::once((&progress.samples[..], &progress.splats[..])).chain(more)
+    {
+        for x in samples.as_flattened().iter().chain(splats.as_flattened()) {
+            out.extend_from_slice(&x.to_bits().to_le_bytes());
+        }
     }
     let checksum = fnv1a(&out, FNV_OFFSET);
     out.extend_from_slice(&checksum.to_le_bytes());
@@ -180,10 +221,17 @@ fn accumulator_bytes(size: (u32, u32)) -> u128 {
     28 * u128::from(size.0) * u128::from(size.1)
 }
 
-/// Most bytes of a checkpoint of a `size` image: the frame, the most
-/// words an integrator keeps and the accumulators.
-fn file_bytes(size: (u32, u32)) -> u128 {
-    FRAME_BYTES + 8 * u128::from(MAX_EXTRA_WORDS) + accumulator_bytes(size)
+/// Most bytes of a checkpoint of format version 3 (`v2`: 2) of a `size`
+/// image: the frame, the most words an integrator keeps and the
+/// accumulators of the most films.
+fn file_bytes(size: (u32, u32), v2: bool) -> u128 {
+    if v2 {
+        FRAME_BYTES - 8 + 8 * u128::from(MAX_EXTRA_WORDS_V2) + accumulator_bytes(size)
+    } else {
+        FRAME_BYTES
+            + 8 * u128::from(MAX_EXTRA_WORDS)
+            + u128::from(1 + MAX_MORE_FILMS) * accumulator_bytes(size)
+    }
 }
 
 /// The largest count a checkpoint may hold (samples done in all, and
@@ -193,9 +241,10 @@ pub(crate) const MAX_COUNT: u64 = 1 << 53;
 
 /// The progress saved at `path` for the inputs `fingerprint` and an image
 /// of `size`: `None` when there is no file; an error (one line) when it is
-/// not a checkpoint, of the earlier format, damaged or belongs to another
-/// render. A path that is not a regular file, or a file longer than a
-/// checkpoint of `size`, is refused before it is read.
+/// not a checkpoint, of format 1, damaged or belongs to another render. A
+/// path that is not a regular file, or a file longer than a checkpoint of
+/// its format (its first 8 bytes) and `size` can be, or than the memory
+/// available can hold twice, is refused before the rest is read.
 pub fn load(path: &Path, fingerprint: u64, size: (u32, u32)) -> Result<Option<Progress>, String> {
     let len = match std::fs::metadata(path) {
         Ok(m) => m.len(),
@@ -203,7 +252,11 @@ pub fn load(path: &Path, fingerprint: u64, size: (u32, u32)) -> Result<Option<Pr
         Err(e) => return Err(format!("cannot read checkpoint {}: {e}", path.display())),
     };
     crate::resources::regular_file(path).map_err(|e| format!("checkpoint: {e}"))?;
-    let expected = file_bytes(size);
+    let cannot = |e: std::io::Error| format!("cannot read checkpoint {}: {e}", path.display());
+    let mut magic = Vec::with_capacity(8);
+    let file = std::fs::File::open(path).map_err(cannot)?;
+    std::io::Read::read_to_end(&mut std::io::Read::take(file, 8), &mut magic).map_err(cannot)?;
+    let expected = file_bytes(size, magic == MAGIC_V2);
     if u128::from(len) > expected {
         return Err(format!(
             "checkpoint {}: {len} bytes, more than the {expected} a checkpoint of a {}×{} image can have",
@@ -212,19 +265,25 @@ pub fn load(path: &Path, fingerprint: u64, size: (u32, u32)) -> Result<Option<Pr
             size.1
         ));
     }
-    let bytes = std::fs::read(path)
-        .map_err(|e| format!("cannot read checkpoint {}: {e}", path.display()))?;
+    crate::resources::check_memory(
+        &format!("checkpoint {} ({len} bytes)", path.display()),
+        2 * u128::from(len),
+    )?;
+    let bytes = std::fs::read(path).map_err(cannot)?;
     progress_from_bytes(&bytes, path, fingerprint, size).map(Some)
 }
 
 /// The progress a checkpoint's bytes hold, checked as [`load`] checks a
-/// file (`path` names it in messages): the format (a file of format 1,
+/// file (`path` names it in messages): the format (3, or 2 with one film
+/// and at most 256 words of the integrator's; a file of format 1,
 /// `mcmcPX01`, has no checksum and is refused), the checksum (a flipped
 /// bit, a cut or a file written over is refused as damaged before
 /// anything in it is read), the fingerprint, the image size,
-/// one sample and one splat accumulator per pixel, every accumulator
+/// one sample and one splat accumulator per pixel in every film, at most
+/// [`MAX_MORE_FILMS`] films after the first, every accumulator
 /// finite, at most one pass per sample per pixel and counts within
-/// [`MAX_COUNT`]. What it returns makes a film ([`Progress::film`]).
+/// [`MAX_COUNT`]. What it returns makes films ([`Progress::film`],
+/// [`Progress::more_film`]).
 pub fn progress_from_bytes(
     bytes: &[u8],
     path: &Path,
@@ -237,8 +296,12 @@ pub fn progress_from_bytes(
             "of an earlier format (mcmcPX01, without a checksum); delete it to start afresh",
         ));
     }
-    let Some(body) = bytes.strip_prefix(MAGIC) else {
-        return Err(bad("not a checkpoint of mcmc-render's per-pixel driver"));
+    // Format 2 lacks the tenth word (one film) and keeps fewer words.
+    let (body, header, max_extra) = match (bytes.strip_prefix(MAGIC), bytes.strip_prefix(MAGIC_V2))
+    {
+        (Some(body), _) => (body, 10, MAX_EXTRA_WORDS),
+        (None, Some(body)) => (body, 9, MAX_EXTRA_WORDS_V2),
+        (None, None) => return Err(bad("not a checkpoint of mcmc-render's per-pixel driver")),
     };
     let Some((body, checksum)) = body.split_last_chunk::<8>() else {
         return Err(bad("truncated"));
@@ -259,6 +322,7 @@ pub fn progress_from_bytes(
     let (pass, spp_done, nonfinite) = (word(1)?, word(2)?, word(3)?);
     let (w, h) = (word(4)?, word(5)?);
     let (n_samples, n_splats, n_extra) = (word(6)?, word(7)?, word(8)?);
+    let n_more = if header == 10 { word(9)? } else { 0 };
     if (w, h) != (u64::from(size.0), u64::from(size.1)) {
         return Err(bad(&format!(
             "holds a {w}×{h} image, the scene is {}×{}",
@@ -272,16 +336,23 @@ pub fn progress_from_bytes(
             "holds {n_samples} sample and {n_splats} splat accumulators, a {w}×{h} image has {pixels} of each"
         )));
     }
-    if n_extra > MAX_EXTRA_WORDS {
+    if n_extra > max_extra {
         return Err(bad(&format!(
-            "holds {n_extra} words of the integrator's, more than the {MAX_EXTRA_WORDS} any keeps"
+            "holds {n_extra} words of the integrator's, more than the {max_extra} any keeps"
+        )));
+    }
+    if n_more > MAX_MORE_FILMS {
+        return Err(bad(&format!(
+            "holds {} films, more than the {} any integrator keeps",
+            u128::from(n_more) + 1,
+            MAX_MORE_FILMS + 1
         )));
     }
     let extra = (0..n_extra as usize)
-        .map(|i| word(9 + i))
+        .map(|i| word(header + i))
         .collect::<Result<Vec<u64>, String>>()?;
-    let floats = &body[(72 + 8 * extra.len()).min(body.len())..];
-    if floats.len() as u128 != accumulator_bytes(size) {
+    let floats = &body[(8 * (header + extra.len())).min(body.len())..];
+    if floats.len() as u128 != u128::from(1 + n_more) * accumulator_bytes(size) {
         return Err(bad("truncated or padded"));
     }
     let samples_done = u128::from(spp_done) * u128::from(pixels);
@@ -302,12 +373,16 @@ pub fn progress_from_bytes(
             values[i]
         )));
     }
-    let (s, p) = values.split_at(4 * pixels as usize);
-    let samples = s
-        .chunks_exact(4)
-        .map(|c| [c[0], c[1], c[2], c[3]])
-        .collect();
-    let splats = p.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    let mut films = values.chunks_exact(7 * pixels.max(1) as usize).map(|film| {
+        let (s, p) = film.split_at(4 * pixels as usize);
+        let samples = s
+            .chunks_exact(4)
+            .map(|c| [c[0], c[1], c[2], c[3]])
+            .collect();
+        let splats = p.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        (samples, splats)
+    });
+    let (samples, splats) = films.next().unwrap_or_default();
     Ok(Progress {
         pass,
         spp_done,
@@ -316,6 +391,7 @@ pub fn progress_from_bytes(
         samples,
         splats,
         extra,
+        more_films: films.collect(),
     })
 }
 

@@ -412,10 +412,11 @@ impl Default for Mutation {
 pub const LARGE_STEP_COMPONENT: usize = 1;
 
 impl Mutation {
-    /// Whether chains with this mutation can be checkpointed
+    /// Whether replica sets with this mutation can be checkpointed
     /// ([`crate::markov::ChainFamily::checkpointable`]): its kernel keeps
-    /// no state, unless the small step is the adaptive one (its
-    /// adaptation's state is not saved).
+    /// no state, unless the small step is the adaptive one (a replica
+    /// set's levels are saved without their kernels; independent chains
+    /// save the adaptation with each chain since session 20).
     pub fn checkpointable(&self) -> bool {
         !matches!(self.small, SmallStepKind::Adaptive)
     }
@@ -492,8 +493,10 @@ impl<'a, F: PssPathSampler> ChainFamily for PssFamily<'a, F> {
     fn independent_probability(&self, mutation: &Mutation) -> f64 {
         mutation.large_step_probability
     }
-    fn checkpointable(&self, mutation: &Mutation) -> bool {
-        mutation.checkpointable()
+    fn checkpointable(&self, _mutation: &Mutation) -> bool {
+        // Independent chains: every small step, the adaptive one's state
+        // saved with its chain (`ChainRecord::kernel`).
+        true
     }
     crate::primary_sample_space_family!();
 }

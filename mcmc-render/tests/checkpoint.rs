@@ -26,6 +26,15 @@
 //! The same for `vcm`'s iterations and the passes of `guided`'s last
 //! iteration (session 19; control for `guided`: the pass count two back),
 //! and pre-trained `mcmc-pg`'s chains (session 19, as `pssmlt`'s).
+//!
+//! Session 20: `mlt` and `mept` (path-space chains, every path saved bit
+//! for bit; control: the chains' streams put back), a forged or foreign
+//! path-space checkpoint refused with one line, and `mcmc-vcm` (format 3:
+//! two films, its chains' streams and adaptive small steps; controls: the
+//! streams replaced, the small steps put back to their start), and
+//! `pssmlt`/`mmlt` with the adaptive small step (each chain's adaptation
+//! saved with it, format `mcmcMC04`; controls: the streams, the small
+//! steps put back).
 
 mod common;
 
@@ -163,10 +172,10 @@ fn a_stopped_render_resumed_from_its_checkpoint_ends_bit_identical() {
     }
 }
 
-/// The per-pixel driver's checkpoint (format 2, `mcmcPX02`) ends with an
-/// FNV-1a checksum: a flipped bit (here in the non-finite count, which the
-/// reader's consistency checks alone would accept), a flipped accumulator
-/// bit or a cut file is refused as damaged, and a file of format 1
+/// The per-pixel driver's checkpoint (format 3, `mcmcPX03`, as format 2
+/// before it) ends with an FNV-1a checksum: a flipped bit (here in the
+/// non-finite count, which the reader's consistency checks alone would
+/// accept), a flipped accumulator bit or a cut file is refused as damaged, and a file of format 1
 /// (`mcmcPX01`, no checksum) as of an earlier format, each with one line.
 /// Control: the intact file loads and holds the passes saved.
 #[test]
@@ -372,6 +381,123 @@ fn a_stopped_vcm_render_resumed_from_its_checkpoint_ends_bit_identical() {
     );
 }
 
+/// Where `mcmc-vcm`'s checkpoint words keep every chain's random stream
+/// (4 words) and its kernel's state (θ, proposals, acceptances, frozen),
+/// found by the layout `McmcVcm::saved_words` documents: the MIS scale,
+/// 3 restart weights, the skipped iterations, the tally's counters (a
+/// count, the numbers, a count, the counts), 8 running sums, the batch
+/// count and 8 words a batch, the pair count, then per pair its counters,
+/// whose counts start with the length of its chains' part: per chain its
+/// kind, stream, state length and state.
+fn mcmc_vcm_chains(words: &[u64]) -> Vec<(usize, usize)> {
+    let skip = |i: usize| i + 1 + words[i] as usize;
+    let mut i = skip(skip(5));
+    i += 8;
+    i += 1 + 8 * words[i] as usize;
+    let pairs = words[i];
+    i += 1;
+    let mut out = Vec::new();
+    for _ in 0..pairs {
+        i = skip(i);
+        let (end, tail_end) = (skip(i), i + 2 + words[i + 1] as usize);
+        let mut j = i + 2;
+        while j < tail_end {
+            out.push((j + 1, j + 6));
+            j += 6 + words[j + 5] as usize;
+        }
+        i = end;
+    }
+    assert_eq!(i, words.len(), "the layout of mcmc-vcm's words changed");
+    out
+}
+
+/// `mcmc-vcm` checkpointed after every iteration (session 20, in format 3:
+/// its two films and, as its words, the MIS scale, restart weights,
+/// running normalisation with its batches, tally, and per chain pair the
+/// report, each chain's stream and adaptive small step): a render stopped
+/// after two of its four iterations and resumed ends with the
+/// uninterrupted render's image and statistics bit for bit. Two controls
+/// must give another image: every chain's stream replaced by another
+/// (all else kept), and every chain's small step put back to its start
+/// (θ = 0.5, no proposals counted). A file with a word cut is refused
+/// with one line.
+#[test]
+fn a_stopped_mcmc_vcm_render_resumed_from_its_checkpoint_ends_bit_identical() {
+    let scene = repo_scene("cornell-box.xml", 16);
+    let sets = [("candidates", "500")];
+    let keys = [
+        "iterations",
+        "energy_shares",
+        "chains",
+        "exchange_attempts",
+        "exchange_rate",
+        "exchange_mean_alpha",
+        "b_vis",
+        "b_vis_standard_error",
+        "b_con",
+        "b_con_standard_error",
+        "light_density_scale",
+        "restart_weight_ess",
+        "skipped_iterations",
+        "nonfinite_samples",
+        "normalisation_samples",
+        "visibility_chain_steps",
+    ];
+    let job = ("mcmc-vcm", &sets[..]);
+    let at = ("resumed_from_iterations", 2);
+    let other_streams = |p: &mut Progress| {
+        for (r, _) in mcmc_vcm_chains(&p.extra) {
+            let rng = mcmc_core::rng::stream_rng(9, r as u64);
+            p.extra[r..r + 4].copy_from_slice(&mcmc_core::rng::rng_words(&rng));
+        }
+    };
+    let (saved, integ) = check_per_pixel_resume(&scene, job, (4, 2), other_streams, &keys, at);
+    let fresh_steps = |p: &mut Progress| {
+        for (_, k) in mcmc_vcm_chains(&p.extra) {
+            p.extra[k..k + 3].copy_from_slice(&[0.5f64.to_bits(), 0, 0]);
+        }
+    };
+    check_per_pixel_resume(&scene, job, (4, 2), fresh_steps, &keys, at);
+    // Two films, and more words than format 2's 256 (8 pairs of two chains).
+    assert_eq!(
+        (saved.pass, saved.spp_done, saved.more_films.len()),
+        (2, 2, 1)
+    );
+    assert_eq!(mcmc_vcm_chains(&saved.extra).len(), 16);
+    assert!(saved.extra.len() > 256, "{}", saved.extra.len());
+    use mcmc_render::integrators::mcmc_vcm::check_checkpoint;
+    assert!(check_checkpoint(&saved, integ.as_any(), &scene).is_ok());
+    let mut cut = saved;
+    cut.extra.pop();
+    let e = check_checkpoint(&cut, integ.as_any(), &scene).unwrap_err();
+    assert!(
+        e.contains("not a checkpoint of mcmc-vcm") && !e.contains('\n'),
+        "{e}"
+    );
+    let run = RunSettings {
+        spp: Some(4),
+        seed: 9,
+        checkpoint: Some(Checkpoint {
+            path: std::env::temp_dir().join(format!(
+                "mcmc-render-checkpoint-mcmc-vcm-cut-{}.ckpt",
+                std::process::id()
+            )),
+            fingerprint: 42,
+            resume: Some(Arc::new(cut)),
+            chains: None,
+        }),
+        ..RunSettings::default()
+    };
+    let refused = integ
+        .render(&scene, &run, &AtomicBool::new(false), &NoObserver)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        refused.contains("not a checkpoint of mcmc-vcm") && !refused.contains('\n'),
+        "{refused}"
+    );
+}
+
 /// `guided` checkpointed after every pass of its last iteration (session
 /// 19): 100 spp on a 16×16 box are iterations of 1, 2, 4, 8 and 16 spp
 /// (one pass each) and a last one of 69 in passes of 16. A render stopped
@@ -471,6 +597,18 @@ fn chains_render(
     stop: &AtomicBool,
     observer: &dyn Observer,
 ) -> Rendered {
+    try_chains_render(scene, (name, sets), path, progress, stop, observer).expect(name)
+}
+
+/// [`chains_render`], its error as the command line prints it.
+fn try_chains_render(
+    scene: &Scene,
+    (name, sets): (&str, &[(&str, &str)]),
+    path: &std::path::Path,
+    progress: Option<ChainProgress>,
+    stop: &AtomicBool,
+    observer: &dyn Observer,
+) -> Result<Rendered, String> {
     let sets: Vec<(String, String)> = (sets.iter())
         .map(|(k, v)| (k.to_string(), v.to_string()))
         .collect();
@@ -486,7 +624,9 @@ fn chains_render(
         }),
         ..RunSettings::default()
     };
-    integ.render(scene, &run, stop, observer).expect(name)
+    integ
+        .render(scene, &run, stop, observer)
+        .map_err(|e| e.to_string())
 }
 
 /// `name` with `sets` on `scene`, stopped after two whole rounds (of
@@ -591,6 +731,68 @@ fn a_stopped_markov_render_resumed_from_its_checkpoint_ends_bit_identical() {
     }
 }
 
+/// The adaptive small step (session 20): `pssmlt` and `mmlt` with
+/// `small_step=adaptive`, each chain's adaptation (θ, proposals,
+/// acceptances) saved with it (`ChainRecord::kernel`), stopped after two
+/// of four rounds and resumed: image and statistics as the uninterrupted
+/// run's; controls: every chain's stream put back to its start, and every
+/// chain's θ put back to its start (0.5) with its counts (all else kept):
+/// each must differ.
+#[test]
+fn a_stopped_adaptive_markov_render_resumed_from_its_checkpoint_ends_bit_identical() {
+    let scene = repo_scene("cornell-box.xml", 24);
+    // 24×24 × 16 mutations per pixel over 9 chains: 1024 a chain, i.e.
+    // four rounds of 256.
+    let sets = [
+        ("bootstrap", "2000"),
+        ("chains", "9"),
+        ("mutations_per_pixel", "16"),
+        ("max_depth", "5"),
+        ("small_step", "adaptive"),
+    ];
+    let (w, h) = (scene.film.width, scene.film.height);
+    let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
+    for name in ["pssmlt", "mmlt"] {
+        check_markov_resume(&scene, (name, &sets), 9 * 256, 24 * 24 * 16);
+        let path = std::env::temp_dir().join(format!(
+            "mcmc-render-checkpoint-adaptive-{name}-{}.ckpt",
+            std::process::id()
+        ));
+        let _ = std::fs::remove_file(&path);
+        let stop = AtomicBool::new(false);
+        let observer = StopAfter {
+            stop: &stop,
+            after: 2,
+            seen: AtomicU32::new(0),
+        };
+        chains_render(&scene, (name, &sets), &path, None, &stop, &observer);
+        let mut fresh_steps = load_chains(&path, 7, (w, h), &filter)
+            .unwrap()
+            .expect("a checkpoint");
+        for chain in fresh_steps.tasks.iter_mut().flat_map(|t| &mut t.chains) {
+            // θ, proposals, acceptances, frozen: the small step's words.
+            assert_eq!(chain.kernel.len(), 4, "{name}");
+            chain.kernel[..3].copy_from_slice(&[0.5f64.to_bits(), 0, 0]);
+        }
+        let go = AtomicBool::new(false);
+        let control = chains_render(
+            &scene,
+            (name, &sets),
+            &path,
+            Some(fresh_steps),
+            &go,
+            &NoObserver,
+        );
+        let _ = std::fs::remove_file(&path);
+        let whole = chains_render(&scene, (name, &sets), &path, None, &go, &NoObserver);
+        std::fs::remove_file(&path).unwrap();
+        assert!(
+            bits(&control.image) != bits(&whole.image),
+            "{name}: the small steps' control agreed"
+        );
+    }
+}
+
 #[test]
 fn a_stopped_tempered_render_resumed_from_its_checkpoint_ends_bit_identical() {
     let scene = repo_scene("cornell-box.xml", 24);
@@ -640,6 +842,99 @@ fn a_stopped_relt_render_resumed_from_its_checkpoint_ends_bit_identical() {
     // sets, i.e. 586·3 + 293 + 3·(585·3 + 292) = 8192 mutations. A round
     // is 64 sweeps (256 / 4 levels) of 3.5 mutations in each of 4 sets.
     check_markov_resume(&scene, ("relt", &RELT), 4 * 224, 16 * 16 * 32);
+}
+
+/// `mlt`'s settings in the path-space tests: 16×16 × 16 mutations per
+/// pixel over 4 chains, 1024 a chain, i.e. four rounds of 256; the
+/// specular-chain pass (16 spp, rendered again on resume) stays on.
+const MLT: [(&str, &str); 4] = [
+    ("bootstrap", "2000"),
+    ("chains", "4"),
+    ("mutations_per_pixel", "16"),
+    ("max_depth", "5"),
+];
+
+/// `mlt` and `mept` (session 20): path-space chains, each chain's path
+/// saved with every vertex field bit for bit
+/// (`path_space::state::Path::to_words`), stopped after two of four
+/// rounds and resumed: image and statistics as the uninterrupted run's;
+/// control: every chain's stream put back to its start. `mlt` with its
+/// defaults (bidirectional mutation and lens perturbation) on the Cornell
+/// box; `mept` (manifold perturbation, independent proposals, the BDPT
+/// start-up) on the glossy-glass box, where the manifold perturbation
+/// has specular vertices to move.
+#[test]
+fn a_stopped_path_space_render_resumed_from_its_checkpoint_ends_bit_identical() {
+    let scene = repo_scene("cornell-box.xml", 16);
+    check_markov_resume(&scene, ("mlt", &MLT), 4 * 256, 16 * 16 * 16);
+    let glass = repo_scene_tilted("cornell-glossy-glass.xml", 16, 5);
+    check_markov_resume(&glass, ("mept", &MLT), 4 * 256, 16 * 16 * 16);
+}
+
+/// A path-space checkpoint whose paths are not the scene's own is refused
+/// with one line before a mutation reads them: a path whose stored `f(x)`
+/// its evaluation does not reproduce (the checksum, recomputed by a
+/// forger, cannot see it), a vertex on an emitter the scene does not have
+/// (it would index past the emitters), and `pssmlt`'s chains given to
+/// `mlt`. Control: the checkpoint itself resumes.
+#[test]
+fn a_forged_or_foreign_path_space_checkpoint_is_refused_with_one_line() {
+    let scene = repo_scene("cornell-box.xml", 16);
+    let (w, h) = (scene.film.width, scene.film.height);
+    let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
+    let path = std::env::temp_dir().join(format!(
+        "mcmc-render-checkpoint-mlt-forged-{}.ckpt",
+        std::process::id()
+    ));
+    let after_one = |name: &str| {
+        let _ = std::fs::remove_file(&path);
+        let stop = AtomicBool::new(false);
+        let observer = StopAfter {
+            stop: &stop,
+            after: 1,
+            seen: AtomicU32::new(0),
+        };
+        chains_render(&scene, (name, &MLT), &path, None, &stop, &observer);
+        load_chains(&path, 7, (w, h), &filter)
+            .unwrap()
+            .expect("a checkpoint")
+    };
+    let saved = after_one("mlt");
+    let go = AtomicBool::new(false);
+    let resume = |progress: ChainProgress, name: &str| {
+        try_chains_render(
+            &scene,
+            (name, &MLT),
+            &path,
+            Some(progress),
+            &go,
+            &NoObserver,
+        )
+    };
+    let refused = |progress: ChainProgress, name: &str, why: &str| {
+        let e = resume(progress, name).map(|_| ()).unwrap_err();
+        assert!(e.contains(why) && !e.contains('\n'), "{why}: {e}");
+    };
+    // The first chain's path: its vertex count, 14 words a vertex, then
+    // f(x) (r and g in its first word) and the raster position.
+    let state = &saved.tasks[0].chains[0].state;
+    let vertices = state[0] as usize;
+    assert_eq!(state.len(), 1 + 14 * vertices + 3);
+    let mut brighter = saved.clone();
+    brighter.tasks[0].chains[0].state[1 + 14 * vertices] ^= 1 << 20;
+    refused(brighter, "mlt", "a chain's state does not decode");
+    let mut no_emitter = saved.clone();
+    // x_0's emitter: the low half of its 14th word.
+    no_emitter.tasks[0].chains[0].state[14] = (state[14] & !0xffff_ffff) | 999;
+    refused(no_emitter, "mlt", "a chain's state does not decode");
+    refused(after_one("pssmlt"), "mlt", "checkpoint");
+    // Control: the genuine checkpoint resumes and finishes.
+    let done = resume(saved, "mlt").unwrap();
+    assert_eq!(
+        done.statistics["checkpoint"]["resumed_from_mutations"],
+        4 * 256
+    );
+    std::fs::remove_file(&path).unwrap();
 }
 
 /// A RELT render of `RELT` with `run`'s budget and checkpoint.

@@ -172,6 +172,18 @@ impl<S, P> Kernel<S, P> for Mixture<S, P> {
         }
     }
 
+    fn state_words(&self, out: &mut Vec<u64>) {
+        // The selection is fixed or a function of the state: only the
+        // components keep state.
+        for c in &self.components {
+            c.state_words(out);
+        }
+    }
+
+    fn restore_words(&mut self, input: &mut &[u64]) -> bool {
+        self.components.iter_mut().all(|c| c.restore_words(input))
+    }
+
     fn check_state(&self, state: &S) -> crate::Result<()> {
         self.components
             .iter()

@@ -156,6 +156,24 @@ pub trait Kernel<S, P = ()> {
     fn enumerate(&self, _from: &Sample<S, P>) -> Option<Vec<Enumerated<S>>> {
         None
     }
+
+    /// Appends the kernel's own state (what its adaptation has learnt) to
+    /// `out`, bit for bit, for checkpoints: a kernel restored from these
+    /// words ([`Kernel::restore_words`]) makes the proposals the saved one
+    /// would have made. The default, for kernels without state of their
+    /// own, appends nothing; of the adaptive kernels only
+    /// [`AdaptiveTorusStep`] writes its state so far (the others' runs
+    /// cannot be checkpointed).
+    fn state_words(&self, _out: &mut Vec<u64>) {}
+
+    /// Restores the state [`Kernel::state_words`] wrote at the front of
+    /// `input` (advanced past it) into this kernel, built with the same
+    /// settings; false when the words are not such a state (the kernel,
+    /// then perhaps partly restored, is not to be used). The default reads
+    /// nothing.
+    fn restore_words(&mut self, _input: &mut &[u64]) -> bool {
+        true
+    }
 }
 
 impl<S, P, K: Kernel<S, P> + ?Sized> Kernel<S, P> for Box<K> {
@@ -184,5 +202,11 @@ impl<S, P, K: Kernel<S, P> + ?Sized> Kernel<S, P> for Box<K> {
     }
     fn enumerate(&self, from: &Sample<S, P>) -> Option<Vec<Enumerated<S>>> {
         (**self).enumerate(from)
+    }
+    fn state_words(&self, out: &mut Vec<u64>) {
+        (**self).state_words(out)
+    }
+    fn restore_words(&mut self, input: &mut &[u64]) -> bool {
+        (**self).restore_words(input)
     }
 }

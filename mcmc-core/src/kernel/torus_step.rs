@@ -168,6 +168,36 @@ impl AdaptiveTorusStep {
         SmallStep::Power { theta: self.theta }
     }
 
+    /// The adaptation's state: `θ` (bits), the proposals and acceptances
+    /// it has counted, and whether it is frozen.
+    fn words(&self, out: &mut Vec<u64>) {
+        out.extend([
+            self.theta.to_bits(),
+            self.proposals,
+            self.accepted,
+            u64::from(self.frozen),
+        ]);
+    }
+
+    /// Restores [`AdaptiveTorusStep::words`] from the front of `input`:
+    /// false unless `θ` lies in `(0, 1]` (as [`AdaptiveTorusStep::new`]
+    /// takes it), at most as many acceptances as proposals, and a frozen
+    /// flag of 0 or 1.
+    fn restore(&mut self, input: &mut &[u64]) -> bool {
+        let Some((&[theta, proposals, accepted, frozen], rest)) = input.split_first_chunk::<4>()
+        else {
+            return false;
+        };
+        let theta = f64::from_bits(theta);
+        if !(theta > 0.0 && theta <= 1.0 && accepted <= proposals && frozen <= 1) {
+            return false;
+        }
+        (self.theta, self.proposals, self.accepted) = (theta, proposals, accepted);
+        self.frozen = frozen == 1;
+        *input = rest;
+        true
+    }
+
     fn adapt<S>(&mut self, obs: &StepObservation<'_, S>) {
         if self.frozen || !obs.own {
             return;
@@ -207,6 +237,14 @@ impl<P> Kernel<Vec<f64>, P> for AdaptiveTorusStep {
         self.frozen = true;
     }
 
+    fn state_words(&self, out: &mut Vec<u64>) {
+        self.words(out);
+    }
+
+    fn restore_words(&mut self, input: &mut &[u64]) -> bool {
+        self.restore(input)
+    }
+
     fn component_names(&self) -> Vec<String> {
         vec![name_of(self.step())]
     }
@@ -235,6 +273,14 @@ impl<P> Kernel<TorusPoint, P> for AdaptiveTorusStep {
 
     fn freeze(&mut self) {
         self.frozen = true;
+    }
+
+    fn state_words(&self, out: &mut Vec<u64>) {
+        self.words(out);
+    }
+
+    fn restore_words(&mut self, input: &mut &[u64]) -> bool {
+        self.restore(input)
     }
 
     fn component_names(&self) -> Vec<String> {

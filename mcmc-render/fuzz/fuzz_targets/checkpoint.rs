@@ -8,8 +8,10 @@
 //! Each reader first compares the file's fingerprint and image size with
 //! the run's; the target takes the fingerprint from the input (the word
 //! after the magic) and the size from the scene, so that the fuzzer gets
-//! past them to the rest. Both formats (per-pixel `mcmcPX02`, Markov-chain
-//! `mcmcMC03`) end with an FNV-1a checksum of what precedes it, which the
+//! past them to the rest. Both formats (per-pixel `mcmcPX03`, whose reader
+//! still takes `mcmcPX02`, the seeds' format; Markov-chain `mcmcMC04`,
+//! whose reader still takes `mcmcMC03`) end
+//! with an FNV-1a checksum of what precedes it, which the
 //! target writes into the input's last eight bytes before either reader
 //! sees it (damaged checksums are refused first and are tested in
 //! `tests/checkpoint.rs`).

@@ -274,6 +274,11 @@ fn open_checkpoint(
                     "erpt" => crate::integrators::erpt::check_checkpoint(p),
                     "vcm" => crate::integrators::vcm::check_checkpoint(p),
                     "guided" => crate::integrators::guided::check_checkpoint(p, budget),
+                    "mcmc-vcm" => crate::integrators::mcmc_vcm::check_checkpoint(
+                        p,
+                        integrator.as_any(),
+                        scene,
+                    ),
                     _ => Ok(()),
                 };
                 checked.map_err(|e| format!("checkpoint {}: {e}", path.display()))?;

@@ -446,6 +446,7 @@ impl IntegratorSettings for Erpt {
                     samples: vec![[0.0; 4]; w as usize * h as usize],
                     splats: film.accumulators().1.to_vec(),
                     extra: saved_words(seeds_total, chains_total, &lum, &stats),
+                    more_films: Vec::new(),
                 };
                 checkpoint_error = crate::checkpoint::save(&c.path, c.fingerprint, &progress).err();
             }

@@ -169,6 +169,22 @@
 //! flag) wherever a stop is checked between the phases, so all drop the
 //! same iteration: the image is the single process's for any number of
 //! ranks, with either restart rule.
+//!
+//! # Checkpoints
+//! With `--checkpoint FILE` (session 20) rank 0 saves after every
+//! iteration, in the per-pixel driver's format ([`crate::checkpoint`],
+//! version 3: two films and more words than version 2 allowed), the
+//! path-tracing film, the light side's film, the iterations done and, as
+//! the integrator's words (`McmcVcm::saved_words`), everything an
+//! iteration reads from the ones before it: the MIS scale `k`, the restart
+//! weights, the running normalisation with its per-iteration batches (8
+//! numbers an iteration), the tally and, per chain pair, its report
+//! (tally, swaps, chain statistics), each chain's random stream and its
+//! adaptive small step's state ([`Kernel::state_words`]). A chain's
+//! current state is not saved: every iteration restarts both chains from
+//! its own pool before their first step. On a cluster rank 0 gathers the
+//! pairs' records, and on resume broadcasts the words; every rank restores
+//! every pair (it runs its own), rank 0 the films.
 
 use super::bdpt::SubpathBuffers;
 use super::path_vertex::{Vertex, VertexKind};
@@ -178,6 +194,7 @@ use super::vcm::{
     VcmMode, VcmSettings, connections_at,
 };
 use super::{RenderError, Rendered, RunSettings};
+use crate::checkpoint::{Checkpoint, Progress};
 use crate::cluster::{Counters, Parcel, owns};
 use crate::color::Rgb;
 use crate::deadline::Deadline;
@@ -193,7 +210,7 @@ use mcmc_core::chain::{Algorithm, Chain, Transition};
 use mcmc_core::kernel::{AdaptiveTorusStep, Independent, Kernel, Mixture};
 use mcmc_core::mh::{MetropolisHastings, accept};
 use mcmc_core::replica::swap_log_acceptance;
-use mcmc_core::rng::{ChainRng, child_rng, stream_rng, uniform};
+use mcmc_core::rng::{ChainRng, child_rng, rng_from_words, rng_words, stream_rng, uniform};
 use mcmc_core::sample::Sample;
 use mcmc_core::space::{PrimarySampleSpace, TorusPoint};
 use mcmc_core::stats::ChainStatistics;
@@ -1092,6 +1109,180 @@ fn join_units(
     light
 }
 
+/// The gathered records of every chain pair, `record(unit)` each, in
+/// pair order: this process's, or on a cluster every rank's (each its own
+/// pairs'), on rank 0 (`None` on the other ranks). Collective on a
+/// cluster.
+fn gather_pairs(
+    units: &[Unit],
+    filter: &Arc<Filter>,
+    record: impl Fn(&Unit) -> Counters,
+) -> Option<Vec<Counters>> {
+    let Some(cluster) = crate::cluster::current() else {
+        return Some(units.iter().map(record).collect());
+    };
+    let parcels = (units.iter().enumerate())
+        .filter(|(p, _)| owns(Some(cluster), *p))
+        .map(|(p, unit)| {
+            let (numbers, counts) = record(unit);
+            Parcel {
+                unit: p,
+                films: Vec::new(),
+                numbers,
+                counts,
+            }
+        })
+        .collect();
+    let all = cluster.gather(parcels, filter)?;
+    Some(all.into_iter().map(|p| (p.numbers, p.counts)).collect())
+}
+
+/// A chain pair's record in a checkpoint: its report's numbers, and as
+/// counts the length of its chains' part, that part — per chain that
+/// runs: its kind, its random stream (4 words), its kernel's state
+/// ([`Kernel::state_words`], after its length) — then the report's counts
+/// ([`PairReport::to_counters`]). The chains' current states are not
+/// saved: each iteration restarts them before they step.
+fn unit_record(unit: &Unit) -> Counters {
+    let (numbers, counts) = PairReport::of(unit).to_counters();
+    let mut tail = Vec::new();
+    for (kind, chain) in unit.chains.iter().enumerate() {
+        if let Some(chain) = chain {
+            tail.push(kind as u64);
+            tail.extend(rng_words(chain.rng()));
+            let mut state = Vec::new();
+            chain.algorithm().kernel().state_words(&mut state);
+            tail.push(state.len() as u64);
+            tail.extend(state);
+        }
+    }
+    let mut out = vec![tail.len() as u64];
+    out.extend(tail);
+    out.extend(counts);
+    (numbers, out)
+}
+
+/// Appends `counters` to `out`: the numbers' count and bits, the counts'
+/// count and the counts.
+fn push_counters(out: &mut Vec<u64>, (numbers, counts): &Counters) {
+    out.push(numbers.len() as u64);
+    out.extend(numbers.iter().map(|x| x.to_bits()));
+    out.push(counts.len() as u64);
+    out.extend(counts);
+}
+
+/// A checkpoint's words read one after the other.
+struct Words<'a>(&'a [u64]);
+
+impl<'a> Words<'a> {
+    /// The error of words that end too soon or do not fit.
+    fn bad(&self) -> String {
+        "mcmc-vcm's words are cut or do not fit: not a checkpoint of mcmc-vcm".into()
+    }
+
+    /// The next word.
+    fn next(&mut self) -> Result<u64, String> {
+        let all: &'a [u64] = self.0;
+        let (&w, rest) = all.split_first().ok_or_else(|| self.bad())?;
+        self.0 = rest;
+        Ok(w)
+    }
+
+    /// The next `n` words.
+    fn take(&mut self, n: u64) -> Result<&'a [u64], String> {
+        let all: &'a [u64] = self.0;
+        let n = usize::try_from(n).ok().filter(|&n| n <= all.len());
+        let (taken, rest) = all.split_at(n.ok_or_else(|| self.bad())?);
+        self.0 = rest;
+        Ok(taken)
+    }
+
+    /// Counters [`push_counters`] wrote.
+    fn counters(&mut self) -> Result<Counters, String> {
+        let n = self.next()?;
+        let numbers = self.take(n)?.iter().map(|&x| f64::from_bits(x)).collect();
+        let n = self.next()?;
+        Ok((numbers, self.take(n)?.to_vec()))
+    }
+}
+
+/// What a checkpoint holds besides the films, decoded
+/// ([`McmcVcm::decode`]).
+struct Resumed {
+    light_scale: f32,
+    weights: RestartWeights,
+    skipped_iterations: u64,
+    tally: Tally,
+    norm: Normalisation,
+    units: Vec<SavedUnit>,
+    /// The path-tracing and light-side films (rank 0 only: the only rank
+    /// that adds into them).
+    films: Option<(Film, Film)>,
+}
+
+/// A chain pair as a checkpoint holds it: its report, and per chain kind
+/// that runs its stream and its kernel with the saved adaptation.
+struct SavedUnit {
+    report: PairReport,
+    chains: [Option<(ChainRng, LightAlgorithm)>; 2],
+}
+
+impl SavedUnit {
+    /// Puts the saved pair into `unit`: its counters, and each chain
+    /// re-made with its stream, kernel and statistics at a placeholder
+    /// state (the iteration's restart replaces it before the first step).
+    fn restore(self, unit: &mut Unit) {
+        let SavedUnit { report, chains } = self;
+        unit.tally = report.tally;
+        (unit.swaps, unit.swaps_accepted) = (report.swaps, report.swaps_accepted);
+        (unit.swap_alpha, unit.invalid) = (report.swap_alpha, report.invalid);
+        for ((slot, saved), stats) in unit.chains.iter_mut().zip(chains).zip(report.chains) {
+            *slot = saved.map(|(rng, algorithm)| {
+                let placeholder = Sample {
+                    state: TorusPoint::fresh(stream_rng(0, 0)),
+                    log_density: 0.0,
+                    payload: LightContribution::default(),
+                };
+                let mut chain = Chain::from_sample(placeholder, algorithm, rng)
+                    .expect("a placeholder of finite density");
+                chain.parts_mut().stats = stats.expect("decode matched chains and statistics");
+                chain
+            });
+        }
+    }
+}
+
+/// Checks that a checkpoint's `progress` is one an `mcmc-vcm` run with
+/// `integrator`'s settings on `scene` wrote (one line if not): one sample
+/// per pixel an iteration, two films, and words that decode for those
+/// settings (`McmcVcm::decode`). The command line checks it on rank 0 before the ranks' start-up
+/// handshake, so that a bad file stops every rank with one error; the
+/// render checks it too.
+pub fn check_checkpoint(
+    progress: &Progress,
+    integrator: &dyn std::any::Any,
+    scene: &Scene,
+) -> Result<(), String> {
+    let Some(settings) = integrator.downcast_ref::<McmcVcmSettings>() else {
+        return Err("not a checkpoint of mcmc-vcm".into());
+    };
+    if progress.spp_done != progress.pass {
+        return Err(format!(
+            "holds {} iterations and {} samples per pixel: not a checkpoint of mcmc-vcm (one sample an iteration)",
+            progress.pass, progress.spp_done
+        ));
+    }
+    if progress.more_films.len() != 1 {
+        return Err(format!(
+            "holds {} films, mcmc-vcm keeps 2: not a checkpoint of mcmc-vcm",
+            1 + progress.more_films.len()
+        ));
+    }
+    (settings.integrator(scene))
+        .decode(progress.pass, &progress.extra)
+        .map(|_| ())
+}
+
 /// The integrator.
 pub struct McmcVcm {
     /// VCM (techniques, radius, MIS, depth).
@@ -1282,6 +1473,28 @@ impl McmcVcm {
         let mut pilot_done = false;
         let mut iterations = 0u64;
         let mut interrupted = false;
+        // A checkpoint's progress replaces the fresh state (module docs).
+        let resumed = run
+            .checkpoint
+            .as_ref()
+            .and_then(|c| self.resume_point(c, &filter));
+        let resumed_from = resumed.as_ref().map(|r| r.0);
+        if let Some((done, saved)) = resumed {
+            if let Some(films) = saved.films {
+                (film, light_film) = films;
+            }
+            iterations = done;
+            pilot_done = true;
+            light_scale = saved.light_scale;
+            weights = saved.weights;
+            norm = saved.norm;
+            totals.tally = saved.tally;
+            totals.skipped_iterations = saved.skipped_iterations;
+            for (unit, saved) in units.iter_mut().zip(saved.units) {
+                saved.restore(unit);
+            }
+        }
+        let mut checkpoint_error: Option<String> = None;
         // On a cluster this rank runs the chain pairs dealt to it (module
         // docs), and every stop below is decided by all ranks alike (a
         // collective; in one process the flag itself).
@@ -1445,6 +1658,20 @@ impl McmcVcm {
             }
             weights.add(weight);
             iterations += 1;
+            if let Some(c) = &run.checkpoint {
+                // Collective: rank 0 gathers the pairs' records.
+                let records = gather_pairs(&units, &filter, unit_record);
+                if let Some(records) = records.filter(|_| checkpoint_error.is_none()) {
+                    let mut progress =
+                        Progress::of(iterations, iterations, totals.tally.nonfinite, &film);
+                    let (samples, splats) = light_film.accumulators();
+                    progress.more_films = vec![(samples.to_vec(), splats.to_vec())];
+                    progress.extra =
+                        Self::saved_words(light_scale, &weights, &totals, &norm, &records);
+                    checkpoint_error =
+                        crate::checkpoint::save(&c.path, c.fingerprint, &progress).err();
+                }
+            }
             observer.snapshot(
                 &|| develop(&film, &light_film, &weights, iterations),
                 iterations * pixels as u64,
@@ -1481,6 +1708,16 @@ impl McmcVcm {
             interrupted,
             pixels,
         );
+        if let Some(c) = &run.checkpoint {
+            rendered.statistics.insert(
+                "checkpoint".into(),
+                serde_json::json!({
+                    "path": c.path.display().to_string(),
+                    "resumed_from_iterations": resumed_from,
+                    "error": checkpoint_error,
+                }),
+            );
+        }
         // On a cluster, every rank's share (on rank 0; collective).
         let pairs = (0..self.units).filter(|&p| owns(cluster, p)).count();
         if let serde_json::Value::Object(m) = crate::cluster::with_ranks(
@@ -1496,33 +1733,202 @@ impl McmcVcm {
     /// on a cluster every rank's, on rank 0 (the other ranks get none:
     /// only rank 0 writes the statistics). Collective on a cluster.
     fn pair_reports(&self, units: &[Unit], filter: &Arc<Filter>) -> Vec<PairReport> {
-        let Some(cluster) = crate::cluster::current() else {
-            return units.iter().map(PairReport::of).collect();
-        };
-        let parcels = (units.iter().enumerate())
-            .filter(|(p, _)| owns(Some(cluster), *p))
-            .map(|(p, unit)| {
-                let (numbers, counts) = PairReport::of(unit).to_counters();
-                Parcel {
-                    unit: p,
-                    films: Vec::new(),
-                    numbers,
-                    counts,
-                }
+        let names = self.component_names();
+        let all = gather_pairs(units, filter, |u| PairReport::of(u).to_counters());
+        all.unwrap_or_default()
+            .into_iter()
+            .map(|c| {
+                PairReport::from_counters(c, &names)
+                    .expect("every rank runs the same binary (the start-up handshake)")
             })
-            .collect();
-        // The kernels' component names (not sent).
+            .collect()
+    }
+
+    /// The kernels' component names by chain kind (not sent: every rank
+    /// knows them).
+    fn component_names(&self) -> [Vec<String>; 2] {
         let mut names: [Vec<String>; 2] = Default::default();
         for &(kind, large) in self.kinds() {
             names[kind as usize] = self.algorithm(large).component_names();
         }
-        let all = cluster.gather(parcels, filter).unwrap_or_default();
-        all.into_iter()
-            .map(|p| {
-                PairReport::from_counters((p.numbers, p.counts), &names)
-                    .expect("every rank runs the same binary (the start-up handshake)")
-            })
-            .collect()
+        names
+    }
+
+    /// A checkpoint's words ([`crate::checkpoint::Progress::extra`]): the
+    /// MIS scale `k` (bits), the restart weights (3), the skipped
+    /// iterations, the tally (its counters after their counts), the
+    /// running normalisation (8 sums, the batch count, 8 numbers a batch),
+    /// then the pair count and every pair's record ([`unit_record`], in
+    /// pair order, its counters after their counts).
+    fn saved_words(
+        light_scale: f32,
+        weights: &RestartWeights,
+        totals: &Totals,
+        norm: &Normalisation,
+        records: &[Counters],
+    ) -> Vec<u64> {
+        let mut out = vec![u64::from(light_scale.to_bits())];
+        out.extend([weights.sum, weights.sum_squares, weights.iterations].map(f64::to_bits));
+        out.push(totals.skipped_iterations);
+        push_counters(&mut out, &totals.tally.to_counters());
+        out.extend(norm.batch().map(f64::to_bits));
+        out.push(norm.batches.len() as u64);
+        out.extend(norm.batches.iter().flatten().map(|x| x.to_bits()));
+        out.push(records.len() as u64);
+        for r in records {
+            push_counters(&mut out, r);
+        }
+        out
+    }
+
+    /// What the words of a checkpoint of `iterations` iterations hold, for
+    /// this run's settings: refused (one line) unless a run with them
+    /// could have written them (finite sums, a batch per iteration, a
+    /// record per chain pair whose chains are the run's kinds, streams
+    /// not all zero, kernel states the kernels take, no word left over).
+    fn decode(&self, iterations: u64, words: &[u64]) -> Result<Resumed, String> {
+        let mut w = Words(words);
+        let light_scale = f32::from_bits(u32::try_from(w.next()?).map_err(|_| w.bad())?);
+        let [sum, sum_squares, count] = [w.next()?, w.next()?, w.next()?].map(f64::from_bits);
+        let weights = RestartWeights {
+            sum,
+            sum_squares,
+            iterations: count,
+        };
+        let skipped_iterations = w.next()?;
+        let (energy, counts) = w.counters()?;
+        if energy.len() != TECHNIQUE_NAMES.len() || counts.len() != 2 {
+            return Err(w.bad());
+        }
+        let tally = Tally::from_counters((energy, counts));
+        let sums: Vec<f64> = w
+            .take(COLUMNS as u64)?
+            .iter()
+            .map(|&x| f64::from_bits(x))
+            .collect();
+        let mut norm = Normalisation::from_batch(&sums);
+        let batches = w.next()?;
+        if batches != iterations {
+            return Err(format!(
+                "holds {batches} batches of the normalisation for {iterations} iterations: not a checkpoint of mcmc-vcm"
+            ));
+        }
+        let batch_len = batches.checked_mul(COLUMNS as u64).ok_or_else(|| w.bad())?;
+        let batch_words = w.take(batch_len)?;
+        norm.batches = (batch_words.chunks_exact(COLUMNS))
+            .map(|b| std::array::from_fn(|i| f64::from_bits(b[i])))
+            .collect();
+        let mut numbers = [light_scale as f64, sum, sum_squares, count]
+            .into_iter()
+            .chain(sums.iter().copied())
+            .chain(norm.batches.iter().flatten().copied())
+            .chain(tally.energy);
+        if numbers.any(|x| !x.is_finite()) || !(light_scale > 0.0) {
+            return Err("holds a sum that is not finite or a MIS scale not positive: not a checkpoint of mcmc-vcm".into());
+        }
+        let pairs = w.next()?;
+        if pairs != self.units as u64 {
+            return Err(format!(
+                "holds {pairs} chain pairs, the run has {}",
+                self.units
+            ));
+        }
+        let units = (0..pairs)
+            .map(|_| self.unit_of(w.counters()?))
+            .collect::<Result<Vec<_>, String>>()?;
+        if !w.0.is_empty() {
+            return Err(format!(
+                "holds {} words after its last chain pair: not a checkpoint of mcmc-vcm",
+                w.0.len()
+            ));
+        }
+        Ok(Resumed {
+            light_scale,
+            weights,
+            skipped_iterations,
+            tally,
+            norm,
+            units,
+            films: None,
+        })
+    }
+
+    /// A chain pair's record ([`unit_record`]) decoded for this run's
+    /// chain kinds: its report, and each chain's stream and kernel with
+    /// its saved adaptation.
+    fn unit_of(&self, (numbers, counts): Counters) -> Result<SavedUnit, String> {
+        let mut w = Words(&counts);
+        let tail_len = w.next()?;
+        let mut tail = Words(w.take(tail_len)?);
+        let rest = w.0.to_vec();
+        let report = PairReport::from_counters((numbers, rest.clone()), &self.component_names())?;
+        if report.to_counters().1 != rest {
+            return Err("a chain pair's report has words left over".into());
+        }
+        let mut chains: [Option<(ChainRng, LightAlgorithm)>; 2] = [None, None];
+        while !tail.0.is_empty() {
+            let kind = tail.next()?;
+            let Some(&(k, large)) = self.kinds().iter().find(|k| k.0 as u64 == kind) else {
+                return Err(format!(
+                    "holds a chain of kind {kind}, which the run does not have"
+                ));
+            };
+            let rng = rng_from_words([tail.next()?, tail.next()?, tail.next()?, tail.next()?])
+                .ok_or("a chain's stream is all zero")?;
+            let len = tail.next()?;
+            let mut state = tail.take(len)?;
+            let mut algorithm = self.algorithm(large);
+            if !algorithm.kernel_mut().restore_words(&mut state) || !state.is_empty() {
+                return Err("a chain's kernel state does not decode".into());
+            }
+            if chains[k as usize].replace((rng, algorithm)).is_some() {
+                return Err(format!("holds two chains of kind {kind} in one pair"));
+            }
+        }
+        for (chain, stats) in chains.iter().zip(&report.chains) {
+            let fits = match (chain, stats) {
+                (Some((_, a)), Some(s)) => a.component_names().len() == s.components.len(),
+                (None, None) => true,
+                _ => false,
+            };
+            if !fits {
+                return Err("a chain pair's report does not match its chains".into());
+            }
+        }
+        Ok(SavedUnit { report, chains })
+    }
+
+    /// Where a checkpointed run starts: `None` for a fresh start, else
+    /// the iterations done and what they left (every rank: rank 0 reads
+    /// the file and broadcasts its words), and on rank 0 the two films
+    /// rebuilt with `filter`. Collective on a cluster. The progress must
+    /// have passed [`check_checkpoint`].
+    fn resume_point(
+        &self,
+        checkpoint: &Checkpoint,
+        filter: &Arc<Filter>,
+    ) -> Option<(u64, Resumed)> {
+        let local = checkpoint.resume.as_ref();
+        let words = local.map_or(Vec::new(), |p| {
+            let mut w = vec![p.pass];
+            w.extend(&p.extra);
+            w
+        });
+        let words = match crate::cluster::current() {
+            Some(c) => c.broadcast_u64s(words),
+            None => words,
+        };
+        let (&iterations, extra) = words.split_first()?;
+        let mut resumed = (self.decode(iterations, extra))
+            .expect("rank 0 checked the checkpoint (check_checkpoint)");
+        resumed.films = local.map(|p| {
+            let film = |f: Result<Film, String>| f.expect("checked against the scene");
+            (
+                film(p.film(filter.clone())),
+                film(p.more_film(0, filter.clone())),
+            )
+        });
+        Some((iterations, resumed))
     }
 
     /// Whether the chains' restarts carry their pool's weight
@@ -2271,6 +2677,9 @@ impl IntegratorSettings for McmcVcmSettings {
             bytes,
         )
         .map_err(RenderError::Invalid)?;
+        if let Some(p) = run.checkpoint.as_ref().and_then(|c| c.resume.as_ref()) {
+            check_checkpoint(p, self, scene).map_err(RenderError::Invalid)?;
+        }
         let mut out = self.integrator(scene).render(scene, run, stop, observer);
         // Reported so that the estimate can be set against the resident
         // set a run measures (docs/vcm.md, "Session 17").

@@ -43,6 +43,11 @@
 //! - Emitters at infinity (environment maps, `constant`, directional
 //!   lights): `x_0` is then a vertex at infinity measured in solid angle
 //!   (`path_space::state`; since session 19).
+//! - **Checkpoints** (`--checkpoint`, session 20): the driver saves the
+//!   chains between rounds with their paths encoded bit for bit
+//!   ([`crate::path_space::state::Path::to_words`]); the passes are not
+//!   saved but rendered again on resume, so with a checkpoint they run to
+//!   their sample counts whatever the time budget.
 
 use super::pt::PathTracer;
 use super::registry::IntegratorSettings;
@@ -235,6 +240,11 @@ impl IntegratorSettings for Mlt {
         IntegratorSettings::validate(self).map_err(RenderError::Invalid)?;
         let start = Instant::now();
         let deadline = Deadline::new(start, run.time_budget);
+        // With a checkpoint the passes are not saved: a resumed run renders
+        // them again and must get the saved run's images, so they run to
+        // their sample counts whatever the clock (no time share, no cut).
+        let checkpointed = run.checkpoint.is_some();
+        let pass_deadline = markov::startup_deadline(deadline, checkpointed);
         // A pass alone is not an estimate of the image: its snapshots are
         // not passed on; the chains' snapshots carry the passes' images.
         let quiet = WithPasses::progress_only(observer);
@@ -246,7 +256,7 @@ impl IntegratorSettings for Mlt {
             let r = crate::render::run_per_pixel(
                 scene,
                 &pt,
-                &fixed_spp(run, spp, deadline),
+                &fixed_spp(run, spp, pass_deadline),
                 stop,
                 &quiet,
             );
@@ -262,9 +272,13 @@ impl IntegratorSettings for Mlt {
             specular_chains_pass(
                 scene,
                 &pass,
-                (run, deadline),
+                (run, pass_deadline),
                 spp,
-                self.specular_time_share,
+                if checkpointed {
+                    0.0
+                } else {
+                    self.specular_time_share
+                },
                 stop,
                 &quiet,
             )
@@ -432,7 +446,8 @@ fn fixed_spp(run: &RunSettings, spp: u32, deadline: Deadline) -> RunSettings {
     RunSettings {
         spp: Some(spp),
         time_budget: deadline.time_left(),
-        // The chains' run is not checkpointed; these passes are part of it.
+        // The chains' run saves the checkpoint; a resumed run renders
+        // these passes again (to the same images).
         checkpoint: None,
         ..run.clone()
     }

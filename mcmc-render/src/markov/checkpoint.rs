@@ -27,17 +27,24 @@ use crate::color::Rgb;
 use crate::film::Filter;
 use crate::pss::{PathSample, Splat};
 use mcmc_core::chain::ChainState;
+use mcmc_core::kernel::Kernel;
 use mcmc_core::rng::{ChainRng, rng_from_words, rng_words};
 use mcmc_core::sample::Sample;
 use mcmc_core::stats::ChainStatistics;
 use std::path::Path;
 use std::sync::Arc;
 
-/// First bytes of a Markov-chain checkpoint file (format version 3:
-/// version 2's replica sets, and a checksum at the end).
-const MAGIC: &[u8; 8] = b"mcmcMC03";
+/// First bytes of a Markov-chain checkpoint file (format version 4,
+/// session 20: version 3's records with each chain's kernel state after
+/// its statistics; version 3 had version 2's replica sets and a checksum
+/// at the end).
+const MAGIC: &[u8; 8] = b"mcmcMC04";
 
-/// First bytes of a file of the earlier format (no checksum), refused.
+/// First bytes of a file of format version 3 (no kernel states): still
+/// read, its chains' kernels taken as without state.
+const MAGIC_V3: &[u8; 8] = b"mcmcMC03";
+
+/// First bytes of a file of format version 2 (no checksum), refused.
 const MAGIC_V2: &[u8; 8] = b"mcmcMC02";
 
 /// One chain as saved.
@@ -54,6 +61,11 @@ pub struct ChainRecord {
     pub rng: [u64; 4],
     /// Its statistics (the component names are the kernel's).
     pub stats: ChainStatistics,
+    /// Its kernel's own state ([`mcmc_core::kernel::Kernel::state_words`]:
+    /// the adaptive small step's adaptation; empty for kernels without
+    /// state, and for the levels of replica sets, whose kernels are
+    /// refused when they keep state).
+    pub kernel: Vec<u64>,
 }
 
 /// One replica set as saved, besides its levels' chains.
@@ -96,7 +108,8 @@ impl ChainProgress {
             .fold(0, u64::saturating_add)
     }
 
-    /// The progress as bytes (the body of a checkpoint file).
+    /// The progress as bytes (the body of a checkpoint file of the
+    /// current format).
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut out = (self.tasks.len() as u64).to_le_bytes().to_vec();
         for t in &self.tasks {
@@ -106,8 +119,13 @@ impl ChainProgress {
     }
 
     /// The progress [`ChainProgress::to_bytes`] wrote, films rebuilt with
-    /// `filter`.
-    pub fn from_bytes(mut bytes: &[u8], filter: &Arc<Filter>) -> Result<ChainProgress, String> {
+    /// `filter` (`kernels`: the chains' records hold kernel states, as
+    /// from format 4 on).
+    pub fn from_bytes(
+        mut bytes: &[u8],
+        filter: &Arc<Filter>,
+        kernels: bool,
+    ) -> Result<ChainProgress, String> {
         let n = bytes
             .split_first_chunk::<8>()
             .map(|(n, rest)| {
@@ -116,7 +134,7 @@ impl ChainProgress {
             })
             .ok_or("truncated")?;
         let tasks = (0..n)
-            .map(|_| record_of(Parcel::decode(&mut bytes, filter)?))
+            .map(|_| record_of(Parcel::decode(&mut bytes, filter)?, kernels))
             .collect::<Result<_, String>>()?;
         if !bytes.is_empty() {
             return Err(format!("{} bytes after the last task", bytes.len()));
@@ -185,8 +203,10 @@ pub fn progress_from_bytes(
             "of an earlier format (mcmcMC02, without a checksum); delete it to start afresh",
         ));
     }
-    let Some(body) = bytes.strip_prefix(MAGIC) else {
-        return Err(bad("not a checkpoint of mcmc-render's Markov-chain driver"));
+    let (body, kernels) = match (bytes.strip_prefix(MAGIC), bytes.strip_prefix(MAGIC_V3)) {
+        (Some(body), _) => (body, true),
+        (None, Some(body)) => (body, false),
+        (None, None) => return Err(bad("not a checkpoint of mcmc-render's Markov-chain driver")),
     };
     let Some((body, checksum)) = body.split_last_chunk::<8>() else {
         return Err(bad("truncated"));
@@ -202,7 +222,7 @@ pub fn progress_from_bytes(
             "written by another render (scene, defines, integrator, its settings or seed differ)",
         ));
     }
-    let progress = ChainProgress::from_bytes(body, filter).map_err(|e| bad(&e))?;
+    let progress = ChainProgress::from_bytes(body, filter, kernels).map_err(|e| bad(&e))?;
     for f in progress
         .tasks
         .iter()
@@ -233,12 +253,14 @@ pub fn progress_from_bytes(
     Ok(progress)
 }
 
-/// The record of a chain: its current sample, stream and statistics.
+/// The record of a chain: its current sample, stream, statistics and
+/// kernel state.
 fn chain_record<F: ChainFamily>(
     family: &F,
     current: &Sample<F::State, PathSample>,
     rng: &ChainRng,
     stats: &ChainStatistics,
+    kernel: Vec<u64>,
 ) -> ChainRecord {
     let mut state = Vec::new();
     family.state_words(&current.state, &mut state);
@@ -248,6 +270,7 @@ fn chain_record<F: ChainFamily>(
         payload: current.payload.clone(),
         rng: rng_words(rng),
         stats: stats.clone(),
+        kernel,
     }
 }
 
@@ -261,7 +284,9 @@ pub(crate) fn record_of_task<F: ChainFamily>(
         Units::Chains(chains) => {
             let records = chains.iter().map(|slot| {
                 let c = &slot.chain;
-                chain_record(family, c.current(), c.rng(), c.stats())
+                let mut kernel = Vec::new();
+                c.algorithm().kernel().state_words(&mut kernel);
+                chain_record(family, c.current(), c.rng(), c.stats(), kernel)
             });
             (records.collect(), Vec::new())
         }
@@ -275,7 +300,7 @@ pub(crate) fn record_of_task<F: ChainFamily>(
                     .expect("the driver refuses checkpoints of moves that cannot be saved");
                 chains.extend(
                     (progress.chains.iter())
-                        .map(|c| chain_record(family, &c.current, &c.rng, &c.stats)),
+                        .map(|c| chain_record(family, &c.current, &c.rng, &c.stats, Vec::new())),
                 );
                 sets.push(SetRecord {
                     sweeps: slot.sweeps,
@@ -348,6 +373,13 @@ pub(crate) fn restore_task<F: ChainFamily>(
             }
             for (slot, saved) in chains.iter_mut().zip(&record.chains) {
                 restore_chain(family, slot.chain.parts_mut(), saved)?;
+                let mut kernel = &saved.kernel[..];
+                let kernel_restored = (slot.chain.algorithm_mut().kernel_mut())
+                    .restore_words(&mut kernel)
+                    && kernel.is_empty();
+                if !kernel_restored {
+                    return Err("a chain's kernel state does not decode".into());
+                }
                 slot.remaining = slot.remaining.map(|r| r.saturating_sub(saved.stats.steps));
             }
         }
@@ -364,6 +396,9 @@ pub(crate) fn restore_task<F: ChainFamily>(
                 let mut progress =
                     (slot.set.progress()).ok_or("the run's exchange move cannot be restored")?;
                 for (parts, saved) in progress.chains.iter_mut().zip(saved) {
+                    if !saved.kernel.is_empty() {
+                        return Err("a replica's chain holds a kernel state".into());
+                    }
                     restore_chain(family, parts, saved)?;
                 }
                 progress.words.clone_from(&set.words);
@@ -388,8 +423,9 @@ fn sums_of(parcel: &Parcel) -> TaskSums<'static> {
 }
 
 /// A record as one parcel: its sums' films and numbers; counts: the
-/// sums' count, the sums' counts, then the chains' words, then the
-/// replica sets' (their count, then each set's sweeps and words).
+/// sums' count, the sums' counts, then the chains' words (each chain's
+/// kernel state last, after its length), then the replica sets' (their
+/// count, then each set's sweeps and words).
 pub(crate) fn parcel_of(record: &TaskRecord) -> Parcel {
     let mut counts = vec![record.sums.counts.len() as u64];
     counts.extend(&record.sums.counts);
@@ -406,6 +442,8 @@ pub(crate) fn parcel_of(record: &TaskRecord) -> Parcel {
         }
         counts.extend(c.rng);
         stats_words(&c.stats, &mut counts);
+        counts.push(c.kernel.len() as u64);
+        counts.extend(&c.kernel);
     }
     counts.push(record.sets.len() as u64);
     for set in &record.sets {
@@ -481,8 +519,9 @@ pub(crate) fn stats_from_words(
     Ok(stats)
 }
 
-/// The record [`parcel_of`] made.
-pub(crate) fn record_of(p: Parcel) -> Result<TaskRecord, String> {
+/// The record [`parcel_of`] made (`kernels`: with the chains' kernel
+/// states, as from format 4 on).
+pub(crate) fn record_of(p: Parcel, kernels: bool) -> Result<TaskRecord, String> {
     let mut words = &p.counts[..];
     let mut next = || -> Result<u64, String> {
         let (&w, rest) = words.split_first().ok_or("a task's record is cut")?;
@@ -522,12 +561,17 @@ pub(crate) fn record_of(p: Parcel) -> Result<TaskRecord, String> {
         let rng = [next()?, next()?, next()?, next()?];
         // The kernel's component names are put back by `restore_task`.
         let stats = stats_from_words(&mut next)?;
+        let kernel = match kernels {
+            true => (0..next()?).map(|_| next()).collect::<Result<_, _>>()?,
+            false => Vec::new(),
+        };
         chains.push(ChainRecord {
             state,
             log_density,
             payload: PathSample { splats, depth },
             rng,
             stats,
+            kernel,
         });
     }
     let mut sets = Vec::new();
@@ -587,7 +631,7 @@ pub(crate) fn resume<F: ChainFamily>(
                 Some((&n, rest)) => {
                     let mut bytes: Vec<u8> = rest.iter().flat_map(|w| w.to_le_bytes()).collect();
                     bytes.truncate(n as usize);
-                    Some(Arc::new(ChainProgress::from_bytes(&bytes, filter)?))
+                    Some(Arc::new(ChainProgress::from_bytes(&bytes, filter, true)?))
                 }
             }
         }
@@ -627,7 +671,9 @@ pub(crate) fn save_tasks<F: ChainFamily>(
         Some(c) => {
             let parcels = records.map(|r| parcel_of(&r)).collect();
             match c.gather(parcels, filter) {
-                Some(all) => all.into_iter().map(record_of).collect::<Result<_, _>>()?,
+                Some(all) => (all.into_iter())
+                    .map(|p| record_of(p, true))
+                    .collect::<Result<_, _>>()?,
                 None => return Ok(()),
             }
         }

@@ -310,8 +310,10 @@ pub trait ChainFamily: Sync {
     /// Whether runs of this family with `mutation` can be checkpointed
     /// ([`checkpoint`]): its states encode exactly
     /// ([`ChainFamily::state_words`]) and its kernels keep no state of
-    /// their own (no adaptation). A family with an exchange move also
-    /// needs a move that can be saved (the driver checks
+    /// their own, or write it ([`mcmc_core::kernel::Kernel::state_words`]:
+    /// the adaptive small step; saved for independent chains only, not
+    /// for the levels of replica sets). A family with an exchange move
+    /// also needs a move that can be saved (the driver checks
     /// [`ExchangeMove::state_words`]). Default: no.
     fn checkpointable(&self, _mutation: &Self::Mutation) -> bool {
         false
@@ -854,7 +856,7 @@ pub fn run<F: ChainFamily>(
         && (unsaved_move() || !family.checkpointable(&settings.mutation))
     {
         return Err(MltError::Setting(format!(
-            "these chains cannot be checkpointed (only those of {}, without the adaptive small step)",
+            "these chains cannot be checkpointed (only those of {}, without the adaptive small step in replica sets)",
             crate::checkpoint::CHAIN_INTEGRATORS.join(", ")
         )));
     }

@@ -533,6 +533,21 @@ impl<'s> ChainFamily for PathFamily<'s> {
     fn coordinates(&self, _state: &Path<'s>) -> Option<Vec<f64>> {
         None
     }
+    fn checkpointable(&self, _mutation: &PathMutations) -> bool {
+        // No path-space mutation keeps state from one step to the next:
+        // each builds its proposal afresh from the current path and the
+        // chain's stream (the bidirectional mutation's record is of the
+        // step in flight; `Timed`'s clock holds timings, not draws).
+        true
+    }
+    fn state_words(&self, state: &Path<'s>, out: &mut Vec<u64>) {
+        state.to_words(out);
+    }
+    fn state_from_words(&self, input: &mut &[u64]) -> Option<Path<'s>> {
+        let max = self.max_segments.unwrap_or(usize::MAX);
+        Path::from_words(self.scene, input)
+            .filter(|p| (self.min_segments..=max).contains(&p.segments()))
+    }
     fn search(&self, _member: usize, seed: u64) -> Option<Search> {
         (self.bdpt_startup > 0)
             .then(|| self.bdpt_search(seed, self.bdpt_startup))

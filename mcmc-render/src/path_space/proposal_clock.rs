@@ -171,6 +171,14 @@ impl<'s, K: Kernel<Path<'s>, PathSample>> Kernel<Path<'s>, PathSample> for Timed
     fn check_state(&self, state: &Path<'s>) -> mcmc_core::Result<()> {
         self.inner.check_state(state)
     }
+
+    fn state_words(&self, out: &mut Vec<u64>) {
+        self.inner.state_words(out)
+    }
+
+    fn restore_words(&mut self, input: &mut &[u64]) -> bool {
+        self.inner.restore_words(input)
+    }
 }
 
 /// The sidecar's `mutation_types`: per type, from the chains' component

@@ -96,6 +96,9 @@ use crate::scene::Scene;
 use glam::{Vec2, Vec3};
 use mcmc_core::target::{Evaluation, Target};
 
+/// Words per vertex of [`Path::to_words`].
+pub const VERTEX_WORDS: usize = 14;
+
 /// A light path `x_0` (on an emitter) … `x_k` (the camera) in a scene,
 /// with its contribution and the densities mutations need (see the module
 /// docs).
@@ -170,6 +173,134 @@ impl<'s> Path<'s> {
         {
             *first = Vertex::light(scene, first.light, first.sp, Rgb::WHITE, 0.0);
         }
+    }
+
+    /// Appends the path's exact encoding to `out`, for checkpoints of its
+    /// chain ([`crate::markov::checkpoint`]): the vertex count, then per
+    /// vertex [`VERTEX_WORDS`] words holding every field bit for bit (24
+    /// `f32` two to a word, the shape and primitive, the emitter, the kind
+    /// and `delta`), then `f(x)` and the raster position.
+    ///
+    /// Why every field and not fewer: a path-space state is the outcome
+    /// of its chain's whole history (unlike a primary-sample point, it is
+    /// not a function of a few stored random numbers), and its derived
+    /// fields (densities, directions, `f`) are read by the next mutation;
+    /// storing them makes the decoded state the saved one by construction,
+    /// and [`Path::from_words`] checks them against a re-evaluation.
+    pub fn to_words(&self, out: &mut Vec<u64>) {
+        let pair = |a: f32, b: f32| u64::from(a.to_bits()) | u64::from(b.to_bits()) << 32;
+        out.push(self.vertices.len() as u64);
+        for v in &self.vertices {
+            let sp = &v.sp;
+            let floats = [
+                sp.p.x, sp.p.y, sp.p.z, sp.p_err.x, sp.p_err.y, sp.p_err.z, sp.ng.x, sp.ng.y,
+                sp.ng.z, sp.ns.x, sp.ns.y, sp.ns.z, sp.uv.x, sp.uv.y, v.wo.x, v.wo.y, v.wo.z,
+                v.beta.r, v.beta.g, v.beta.b, v.pdf_fwd, v.pdf_rev, v.raster.x, v.raster.y,
+            ];
+            out.extend(floats.chunks_exact(2).map(|c| pair(c[0], c[1])));
+            let kind = match v.kind {
+                VertexKind::Camera => 0,
+                VertexKind::Light => 1,
+                VertexKind::Surface => 2,
+                VertexKind::Infinite => 3,
+            };
+            out.push(u64::from(sp.shape) | u64::from(sp.prim) << 32);
+            out.push(u64::from(v.light) | (kind | u64::from(v.delta) << 8) << 32);
+        }
+        let c = self.contribution;
+        out.extend([
+            pair(c.r, c.g),
+            pair(c.b, self.raster.x),
+            u64::from(self.raster.y.to_bits()),
+        ]);
+    }
+
+    /// The path [`Path::to_words`] wrote at the front of `input` (advanced
+    /// past it), in `scene`; `None` when the words are not a path of
+    /// `scene` that its own evaluation reproduces: at least two vertices,
+    /// an emitter first and the camera last, kinds, emitters and shapes
+    /// that exist (a surface vertex on a shape, an emitter vertex on an
+    /// emitter), finite positions, normals, UVs and directions at
+    /// infinity, and every derived field (densities, directions, `f`,
+    /// raster position) equal, bit for bit, to what [`Path::evaluate`]
+    /// gives — a forged or foreign state is refused before a mutation
+    /// reads it.
+    pub fn from_words(scene: &'s Scene, input: &mut &[u64]) -> Option<Path<'s>> {
+        let (&n, rest) = input.split_first()?;
+        let n = usize::try_from(n).ok()?;
+        let len = n.checked_mul(VERTEX_WORDS)?.checked_add(3)?;
+        if n < 2 || rest.len() < len {
+            return None;
+        }
+        let (words, rest) = rest.split_at(len);
+        let lo = |w: u64| f32::from_bits(w as u32);
+        let hi = |w: u64| f32::from_bits((w >> 32) as u32);
+        let mut vertices = Vec::with_capacity(n);
+        for (i, w) in words.chunks_exact(VERTEX_WORDS).enumerate() {
+            let f: Vec<f32> = w[..12].iter().flat_map(|&x| [lo(x), hi(x)]).collect();
+            let v3 = |i: usize| Vec3::new(f[i], f[i + 1], f[i + 2]);
+            let (shape, prim) = (w[12] as u32, (w[12] >> 32) as u32);
+            let (light, flags) = (w[13] as u32, w[13] >> 32);
+            let kind = match (flags & 0xff, i) {
+                (1, 0) => VertexKind::Light,
+                (3, 0) => VertexKind::Infinite,
+                (0, _) if i + 1 == n => VertexKind::Camera,
+                (2, _) if i > 0 && i + 1 < n => VertexKind::Surface,
+                _ => return None,
+            };
+            let delta = match flags >> 8 {
+                0 => false,
+                1 => true,
+                _ => return None,
+            };
+            let shape_ok = (shape as usize) < scene.shapes.len()
+                || (shape == u32::MAX && kind != VertexKind::Surface);
+            let light_ok = (light as usize) < scene.lights.lights.len()
+                || (light == crate::integrators::path_vertex::NO_LIGHT
+                    && !matches!(kind, VertexKind::Light | VertexKind::Infinite));
+            // Positions, normals, UVs and `ω` at infinity are not derived
+            // (the evaluation checks the rest): a genuine state's are finite.
+            if !(shape_ok && light_ok && f[..17].iter().all(|x| x.is_finite())) {
+                return None;
+            }
+            vertices.push(Vertex {
+                kind,
+                sp: crate::geometry::SurfacePoint {
+                    p: v3(0),
+                    p_err: v3(3),
+                    ng: v3(6),
+                    ns: v3(9),
+                    uv: Vec2::new(f[12], f[13]),
+                    shape,
+                    prim,
+                },
+                wo: v3(14),
+                beta: Rgb::new(f[17], f[18], f[19]),
+                pdf_fwd: f[20],
+                pdf_rev: f[21],
+                delta,
+                light,
+                raster: Vec2::new(f[22], f[23]),
+            });
+        }
+        let tail = &words[n * VERTEX_WORDS..];
+        let path = Path {
+            scene,
+            vertices,
+            contribution: Rgb::new(lo(tail[0]), hi(tail[0]), lo(tail[1])),
+            raster: Vec2::new(hi(tail[1]), lo(tail[2])),
+        };
+        // Every derived field as the evaluation gives it (which is how
+        // every state a chain holds was made).
+        let mut again = path.clone();
+        again.evaluate();
+        let mut check = Vec::with_capacity(words.len() + 1);
+        again.to_words(&mut check);
+        if check[1..] != *words {
+            return None;
+        }
+        *input = rest;
+        Some(path)
     }
 
     /// Number of vertices `k + 1`.
