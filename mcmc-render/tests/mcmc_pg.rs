@@ -227,6 +227,9 @@ fn pretrained_glossy_glass() -> &'static [[f64; 3]] {
 /// (4σ and 1%, 5σ < 1%), and the same replicates × 1.01 fail. Ignored
 /// (≈ 5 min of CPU): `cargo test -p mcmc-render --test mcmc_pg
 /// pretrained_agrees_with_pt_on_the_glossy -- --ignored --nocapture`.
+/// Passed (session 20, 2026-11-27, 2 cores, load 8–11; 646 s wall, 258 s
+/// CPU): −0.24%, −0.28%, −0.32% (σ 0.12%, 0.12%, 0.15%), the control
+/// rejected at z +4.4 … +6.4.
 #[test]
 #[ignore = "several minutes of CPU: glossy-glass box, run with --ignored"]
 fn pretrained_agrees_with_pt_on_the_glossy_glass_box() {
