@@ -2,15 +2,16 @@
 """Session 20, docs/smcmc.md: SMCMC's shifts on the 64x64 tilted glossy-glass box
 against a PT reference, per region (glass sphere, caustic, brightest 5%, rest).
 
-Usage: failure_modes.py DIR OUT_CSV OUT_PNG
+Usage: failure_modes.py DIR OUT_CSV OUT_PNG [SHIFTS]
 DIR holds ref.exr (PT), mask.exr (the sphere as an emitter, max_depth 1) and
-SHIFT-SEED.exr for SHIFT in bdpt, cmmlt, ummlt and SEED in 1, 2, 3 (the
-commands are in docs/smcmc.md). Needs numpy and the OpenEXR bindings."""
+SHIFT-SEED.exr for SHIFT in SHIFTS (comma-separated; default bdpt,cmmlt,ummlt)
+and SEED in 1, 2, 3 (the commands are in docs/smcmc.md). Needs numpy and the
+OpenEXR bindings."""
 import struct, sys, zlib
 import Imath, OpenEXR
 import numpy as np
 
-SHIFTS, SEEDS = ("bdpt", "cmmlt", "ummlt"), (1, 2, 3)
+SEEDS = (1, 2, 3)
 
 
 def read(path):
@@ -43,7 +44,8 @@ def to8(im, exposure=2.0, scale=4):
     return np.repeat(np.repeat(v, scale, 0), scale, 1)
 
 
-def main(d, out_csv, out_png):
+def main(d, out_csv, out_png, shifts="bdpt,cmmlt,ummlt"):
+    shifts = shifts.split(",")
     ref, mask = read(f"{d}/ref.exr"), read(f"{d}/mask.exr")[..., 0]
     L = lum(ref)
     sphere = mask > 0.99  # pixels that see only the sphere
@@ -53,7 +55,7 @@ def main(d, out_csv, out_png):
     regions = {"image": np.ones_like(sphere), "sphere": sphere, "caustic": caustic, "bright": bright, "rest": outside & ~bright}
     print("pixels:", {k: int(v.sum()) for k, v in regions.items()})
     rows = ["shift,seed," + ",".join(f"{k}_rel_pct" for k in regions) + ",relmse"]
-    for sh in SHIFTS:
+    for sh in shifts:
         for seed in SEEDS:
             im = lum(read(f"{d}/{sh}-{seed}.exr"))
             rel = [100 * (im[r].mean() / L[r].mean() - 1) for r in regions.values()]
@@ -61,15 +63,15 @@ def main(d, out_csv, out_png):
             rows.append(f"{sh},{seed}," + ",".join(f"{v:.2f}" for v in rel) + f",{relmse:.5f}")
     open(out_csv, "w").write("\n".join(rows) + "\n")
     print("\n".join(rows))
-    # Rows seeds 1 and 2: reference | bdpt | cMMLT | uMMLT, the lit rows 0..39, x4.
+    # Rows seeds 1 and 2: reference | each shift, the lit rows 0..39, x4.
     white = lambda h, w: np.full((h, w, 3), 255, np.uint8)
     strips = []
     for seed in SEEDS[:2]:
-        tiles = [to8(im[:40]) for im in [ref] + [read(f"{d}/{sh}-{seed}.exr") for sh in SHIFTS]]
+        tiles = [to8(im[:40]) for im in [ref] + [read(f"{d}/{sh}-{seed}.exr") for sh in shifts]]
         parts = sum([[t, white(t.shape[0], 4)] for t in tiles], [])[:-1]
         strips += [np.concatenate(parts, 1), white(4, sum(p.shape[1] for p in parts))]
     write_png(out_png, np.concatenate(strips[:-1], 0))
 
 
 if __name__ == "__main__":
-    main(*sys.argv[1:4])
+    main(*sys.argv[1:5])
