@@ -130,17 +130,36 @@ pub struct TileTarget<'a, S> {
     pub slots: usize,
 }
 
-impl<S: TileShift> Target<TorusPoint> for TileTarget<'_, S> {
-    type Payload = TileValues;
-
-    fn evaluate(&self, state: &TorusPoint) -> Evaluation<TileValues> {
+impl<S: TileShift> TileTarget<'_, S> {
+    /// [`Target::evaluate`] with the values of some slots already known:
+    /// `known[k]` is `f` of `state` at slot `k`'s pixel, taken from another
+    /// tile holding the same pixel (the partner of a tile exchange), and
+    /// only the other slots are traced. A shift's value at a pixel depends on
+    /// the state and that pixel alone ([`TileShift::evaluate`]), so the
+    /// evaluation is the same, bit for bit, as tracing every slot.
+    pub fn evaluate_known(
+        &self,
+        state: &TorusPoint,
+        known: &[Option<Rgb>; MAX_TILE_PIXELS],
+    ) -> Evaluation<TileValues> {
         let mut v = TileValues::default();
+        let mut pixels = self.pixels;
+        for (p, k) in pixels.iter_mut().zip(known) {
+            if k.is_some() {
+                *p = None;
+            }
+        }
         self.shift.evaluate(
             self.scene,
             state,
-            &self.pixels[..self.slots],
+            &pixels[..self.slots],
             &mut v.f[..self.slots],
         );
+        for (f, k) in v.f.iter_mut().zip(known) {
+            if let Some(k) = k {
+                *f = *k;
+            }
+        }
         v.offset = self
             .shift
             .offset_coordinates()
@@ -155,6 +174,14 @@ impl<S: TileShift> Target<TorusPoint> for TileTarget<'_, S> {
             f64::NEG_INFINITY
         };
         Evaluation::new(log_density, v)
+    }
+}
+
+impl<S: TileShift> Target<TorusPoint> for TileTarget<'_, S> {
+    type Payload = TileValues;
+
+    fn evaluate(&self, state: &TorusPoint) -> Evaluation<TileValues> {
+        self.evaluate_known(state, &[None; MAX_TILE_PIXELS])
     }
 }
 
