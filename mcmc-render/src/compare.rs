@@ -34,8 +34,8 @@
 //!   diagonal, so the variance mode takes the channels' noise as fully
 //!   correlated, `(Σ_c w_c σ_c)²` — an upper bound (Cauchy–Schwarz), exact
 //!   when the three channels' noise is proportional (the usual case of one
-//!   light path's throughput); with independent channels it
-//!   over-subtracts by at most a factor 3 of the floor. The second-reference
+//!   light path's throughput); with independent channels the floor it
+//!   subtracts is too large, by at most a factor 3. The second-reference
 //!   mode works on the luminances directly and needs no such assumption.
 //! - its denominator `w(R) = 1/(R² + 0.01)` is taken from the same noisy
 //!   reference, so it is correlated with the numerator. Expanding `w` about
