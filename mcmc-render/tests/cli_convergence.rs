@@ -5,6 +5,8 @@ mod cli_support;
 
 use cli_support::{assert_clean_failure, run, run_ok, scratch, write};
 use mcmc_render::cli::convergence::{Record, read_csv, write_csv};
+use mcmc_render::color::Rgb;
+use mcmc_render::compare::Corrected;
 use std::path::Path;
 
 /// The Cornell box fixture of the test suite.
@@ -203,6 +205,7 @@ fn csv_round_trips_through_read_csv() {
             samples: 1024,
             rel_mse: 1.25e-2,
             rmse: 3.5e-3,
+            corrected: None,
         },
         Record {
             integrator: "mmlt".into(),
@@ -210,6 +213,7 @@ fn csv_round_trips_through_read_csv() {
             samples: 4096,
             rel_mse: 2.5e-3,
             rmse: 1.5e-3,
+            corrected: None,
         },
     ];
     let path = dir.join("r.csv");
@@ -217,6 +221,162 @@ fn csv_round_trips_through_read_csv() {
     // The CSV keeps 4 decimals of seconds and 7 significant digits of the
     // errors: exact for these values.
     assert_eq!(read_csv(&path).unwrap(), records);
+    // With corrected errors: four more columns (negative values allowed:
+    // they are estimates).
+    let corrected: Vec<Record> = records
+        .into_iter()
+        .map(|r| Record {
+            corrected: Some(Corrected {
+                rel_mse: -2.5e-4,
+                rel_mse_floor: 1.5e-3,
+                mse: 1.25e-6,
+                mse_floor: 7.5e-7,
+            }),
+            ..r
+        })
+        .collect();
+    write_csv(&path, &corrected).unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.starts_with(
+        "integrator,seconds,samples,rel_mse,rmse,rel_mse_floor,rel_mse_corrected,mse_floor,mse_corrected\n"
+    ));
+    assert_eq!(read_csv(&path).unwrap(), corrected);
+}
+
+/// `--reference-variance`/`--reference-spp` and `--second-reference` add the
+/// corrected errors to `convergence` (CSV columns, stdout) and to `compare`;
+/// plain = corrected + floor; bad noise input is refused with one line.
+#[test]
+fn convergence_and_compare_take_the_references_noise_out() {
+    let dir = scratch("convergence-noise");
+    reference(&dir);
+    let scene = cornell();
+    run_ok(
+        &[
+            "render", &scene, "-D", "res=16", "--spp", "256", "--seed", "8", "--out", "ref2.exr",
+            "--quiet",
+        ],
+        &dir,
+    );
+    // A variance image: constant per-sample variance 0.04 (so 0.04/1024 per
+    // pixel of the 1024-spp reference), and a 16×16 one with a negative pixel.
+    let write = |name: &str, size: u32, v: f32| {
+        let mut pixels = vec![Rgb::splat(0.04); (size * size) as usize];
+        pixels[3] = Rgb::splat(v);
+        mcmc_render::image_io::write_exr(&dir.join(name), size, size, &pixels).unwrap();
+    };
+    write("var.exr", 16, 0.04);
+    write("neg.exr", 16, -1.0);
+    write("small.exr", 8, 0.04);
+    let study = |extra: &[&'static str]| {
+        let mut a = vec![
+            "convergence",
+            scene.as_str(),
+            "-D",
+            "res=16",
+            "--reference",
+            "ref.exr",
+            "--integrators",
+            "pt",
+            "--time",
+            "0.2",
+            "--checkpoints",
+            "2",
+            "--out",
+            "n.csv",
+        ];
+        a.extend_from_slice(extra);
+        a
+    };
+    for (extra, floor) in [
+        (
+            &["--reference-variance", "var.exr", "--reference-spp", "1024"][..],
+            Some(0.04 / 1024.0),
+        ),
+        (&["--second-reference", "ref2.exr"][..], None),
+    ] {
+        let stdout = run_ok(&study(extra), &dir);
+        assert!(stdout.contains("corrected relMSE"), "{stdout}");
+        let records = read_csv(&dir.join("n.csv")).unwrap();
+        assert!(!records.is_empty());
+        for r in &records {
+            let k = r.corrected.expect("corrected columns");
+            // 7 significant digits in the CSV.
+            let mse = r.rmse * r.rmse;
+            assert!((k.mse + k.mse_floor - mse).abs() <= 1e-5 * mse, "{r:?}");
+            assert!(
+                (k.rel_mse + k.rel_mse_floor - r.rel_mse).abs() <= 1e-5 * r.rel_mse,
+                "{r:?}"
+            );
+            if let Some(f) = floor {
+                assert!((k.mse_floor - f).abs() <= 1e-5 * f, "{r:?}");
+            }
+        }
+    }
+    let compared = run_ok(
+        &[
+            "compare",
+            "ref.exr",
+            "ref2.exr",
+            "--second-reference",
+            "ref2.exr",
+        ],
+        &dir,
+    );
+    assert!(compared.contains("MSE corrected"), "{compared}");
+    let json = run_ok(
+        &[
+            "compare",
+            "ref.exr",
+            "ref2.exr",
+            "--json",
+            "--reference-variance",
+            "var.exr",
+            "--reference-spp",
+            "1024",
+        ],
+        &dir,
+    );
+    let v: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert!(
+        v["corrected"]["mse_floor"].as_f64().unwrap() > 0.0,
+        "{json}"
+    );
+    assert!(v["rel_mse"].as_f64().unwrap() > 0.0, "{json}");
+
+    let out = run(
+        &study(&["--reference-variance", "neg.exr", "--reference-spp", "4"]),
+        &dir,
+    );
+    assert_clean_failure(&out, &["error:", "neg.exr", "negative at pixel (3, 0)"]);
+    let out = run(
+        &study(&["--reference-variance", "small.exr", "--reference-spp", "4"]),
+        &dir,
+    );
+    assert_clean_failure(&out, &["error:", "8x8"]);
+    let out = run(
+        &study(&["--reference-variance", "var.exr", "--reference-spp", "0"]),
+        &dir,
+    );
+    assert_clean_failure(
+        &out,
+        &["error:", "--reference-spp must be a positive number"],
+    );
+    let out = run(&study(&["--reference-variance", "var.exr"]), &dir);
+    assert_clean_failure(&out, &["--reference-spp"]);
+    assert_eq!(out.status.code(), Some(2));
+    let out = run(
+        &study(&[
+            "--reference-variance",
+            "var.exr",
+            "--reference-spp",
+            "4",
+            "--second-reference",
+            "ref2.exr",
+        ]),
+        &dir,
+    );
+    assert_eq!(out.status.code(), Some(2));
 }
 
 #[test]

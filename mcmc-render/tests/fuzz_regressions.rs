@@ -136,6 +136,7 @@ fn convergence_plot_of_extreme_values_is_refused() {
             samples: 1,
             rel_mse,
             rmse: 0.1,
+            corrected: None,
         }];
         let png = dir.join("plot.png");
         let err = within(20, "plot of extreme values", move || {

@@ -9,9 +9,17 @@ the mean has variance v/K, and the unbiased per-pixel estimate of v is the sampl
 over the K renders; relMSE uses mcmc-render's definition (luminance, (t - r)^2 / (r^2 + 0.01),
 with r the average). Optionally compares another reference (e.g. Mitsuba's) with the average.
 
-    python3 scenes/tools/average_exr.py OUT.exr IN1.exr IN2.exr [...] [--compare OTHER.exr]
+    python3 scenes/tools/average_exr.py OUT.exr IN1.exr IN2.exr [...] [--compare OTHER.exr] \
+        [--variance VAR.exr]
 
-Needs numpy and mitsuba (only for EXR input/output, variant scalar_rgb).
+--variance writes the per-pixel, per-channel variance of ONE sample (the convention of
+mitsuba_reference.py --variance and of `mcmc-render convergence --reference-variance`): the
+sample variance over the K renders (ddof=1) times their spp, which must be equal. The average
+OUT has `total_spp` samples per pixel (in the JSON), so its own pixel variance is
+VAR / total_spp: pass `--reference-variance VAR.exr --reference-spp TOTAL_SPP`.
+
+Needs numpy and, for EXR input/output, mitsuba (variant scalar_rgb) or else the OpenEXR
+Python package.
 """
 
 from __future__ import annotations
@@ -21,14 +29,36 @@ import json
 import sys
 from pathlib import Path
 
-import mitsuba as mi
 import numpy as np
 
-mi.set_variant("scalar_rgb")
+try:
+    import mitsuba as mi
+
+    mi.set_variant("scalar_rgb")
+except ImportError:  # OpenEXR reads and writes the same RGB EXRs
+    mi = None
+    import OpenEXR
 
 
 def load(path: str) -> np.ndarray:
-    return np.array(mi.Bitmap(path), dtype=np.float64)[..., :3]
+    if mi is not None:
+        return np.array(mi.Bitmap(path), dtype=np.float64)[..., :3]
+    with OpenEXR.File(path) as f:
+        ch = f.channels()
+        if "RGB" in ch:
+            return np.array(ch["RGB"].pixels, dtype=np.float64)[..., :3]
+        return np.stack([np.array(ch[c].pixels, dtype=np.float64) for c in "RGB"], axis=-1)
+
+
+def save(path: str, rgb: np.ndarray) -> None:
+    """Writes a float32 RGB EXR."""
+    rgb = np.ascontiguousarray(rgb, dtype=np.float32)
+    if mi is not None:
+        mi.Bitmap(rgb, mi.Bitmap.PixelFormat.RGB).write(path)
+        return
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, {"RGB": rgb}) as f:
+        f.write(path)
 
 
 def luminance(a: np.ndarray) -> np.ndarray:
@@ -45,6 +75,7 @@ def main() -> int:
     ap.add_argument("out", help="output EXR (the JSON report goes beside it)")
     ap.add_argument("inputs", nargs="+", help="independent renders (EXR), K >= 2")
     ap.add_argument("--compare", help="another reference to compare with the average")
+    ap.add_argument("--variance", help="also write the per-sample pixel variance to this EXR")
     args = ap.parse_args()
     if len(args.inputs) < 2:
         print("need at least two independent renders to estimate the error", file=sys.stderr)
@@ -56,7 +87,7 @@ def main() -> int:
     k = len(imgs)
     stack = np.stack(imgs)
     avg = stack.mean(axis=0)
-    mi.Bitmap(avg.astype(np.float32), mi.Bitmap.PixelFormat.RGB).write(args.out)
+    save(args.out, avg)
 
     # Unbiased per-pixel variance of one render's luminance, then of the mean.
     lum = luminance(stack)
@@ -71,8 +102,15 @@ def main() -> int:
         renders.append({"file": p, **{key: info.get(key) for key in
                         ("integrator", "seed", "seconds", "samples", "spp", "samples_per_second",
                          "threads", "nonfinite_samples")}})
+    if args.variance:
+        spps = {x["spp"] for x in renders}
+        if len(spps) != 1 or None in spps:
+            print(f"--variance needs renders of one spp with JSON sidecars, got {spps}", file=sys.stderr)
+            return 2
+        save(args.variance, stack.var(axis=0, ddof=1) * spps.pop())
     report = {
         "output": args.out,
+        "variance": args.variance,
         "inputs": renders,
         "total_spp": sum(x["spp"] or 0 for x in renders),
         "mean": [float(v) for v in avg.reshape(-1, 3).mean(axis=0)],

@@ -3,6 +3,10 @@
 //! reference ([`crate::compare`]: relMSE and RMSE). The records go to a
 //! CSV and a log–log PNG plot (title, axis and tick labels, legend; the
 //! text is drawn with an embedded DejaVu Sans, so no system font is needed).
+//! Given the reference's own noise (a variance image or a second
+//! reference, [`super::NoiseFlags`]), every record also carries the errors
+//! with the reference's share taken out and that share
+//! ([`crate::compare::compare_with_noise`]): four more CSV columns.
 //!
 //! Checkpoints are taken where an integrator can show an image: after a
 //! pass (`pt`, `lt`) or after a round of mutations (`pssmlt`), at the first
@@ -10,9 +14,9 @@
 //! time since that integrator started, start-up (bootstrap) included.
 
 use super::stdout::{Failure, err, out};
-use super::{ParamFlags, STOP, check_writable, parse_defines, stop_on_ctrl_c};
+use super::{NoiseFlags, ParamFlags, STOP, check_writable, parse_defines, stop_on_ctrl_c};
 use crate::color::Rgb;
-use crate::compare::compare;
+use crate::compare::{Corrected, ReferenceNoise, compare, compare_with_noise};
 use crate::image_io::read_exr;
 use crate::integrators::RunSettings;
 use crate::integrators::registry::{self, Configured};
@@ -34,7 +38,11 @@ pub struct ConvergenceArgs {
     #[arg(long, required_unless_present = "replot")]
     reference: Option<PathBuf>,
     /// Only redraw the plot of an existing CSV (written beside it as PNG).
-    #[arg(long, value_name = "CSV", conflicts_with_all = ["scene", "reference"])]
+    #[arg(
+        long,
+        value_name = "CSV",
+        conflicts_with_all = ["scene", "reference", "reference_variance", "second_reference"]
+    )]
     replot: Option<PathBuf>,
     /// Plot title (default: the scene's or CSV's file stem).
     #[arg(long)]
@@ -69,6 +77,9 @@ pub struct ConvergenceArgs {
     /// Parameters, applied to every integrator that has them.
     #[command(flatten)]
     params: ParamFlags,
+    /// The reference's own noise: adds the corrected errors.
+    #[command(flatten)]
+    noise: NoiseFlags,
 }
 
 /// `mcmc-render convergence …`.
@@ -105,6 +116,7 @@ pub(crate) fn command(args: ConvergenceArgs) -> Result<(), Failure> {
         )
         .into());
     }
+    let noise = args.noise.load((rw, rh))?;
     let names: Vec<String> = args
         .integrators
         .split(',')
@@ -117,6 +129,7 @@ pub(crate) fn command(args: ConvergenceArgs) -> Result<(), Failure> {
         seed: args.seed,
         assignments: args.params.assignments()?,
         images: args.images.clone(),
+        noise,
     };
     stop_on_ctrl_c();
     let records = mcmc_core::runner::with_threads(threads, || run(&loaded, &r, &study, &STOP))?;
@@ -134,8 +147,14 @@ pub(crate) fn command(args: ConvergenceArgs) -> Result<(), Failure> {
         }
     }
     for rec in &records {
+        let corrected = rec.corrected.map_or_else(String::new, |k| {
+            format!(
+                " | corrected relMSE {:.4e} (reference {:.2e}) MSE {:.4e} (reference {:.2e})",
+                k.rel_mse, k.rel_mse_floor, k.mse, k.mse_floor
+            )
+        });
         out!(
-            "{:8} {:8.2} s {:>12} relMSE {:.4e} RMSE {:.4e}",
+            "{:8} {:8.2} s {:>12} relMSE {:.4e} RMSE {:.4e}{corrected}",
             rec.integrator,
             rec.seconds,
             rec.samples,
@@ -159,12 +178,16 @@ pub struct Record {
     pub rel_mse: f64,
     /// RMSE against the reference.
     pub rmse: f64,
+    /// The errors with the reference's own share taken out, when the study
+    /// was given the reference's noise.
+    pub corrected: Option<Corrected>,
 }
 
 /// Collects records at checkpoints.
 struct Recorder<'a> {
     name: &'a str,
     reference: &'a [Rgb],
+    noise: Option<&'a ReferenceNoise>,
     start: Instant,
     step: f64,
     state: Mutex<(u32, Vec<Record>)>,
@@ -184,13 +207,18 @@ impl Recorder<'_> {
         if force && (samples == 0 || g.1.last().is_some_and(|r| r.samples == samples)) {
             return;
         }
-        if let Ok(c) = compare(self.reference, &image()) {
+        let image = image();
+        if let Ok(c) = compare(self.reference, &image) {
+            let corrected = self
+                .noise
+                .and_then(|n| compare_with_noise(self.reference, n, &image).ok());
             g.1.push(Record {
                 integrator: self.name.to_string(),
                 seconds: t,
                 samples,
                 rel_mse: c.rel_mse,
                 rmse: c.rmse,
+                corrected,
             });
         }
         g.0 = (t / self.step).floor() as u32 + 1;
@@ -221,6 +249,9 @@ pub struct Study {
     /// Where to write each integrator's final image, statistics and error
     /// maps ([`write_final`]); `None`: nowhere.
     pub images: Option<PathBuf>,
+    /// The reference's own noise; `Some`: the records carry the corrected
+    /// errors too.
+    pub noise: Option<ReferenceNoise>,
 }
 
 /// The assignments a modifier of [`variant`] stands for.
@@ -330,6 +361,7 @@ pub fn run(
         seed,
         assignments,
         images,
+        noise,
     } = study;
     let (seconds, checkpoints, seed) = (*seconds, *checkpoints, *seed);
     let budget = time_budget(seconds)?;
@@ -340,6 +372,15 @@ pub fn run(
     if reference.len() as u64 != pixels {
         return Err(format!(
             "the reference has {} pixels, the scene renders {pixels}",
+            reference.len()
+        ));
+    }
+    if let Some(ReferenceNoise::Variance(v) | ReferenceNoise::Independent(v)) = noise
+        && v.len() != reference.len()
+    {
+        return Err(format!(
+            "the reference's noise image has {} pixels, the reference {}",
+            v.len(),
             reference.len()
         ));
     }
@@ -367,6 +408,7 @@ pub fn run(
         let rec = Recorder {
             name,
             reference,
+            noise: noise.as_ref(),
             start: Instant::now(),
             step,
             state: Mutex::new((1, Vec::new())),
@@ -383,7 +425,7 @@ pub fn run(
             .map_err(|e| e.to_string())?;
         rec.offer(r.samples, &|| r.image.clone(), true);
         if let Some(dir) = images {
-            write_final(dir, name, scene, reference, &r)?;
+            write_final(dir, name, scene, reference, noise.as_ref(), &r)?;
         }
         let (_, records) = rec.state.into_inner().unwrap_or_else(|p| p.into_inner());
         all.extend(records);
@@ -396,8 +438,9 @@ pub fn run(
 }
 
 /// Writes integrator `name`'s final image `r` into `dir` (created if
-/// needed): `NAME.exr`, `NAME.json` (seconds, samples, relMSE, the
-/// integrator's statistics), `NAME.relerr.exr` (per-pixel
+/// needed): `NAME.exr`, `NAME.json` (seconds, samples, relMSE, RMSE, the
+/// corrected errors when `noise` is given, the integrator's statistics),
+/// `NAME.relerr.exr` (per-pixel
 /// `(t − r)² / (r² + 0.01)` on luminance, the terms relMSE averages) and
 /// `NAME.relerr.png` (the same on a log scale, black at 1e-4 through red
 /// and yellow to white at 10, equal for every integrator). Characters of
@@ -407,6 +450,7 @@ pub fn write_final(
     name: &str,
     scene: &Scene,
     reference: &[Rgb],
+    noise: Option<&ReferenceNoise>,
     r: &crate::integrators::Rendered,
 ) -> Result<(), String> {
     use crate::compare::rel_sq_error;
@@ -446,12 +490,17 @@ pub fn write_final(
         .collect();
     write_png(&dir.join(format!("{stem}.relerr.png")), w, h, &ramp)?;
     let c = compare(reference, &r.image)?;
+    let corrected = match noise {
+        Some(n) => Some(compare_with_noise(reference, n, &r.image)?),
+        None => None,
+    };
     let json = serde_json::json!({
         "integrator": name,
         "seconds": r.seconds,
         "samples": r.samples,
         "rel_mse": c.rel_mse,
         "rmse": c.rmse,
+        "corrected": corrected,
         "statistics": r.statistics,
     });
     let text = serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?;
@@ -459,14 +508,40 @@ pub fn write_final(
     std::fs::write(&path, text).map_err(|e| format!("cannot write {}: {e}", path.display()))
 }
 
-/// Writes the records as CSV.
+/// The CSV header of a study.
+const HEADER: &str = "integrator,seconds,samples,rel_mse,rmse";
+/// The columns a study given the reference's noise adds to [`HEADER`]
+/// ([`Corrected`]: `mse_*` are squared RMSEs over all channels).
+const CORRECTED_COLUMNS: &str = "rel_mse_floor,rel_mse_corrected,mse_floor,mse_corrected";
+
+/// Writes the records as CSV: [`HEADER`]'s columns, and
+/// [`CORRECTED_COLUMNS`] when any record has corrected errors (NaN in a
+/// record without).
 pub fn write_csv(path: &Path, records: &[Record]) -> Result<(), String> {
-    let mut text = String::from("integrator,seconds,samples,rel_mse,rmse\n");
+    let extended = records.iter().any(|r| r.corrected.is_some());
+    let mut text = if extended {
+        format!("{HEADER},{CORRECTED_COLUMNS}\n")
+    } else {
+        format!("{HEADER}\n")
+    };
     for r in records {
         text.push_str(&format!(
-            "{},{:.4},{},{:.6e},{:.6e}\n",
+            "{},{:.4},{},{:.6e},{:.6e}",
             r.integrator, r.seconds, r.samples, r.rel_mse, r.rmse
         ));
+        if extended {
+            let k = r.corrected.unwrap_or(Corrected {
+                rel_mse: f64::NAN,
+                rel_mse_floor: f64::NAN,
+                mse: f64::NAN,
+                mse_floor: f64::NAN,
+            });
+            text.push_str(&format!(
+                ",{:.6e},{:.6e},{:.6e},{:.6e}",
+                k.rel_mse_floor, k.rel_mse, k.mse_floor, k.mse
+            ));
+        }
+        text.push('\n');
     }
     crate::output::write_bytes(path, text.as_bytes())
 }
@@ -483,15 +558,18 @@ pub fn read_csv(path: &Path) -> Result<Vec<Record>, String> {
 /// `path` names it in messages.
 pub fn parse_csv(text: &str, path: &Path) -> Result<Vec<Record>, String> {
     let mut lines = text.lines().enumerate();
-    match lines.next() {
-        Some((_, h)) if h.trim() == "integrator,seconds,samples,rel_mse,rmse" => {}
+    let extended_header = format!("{HEADER},{CORRECTED_COLUMNS}");
+    let extended = match lines.next() {
+        Some((_, h)) if h.trim() == HEADER => false,
+        Some((_, h)) if h.trim() == extended_header => true,
         _ => {
             return Err(format!(
-                "{}:1: expected the header integrator,seconds,samples,rel_mse,rmse",
+                "{}:1: expected the header {HEADER} (optionally followed by ,{CORRECTED_COLUMNS})",
                 path.display()
             ));
         }
-    }
+    };
+    let fields = if extended { 9 } else { 5 };
     let mut out = Vec::new();
     for (n, line) in lines {
         if line.trim().is_empty() {
@@ -499,15 +577,29 @@ pub fn parse_csv(text: &str, path: &Path) -> Result<Vec<Record>, String> {
         }
         let bad = || format!("{}:{}: malformed record: {line}", path.display(), n + 1);
         let f: Vec<&str> = line.split(',').map(str::trim).collect();
-        if f.len() != 5 || f[0].is_empty() {
+        if f.len() != fields || f[0].is_empty() {
             return Err(bad());
         }
+        let number = |i: usize| f[i].parse::<f64>().map_err(|_| bad());
+        // Corrected errors and a second reference's floor are estimates:
+        // any sign (and NaN where a record had none).
+        let corrected = if extended {
+            Some(Corrected {
+                rel_mse_floor: number(5)?,
+                rel_mse: number(6)?,
+                mse_floor: number(7)?,
+                mse: number(8)?,
+            })
+        } else {
+            None
+        };
         let record = Record {
             integrator: f[0].to_string(),
-            seconds: f[1].parse().map_err(|_| bad())?,
+            seconds: number(1)?,
             samples: f[2].parse().map_err(|_| bad())?,
-            rel_mse: f[3].parse().map_err(|_| bad())?,
-            rmse: f[4].parse().map_err(|_| bad())?,
+            rel_mse: number(3)?,
+            rmse: number(4)?,
+            corrected,
         };
         // What `write_csv` writes: finite non-negative times; errors
         // non-negative (NaN or +inf for a non-finite image).

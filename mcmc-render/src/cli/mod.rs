@@ -10,6 +10,8 @@
 //! - `mcmc-render convergence SCENE.xml --reference REF.exr [--integrators …]
 //!   [--time S] [--checkpoints K] [--out FILE.csv]`, or `convergence --replot FILE.csv`
 //! - `mcmc-render compare REF.exr TEST.exr [--json]`
+//!   (`compare` and `convergence` also take the reference's own noise:
+//!   `--reference-variance VAR.exr --reference-spp N` or `--second-reference R2.exr`)
 //! - `mcmc-render info SCENE.xml`
 //! - `mcmc-render integrators`: every integrator with its parameters and defaults
 //!
@@ -27,7 +29,7 @@ mod progress;
 mod render_cmd;
 mod stdout;
 
-use crate::compare::compare;
+use crate::compare::{Comparison, Corrected, ReferenceNoise, compare, compare_with_noise};
 use crate::image_io::read_exr;
 use clap::{Args, Parser, Subcommand};
 use std::collections::HashMap;
@@ -95,6 +97,77 @@ pub struct ParamFlags {
     max_depth: Option<String>,
 }
 
+/// The reference's own noise (`compare`, `convergence`): with either form,
+/// the errors are also given with the reference's share taken out
+/// ([`crate::compare::compare_with_noise`]).
+#[derive(Args, Clone, Debug, Default)]
+pub struct NoiseFlags {
+    /// Per-sample variance of the reference, per pixel and channel (EXR, as
+    /// `scenes/tools/mitsuba_reference.py --variance` and
+    /// `scenes/tools/average_exr.py --variance` write it); needs `--reference-spp`.
+    #[arg(
+        long,
+        value_name = "EXR",
+        requires = "reference_spp",
+        conflicts_with = "second_reference"
+    )]
+    reference_variance: Option<PathBuf>,
+    /// Samples per pixel of the reference: the variance image is divided by
+    /// it (1 if the image already holds the variance of the reference's pixels).
+    #[arg(long, value_name = "N", requires = "reference_variance")]
+    reference_spp: Option<f64>,
+    /// A second reference, rendered independently of the first (other seed)
+    /// with the same expectation.
+    #[arg(long, value_name = "EXR")]
+    second_reference: Option<PathBuf>,
+}
+
+impl NoiseFlags {
+    /// Reads the noise image the flags name, checked against the reference's
+    /// size `(width, height)`; `None` without these flags.
+    pub(crate) fn load(&self, size: (u32, u32)) -> Result<Option<ReferenceNoise>, String> {
+        let read = |path: &Path, what: &str| {
+            let (w, h, pixels) = read_exr(path)?;
+            if (w, h) != size {
+                return Err(format!(
+                    "{what} {} is {w}x{h}, the reference {}x{}",
+                    path.display(),
+                    size.0,
+                    size.1
+                ));
+            }
+            Ok(pixels)
+        };
+        if let Some(path) = &self.second_reference {
+            return Ok(Some(ReferenceNoise::Independent(read(
+                path,
+                "the second reference",
+            )?)));
+        }
+        let (Some(path), Some(spp)) = (&self.reference_variance, self.reference_spp) else {
+            return Ok(None);
+        };
+        if !(spp > 0.0 && spp.is_finite()) {
+            return Err(format!(
+                "--reference-spp must be a positive number, got {spp}"
+            ));
+        }
+        let var = read(path, "the variance image")?;
+        if let Some(i) = var.iter().position(|v| v.r < 0.0 || v.g < 0.0 || v.b < 0.0) {
+            return Err(format!(
+                "the variance image {} is negative at pixel ({}, {})",
+                path.display(),
+                i as u32 % size.0,
+                i as u32 / size.0
+            ));
+        }
+        let per_pixel = (1.0 / spp) as f32;
+        Ok(Some(ReferenceNoise::Variance(
+            var.into_iter().map(|v| v * per_pixel).collect(),
+        )))
+    }
+}
+
 impl ParamFlags {
     /// The flags as parameter assignments, named flags first, then `--set`
     /// in order (so `--set` wins).
@@ -139,6 +212,9 @@ enum Command {
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
+        /// The reference's own noise.
+        #[command(flatten)]
+        noise: NoiseFlags,
     },
     /// Error against time of several integrators at equal time budgets (CSV + log-log PNG).
     Convergence(convergence::ConvergenceArgs),
@@ -202,7 +278,8 @@ fn run(cli: Cli) -> Result<(), Failure> {
             reference,
             test,
             json,
-        }) => compare_images(&reference, &test, json),
+            noise,
+        }) => compare_images(&reference, &test, json, &noise),
         Some(Command::Convergence(args)) => convergence::command(args),
         Some(Command::Info { scene, define }) => {
             let defines = parse_defines(&define)?;
@@ -213,17 +290,40 @@ fn run(cli: Cli) -> Result<(), Failure> {
     }
 }
 
-fn compare_images(reference: &Path, test: &Path, json: bool) -> Result<(), Failure> {
+fn compare_images(
+    reference: &Path,
+    test: &Path,
+    json: bool,
+    noise: &NoiseFlags,
+) -> Result<(), Failure> {
     let (rw, rh, r) = read_exr(reference)?;
     let (tw, th, t) = read_exr(test)?;
     if (rw, rh) != (tw, th) {
         return Err(format!("image sizes differ: {rw}x{rh} vs {tw}x{th}").into());
     }
+    let noise = noise.load((rw, rh))?;
     let c = compare(&r, &t)?;
+    let corrected = match &noise {
+        Some(n) => Some(compare_with_noise(&r, n, &t)?),
+        None => None,
+    };
     if json {
+        /// `compare --json`: the comparison, and the corrected errors when
+        /// the reference's noise is given.
+        #[derive(serde::Serialize)]
+        struct Report<'a> {
+            #[serde(flatten)]
+            comparison: &'a Comparison,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            corrected: Option<Corrected>,
+        }
+        let report = Report {
+            comparison: &c,
+            corrected,
+        };
         out!(
             "{}",
-            serde_json::to_string_pretty(&c).map_err(|e| e.to_string())?
+            serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?
         )?;
     } else {
         out!("relMSE              {:.6e}", c.rel_mse)?;
@@ -251,6 +351,19 @@ fn compare_images(reference: &Path, test: &Path, json: bool) -> Result<(), Failu
             c.ref_nonfinite,
             c.test_nonfinite
         )?;
+        if let Some(k) = corrected {
+            out!(
+                "relMSE corrected    {:.6e}  (reference's share {:.6e})",
+                k.rel_mse,
+                k.rel_mse_floor
+            )?;
+            out!(
+                "MSE corrected       {:.6e}  (reference's share {:.6e}; RMSE² {:.6e})",
+                k.mse,
+                k.mse_floor,
+                k.mse + k.mse_floor
+            )?;
+        }
     }
     Ok(())
 }
