@@ -100,13 +100,30 @@ pub struct Splat {
 pub const PATH_CLASSES: usize = 6;
 
 /// What evaluating a primary-sample vector produces besides `ln π`.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Debug, Default, PartialEq)]
 pub struct PathSample {
     /// Contributions to the image (one for path tracing).
     pub splats: Vec<Splat>,
     /// Path depth used for the per-depth statistics (for path tracing: the
     /// number of surface vertices the tracer consumed numbers for).
     pub depth: u32,
+}
+
+/// Written out so that `clone_from` reuses the splats' storage (a derived
+/// `Clone` replaces it with a fresh allocation): chains copy a proposal's
+/// payload on every step.
+impl Clone for PathSample {
+    fn clone(&self) -> Self {
+        PathSample {
+            splats: self.splats.clone(),
+            depth: self.depth,
+        }
+    }
+
+    fn clone_from(&mut self, source: &Self) {
+        self.splats.clone_from(&source.splats);
+        self.depth = source.depth;
+    }
 }
 
 impl PathSample {

@@ -315,7 +315,16 @@ pub struct FusedKernel<'s> {
     pss_prop: Option<Sample<TorusPoint, PathSample>>,
     path_cur: Option<Sample<Path<'s>, PathSample>>,
     path_prop: Option<Sample<Path<'s>, PathSample>>,
+    /// Stage 1's values of the evaluated current path `path_cur` under
+    /// technique `s`: `(s, ln p_s(x), ln π̃(x))`, computed by the first
+    /// path-space proposal from it that reaches stage 1 and reused by the
+    /// next ones while the path stays (cleared when it changes). Pure
+    /// functions of the path, so reusing them changes nothing.
+    cur_stage1: Option<(usize, f64, f64)>,
     scratch: Option<FusedState<'s>>,
+    /// The state the current path's round trip writes into (reused: a
+    /// new one per check allocated its point, path and splats again).
+    probe: Option<FusedState<'s>>,
     /// Whether the current state's path survives the round trip (`None`:
     /// not checked since the state last changed).
     current_invertible: Option<bool>,
@@ -365,7 +374,9 @@ impl<'s> FusedKernel<'s> {
             pss_prop: None,
             path_cur: None,
             path_prop: None,
+            cur_stage1: None,
             scratch: None,
+            probe: None,
             current_invertible: None,
             proposal_invertible: None,
             last_move: (false, 0.0),
@@ -509,6 +520,7 @@ impl<'s> FusedKernel<'s> {
             cur.state.clone_from(&x.path);
             cur.state.evaluate();
             cur.log_density = cur.state.log_density();
+            self.cur_stage1 = None;
         }
         let prop = self.path_prop.get_or_insert_with(|| cur.clone());
         let p = self.path.propose(cur, prop, rng);
@@ -518,12 +530,24 @@ impl<'s> FusedKernel<'s> {
         let x_path = &cur.state;
         let y = &prop.state;
         let log_p_y = log_technique_density(y, s);
-        let log_p_x = log_technique_density(x_path, s);
+        let (log_p_x, log_pi_x) = match self.cur_stage1 {
+            Some((cached_s, log_p, log_pi)) if cached_s == s => (log_p, log_pi),
+            _ => {
+                // ln π̃(x) only where stage 1 needs it (both densities positive).
+                let log_p = log_technique_density(x_path, s);
+                let log_pi = if log_p > f64::NEG_INFINITY {
+                    log_target(&depth, x_path, s)
+                } else {
+                    f64::NEG_INFINITY
+                };
+                self.cur_stage1 = Some((s, log_p, log_pi));
+                (log_p, log_pi)
+            }
+        };
         if !(log_p_y > f64::NEG_INFINITY) || !(log_p_x > f64::NEG_INFINITY) {
             return Proposal::failed(fail[0]);
         }
         // Stage 1 (module docs): Eq. 24 on the paths, nothing converted.
-        let log_pi_x = log_target(&depth, x_path, s);
         if !log_pi_x.is_finite() {
             return Proposal::failed(fail[4]);
         }
@@ -545,8 +569,15 @@ impl<'s> FusedKernel<'s> {
         let current_ok = match self.current_invertible {
             Some(ok) => ok,
             None => {
-                let mut probe = FusedState::untraced(scene, TorusPoint::fresh(child_rng(rng)));
-                let ok = round_trip(scene, &depth, x_path, s, rng, &mut probe).is_ok();
+                // A fresh point's stream is drawn for every check, as when
+                // each check had a new state (the inverse replaces it).
+                // `set_values` of nothing makes it `TorusPoint::fresh`.
+                let fresh = child_rng(rng);
+                let probe = self.probe.get_or_insert_with(|| {
+                    FusedState::untraced(scene, TorusPoint::fresh(fresh.clone()))
+                });
+                probe.point.set_values(&[], fresh);
+                let ok = round_trip(scene, &depth, x_path, s, rng, probe).is_ok();
                 self.local.inversions += 1;
                 self.current_invertible = Some(ok);
                 ok
