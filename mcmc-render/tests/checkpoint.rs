@@ -335,6 +335,39 @@ fn a_stopped_erpt_render_resumed_from_its_checkpoint_ends_bit_identical() {
 /// same file with the iteration count put back to 0 (so the resumed
 /// iterations redraw the first iterations' streams and radii) must give
 /// another image. A file whose vcm words are cut is refused with one line.
+/// A render resumed from `cut` (a checkpoint of `name` with its words
+/// cut short) must be refused with one line naming the integrator.
+fn assert_cut_checkpoint_is_refused(
+    scene: &Scene,
+    integ: &dyn registry::Configured,
+    name: &str,
+    cut: Progress,
+) {
+    let run = RunSettings {
+        spp: Some(4),
+        seed: 9,
+        checkpoint: Some(Checkpoint {
+            path: std::env::temp_dir().join(format!(
+                "mcmc-render-checkpoint-{name}-cut-{}.ckpt",
+                std::process::id()
+            )),
+            fingerprint: 42,
+            resume: Some(Arc::new(cut)),
+            chains: None,
+        }),
+        ..RunSettings::default()
+    };
+    let refused = integ
+        .render(scene, &run, &AtomicBool::new(false), &NoObserver)
+        .unwrap_err()
+        .to_string();
+    let want = format!("not a checkpoint of {name}");
+    assert!(
+        refused.contains(&want) && !refused.contains('\n'),
+        "{refused}"
+    );
+}
+
 #[test]
 fn a_stopped_vcm_render_resumed_from_its_checkpoint_ends_bit_identical() {
     let scene = repo_scene("cornell-box.xml", 24);
@@ -357,28 +390,7 @@ fn a_stopped_vcm_render_resumed_from_its_checkpoint_ends_bit_identical() {
     assert_eq!((saved.pass, saved.spp_done, saved.extra.len()), (2, 2, 6));
     let mut cut = saved;
     cut.extra.pop();
-    let run = RunSettings {
-        spp: Some(4),
-        seed: 9,
-        checkpoint: Some(Checkpoint {
-            path: std::env::temp_dir().join(format!(
-                "mcmc-render-checkpoint-vcm-cut-{}.ckpt",
-                std::process::id()
-            )),
-            fingerprint: 42,
-            resume: Some(Arc::new(cut)),
-            chains: None,
-        }),
-        ..RunSettings::default()
-    };
-    let refused = vcm
-        .render(&scene, &run, &AtomicBool::new(false), &NoObserver)
-        .unwrap_err()
-        .to_string();
-    assert!(
-        refused.contains("not a checkpoint of vcm") && !refused.contains('\n'),
-        "{refused}"
-    );
+    assert_cut_checkpoint_is_refused(&scene, vcm.as_ref(), "vcm", cut);
 }
 
 /// Where `mcmc-vcm`'s checkpoint words keep every chain's random stream
@@ -474,28 +486,7 @@ fn a_stopped_mcmc_vcm_render_resumed_from_its_checkpoint_ends_bit_identical() {
         e.contains("not a checkpoint of mcmc-vcm") && !e.contains('\n'),
         "{e}"
     );
-    let run = RunSettings {
-        spp: Some(4),
-        seed: 9,
-        checkpoint: Some(Checkpoint {
-            path: std::env::temp_dir().join(format!(
-                "mcmc-render-checkpoint-mcmc-vcm-cut-{}.ckpt",
-                std::process::id()
-            )),
-            fingerprint: 42,
-            resume: Some(Arc::new(cut)),
-            chains: None,
-        }),
-        ..RunSettings::default()
-    };
-    let refused = integ
-        .render(&scene, &run, &AtomicBool::new(false), &NoObserver)
-        .unwrap_err()
-        .to_string();
-    assert!(
-        refused.contains("not a checkpoint of mcmc-vcm") && !refused.contains('\n'),
-        "{refused}"
-    );
+    assert_cut_checkpoint_is_refused(&scene, integ.as_ref(), "mcmc-vcm", cut);
 }
 
 /// `guided` checkpointed after every pass of its last iteration (session
