@@ -91,6 +91,30 @@ pub struct Checkpoint {
     pub chains: Option<Arc<crate::markov::checkpoint::ChainProgress>>,
 }
 
+impl Checkpoint {
+    /// The run's `checkpoint` statistics: the file, where the run resumed
+    /// from (`resumed_from_<unit>`: `spp`, `passes`, `iterations`) and the
+    /// last save's error, if any; one shape for every integrator's JSON.
+    pub fn statistics(
+        &self,
+        unit: &str,
+        resumed_from: impl serde::Serialize,
+        error: impl serde::Serialize,
+    ) -> serde_json::Value {
+        let mut map = serde_json::Map::new();
+        map.insert("path".into(), self.path.display().to_string().into());
+        map.insert(
+            format!("resumed_from_{unit}"),
+            serde_json::to_value(resumed_from).unwrap_or_default(),
+        );
+        map.insert(
+            "error".into(),
+            serde_json::to_value(error).unwrap_or_default(),
+        );
+        serde_json::Value::Object(map)
+    }
+}
+
 /// A per-pixel render's progress: whole passes only.
 #[derive(Debug)]
 pub struct Progress {

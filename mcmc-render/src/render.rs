@@ -452,11 +452,7 @@ pub fn run_per_pixel(
     });
     let mut statistics = statistics;
     if let (Some(c), Some((resumed, error))) = (&run.checkpoint, &r.checkpoint) {
-        statistics["checkpoint"] = serde_json::json!({
-            "path": c.path.display().to_string(),
-            "resumed_from_spp": resumed,
-            "error": error,
-        });
+        statistics["checkpoint"] = c.statistics("spp", resumed, error);
     }
     let statistics = crate::cluster::with_ranks(
         statistics,

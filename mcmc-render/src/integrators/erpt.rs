@@ -487,11 +487,7 @@ impl IntegratorSettings for Erpt {
             ),
         });
         if let Some(c) = &run.checkpoint {
-            statistics["checkpoint"] = json!({
-                "path": c.path.display().to_string(),
-                "resumed_from_passes": resumed_from,
-                "error": checkpoint_error,
-            });
+            statistics["checkpoint"] = c.statistics("passes", resumed_from, &checkpoint_error);
         }
         // On a cluster, every rank's share (on rank 0; collective).
         let statistics = crate::cluster::with_ranks(

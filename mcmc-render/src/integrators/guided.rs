@@ -760,11 +760,7 @@ impl GuidedSettings {
             "triangles": scene.geometry.triangles,
         });
         if let (Some(c), true) = (&run.checkpoint, saves) {
-            statistics["checkpoint"] = serde_json::json!({
-                "path": c.path.display().to_string(),
-                "resumed_from_spp": resumed_from,
-                "error": checkpoint_error,
-            });
+            statistics["checkpoint"] = c.statistics("spp", resumed_from, &checkpoint_error);
         }
         let rendered = Rendered {
             image,

@@ -1711,11 +1711,7 @@ impl McmcVcm {
         if let Some(c) = &run.checkpoint {
             rendered.statistics.insert(
                 "checkpoint".into(),
-                serde_json::json!({
-                    "path": c.path.display().to_string(),
-                    "resumed_from_iterations": resumed_from,
-                    "error": checkpoint_error,
-                }),
+                c.statistics("iterations", resumed_from, &checkpoint_error),
             );
         }
         // On a cluster, every rank's share (on rank 0; collective).

@@ -1143,11 +1143,7 @@ impl Vcm {
         if let Some(c) = &run.checkpoint {
             rendered.statistics.insert(
                 "checkpoint".into(),
-                serde_json::json!({
-                    "path": c.path.display().to_string(),
-                    "resumed_from_iterations": resumed_from,
-                    "error": checkpoint_error,
-                }),
+                c.statistics("iterations", resumed_from, &checkpoint_error),
             );
         }
         if let serde_json::Value::Object(m) = crate::cluster::with_ranks(
