@@ -15,7 +15,7 @@
 //! without a random walk's draws), `chained` (the target, each evaluation
 //! waiting for the previous one's result, as a chain's next step waits
 //! for the acceptance: its latency, where `target` gives its throughput),
-//! `words` (only the ⌈d/2⌉ generator words a `uniform` step draws, from a
+//! `words` (only the ⌈d/4⌉ generator words a `uniform` step draws, from a
 //! local generator);
 //! targets `1` (standard normal 1-d), `100` (standard normal 100-d),
 //! `dense` (dense Gaussian 100-d).
@@ -107,7 +107,7 @@ fn run<T: Fn(&[f64]) -> f64>(
         "words" => {
             use rand::Rng;
             let mut rng = stream_rng(1, 0);
-            let mut words = vec![0u64; d.div_ceil(2)];
+            let mut words = vec![0u64; d.div_ceil(4)];
             timed(n, batches, || {
                 words.iter_mut().for_each(|w| *w = rng.next_u64());
                 black_box(&words)[0] as f64

@@ -4,22 +4,30 @@ use crate::rng::ChainRng;
 use crate::sample::Sample;
 
 /// Uniform (box) random walk on `R^d`: `y_i = x_i + a·u_i`, the `u_i`
-/// independent and uniform on `(−1, 1)`. Symmetric.
+/// independent and uniform on a symmetric grid in `(−1, 1)`. Symmetric.
 ///
 /// A cheaper exact random walk than [`GaussianRandomWalk`](super::GaussianRandomWalk)
-/// for targets that cost little per coordinate: each coordinate takes 32
-/// bits of one 64-bit generator word (two coordinates per word) and one
+/// for targets that cost little per coordinate: each coordinate takes 16
+/// bits of one 64-bit generator word (four coordinates per word) and one
 /// conversion, where a Gaussian step takes a whole word and a ziggurat
-/// draw. Per coordinate the step has variance `a²/3`, so `a = σ√3`
-/// matches the variance of a Gaussian walk of scale `σ`.
+/// draw. Per coordinate the step has variance `a²/3·(1 − 2⁻³²)`, so
+/// `a = σ√3` matches the variance of a Gaussian walk of scale `σ`.
 ///
-/// The offsets are exactly symmetric: a word's 32 bits `w` give
-/// `u = (w + ½)/2³¹` with `w` read as a signed integer in `[−2³¹, 2³¹)`,
-/// and the complement `!w` gives exactly `−u` (`−1 − w + ½ = −(w + ½)`,
-/// with no rounding in `f64`). So each `u_i` is uniform on a grid of 2³²
-/// points symmetric about 0 (spacing `a/2³¹`), and the move is a
-/// Metropolis–Hastings kernel with a symmetric proposal, just as every
-/// other kernel's continuous draws are made from finitely many bits.
+/// The offsets are exactly symmetric: a word's 16 bits `h`, read as a
+/// signed integer in `[−2¹⁵, 2¹⁵)`, give `u = (2h + 1)/2¹⁶`, and the
+/// complement `!h` gives exactly `−u` (`2(−1 − h) + 1 = −(2h + 1)`, with no
+/// rounding in `f64`). So each `u_i` is uniform on the 2¹⁶ odd multiples of
+/// 2⁻¹⁶ in `(−1, 1)`, and the move is a Metropolis–Hastings kernel with a
+/// symmetric proposal.
+///
+/// **Reachable states.** Every step moves each coordinate by an odd
+/// multiple of `h = a/2¹⁶`, so (up to the rounding of `x + a·u` in `f64`,
+/// which every random walk shares) a chain started at `x⁰` lives on the
+/// lattice `x⁰ + h·Z^d`, and its stationary law is `π` restricted to that
+/// lattice. For `a = 0.4` the spacing is 6·10⁻⁶; a smooth `π` whose features
+/// are on the scale of a well-tuned `a` is summed on the lattice with an
+/// error far below any Monte Carlo error (a continuous random walk in
+/// `f64` is a lattice walk too, only on a finer, irregular grid).
 ///
 /// It reports no proposal density ([`Kernel::log_proposal_density`] is
 /// `None`): in [`MultipleTry`](crate::mtm::MultipleTry) use
@@ -38,18 +46,28 @@ use crate::sample::Sample;
 #[derive(Clone, Debug)]
 pub struct UniformRandomWalk {
     half_width: f64,
-    /// `a/2³¹`: the step per unit of the signed 32-bit offset.
+    /// `a/2¹⁶`: the lattice spacing, the step per unit of the odd offset.
     unit: f64,
 }
 
-/// 2³¹, the number of offsets on each side of zero.
-const HALF_RANGE: f64 = 2_147_483_648.0;
+/// 2¹⁶, the number of offsets per coordinate.
+const LEVELS: f64 = 65_536.0;
 
-/// The offset `(w + ½)` of a word's 32 bits `w`, read as a signed integer:
-/// in `(−2³¹, 2³¹)`, and `offset(!w) = −offset(w)` exactly.
+/// The odd offsets `2h + 1` of the four 16-bit quarters `h` of a word, each
+/// read as a signed integer, in the order coordinates take them: bits
+/// 0–15, 32–47, 16–31, 48–63 (the low, then the high quarter of each
+/// 32-bit half, which SSE2 extracts with one shift pair per half). Each is
+/// in `(−2¹⁶, 2¹⁶)`, and complementing a quarter negates its offset exactly
+/// (`2(−1 − h) + 1 = −(2h + 1)`).
 #[inline(always)]
-fn offset(w: u32) -> f64 {
-    f64::from(w as i32) + 0.5
+fn odd_offsets(w: u64) -> [f64; 4] {
+    let halves = [w as u32, (w >> 32) as u32];
+    // `(l << 16) as i32 >> 15` is twice the low quarter, sign extended;
+    // `l as i32 >> 15` twice the high quarter plus a bit of the low one,
+    // which `| 1` overwrites with the 1 of `2h + 1`.
+    let low = halves.map(|l| ((l << 16) as i32 >> 15) | 1);
+    let high = halves.map(|l| (l as i32 >> 15) | 1);
+    [low[0], low[1], high[0], high[1]].map(f64::from)
 }
 
 impl UniformRandomWalk {
@@ -63,7 +81,7 @@ impl UniformRandomWalk {
         }
         Ok(UniformRandomWalk {
             half_width,
-            unit: half_width / HALF_RANGE,
+            unit: half_width / LEVELS,
         })
     }
 
@@ -76,45 +94,31 @@ impl UniformRandomWalk {
     #[inline(always)]
     fn step_into(&self, current: &[f64], out: &mut Vec<f64>, rng: &mut ChainRng) {
         use rand::Rng;
-        // One pass that copies and perturbs, as the Gaussian walk does, two
-        // coordinates per generator word. Three things make it short
-        // (1 535 instructions per 100-d MH step on `−½Σx²`; 2 223 written
-        // as a plain loop over pairs; `docs/performance.md`, session 19):
-        // the generator's state is worked on in a local copy that stays in
-        // registers (through `rng` the compiler stored its four state words
-        // after every word, as `out` might alias them); each block of the
-        // input is read whole before its output is written; and so LLVM
-        // converts, scales and adds two offsets per SSE2 instruction
-        // (`cvtdq2pd`). What is left is mostly the generator's words.
+        // One pass that copies and perturbs, as the Gaussian walk does, four
+        // coordinates per generator word (`docs/performance.md`, item 4,
+        // sessions 19 and 21). The generator's state is worked on in a
+        // local copy that stays in registers (through `rng` the compiler
+        // stored its four state words after every word, as `out` might
+        // alias them); each block of the input is read whole before its
+        // output is written, so LLVM widens, converts, scales and adds the
+        // offsets in SSE2 vectors.
         out.resize(current.len(), 0.0);
         let unit = self.unit;
         let mut words = rng.clone();
-        // Blocks of 8 coordinates (4 words), read whole before the block
-        // is written (so the compiler need not fear `out` aliasing
-        // `current`), then pairs, then one; word j always moves
-        // coordinates 2j and 2j + 1.
-        let (blocks_out, rest_out) = out.as_chunks_mut::<8>();
-        let (blocks_in, rest_in) = current.as_chunks::<8>();
+        // Word j moves coordinates 4j to 4j + 3; each block of 4 is read
+        // whole before it is written (so the compiler need not fear `out`
+        // aliasing `current`), then the last 1 to 3 coordinates.
+        let (blocks_out, rest_out) = out.as_chunks_mut::<4>();
+        let (blocks_in, rest_in) = current.as_chunks::<4>();
         for (o, c) in blocks_out.iter_mut().zip(blocks_in) {
-            let x = *c;
-            let mut halves = [0u32; 8];
-            for pair in halves.as_chunks_mut::<2>().0 {
-                let w = words.next_u64();
-                *pair = [w as u32, (w >> 32) as u32];
+            let (x, u) = (*c, odd_offsets(words.next_u64()));
+            *o = std::array::from_fn(|k| x[k] + unit * u[k]);
+        }
+        if !rest_in.is_empty() {
+            let u = odd_offsets(words.next_u64());
+            for ((o, c), u) in rest_out.iter_mut().zip(rest_in).zip(u) {
+                *o = c + unit * u;
             }
-            *o = std::array::from_fn(|k| x[k] + unit * offset(halves[k]));
-        }
-        let (pairs_out, last_out) = rest_out.as_chunks_mut::<2>();
-        let (pairs_in, last_in) = rest_in.as_chunks::<2>();
-        for (o, c) in pairs_out.iter_mut().zip(pairs_in) {
-            let (x, w) = (*c, words.next_u64());
-            *o = [
-                x[0] + unit * offset(w as u32),
-                x[1] + unit * offset((w >> 32) as u32),
-            ];
-        }
-        if let ([o], [c]) = (last_out, last_in) {
-            *o = c + unit * offset(words.next_u64() as u32);
         }
         *rng = words;
     }
@@ -146,64 +150,80 @@ impl<P> Kernel<Vec<f64>, P> for UniformRandomWalk {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::kernel::Enumerated;
     use crate::rng::{standard_normal, stream_rng};
     use rand::Rng;
 
-    #[test]
-    fn offsets_are_exactly_symmetric_and_inside_the_box() {
-        // The ends of the signed range, around zero, and random words.
-        let mut rng = stream_rng(19, 0);
-        let edges = [0, 1, 2, u32::MAX, u32::MAX - 1, 1 << 31, (1 << 31) - 1];
-        let words = edges
-            .into_iter()
-            .chain((0..100_000).map(|_| rng.next_u64() as u32));
-        for w in words {
-            assert_eq!(offset(w), -offset(!w), "word {w:#x}");
-            assert!(offset(w).abs() < HALF_RANGE, "word {w:#x}");
-        }
-        // The extreme offsets are ±(2³¹ − ½): strictly inside (−a, a).
-        assert_eq!(offset(1 << 31), 0.5 - HALF_RANGE);
-        assert_eq!(offset((1 << 31) - 1), HALF_RANGE - 0.5);
+    /// Where in a word each of `odd_offsets`' four results takes its
+    /// quarter: bits 0–15, 32–47, 16–31, 48–63.
+    const SHIFTS: [u32; 4] = [0, 32, 16, 48];
+
+    /// The offset that quarter `h` gives at position `k` of a word.
+    fn odd(h: u16, k: usize) -> f64 {
+        odd_offsets(u64::from(h) << SHIFTS[k])[k]
     }
 
-    /// The blocks, pairs and last coordinate of `step_into` follow the
-    /// definition (word `j` moves coordinates `2j` and `2j + 1`, low half
-    /// first) bit for bit, for every dimension modulo 8.
+    #[test]
+    fn offsets_are_exactly_symmetric_distinct_and_inside_the_box() {
+        // Every one of the 2¹⁶ quarters at every position, the other three
+        // quarters random: the offset is 2h + 1 (h signed) whatever the
+        // rest of the word, and the complement gives exactly its negation;
+        // so the offsets are the 2¹⁶ distinct odd integers in (−2¹⁶, 2¹⁶),
+        // uniform and symmetric.
+        let mut rng = stream_rng(21, 0);
+        for h in 0..=u16::MAX {
+            for (k, shift) in SHIFTS.into_iter().enumerate() {
+                let rest = rng.next_u64() & !(0xFFFF << shift);
+                let o = odd_offsets(rest | u64::from(h) << shift)[k];
+                assert_eq!(o, 2.0 * f64::from(h as i16) + 1.0, "quarter {h:#x} at {k}");
+                let c = odd_offsets(rest | u64::from(!h) << shift)[k];
+                assert_eq!(c, -o, "quarter {h:#x} at {k}");
+            }
+        }
+        assert_eq!(odd(1 << 15, 3), 1.0 - LEVELS);
+        assert_eq!(odd((1 << 15) - 1, 2), LEVELS - 1.0);
+    }
+
+    /// The blocks and the remainder of `step_into` follow the definition
+    /// (word `j` moves coordinates `4j` to `4j + 3` by its quarters in the
+    /// order of `SHIFTS`) bit for bit, for every dimension modulo 4.
     #[test]
     fn every_dimension_moves_by_its_words_in_order() {
         let walk = UniformRandomWalk::new(0.3).unwrap();
         let mut out = Vec::new();
-        for d in 1..=19usize {
+        for d in 1..=11usize {
             let current: Vec<f64> = (0..d).map(|i| i as f64 - 4.5).collect();
             let mut rng = stream_rng(19, d as u64);
             let mut reference = rng.clone();
             walk.step_into(&current, &mut out, &mut rng);
-            let words: Vec<u64> = (0..d.div_ceil(2)).map(|_| reference.next_u64()).collect();
+            let words: Vec<u64> = (0..d.div_ceil(4)).map(|_| reference.next_u64()).collect();
             for (i, (y, x)) in out.iter().zip(&current).enumerate() {
-                let half = (words[i / 2] >> (32 * (i % 2))) as u32 as i32;
-                let expected = x + 0.3 / 2f64.powi(31) * (f64::from(half) + 0.5);
+                let quarter = (words[i / 4] >> SHIFTS[i % 4]) as u16 as i16;
+                let expected = x + 0.3 / 65536.0 * (2.0 * f64::from(quarter) + 1.0);
                 assert_eq!(y.to_bits(), expected.to_bits(), "d = {d}, coordinate {i}");
             }
             assert_eq!(out.len(), d);
-            // Exactly ⌈d/2⌉ words drawn.
+            // Exactly ⌈d/4⌉ words drawn.
             assert_eq!(rng.next_u64(), reference.next_u64(), "d = {d}");
         }
     }
 
     #[test]
-    fn steps_are_uniform_on_the_box_with_both_halves_of_each_word() {
-        // 200 000 steps of 3 coordinates (odd: the last word's high half is
-        // unused) from 0: each coordinate's step/a is uniform on (−1, 1),
-        // mean 0 and variance 1/3; the sample mean has sd √(1/3/n) and the
-        // sample variance sd √((1/5 − 1/9)/n) (fourth moment 1/5); |z| < 5.
+    fn steps_are_uniform_on_the_box_with_every_quarter_of_each_word() {
+        // 200 000 steps of 11 coordinates (a block of 8, then 3: the last
+        // word's top quarter is unused) from 0: each coordinate's step/a is
+        // uniform on (−1, 1) up to the grid, mean 0 and variance
+        // 1/3·(1 − 2⁻³²); the sample mean has sd √(1/3/n) and the sample
+        // variance sd √((1/5 − 1/9)/n) (fourth moment 1/5); |z| < 5 (the
+        // grid's effect on the variance, 8·10⁻¹¹, is 10⁻⁷ of its sd).
         let a = 0.7;
         let walk = UniformRandomWalk::new(a).unwrap();
         let mut rng = stream_rng(19, 1);
-        let (n, d) = (200_000, 3);
+        let (n, d) = (200_000, 11);
         let (mut sum, mut sq) = (vec![0.0; d], vec![0.0; d]);
         let mut out = Vec::new();
         for _ in 0..n {
-            walk.step_into(&[0.0; 3], &mut out, &mut rng);
+            walk.step_into(&[0.0; 11], &mut out, &mut rng);
             for i in 0..d {
                 let u = out[i] / a;
                 assert!(u.abs() < 1.0);
@@ -220,6 +240,108 @@ mod tests {
                 "{i}: {z_mean} {z_var}"
             );
         }
+    }
+
+    /// Positions `k` (lattice units, `x_k = k·2⁻¹⁶`, exact in `f64` for
+    /// `a = 1`) of a finite window of the 1-d lattice the walk lives on,
+    /// around both ends of the offsets' range (the largest jump is
+    /// 2¹⁶ − 1; 2¹⁶ and even jumps are not proposals).
+    const WINDOW: [i64; 8] = [0, 1, 2, 3, 65_533, 65_534, 65_535, 65_536];
+
+    /// The walk with `a = 1` on `WINDOW`, as a kernel on `{0, …, 7}` for
+    /// `crate::exact`: every one of the 2¹⁶ quarters is an outcome of
+    /// probability 2⁻¹⁶, moved by the walk's own `x + unit·odd_offsets(w)[k]` (which
+    /// `every_dimension_moves_by_its_words_in_order` ties to `step_into`);
+    /// those that land outside the window are left out (a target that is
+    /// `−∞` there rejects them). `shift` (lattice units) moves every offset,
+    /// for the control; the kernel reports itself symmetric either way,
+    /// as `UniformRandomWalk` does.
+    struct Window {
+        walk: UniformRandomWalk,
+        shift: f64,
+    }
+
+    impl Window {
+        fn land(&self, from: usize, h: u16) -> Option<usize> {
+            let unit = self.walk.unit;
+            // The quarter at each position in turn, by the state.
+            let y = WINDOW[from] as f64 * unit + unit * (odd(h, from % 4) + self.shift);
+            WINDOW.iter().position(|&k| k as f64 * unit == y)
+        }
+    }
+
+    impl Kernel<usize> for Window {
+        fn propose(
+            &mut self,
+            current: &Sample<usize>,
+            proposal: &mut Sample<usize>,
+            rng: &mut ChainRng,
+        ) -> Proposal {
+            match self.land(current.state, rng.next_u64() as u16) {
+                Some(y) => {
+                    proposal.state = y;
+                    Proposal::symmetric(0)
+                }
+                None => Proposal::failed(0),
+            }
+        }
+        fn is_symmetric(&self) -> bool {
+            true
+        }
+        fn component_names(&self) -> Vec<String> {
+            vec!["window".into()]
+        }
+        fn enumerate(&self, from: &Sample<usize>) -> Option<Vec<Enumerated<usize>>> {
+            let outcomes = (0..=u16::MAX).filter_map(|h| self.land(from.state, h));
+            Some(
+                outcomes
+                    .map(|state| Enumerated {
+                        state,
+                        probability: 1.0 / LEVELS,
+                        log_q_ratio: 0.0,
+                        component: 0,
+                    })
+                    .collect(),
+            )
+        }
+    }
+
+    /// Detailed balance, stationarity and row sums of the enumerated MH
+    /// matrix of `Window` with offset shift `shift`, for an uneven target.
+    fn window_errors(shift: f64) -> [f64; 3] {
+        use crate::exact::{
+            detailed_balance_error, mh_matrix, normalized, stationarity_error,
+            stochasticity_error,
+        };
+        let log_pi = [0.0, 1.0, -0.5, 2.0, 0.3, -1.0, 0.7, -2.0];
+        let walk = UniformRandomWalk::new(1.0).unwrap();
+        let p = mh_matrix(&log_pi, &Window { walk, shift }).unwrap();
+        let pi = normalized(&log_pi);
+        [
+            detailed_balance_error(&pi, &p),
+            stationarity_error(&pi, &p),
+            stochasticity_error(&p),
+        ]
+    }
+
+    #[test]
+    fn the_lattice_walk_is_exactly_reversible_on_a_window() {
+        let [db, st, sto] = window_errors(0.0);
+        eprintln!("lattice window: {db:e} {st:e} {sto:e}");
+        assert!(db < 1e-12 && st < 1e-12 && sto < 1e-12, "{db:e} {st:e} {sto:e}");
+    }
+
+    /// Control: offsets shifted by two lattice units are still odd but no
+    /// longer symmetric (`+2¹⁶ + 1` exists, `−2¹⁶ + 1` does not), and the
+    /// exact check sees it. A single unmatched move violates balance by its
+    /// flow `π_x P_xy = 2⁻¹⁶·min(π_x, π_y) ≥ 1.3·10⁻⁷` here (the smallest
+    /// `π` is 0.0087), so the control's threshold, 10⁻⁸, is far above the
+    /// correct kernel's rounding (< 10⁻¹²) and below any real violation.
+    #[test]
+    fn control_shifted_lattice_offsets_break_detailed_balance() {
+        let [db, _, sto] = window_errors(2.0);
+        eprintln!("shifted lattice offsets: {db:e} {sto:e}");
+        assert!(db > 1e-8 && sto < 1e-12, "{db:e} {sto:e}");
     }
 
     /// `ln π` of a banana: `x₀ ~ N(0, 1)`, `x₁ | x₀ ~ N(x₀²/2, 1)`.
