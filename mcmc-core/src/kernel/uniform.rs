@@ -61,12 +61,14 @@ const LEVELS: f64 = 65_536.0;
 /// (`2(−1 − h) + 1 = −(2h + 1)`).
 #[inline(always)]
 fn odd_offsets(w: u64) -> [f64; 4] {
-    let halves = [w as u32, (w >> 32) as u32];
-    // `(l << 16) as i32 >> 15` is twice the low quarter, sign extended;
-    // `l as i32 >> 15` twice the high quarter plus a bit of the low one,
-    // which `| 1` overwrites with the 1 of `2h + 1`.
-    let low = halves.map(|l| ((l << 16) as i32 >> 15) | 1);
-    let high = halves.map(|l| (l as i32 >> 15) | 1);
+    // Each 32-bit half `l` read as `i32` and shifted right by 15 is twice
+    // its high quarter plus a bit of the low one, which `| 1` overwrites
+    // with the 1 of `2h + 1`; the low quarters go through the same after
+    // moving into the high quarters' places (one shift and mask of `w`).
+    let odd = |l: u64| ((l as u32 as i32) >> 15) | 1;
+    let up = (w << 16) & 0xFFFF_0000_FFFF_0000;
+    let low = [odd(up), odd(up >> 32)];
+    let high = [odd(w), odd(w >> 32)];
     [low[0], low[1], high[0], high[1]].map(f64::from)
 }
 
