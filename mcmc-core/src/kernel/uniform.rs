@@ -20,14 +20,14 @@ use crate::sample::Sample;
 /// 2⁻¹⁶ in `(−1, 1)`, and the move is a Metropolis–Hastings kernel with a
 /// symmetric proposal.
 ///
-/// **Reachable states.** Every step moves each coordinate by an odd
-/// multiple of `h = a/2¹⁶`, so (up to the rounding of `x + a·u` in `f64`,
-/// which every random walk shares) a chain started at `x⁰` lives on the
-/// lattice `x⁰ + h·Z^d`, and its stationary law is `π` restricted to that
-/// lattice. For `a = 0.4` the spacing is 6·10⁻⁶; a smooth `π` whose features
-/// are on the scale of a well-tuned `a` is summed on the lattice with an
-/// error far below any Monte Carlo error (a continuous random walk in
-/// `f64` is a lattice walk too, only on a finer, irregular grid).
+/// **Reachable states.** A step moves every coordinate by an odd multiple
+/// of `δ = a/2¹⁶`, so (up to the rounding of `x + a·u` in `f64`, which
+/// every random walk shares) a chain started at `x⁰` lives on the points
+/// `x⁰ + δk`, `k ∈ Z^d` with all `k_i` of one parity, and its stationary
+/// law is `π` restricted to them. For `a = 0.4`, `δ = 6·10⁻⁶`: a `π` that
+/// is smooth on the scale of a well-tuned `a` is summed on this grid with
+/// an error far below any Monte Carlo error (a continuous random walk in
+/// `f64` lives on a grid too, only a finer, irregular one).
 ///
 /// It reports no proposal density ([`Kernel::log_proposal_density`] is
 /// `None`): in [`MultipleTry`](crate::mtm::MultipleTry) use
@@ -98,18 +98,18 @@ impl UniformRandomWalk {
         use rand::Rng;
         // One pass that copies and perturbs, as the Gaussian walk does, four
         // coordinates per generator word (`docs/performance.md`, item 4,
-        // sessions 19 and 21). The generator's state is worked on in a
-        // local copy that stays in registers (through `rng` the compiler
-        // stored its four state words after every word, as `out` might
-        // alias them); each block of the input is read whole before its
-        // output is written, so LLVM widens, converts, scales and adds the
-        // offsets in SSE2 vectors.
+        // sessions 19 and 21: 31 instructions per word in a 100-d step,
+        // 11 of them the generator's). The generator's state is worked on
+        // in a local copy that stays in registers (through `rng` the
+        // compiler stored its four state words after every word, as `out`
+        // might alias them).
         out.resize(current.len(), 0.0);
         let unit = self.unit;
         let mut words = rng.clone();
         // Word j moves coordinates 4j to 4j + 3; each block of 4 is read
         // whole before it is written (so the compiler need not fear `out`
-        // aliasing `current`), then the last 1 to 3 coordinates.
+        // aliasing `current` and converts, scales and adds two offsets per
+        // SSE2 instruction), then the last 1 to 3 coordinates.
         let (blocks_out, rest_out) = out.as_chunks_mut::<4>();
         let (blocks_in, rest_in) = current.as_chunks::<4>();
         for (o, c) in blocks_out.iter_mut().zip(blocks_in) {
@@ -212,8 +212,8 @@ mod tests {
 
     #[test]
     fn steps_are_uniform_on_the_box_with_every_quarter_of_each_word() {
-        // 200 000 steps of 11 coordinates (a block of 8, then 3: the last
-        // word's top quarter is unused) from 0: each coordinate's step/a is
+        // 200 000 steps of 11 coordinates (two blocks of 4, then 3: the
+        // last word's fourth offset is unused) from 0: each coordinate's step/a is
         // uniform on (−1, 1) up to the grid, mean 0 and variance
         // 1/3·(1 − 2⁻³²); the sample mean has sd √(1/3/n) and the sample
         // variance sd √((1/5 − 1/9)/n) (fourth moment 1/5); |z| < 5 (the
@@ -252,7 +252,8 @@ mod tests {
 
     /// The walk with `a = 1` on `WINDOW`, as a kernel on `{0, …, 7}` for
     /// `crate::exact`: every one of the 2¹⁶ quarters is an outcome of
-    /// probability 2⁻¹⁶, moved by the walk's own `x + unit·odd_offsets(w)[k]` (which
+    /// probability 2⁻¹⁶, moved by the walk's own arithmetic
+    /// `x + unit·odd_offsets(w)[k]` (which
     /// `every_dimension_moves_by_its_words_in_order` ties to `step_into`);
     /// those that land outside the window are left out (a target that is
     /// `−∞` there rejects them). `shift` (lattice units) moves every offset,
@@ -312,8 +313,7 @@ mod tests {
     /// matrix of `Window` with offset shift `shift`, for an uneven target.
     fn window_errors(shift: f64) -> [f64; 3] {
         use crate::exact::{
-            detailed_balance_error, mh_matrix, normalized, stationarity_error,
-            stochasticity_error,
+            detailed_balance_error, mh_matrix, normalized, stationarity_error, stochasticity_error,
         };
         let log_pi = [0.0, 1.0, -0.5, 2.0, 0.3, -1.0, 0.7, -2.0];
         let walk = UniformRandomWalk::new(1.0).unwrap();
@@ -330,7 +330,10 @@ mod tests {
     fn the_lattice_walk_is_exactly_reversible_on_a_window() {
         let [db, st, sto] = window_errors(0.0);
         eprintln!("lattice window: {db:e} {st:e} {sto:e}");
-        assert!(db < 1e-12 && st < 1e-12 && sto < 1e-12, "{db:e} {st:e} {sto:e}");
+        assert!(
+            db < 1e-12 && st < 1e-12 && sto < 1e-12,
+            "{db:e} {st:e} {sto:e}"
+        );
     }
 
     /// Control: offsets shifted by two lattice units are still odd but no
