@@ -1281,8 +1281,9 @@ fn save_smcmc_tiles(
 
 /// `smcmc` (session 21, its own format `mcmcSM01`): stopped at the end of
 /// its third iteration (after one exchange round), resumed and stopped
-/// again in the middle of its fifth (the cut iteration is not saved:
-/// the file still holds three), then resumed to the end: image and
+/// again in the middle of its fifth (a run saves its first whole
+/// iteration at once, the fourth, but not the cut fifth: the file holds
+/// four), then resumed to the end: image and
 /// statistics as the uninterrupted run's, bit for bit. Control: the
 /// three-iteration checkpoint with every tile chain's stream replaced
 /// (all else kept) must give another image.
@@ -1315,11 +1316,11 @@ fn a_stopped_smcmc_render_resumed_from_its_checkpoint_ends_bit_identical() {
     let second = smcmc_render(&scene, &path, &stop, &mid_fifth).unwrap();
     assert!(second.interrupted);
     assert_eq!(second.statistics["checkpoint"]["resumed_from_iterations"], 3);
-    assert_eq!(smcmc_tiles(&scene, &path).0.iterations, 3);
+    assert_eq!(smcmc_tiles(&scene, &path).0.iterations, 4);
     let go = AtomicBool::new(false);
     let resumed = smcmc_render(&scene, &path, &go, &NoObserver).unwrap();
     assert!(!resumed.interrupted);
-    assert_eq!(resumed.statistics["checkpoint"]["resumed_from_iterations"], 3);
+    assert_eq!(resumed.statistics["checkpoint"]["resumed_from_iterations"], 4);
     assert_eq!(smcmc_tiles(&scene, &path).0.iterations, 16);
     std::fs::remove_file(&path).unwrap();
     let whole = smcmc_render(&scene, &path, &go, &NoObserver).unwrap();

@@ -1112,7 +1112,9 @@ impl Smcmc {
 
         let planned = self.iterations(run);
         let mut checkpoint_error: Option<String> = None;
-        let (mut last_save, mut save_cost) = (Instant::now(), std::time::Duration::ZERO);
+        // `None`: nothing saved yet, so the first whole iteration is (a
+        // run stopped soon after its start-up has something to resume).
+        let (mut last_save, mut save_cost) = (None::<Instant>, std::time::Duration::ZERO);
         let mut last_preview = Instant::now();
         // Wall-clock seconds in tile steps, exchange rounds and snapshots
         // (the observer's develop and whatever it does with the image).
@@ -1156,10 +1158,11 @@ impl Smcmc {
             // Checkpoints: whole iterations only (on every rank), at the
             // end, when stopped (here, after the snapshot, where an
             // observer may stop the run), and in between at most once per
-            // `CHECKPOINT_EVERY` and 20 saves' time (≤ 5% of the run).
+            // `CHECKPOINT_EVERY` and 20 saves' time (≤ 5% of the run),
+            // the first whole iteration at once.
             if let Some(ck) = &run.checkpoint {
                 let whole = startup_whole && !crate::cluster::any_rank(!whole);
-                let due = last_save.elapsed() >= CHECKPOINT_EVERY.max(20 * save_cost);
+                let due = last_save.is_none_or(|t| t.elapsed() >= CHECKPOINT_EVERY.max(20 * save_cost));
                 let due = crate::cluster::any_rank(due && crate::cluster::is_root());
                 let end = planned.is_some_and(|m| counters.iterations >= m)
                     || crate::cluster::any_rank(halt());
@@ -1168,7 +1171,7 @@ impl Smcmc {
                     if let Err(e) = sampler.save(ck, &counters, &tiles, &filter) {
                         checkpoint_error.get_or_insert(e);
                     }
-                    (last_save, save_cost) = (Instant::now(), t.elapsed());
+                    (last_save, save_cost) = (Some(Instant::now()), t.elapsed());
                 }
             }
         }
