@@ -1087,7 +1087,14 @@ fn a_stopped_fused_render_resumed_from_its_checkpoint_ends_bit_identical() {
     let tallies = |r: &Rendered| -> Vec<serde_json::Value> {
         let depths = r.statistics["fused"]["per_depth"].as_array().unwrap();
         (depths.iter())
-            .map(|d| serde_json::json!([d["pss_proposals"], d["path_proposals"], d["path_inversions"], d["path_efficiency"]]))
+            .map(|d| {
+                serde_json::json!([
+                    d["pss_proposals"],
+                    d["path_proposals"],
+                    d["path_inversions"],
+                    d["path_efficiency"]
+                ])
+            })
             .collect()
     };
     assert_eq!(tallies(&resumed), tallies(&whole));
@@ -1192,7 +1199,10 @@ fn a_forged_fused_checkpoint_is_refused_with_one_line() {
     refused(other_pilot, "a chain's kernel state does not decode");
     // Control: the genuine checkpoint resumes and finishes.
     let done = resume(saved).unwrap();
-    assert_eq!(done.statistics["checkpoint"]["resumed_from_mutations"], 4 * 256);
+    assert_eq!(
+        done.statistics["checkpoint"]["resumed_from_mutations"],
+        4 * 256
+    );
     std::fs::remove_file(&path).unwrap();
 }
 
@@ -1315,12 +1325,18 @@ fn a_stopped_smcmc_render_resumed_from_its_checkpoint_ends_bit_identical() {
     };
     let second = smcmc_render(&scene, &path, &stop, &mid_fifth).unwrap();
     assert!(second.interrupted);
-    assert_eq!(second.statistics["checkpoint"]["resumed_from_iterations"], 3);
+    assert_eq!(
+        second.statistics["checkpoint"]["resumed_from_iterations"],
+        3
+    );
     assert_eq!(smcmc_tiles(&scene, &path).0.iterations, 4);
     let go = AtomicBool::new(false);
     let resumed = smcmc_render(&scene, &path, &go, &NoObserver).unwrap();
     assert!(!resumed.interrupted);
-    assert_eq!(resumed.statistics["checkpoint"]["resumed_from_iterations"], 4);
+    assert_eq!(
+        resumed.statistics["checkpoint"]["resumed_from_iterations"],
+        4
+    );
     assert_eq!(smcmc_tiles(&scene, &path).0.iterations, 16);
     std::fs::remove_file(&path).unwrap();
     let whole = smcmc_render(&scene, &path, &go, &NoObserver).unwrap();
@@ -1339,7 +1355,10 @@ fn a_stopped_smcmc_render_resumed_from_its_checkpoint_ends_bit_identical() {
         "large_step_samples",
         "solver",
     ] {
-        assert_eq!(resumed.statistics[key], whole.statistics[key], "smcmc: {key}");
+        assert_eq!(
+            resumed.statistics[key], whole.statistics[key],
+            "smcmc: {key}"
+        );
     }
     let mut other_streams = saved;
     for (s, t) in other_streams.iter_mut().enumerate() {

@@ -764,7 +764,10 @@ impl<'s> Kernel<FusedState<'s>, PathSample> for FusedKernel<'s> {
         // Its contents are never read (a round trip writes all of it
         // before it is used): only whether it exists changes the draws.
         self.scratch = (scratch == 1).then(|| {
-            FusedState::untraced(self.scene, TorusPoint::fresh(mcmc_core::rng::stream_rng(0, 0)))
+            FusedState::untraced(
+                self.scene,
+                TorusPoint::fresh(mcmc_core::rng::stream_rng(0, 0)),
+            )
         });
         // Beyond what a run reaches: from a forged file only, and they
         // would overflow as the resumed chain counts on.

@@ -300,7 +300,10 @@ impl<'s> ChainFamily for FusedFamily<'s> {
             return Some(FusedState::untraced(self.scene, point));
         }
         let (&log_density, rest) = words.split_first()?;
-        let target = self.targets.iter().find(|t| t.depth.depth as u64 == depth)?;
+        let target = self
+            .targets
+            .iter()
+            .find(|t| t.depth.depth as u64 == depth)?;
         let mut before = Vec::new();
         point.to_words(&mut before);
         let mut state = FusedState::untraced(self.scene, point);

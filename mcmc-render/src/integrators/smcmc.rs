@@ -1030,9 +1030,7 @@ impl Smcmc {
         // and a run whose tiles started short would be saved as such); a
         // stop still cuts it, and then nothing is saved.
         let checkpointed = run.checkpoint.is_some();
-        let startup_halt = || {
-            stop.load(Ordering::Relaxed) || (!checkpointed && deadline.passed())
-        };
+        let startup_halt = || stop.load(Ordering::Relaxed) || (!checkpointed && deadline.passed());
         if self.init == SmcmcInit::Global {
             // The global start-up keeps one weight per bootstrap state and
             // one walk per chain (10^15 states aborted on an 8 PB
@@ -1088,7 +1086,13 @@ impl Smcmc {
                     })
                     .collect();
                 let started = tiles.iter().filter(|t| t.chain.is_some()).count() as u64;
-                (resume::Counters { started_at_init: started, ..Default::default() }, tiles)
+                (
+                    resume::Counters {
+                        started_at_init: started,
+                        ..Default::default()
+                    },
+                    tiles,
+                )
             }
         };
         // A start-up cut by a stop is not saved (its tiles are not what a
@@ -1120,8 +1124,7 @@ impl Smcmc {
         // (the observer's develop and whatever it does with the image).
         let mut profile = [0.0f64; 3];
         // (On a cluster the ranks agree on stopping: a collective.)
-        while planned.is_none_or(|m| counters.iterations < m) && !crate::cluster::any_rank(halt())
-        {
+        while planned.is_none_or(|m| counters.iterations < m) && !crate::cluster::any_rank(halt()) {
             let t0 = Instant::now();
             let stepped: usize = (tiles.par_iter_mut().enumerate())
                 .map(|(i, tile)| {
@@ -1162,7 +1165,8 @@ impl Smcmc {
             // the first whole iteration at once.
             if let Some(ck) = &run.checkpoint {
                 let whole = startup_whole && !crate::cluster::any_rank(!whole);
-                let due = last_save.is_none_or(|t| t.elapsed() >= CHECKPOINT_EVERY.max(20 * save_cost));
+                let due =
+                    last_save.is_none_or(|t| t.elapsed() >= CHECKPOINT_EVERY.max(20 * save_cost));
                 let due = crate::cluster::any_rank(due && crate::cluster::is_root());
                 let end = planned.is_some_and(|m| counters.iterations >= m)
                     || crate::cluster::any_rank(halt());

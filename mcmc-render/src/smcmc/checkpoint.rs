@@ -227,9 +227,7 @@ fn finite_sums(
 }
 
 /// The chain [`TileRecord::words`] wrote after its flag, word by word.
-fn chain_from_words(
-    next: &mut impl FnMut() -> Result<u64, String>,
-) -> Result<ChainRecord, String> {
+fn chain_from_words(next: &mut impl FnMut() -> Result<u64, String>) -> Result<ChainRecord, String> {
     let n = next()?;
     let words = (0..n).map(|_| next()).collect::<Result<Vec<_>, _>>()?;
     let mut input = &words[..];
@@ -242,7 +240,11 @@ fn chain_from_words(
     for c in &mut f {
         let [r, g, b] = [next()?, next()?, next()?];
         let cut = |_| "a tile's values do not decode".to_string();
-        *c = Rgb::new(f32_of(r).map_err(cut)?, f32_of(g).map_err(cut)?, f32_of(b).map_err(cut)?);
+        *c = Rgb::new(
+            f32_of(r).map_err(cut)?,
+            f32_of(g).map_err(cut)?,
+            f32_of(b).map_err(cut)?,
+        );
     }
     let total = f64::from_bits(next()?);
     let [ox, oy] = [next()?, next()?];
@@ -345,7 +347,11 @@ pub fn load(
 
 /// `header` and `tiles` as one list of words (for a broadcast), and back.
 pub fn join(header: &Header, tiles: &[u64]) -> Vec<u64> {
-    header.words().into_iter().chain(tiles.iter().copied()).collect()
+    header
+        .words()
+        .into_iter()
+        .chain(tiles.iter().copied())
+        .collect()
 }
 
 /// The header and tile words [`join`] made; `None` for too few words.

@@ -172,9 +172,9 @@ impl<S: TileShift> Sampler<'_, S> {
                 match got.split_first() {
                     Some((1, rest)) => Some(rest.to_vec()),
                     Some((2, _)) => {
-                        return Err(read.err().unwrap_or_else(|| {
-                            "rank 0 refused the checkpoint".to_string()
-                        }));
+                        return Err(read
+                            .err()
+                            .unwrap_or_else(|| "rank 0 refused the checkpoint".to_string()));
                     }
                     _ => None,
                 }
@@ -287,14 +287,20 @@ impl<S: TileShift> Sampler<'_, S> {
         if parts.stats.components.len() != c.stats.components.len() {
             return Err(format!("tile {s}'s chain has other kernel components"));
         }
-        parts.rng = rng_from_words(c.rng).ok_or_else(|| format!("tile {s}'s stream is all zero"))?;
+        parts.rng =
+            rng_from_words(c.rng).ok_or_else(|| format!("tile {s}'s stream is all zero"))?;
         let mut stats = c.stats;
         for (k, old) in stats.components.iter_mut().zip(&parts.stats.components) {
             k.name.clone_from(&old.name);
         }
         parts.stats = stats;
         let mut kernel = &c.kernel[..];
-        if !(chain.algorithm_mut().kernel_mut().restore_words(&mut kernel) && kernel.is_empty()) {
+        if !(chain
+            .algorithm_mut()
+            .kernel_mut()
+            .restore_words(&mut kernel)
+            && kernel.is_empty())
+        {
             return Err(format!("tile {s}'s kernel state does not decode"));
         }
         tile.chain = Some(chain);
