@@ -28,8 +28,8 @@ pub const INTEGRATORS: [&str; 7] = ["pt", "lt", "bdpt", "erpt", "vcm", "mcmc-vcm
 /// The integrators whose runs can be checkpointed on the Markov-chain
 /// driver (independent chains and replica sets on primary sample space,
 /// and path space's chains; see [`crate::markov::checkpoint`]; `mcmc-pg`
-/// pre-trained).
-pub const CHAIN_INTEGRATORS: [&str; 8] = [
+/// pre-trained; `fused` since session 21).
+pub const CHAIN_INTEGRATORS: [&str; 9] = [
     "pssmlt",
     "mmlt",
     "tempered-pssmlt",
@@ -38,7 +38,12 @@ pub const CHAIN_INTEGRATORS: [&str; 8] = [
     "mcmc-pg",
     "mlt",
     "mept",
+    "fused",
 ];
+
+/// The integrators whose runs are checkpointed in a format of their own:
+/// `smcmc` (session 21, [`crate::smcmc::checkpoint`]).
+pub const OWN_FORMAT_INTEGRATORS: [&str; 1] = ["smcmc"];
 
 /// First bytes of a checkpoint file (format version 3, session 20:
 /// version 2's nine words and a tenth counting the films after the first,

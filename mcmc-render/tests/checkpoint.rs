@@ -624,13 +624,14 @@ fn try_chains_render(
 /// `round` mutations in all) and resumed, against the uninterrupted
 /// render of `total` mutations: the image and the statistics must be
 /// equal bit for bit, and the control (the checkpoint with every chain's
-/// stream put back to its start) must differ.
+/// stream put back to its start) must differ. Returns the resumed and
+/// the uninterrupted render, for an integrator's own statistics.
 fn check_markov_resume(
     scene: &Scene,
     (name, sets): (&str, &[(&str, &str)]),
     round: u64,
     total: u64,
-) {
+) -> (Rendered, Rendered) {
     let (w, h) = (scene.film.width, scene.film.height);
     let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
     let path = std::env::temp_dir().join(format!(
@@ -704,6 +705,7 @@ fn check_markov_resume(
         bits(&control.image) != bits(&whole.image),
         "{name}: control agreed"
     );
+    (resumed, whole)
 }
 
 #[test]
@@ -1044,5 +1046,392 @@ fn a_damaged_foreign_or_misfitting_markov_checkpoint_is_refused_with_one_line() 
     };
     let e = relt_render(&scene, &five, &run).unwrap_err();
     assert!(e.contains("checkpoint") && !e.contains('\n'), "{e}");
+    std::fs::remove_file(&path).unwrap();
+}
+
+/// `fused`'s settings in its tests: 16×16 × 16 mutations per pixel over 4
+/// chains (MMLT's depths 1–5), four rounds of 256 a chain; the
+/// path-space probability `auto`, so the pilot is made again on resume.
+const FUSED: [(&str, &str); 4] = [
+    ("bootstrap", "2000"),
+    ("chains", "4"),
+    ("mutations_per_pixel", "16"),
+    ("max_depth", "5"),
+];
+
+/// `fused` (session 21): each chain's state saved as its primary sample
+/// (the cached path re-traced from it on resume) and its kernel's own
+/// state (the current path's round-trip outcome, whether its scratch
+/// exists, its counts), stopped after two of four rounds and resumed:
+/// image, statistics and the `fused` block's tallies as the uninterrupted
+/// run's. Controls: every chain's stream put back to its start
+/// (`check_markov_resume`), and every kernel's state put back to a fresh
+/// kernel's (round trip not checked, no scratch: what resuming without
+/// the kernel's words would do) — each must differ.
+#[test]
+fn a_stopped_fused_render_resumed_from_its_checkpoint_ends_bit_identical() {
+    let scene = repo_scene("cornell-box.xml", 16);
+    let (resumed, whole) = check_markov_resume(&scene, ("fused", &FUSED), 4 * 256, 16 * 16 * 16);
+    for key in [
+        "proposals",
+        "inversions",
+        "rejected_before_conversion",
+        "acceptance_path_space",
+        "round_trip_failures",
+    ] {
+        assert_eq!(
+            resumed.statistics["fused"][key], whole.statistics["fused"][key],
+            "fused: {key}"
+        );
+    }
+    let tallies = |r: &Rendered| -> Vec<serde_json::Value> {
+        let depths = r.statistics["fused"]["per_depth"].as_array().unwrap();
+        (depths.iter())
+            .map(|d| {
+                serde_json::json!([
+                    d["pss_proposals"],
+                    d["path_proposals"],
+                    d["path_inversions"],
+                    d["path_efficiency"]
+                ])
+            })
+            .collect()
+    };
+    assert_eq!(tallies(&resumed), tallies(&whole));
+    let (w, h) = (scene.film.width, scene.film.height);
+    let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
+    let path = std::env::temp_dir().join(format!(
+        "mcmc-render-checkpoint-fused-kernels-{}.ckpt",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_file(&path);
+    let stop = AtomicBool::new(false);
+    let observer = StopAfter {
+        stop: &stop,
+        after: 2,
+        seen: AtomicU32::new(0),
+    };
+    chains_render(&scene, ("fused", &FUSED), &path, None, &stop, &observer);
+    let mut fresh_kernels = load_chains(&path, 7, (w, h), &filter)
+        .unwrap()
+        .expect("a checkpoint");
+    let mut checked = 0;
+    for chain in fresh_kernels.tasks.iter_mut().flat_map(|t| &mut t.chains) {
+        // p_pss, p_tc, round trip (0: not checked), scratch (0: none),
+        // 11 counts, no small-step words.
+        assert_eq!(chain.kernel.len(), 15);
+        checked += u64::from(chain.kernel[2] != 0) + chain.kernel[3];
+        chain.kernel[2..4].copy_from_slice(&[0, 0]);
+    }
+    assert!(checked > 0, "no chain had checked a round trip");
+    let go = AtomicBool::new(false);
+    let control = chains_render(
+        &scene,
+        ("fused", &FUSED),
+        &path,
+        Some(fresh_kernels),
+        &go,
+        &NoObserver,
+    );
+    std::fs::remove_file(&path).unwrap();
+    assert!(
+        bits(&control.image) != bits(&whole.image),
+        "fused: the kernels' control agreed"
+    );
+}
+
+/// A `fused` checkpoint whose states or kernels are not the run's is
+/// refused with one line before a chain steps: a state whose stored `ln π`
+/// its re-trace does not reproduce, one traced for a depth the family
+/// does not have, a kernel saved with another path-space probability
+/// (another pilot's choice). Control: the checkpoint itself resumes.
+#[test]
+fn a_forged_fused_checkpoint_is_refused_with_one_line() {
+    let scene = repo_scene("cornell-box.xml", 16);
+    let (w, h) = (scene.film.width, scene.film.height);
+    let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
+    let path = std::env::temp_dir().join(format!(
+        "mcmc-render-checkpoint-fused-forged-{}.ckpt",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_file(&path);
+    let stop = AtomicBool::new(false);
+    let observer = StopAfter {
+        stop: &stop,
+        after: 1,
+        seen: AtomicU32::new(0),
+    };
+    chains_render(&scene, ("fused", &FUSED), &path, None, &stop, &observer);
+    let saved = load_chains(&path, 7, (w, h), &filter)
+        .unwrap()
+        .expect("a checkpoint");
+    let go = AtomicBool::new(false);
+    let resume = |progress: ChainProgress| {
+        try_chains_render(
+            &scene,
+            ("fused", &FUSED),
+            &path,
+            Some(progress),
+            &go,
+            &NoObserver,
+        )
+    };
+    let refused = |progress: ChainProgress, why: &str| {
+        let e = resume(progress).map(|_| ()).unwrap_err();
+        assert!(e.contains(why) && !e.contains('\n'), "{why}: {e}");
+    };
+    // A traced chain: its depth first, its `ln π` last.
+    let (t, c) = (saved.tasks.iter().enumerate())
+        .find_map(|(t, task)| {
+            let c = task.chains.iter().position(|c| c.state[0] != u64::MAX)?;
+            Some((t, c))
+        })
+        .expect("a traced chain");
+    let mut brighter = saved.clone();
+    *brighter.tasks[t].chains[c].state.last_mut().unwrap() ^= 1 << 40;
+    refused(brighter, "a chain's state does not decode");
+    let mut deeper = saved.clone();
+    deeper.tasks[t].chains[c].state[0] = 99;
+    refused(deeper, "a chain's state does not decode");
+    let mut other_pilot = saved.clone();
+    let p = &mut other_pilot.tasks[t].chains[c].kernel[0];
+    *p = (f64::from_bits(*p) + 0.125).to_bits();
+    refused(other_pilot, "a chain's kernel state does not decode");
+    // Control: the genuine checkpoint resumes and finishes.
+    let done = resume(saved).unwrap();
+    assert_eq!(
+        done.statistics["checkpoint"]["resumed_from_mutations"],
+        4 * 256
+    );
+    std::fs::remove_file(&path).unwrap();
+}
+
+/// `smcmc`'s settings in its tests: 16 iterations on a 12×12 image (144
+/// tiles), an exchange round every other iteration (8 rounds: both
+/// directions, both parities).
+const SMCMC: [(&str, &str); 2] = [("mutations_per_pixel", "16"), ("max_depth", "5")];
+
+/// An `smcmc` render of `SMCMC` checkpointed at `path` (resuming from it
+/// if it exists; snapshots after every iteration, so `observer` can stop
+/// it at an iteration's end).
+fn smcmc_render(
+    scene: &Scene,
+    path: &std::path::Path,
+    stop: &AtomicBool,
+    observer: &dyn Observer,
+) -> Result<Rendered, String> {
+    let sets: Vec<(String, String)> = (SMCMC.iter())
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
+    let integ = registry::configure(None, Some("smcmc"), &sets).expect("smcmc");
+    let run = RunSettings {
+        seed: 5,
+        snapshot_every: std::time::Duration::ZERO,
+        checkpoint: Some(Checkpoint {
+            path: path.to_path_buf(),
+            fingerprint: 7,
+            resume: None,
+            chains: None,
+        }),
+        ..RunSettings::default()
+    };
+    integ
+        .render(scene, &run, stop, observer)
+        .map_err(|e| e.to_string())
+}
+
+/// Sets `stop` after `after` tile steps (`progress` calls), in the
+/// middle of an iteration.
+struct StopAfterSteps<'a> {
+    stop: &'a AtomicBool,
+    after: u64,
+    seen: std::sync::atomic::AtomicU64,
+}
+
+impl Observer for StopAfterSteps<'_> {
+    fn progress(&self, done: u64) {
+        if self.seen.fetch_add(done, Ordering::SeqCst) + done >= self.after {
+            self.stop.store(true, Ordering::SeqCst);
+        }
+    }
+}
+
+/// An `smcmc` checkpoint's header and tiles.
+fn smcmc_tiles(
+    scene: &Scene,
+    path: &std::path::Path,
+) -> (
+    mcmc_render::smcmc::checkpoint::Header,
+    Vec<mcmc_render::smcmc::checkpoint::TileRecord>,
+) {
+    use mcmc_render::smcmc::checkpoint::{TileRecord, load};
+    let size = (scene.film.width, scene.film.height);
+    let (header, words) = load(path, 7, size).unwrap().expect("a checkpoint");
+    let spread = (header.slots * header.cells) as usize;
+    let mut input = &words[..];
+    let tiles = (0..size.0 * size.1)
+        .map(|_| TileRecord::from_words(&mut input, spread).unwrap())
+        .collect();
+    assert!(input.is_empty());
+    (header, tiles)
+}
+
+/// `tiles` saved at `path` with `header` (as the run saves them).
+fn save_smcmc_tiles(
+    path: &std::path::Path,
+    header: &mcmc_render::smcmc::checkpoint::Header,
+    tiles: &[mcmc_render::smcmc::checkpoint::TileRecord],
+) {
+    let mut words = Vec::new();
+    for t in tiles {
+        t.words(&mut words);
+    }
+    mcmc_render::smcmc::checkpoint::save(path, 7, header, &words).unwrap();
+}
+
+/// `smcmc` (session 21, its own format `mcmcSM01`): stopped at the end of
+/// its third iteration (after one exchange round), resumed and stopped
+/// again in the middle of its fifth (a run saves its first whole
+/// iteration at once, the fourth, but not the cut fifth: the file holds
+/// four), then resumed to the end: image and
+/// statistics as the uninterrupted run's, bit for bit. Control: the
+/// three-iteration checkpoint with every tile chain's stream replaced
+/// (all else kept) must give another image.
+#[test]
+fn a_stopped_smcmc_render_resumed_from_its_checkpoint_ends_bit_identical() {
+    let scene = repo_scene("cornell-box.xml", 12);
+    let path = std::env::temp_dir().join(format!(
+        "mcmc-render-checkpoint-smcmc-{}.ckpt",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_file(&path);
+    let stop = AtomicBool::new(false);
+    let at_three = StopAfter {
+        stop: &stop,
+        after: 3,
+        seen: AtomicU32::new(0),
+    };
+    let first = smcmc_render(&scene, &path, &stop, &at_three).unwrap();
+    assert!(first.interrupted);
+    let (header, saved) = smcmc_tiles(&scene, &path);
+    assert_eq!((header.iterations, header.rounds), (3, 1));
+    assert!(saved.iter().any(|t| t.chain.is_some()));
+    // Stopped again 1.5 iterations later, in the middle of the fifth.
+    let stop = AtomicBool::new(false);
+    let mid_fifth = StopAfterSteps {
+        stop: &stop,
+        after: 3 * 144 + 216,
+        seen: Default::default(),
+    };
+    let second = smcmc_render(&scene, &path, &stop, &mid_fifth).unwrap();
+    assert!(second.interrupted);
+    assert_eq!(
+        second.statistics["checkpoint"]["resumed_from_iterations"],
+        3
+    );
+    assert_eq!(smcmc_tiles(&scene, &path).0.iterations, 4);
+    let go = AtomicBool::new(false);
+    let resumed = smcmc_render(&scene, &path, &go, &NoObserver).unwrap();
+    assert!(!resumed.interrupted);
+    assert_eq!(
+        resumed.statistics["checkpoint"]["resumed_from_iterations"],
+        4
+    );
+    assert_eq!(smcmc_tiles(&scene, &path).0.iterations, 16);
+    std::fs::remove_file(&path).unwrap();
+    let whole = smcmc_render(&scene, &path, &go, &NoObserver).unwrap();
+    assert!(
+        bits(&resumed.image) == bits(&whole.image),
+        "smcmc: resumed image differs"
+    );
+    for key in [
+        "iterations",
+        "mutations",
+        "acceptance",
+        "acceptance_per_component",
+        "exchange",
+        "initialised_tiles_at_start",
+        "initialised_tiles",
+        "large_step_samples",
+        "solver",
+    ] {
+        assert_eq!(
+            resumed.statistics[key], whole.statistics[key],
+            "smcmc: {key}"
+        );
+    }
+    let mut other_streams = saved;
+    for (s, t) in other_streams.iter_mut().enumerate() {
+        if let Some(c) = &mut t.chain {
+            c.rng = mcmc_core::rng::rng_words(&mcmc_core::rng::stream_rng(5, s as u64));
+        }
+    }
+    save_smcmc_tiles(&path, &header, &other_streams);
+    let control = smcmc_render(&scene, &path, &go, &NoObserver).unwrap();
+    std::fs::remove_file(&path).unwrap();
+    assert!(
+        bits(&control.image) != bits(&whole.image),
+        "smcmc: control agreed"
+    );
+}
+
+/// An `smcmc` checkpoint that is not the run's is refused with one line:
+/// damaged (a bit flipped), of another render, a tile whose saved `ln π̃`
+/// its state's evaluation does not give (the checksum recomputed, as a
+/// forger would), its last word cut (checksum recomputed), a tile with
+/// another step count than the iterations. Control: the file itself
+/// resumes.
+#[test]
+fn a_damaged_or_forged_smcmc_checkpoint_is_refused_with_one_line() {
+    let scene = repo_scene("cornell-box.xml", 12);
+    let size = (scene.film.width, scene.film.height);
+    let path = std::env::temp_dir().join(format!(
+        "mcmc-render-checkpoint-smcmc-forged-{}.ckpt",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_file(&path);
+    let stop = AtomicBool::new(false);
+    let at_two = StopAfter {
+        stop: &stop,
+        after: 2,
+        seen: AtomicU32::new(0),
+    };
+    smcmc_render(&scene, &path, &stop, &at_two).unwrap();
+    let good = std::fs::read(&path).unwrap();
+    let (header, tiles) = smcmc_tiles(&scene, &path);
+    let go = AtomicBool::new(false);
+    let refused = |why: &str| {
+        let e = smcmc_render(&scene, &path, &go, &NoObserver)
+            .map(|_| ())
+            .unwrap_err();
+        assert!(e.contains(why) && !e.contains('\n'), "{why}: {e}");
+    };
+    let mut flipped = good.clone();
+    flipped[good.len() / 2] ^= 0x10;
+    std::fs::write(&path, &flipped).unwrap();
+    refused("damaged");
+    let load = mcmc_render::smcmc::checkpoint::load;
+    std::fs::write(&path, &good).unwrap();
+    let e = load(&path, 8, size).unwrap_err();
+    assert!(e.contains("another render") && !e.contains('\n'), "{e}");
+    let lit = tiles.iter().position(|t| t.chain.is_some()).unwrap();
+    let mut brighter = tiles.clone();
+    let c = brighter[lit].chain.as_mut().unwrap();
+    c.log_density += 1.0;
+    save_smcmc_tiles(&path, &header, &brighter);
+    refused("evaluation differs");
+    let mut words = Vec::new();
+    tiles.iter().for_each(|t| t.words(&mut words));
+    words.pop();
+    mcmc_render::smcmc::checkpoint::save(&path, 7, &header, &words).unwrap();
+    refused("cut");
+    let mut behind = tiles.clone();
+    behind[0].steps -= 1;
+    save_smcmc_tiles(&path, &header, &behind);
+    refused("steps");
+    // Control: the file itself resumes and finishes.
+    std::fs::write(&path, &good).unwrap();
+    let done = smcmc_render(&scene, &path, &go, &NoObserver).unwrap();
+    assert_eq!(done.statistics["checkpoint"]["resumed_from_iterations"], 2);
     std::fs::remove_file(&path).unwrap();
 }

@@ -229,14 +229,18 @@ fn open_checkpoint(
     integrator: &dyn Configured,
     budget: Option<u64>,
 ) -> Result<crate::checkpoint::Checkpoint, String> {
-    use crate::checkpoint::{CHAIN_INTEGRATORS, Checkpoint, INTEGRATORS, fingerprint, load};
+    use crate::checkpoint::{
+        CHAIN_INTEGRATORS, Checkpoint, INTEGRATORS, OWN_FORMAT_INTEGRATORS, fingerprint, load,
+    };
     let name = integrator.name();
     let chains = CHAIN_INTEGRATORS.contains(&name);
-    if !INTEGRATORS.contains(&name) && !chains {
+    let own_format = OWN_FORMAT_INTEGRATORS.contains(&name);
+    if !INTEGRATORS.contains(&name) && !chains && !own_format {
         return Err(format!(
-            "--checkpoint: {name} cannot be checkpointed yet (only {}, {})",
+            "--checkpoint: {name} cannot be checkpointed yet (only {}, {}, {})",
             INTEGRATORS.join(", "),
-            CHAIN_INTEGRATORS.join(", ")
+            CHAIN_INTEGRATORS.join(", "),
+            OWN_FORMAT_INTEGRATORS.join(", ")
         ));
     }
     if name == "guided" && budget.is_none() {
@@ -261,7 +265,12 @@ fn open_checkpoint(
         chains: None,
     };
     if crate::cluster::is_root() {
-        if chains {
+        if own_format {
+            // `smcmc` reads its file when it starts (rank 0, then a
+            // broadcast); checked here too, before the ranks' handshake,
+            // so that a bad file stops every rank with one line.
+            crate::smcmc::checkpoint::load(path, fingerprint, size)?;
+        } else if chains {
             let filter = Arc::new(crate::film::Filter::new(scene.film.filter, size.0, size.1));
             checkpoint.chains =
                 crate::markov::checkpoint::load(path, fingerprint, size, &filter)?.map(Arc::new);

@@ -142,6 +142,43 @@ struct LocalCounts {
 }
 
 impl LocalCounts {
+    /// Words of [`LocalCounts::words`].
+    const WORDS: usize = 11;
+
+    /// The counts as words, for checkpoints.
+    fn words(&self) -> [u64; Self::WORDS] {
+        [
+            self.steps,
+            self.inversions,
+            self.rejected_before_conversion,
+            self.conversion_nanos,
+            self.propose_nanos,
+            self.pss_nanos,
+            self.path_nanos,
+            self.pss_proposals,
+            self.pss_jump,
+            self.path_proposals,
+            self.path_jump,
+        ]
+    }
+
+    /// The counts [`LocalCounts::words`] wrote.
+    fn from_words(w: &[u64]) -> LocalCounts {
+        LocalCounts {
+            steps: w[0],
+            inversions: w[1],
+            rejected_before_conversion: w[2],
+            conversion_nanos: w[3],
+            propose_nanos: w[4],
+            pss_nanos: w[5],
+            path_nanos: w[6],
+            pss_proposals: w[7],
+            pss_jump: w[8],
+            path_proposals: w[9],
+            path_jump: w[10],
+        }
+    }
+
     /// Adds the counts of a kernel of `depth` to `c`.
     fn flush(&self, c: &FusedCounters, depth: usize) {
         let add = |a: &AtomicU64, v: u64| {
@@ -683,6 +720,67 @@ impl<'s> Kernel<FusedState<'s>, PathSample> for FusedKernel<'s> {
     fn freeze(&mut self) {
         self.pss.freeze();
         self.path.freeze();
+    }
+
+    /// What a resumed chain needs to step as this one would: the
+    /// probabilities of the moves (checked on restore: `auto`'s pilot must
+    /// have chosen the same), the current path's round-trip outcome
+    /// (drawn once per state), whether the scratch state exists (made with
+    /// a draw from the chain's stream on the first round trip), the
+    /// counts not yet added to [`FusedCounters`] (so the sidecar's tallies
+    /// cover the whole run), then both mixtures' own words (the adaptive
+    /// small step's).
+    fn state_words(&self, out: &mut Vec<u64>) {
+        let invertible = match self.current_invertible {
+            None => 0,
+            Some(false) => 1,
+            Some(true) => 2,
+        };
+        out.extend([
+            self.p_pss.to_bits(),
+            self.p_tc.to_bits(),
+            invertible,
+            u64::from(self.scratch.is_some()),
+        ]);
+        out.extend(self.local.words());
+        self.pss.state_words(out);
+        self.path.state_words(out);
+    }
+
+    fn restore_words(&mut self, input: &mut &[u64]) -> bool {
+        let Some((head, rest)) = input.split_first_chunk::<{ 4 + LocalCounts::WORDS }>() else {
+            return false;
+        };
+        let [p_pss, p_tc, invertible, scratch] = [head[0], head[1], head[2], head[3]];
+        if (p_pss, p_tc) != (self.p_pss.to_bits(), self.p_tc.to_bits()) || scratch > 1 {
+            return false;
+        }
+        self.current_invertible = match invertible {
+            0 => None,
+            1 => Some(false),
+            2 => Some(true),
+            _ => return false,
+        };
+        // Its contents are never read (a round trip writes all of it
+        // before it is used): only whether it exists changes the draws.
+        self.scratch = (scratch == 1).then(|| {
+            FusedState::untraced(
+                self.scene,
+                TorusPoint::fresh(mcmc_core::rng::stream_rng(0, 0)),
+            )
+        });
+        // Beyond what a run reaches: from a forged file only, and they
+        // would overflow as the resumed chain counts on.
+        let counts = &head[4..];
+        let unit_steps = [0, 1, 2, 7, 9].map(|i| counts[i]);
+        if counts.iter().any(|&w| w > 1 << 62)
+            || unit_steps.iter().any(|&k| k > crate::checkpoint::MAX_COUNT)
+        {
+            return false;
+        }
+        self.local = LocalCounts::from_words(counts);
+        *input = rest;
+        self.pss.restore_words(input) && self.path.restore_words(input)
     }
 
     fn component_names(&self) -> Vec<String> {

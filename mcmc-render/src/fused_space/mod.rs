@@ -268,4 +268,55 @@ impl<'s> ChainFamily for FusedFamily<'s> {
     fn coordinates(&self, state: &FusedState<'s>) -> Option<Vec<f64>> {
         Some(state.point.materialize())
     }
+    fn checkpointable(&self, _mutation: &FusedMutation) -> bool {
+        // A state is its point (the cached path is re-traced from it) and
+        // a kernel's own state (the current path's round-trip outcome, its
+        // scratch, its counts, the adaptive small step) is in its words.
+        true
+    }
+    /// The depth the cache was traced for ([`UNTRACED`] if none), the
+    /// point ([`TorusPoint::to_words`]), and for a traced state its
+    /// `ln π` (which the re-trace on resume must reproduce).
+    fn state_words(&self, state: &FusedState<'s>, out: &mut Vec<u64>) {
+        out.push(state.depth.map_or(UNTRACED, |d| d as u64));
+        state.point.to_words(out);
+        if state.depth.is_some() {
+            out.push(state.log_density.to_bits());
+        }
+    }
+    /// The state [`ChainFamily::state_words`] wrote: an untraced state as
+    /// it was; a traced one re-traced from its point with its depth's
+    /// sampler (a trace is a function of the point), refused unless the
+    /// depth is one of the family's, the re-trace reads no coordinate
+    /// the point lacks (or had not brought up to date) and reproduces
+    /// `ln π` bit for bit — so a forged or foreign state is refused
+    /// before a mutation reads it.
+    fn state_from_words(&self, input: &mut &[u64]) -> Option<FusedState<'s>> {
+        let (&depth, rest) = input.split_first()?;
+        let mut words = rest;
+        let point = TorusPoint::from_words(&mut words)?;
+        if depth == UNTRACED {
+            *input = words;
+            return Some(FusedState::untraced(self.scene, point));
+        }
+        let (&log_density, rest) = words.split_first()?;
+        let target = self
+            .targets
+            .iter()
+            .find(|t| t.depth.depth as u64 == depth)?;
+        let mut before = Vec::new();
+        point.to_words(&mut before);
+        let mut state = FusedState::untraced(self.scene, point);
+        inverse_path::trace(self.scene, &target.depth, &mut state);
+        let mut after = Vec::new();
+        state.point.to_words(&mut after);
+        if before != after || state.log_density.to_bits() != log_density {
+            return None;
+        }
+        *input = rest;
+        Some(state)
+    }
 }
+
+/// [`FusedFamily`]'s first state word for a state whose path is not traced.
+const UNTRACED: u64 = u64::MAX;

@@ -182,6 +182,12 @@ impl Fused {
         pilot.mutations_per_pixel = Some(self.adaptation_mutations_per_pixel as u64);
         pilot.bootstrap = (self.chain.bootstrap / 10).max(self.chain.bootstrap.min(1000));
         pilot.seed = splitmix64(run.seed ^ PILOT_SEED_SALT);
+        // With a checkpoint the pilot is not saved but made again on
+        // resume, so it must choose the same: the time budget does not
+        // cut it (as the driver's start-up, `markov::startup_deadline`).
+        if run.checkpoint.is_some() {
+            pilot.time_budget = None;
+        }
         pilot.checkpoint = None;
         let result = markov::run(scene, &family, &pilot, stop, &NoObserver)?;
         // On a cluster each rank ran some of the pilot's chains: every
@@ -253,6 +259,13 @@ impl Fused {
                 main.time_budget = run
                     .time_budget
                     .map(|t| t.saturating_sub(Duration::from_secs_f64(a.pilot_seconds)));
+                // A pilot cut short (by a stop: with a checkpoint the budget
+                // does not cut it) chose from fewer moves than a resumed
+                // run's would: its chains are not saved, nor is the file
+                // resumed from (it stays as it was).
+                if a.pilot_interrupted {
+                    main.checkpoint = None;
+                }
                 Some(a)
             }
         };

@@ -55,6 +55,8 @@
 //!   develop needs every tile); the exchange statistics are summed per rank,
 //!   so `mean_alpha` may differ from one process's in the last bits.
 
+mod resume;
+
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
 use crate::cluster::Parcel;
@@ -65,6 +67,7 @@ use crate::integrators::guided::GuidedSettings;
 use crate::integrators::mcmc_pg::ProgressOnly;
 use crate::integrators::mmlt::MAX_DEPTH as MMLT_MAX_DEPTH;
 use crate::integrators::pt::PathTracer;
+use crate::markov::CHECKPOINT_EVERY;
 use crate::observer::Observer;
 use crate::pss::{LARGE_STEP_COMPONENT, Mutation, MutationParams};
 use crate::scene::Scene;
@@ -279,6 +282,9 @@ struct ExchangeCounts {
     accepted: u64,
     alpha_sum: f64,
     copies: u64,
+    /// Whether a stop left pairs of the round out (its iteration is then
+    /// not whole, and not checkpointed).
+    cut: bool,
 }
 
 impl AddAssign for ExchangeCounts {
@@ -287,11 +293,17 @@ impl AddAssign for ExchangeCounts {
         self.accepted += o.accepted;
         self.alpha_sum += o.alpha_sum;
         self.copies += o.copies;
+        self.cut |= o.cut;
     }
 }
 
 /// Stream offset of the tiles' seeds.
 const TILE_STREAM: u64 = 1 << 44;
+
+/// The seed of tile `s`'s streams in a run of `seed`.
+fn tile_seed(seed: u64, s: usize) -> u64 {
+    splitmix64(seed ^ splitmix64(TILE_STREAM + s as u64))
+}
 
 /// The tile sampler of one run.
 struct Sampler<'a, S> {
@@ -363,7 +375,7 @@ impl<S: TileShift> Sampler<'_, S> {
     ) -> Tile {
         let mut tile = Tile {
             chain: None,
-            seed: splitmix64(seed ^ splitmix64(TILE_STREAM + s as u64)),
+            seed: tile_seed(seed, s),
             draws: 0,
             steps: 0,
             sums: TileSums::new(self.filter.as_ref(), self.tiling.slots()),
@@ -588,6 +600,7 @@ impl<S: TileShift> Sampler<'_, S> {
                         );
                         x += 2;
                     }
+                    c.cut |= x + 1 < w;
                     c
                 })
                 .collect::<Vec<_>>()
@@ -607,6 +620,7 @@ impl<S: TileShift> Sampler<'_, S> {
                     }
                     let y = row0 + skip + 2 * i;
                     let (top, bottom) = rows.split_at_mut(w);
+                    let mut done = 0;
                     for x in (0..w).take_while(|_| !halt()) {
                         c += self.exchange_pair(
                             y * w + x,
@@ -614,7 +628,9 @@ impl<S: TileShift> Sampler<'_, S> {
                             (y + 1) * w + x,
                             &mut bottom[x],
                         );
+                        done += 1;
                     }
+                    c.cut |= done < w;
                     c
                 })
                 .collect::<Vec<_>>()
@@ -654,6 +670,7 @@ impl<S: TileShift> Sampler<'_, S> {
         let lower = (!rows.is_empty() && rows.start > 0 && (rows.start - 1) % 2 == parity)
             .then_some(rows.start);
         if crate::cluster::any_rank(halt()) {
+            counts.cut = upper.is_some() || lower.is_some();
             return counts;
         }
         let at = |y: usize, x: usize| (y - rows.start) * w + x;
@@ -921,6 +938,13 @@ impl Smcmc {
             depth: self.depth.clone(),
             ..GuidedSettings::default()
         };
+        // The training is not saved: a resumed run trains the tree again,
+        // which gives the same tree only on a sample budget.
+        if run.checkpoint.is_some() && self.iterations(run).is_none() {
+            return Err(RenderError::Invalid(
+                "--checkpoint: smcmc's guided shift needs mutations_per_pixel: a time budget alone trains its SD-tree by the clock, so a resumed run could not repeat it".into(),
+            ));
+        }
         let train_run = match self.iterations(run) {
             Some(m) => RunSettings {
                 spp: Some(
@@ -928,11 +952,13 @@ impl Smcmc {
                         as u32,
                 ),
                 time_budget: None,
+                checkpoint: None,
                 ..run.clone()
             },
             None => RunSettings {
                 spp: None,
                 time_budget: run.time_budget.map(|b| b.mul_f64(self.guide_share)),
+                checkpoint: None,
                 ..run.clone()
             },
         };
@@ -999,6 +1025,12 @@ impl Smcmc {
         // step fewer than their neighbours still give a valid estimate.
         let deadline = Deadline::new(start, run.time_budget);
         let halt = || stop.load(Ordering::Relaxed) || deadline.passed();
+        // With a checkpoint the start-up is not cut by the time budget (a
+        // resumed run makes the global start-up again for its statistics,
+        // and a run whose tiles started short would be saved as such); a
+        // stop still cuts it, and then nothing is saved.
+        let checkpointed = run.checkpoint.is_some();
+        let startup_halt = || stop.load(Ordering::Relaxed) || (!checkpointed && deadline.passed());
         if self.init == SmcmcInit::Global {
             // The global start-up keeps one weight per bootstrap state and
             // one walk per chain (10^15 states aborted on an 8 PB
@@ -1020,18 +1052,52 @@ impl Smcmc {
                 bootstrap: self.init_bootstrap,
                 mutations_per_pixel: self.init_mutations,
             }
-            .run(scene, shift, mutation, run.seed, &halt)
+            .run(scene, shift, mutation, run.seed, &startup_halt)
         });
         // On a cluster this rank holds the tiles of a block of rows (module
         // docs), tiles `first..` of the image; in one process all of them.
         let cluster = crate::cluster::current();
         let rows = own_rows(scene.film.height as usize);
         let first = rows.start * scene.film.width as usize;
-        let mut tiles: Vec<Tile> = (first..rows.end * scene.film.width as usize)
-            .into_par_iter()
-            .map(|s| sampler.new_tile(run.seed, s, self.init_candidates, visits.as_ref(), &halt))
-            .collect();
-        let own_started_at_init = tiles.iter().filter(|t| t.chain.is_some()).count();
+        let own_tiles = first..rows.end * scene.film.width as usize;
+        let filter = Arc::new(Filter::new(
+            scene.film.filter,
+            scene.film.width,
+            scene.film.height,
+        ));
+        let every = u64::from(self.exchange_every);
+        let rounds_of = |iterations: u64| if self.exchange { iterations / every } else { 0 };
+        let resumed = match &run.checkpoint {
+            Some(ck) => (sampler.resume(ck, run.seed, own_tiles.clone(), &rounds_of))
+                .map_err(RenderError::Invalid)?,
+            None => None,
+        };
+        let resumed_from = resumed.as_ref().map(|(c, _)| c.iterations);
+        let (mut counters, mut tiles) = match resumed {
+            Some((counters, tiles)) => {
+                observer.progress(tiles.iter().map(|t| t.steps).sum());
+                (counters, tiles)
+            }
+            None => {
+                let tiles: Vec<Tile> = (own_tiles.into_par_iter())
+                    .map(|s| {
+                        let (n, v) = (self.init_candidates, visits.as_ref());
+                        sampler.new_tile(run.seed, s, n, v, &startup_halt)
+                    })
+                    .collect();
+                let started = tiles.iter().filter(|t| t.chain.is_some()).count() as u64;
+                (
+                    resume::Counters {
+                        started_at_init: started,
+                        ..Default::default()
+                    },
+                    tiles,
+                )
+            }
+        };
+        // A start-up cut by a stop is not saved (its tiles are not what a
+        // resumed run's start-up would give).
+        let startup_whole = !stop.load(Ordering::Relaxed);
         let start_seconds = start.elapsed().as_secs_f64();
         let develop_now = |sums: &[TileSums]| {
             // Past the run's end (stop flag or deadline) the sweeps stop
@@ -1049,29 +1115,38 @@ impl Smcmc {
         };
 
         let planned = self.iterations(run);
-        let mut iterations = 0u64;
-        let mut rounds = 0u64;
-        let mut exchange = ExchangeCounts::default();
+        let mut checkpoint_error: Option<String> = None;
+        // `None`: nothing saved yet, so the first whole iteration is (a
+        // run stopped soon after its start-up has something to resume).
+        let (mut last_save, mut save_cost) = (None::<Instant>, std::time::Duration::ZERO);
         let mut last_preview = Instant::now();
         // Wall-clock seconds in tile steps, exchange rounds and snapshots
         // (the observer's develop and whatever it does with the image).
         let mut profile = [0.0f64; 3];
         // (On a cluster the ranks agree on stopping: a collective.)
-        while planned.is_none_or(|m| iterations < m) && !crate::cluster::any_rank(halt()) {
+        while planned.is_none_or(|m| counters.iterations < m) && !crate::cluster::any_rank(halt()) {
             let t0 = Instant::now();
-            tiles.par_iter_mut().enumerate().for_each(|(i, tile)| {
-                if !halt() {
+            let stepped: usize = (tiles.par_iter_mut().enumerate())
+                .map(|(i, tile)| {
+                    if halt() {
+                        return 0;
+                    }
                     sampler.step(first + i, tile);
                     observer.progress(1);
-                }
-            });
-            iterations += 1;
+                    1
+                })
+                .sum();
+            counters.iterations += 1;
+            let mut whole = stepped == tiles.len();
             let t1 = Instant::now();
             profile[0] += (t1 - t0).as_secs_f64();
-            if self.exchange && iterations.is_multiple_of(u64::from(self.exchange_every)) {
-                exchange += sampler.exchange_round(&mut tiles, rows.start, rounds, &halt);
-                exchange += sampler.cross_exchange(&mut tiles, &rows, rounds, &halt);
-                rounds += 1;
+            if self.exchange && counters.iterations.is_multiple_of(every) {
+                let rounds = counters.rounds;
+                let mut c = sampler.exchange_round(&mut tiles, rows.start, rounds, &halt);
+                c += sampler.cross_exchange(&mut tiles, &rows, rounds, &halt);
+                whole &= !c.cut;
+                counters.exchange += c;
+                counters.rounds += 1;
             }
             let t2 = Instant::now();
             profile[1] += (t2 - t1).as_secs_f64();
@@ -1082,6 +1157,26 @@ impl Smcmc {
                 let sums: Vec<TileSums> = tiles.iter().map(|t| t.sums.clone()).collect();
                 observer.snapshot(&|| develop_now(&sums[..]).image, done);
                 profile[2] += t2.elapsed().as_secs_f64();
+            }
+            // Checkpoints: whole iterations only (on every rank), at the
+            // end, when stopped (here, after the snapshot, where an
+            // observer may stop the run), and in between at most once per
+            // `CHECKPOINT_EVERY` and 20 saves' time (≤ 5% of the run),
+            // the first whole iteration at once.
+            if let Some(ck) = &run.checkpoint {
+                let whole = startup_whole && !crate::cluster::any_rank(!whole);
+                let due =
+                    last_save.is_none_or(|t| t.elapsed() >= CHECKPOINT_EVERY.max(20 * save_cost));
+                let due = crate::cluster::any_rank(due && crate::cluster::is_root());
+                let end = planned.is_some_and(|m| counters.iterations >= m)
+                    || crate::cluster::any_rank(halt());
+                if whole && (due || end) {
+                    let t = Instant::now();
+                    if let Err(e) = sampler.save(ck, &counters, &tiles, &filter) {
+                        checkpoint_error.get_or_insert(e);
+                    }
+                    (last_save, save_cost) = (Some(Instant::now()), t.elapsed());
+                }
             }
         }
         let develop_start = Instant::now();
@@ -1094,15 +1189,16 @@ impl Smcmc {
             "seconds_in_steps": profile[0],
             "seconds_in_exchange": profile[1],
         });
+        let (iterations, rounds) = (counters.iterations, counters.rounds);
         let pooled = crate::cluster::all_gather_words(vec![
-            own_started_at_init as u64,
-            exchange.attempts,
-            exchange.accepted,
-            exchange.copies,
-            exchange.alpha_sum.to_bits(),
+            counters.started_at_init,
+            counters.exchange.attempts,
+            counters.exchange.accepted,
+            counters.exchange.copies,
+            counters.exchange.alpha_sum.to_bits(),
         ]);
         let mut started_at_init = 0u64;
-        exchange = ExchangeCounts::default();
+        let mut exchange = ExchangeCounts::default();
         for r in pooled.chunks_exact(5) {
             started_at_init += r[0];
             exchange += ExchangeCounts {
@@ -1110,17 +1206,13 @@ impl Smcmc {
                 accepted: r[2],
                 copies: r[3],
                 alpha_sum: f64::from_bits(r[4]),
+                cut: false,
             };
         }
         // The chains' component names (not sent between ranks).
         let names = (mutation.kernel::<TileValues>())
             .expect("the mutation was checked by validate")
             .component_names();
-        let filter = Arc::new(Filter::new(
-            scene.film.filter,
-            scene.film.width,
-            scene.film.height,
-        ));
         let Some(results) = TileResults::gather(tiles, first, &names, &filter) else {
             // Not rank 0: only rank 0 develops and writes the image.
             let statistics = crate::cluster::with_ranks(json!({}), own);
@@ -1217,6 +1309,9 @@ impl Smcmc {
             },
             "samples_per_pixel_max_over_median": if median > 0.0 { max / median } else { f64::NAN },
             "nonfinite_contributions": cs.invalid_density,
+            "checkpoint": run.checkpoint.as_ref().map(|ck| {
+                ck.statistics("iterations", resumed_from.unwrap_or(0), &checkpoint_error)
+            }),
         });
         // On a cluster, every rank's share (on rank 0; collective).
         let Value::Object(statistics) = crate::cluster::with_ranks(statistics, own) else {

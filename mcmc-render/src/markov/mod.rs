@@ -1300,7 +1300,7 @@ fn annealing_deadline(deadline: Deadline, checkpointed: bool) -> Deadline {
 
 /// Least time between two checkpoints of a run (besides the one at its
 /// end or when it is stopped).
-const CHECKPOINT_EVERY: Duration = Duration::from_secs(1);
+pub(crate) const CHECKPOINT_EVERY: Duration = Duration::from_secs(1);
 
 /// The sums of this process's tasks, borrowed.
 fn local_sums<'a, F: ChainFamily>(tasks: &'a [Task<'_, F>]) -> Vec<distribute::TaskSums<'a>> {

@@ -43,6 +43,7 @@
 //! integral of the tile target, whatever the filter).
 
 pub mod bdpt_shift;
+pub mod checkpoint;
 pub mod global_init;
 pub mod guided_shift;
 pub mod mmlt_shift;
