@@ -1171,7 +1171,10 @@ fn a_stopped_staged_tempered_render_resumed_from_its_checkpoints_ends_bit_identi
     clear();
     let whole = chains_render(&scene, job, &path, None, &go, &NoObserver);
     clear();
-    assert!(bits(&resumed.image) == bits(&whole.image), "resumed image differs");
+    assert!(
+        bits(&resumed.image) == bits(&whole.image),
+        "resumed image differs"
+    );
     for key in ["mutations", "acceptance", "b_running", "exchange", "stages"] {
         let strip = |v: Option<&serde_json::Value>| {
             // The stages' seconds are timings, not results.

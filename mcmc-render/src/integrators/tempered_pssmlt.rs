@@ -221,7 +221,13 @@ impl TemperedLadder {
                     "resumed_from_mutations": sum("resumed_from_mutations"),
                     "total_mutations": sum("total_mutations"),
                     "error": error.map(|s| s["error"].clone()),
-                    "stages": stage_checkpoints,
+                    // Per stage, under other keys than the sums' (`.ci/run`
+                    // greps for `resumed_from_<unit>`).
+                    "stages": stage_checkpoints.iter().map(|s| json!({
+                        "resumed_from": s["resumed_from_mutations"],
+                        "total": s["total_mutations"],
+                        "error": s["error"],
+                    })).collect::<Vec<_>>(),
                 }),
             );
         }
