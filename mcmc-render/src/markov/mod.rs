@@ -312,9 +312,9 @@ pub trait ChainFamily: Sync {
     /// ([`ChainFamily::state_words`]) and its kernels keep no state of
     /// their own, or write it ([`mcmc_core::kernel::Kernel::state_words`]:
     /// the adaptive small step, saved with each independent chain and,
-    /// since session 21, with each level of a replica set). A family with an exchange move
-    /// also needs a move that can be saved (the driver checks
-    /// [`ExchangeMove::state_words`]). Default: no.
+    /// since session 21, with each level of a replica set). A family with
+    /// an exchange move also needs a move that can be saved (the driver
+    /// checks [`ExchangeMove::state_words`]). Default: no.
     fn checkpointable(&self, _mutation: &Self::Mutation) -> bool {
         false
     }
