@@ -98,12 +98,16 @@ pub struct Checkpoint {
 
 impl Checkpoint {
     /// The run's `checkpoint` statistics: the file, where the run resumed
-    /// from (`resumed_from_<unit>`: `spp`, `passes`, `iterations`) and the
-    /// last save's error, if any; one shape for every integrator's JSON.
+    /// from (`resumed_from_<unit>`: `spp`, `passes`, `iterations`), where
+    /// it ended (`total_<unit>`: the work done when it ended, the resumed
+    /// part included, so that `resumed_from < total` shows that the
+    /// resumed run did work of its own) and the last save's error, if
+    /// any; one shape for every integrator's JSON.
     pub fn statistics(
         &self,
         unit: &str,
         resumed_from: impl serde::Serialize,
+        total: u64,
         error: impl serde::Serialize,
     ) -> serde_json::Value {
         let mut map = serde_json::Map::new();
@@ -112,6 +116,7 @@ impl Checkpoint {
             format!("resumed_from_{unit}"),
             serde_json::to_value(resumed_from).unwrap_or_default(),
         );
+        map.insert(format!("total_{unit}"), total.into());
         map.insert(
             "error".into(),
             serde_json::to_value(error).unwrap_or_default(),

@@ -429,15 +429,6 @@ impl Default for Mutation {
 pub const LARGE_STEP_COMPONENT: usize = 1;
 
 impl Mutation {
-    /// Whether replica sets with this mutation can be checkpointed
-    /// ([`crate::markov::ChainFamily::checkpointable`]): its kernel keeps
-    /// no state, unless the small step is the adaptive one (a replica
-    /// set's levels are saved without their kernels; independent chains
-    /// save the adaptation with each chain since session 20).
-    pub fn checkpointable(&self) -> bool {
-        !matches!(self.small, SmallStepKind::Adaptive)
-    }
-
     /// Builds the `mcmc-core` kernel: component 0 is the small step,
     /// component [`LARGE_STEP_COMPONENT`] the large step.
     pub fn kernel<P: 'static>(&self) -> mcmc_core::Result<Mixture<TorusPoint, P>> {

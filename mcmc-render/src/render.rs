@@ -452,7 +452,7 @@ pub fn run_per_pixel(
     });
     let mut statistics = statistics;
     if let (Some(c), Some((resumed, error))) = (&run.checkpoint, &r.checkpoint) {
-        statistics["checkpoint"] = c.statistics("spp", resumed, error);
+        statistics["checkpoint"] = c.statistics("spp", resumed, r.spp_done, error);
     }
     let statistics = crate::cluster::with_ranks(
         statistics,

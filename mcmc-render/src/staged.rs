@@ -17,11 +17,22 @@
 //! variance about `1/samples`; weighting by sample count is the
 //! inverse-variance combination of the stages (up to their different
 //! per-sample variances, which are not known in advance).
+//!
+//! Checkpoints (session 21): every stage keeps its own file
+//! ([`stage_checkpoint`]), so a resumed run takes the finished stages'
+//! work from theirs, continues the stage that was stopped and runs the
+//! rest; with a mutation budget the stages' budgets and seeds do not
+//! depend on the clock, so the combined image is the uninterrupted run's.
 
+use crate::checkpoint::Checkpoint;
 use crate::color::Rgb;
+use crate::film::Filter;
 use crate::integrators::{RenderError, Rendered, RunSettings};
 use crate::observer::Observer;
+use crate::scene::Scene;
+use mcmc_core::rng::splitmix64;
 use serde_json::json;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
@@ -36,6 +47,43 @@ const STAGE_SEED_STEP: u64 = 0x9E37_79B9_7F4A_7C15;
 /// The seed stage `k` of a run with seed `seed` draws from (stage 0: `seed`).
 pub fn stage_seed(seed: u64, k: usize) -> u64 {
     seed.wrapping_add(STAGE_SEED_STEP.wrapping_mul(k as u64))
+}
+
+/// The checkpoint of stage `k` of a staged render checkpointed to
+/// `checkpoint` (`--checkpoint FILE`): stage 0's is `FILE` itself (which
+/// the command line has read), stage `k ≥ 1`'s is `FILE.stage<k>`, tied to
+/// the run's inputs and to `k` (a stage's file given to another stage is
+/// refused as written by another render); rank 0 reads it here, the
+/// Markov-chain driver broadcasts it. Each stage is a run of its own, so
+/// its file is the driver's; a finished stage's file holds all its work,
+/// and a resumed run makes that stage's start-up again, restores it and
+/// has nothing left to do. One line when a file is refused.
+pub fn stage_checkpoint(
+    checkpoint: &Checkpoint,
+    k: usize,
+    scene: &Scene,
+) -> Result<Checkpoint, String> {
+    if k == 0 {
+        return Ok(checkpoint.clone());
+    }
+    let mut path = checkpoint.path.clone().into_os_string();
+    path.push(format!(".stage{k}"));
+    let fingerprint = splitmix64(checkpoint.fingerprint ^ splitmix64(k as u64));
+    let (w, h) = (scene.film.width, scene.film.height);
+    let chains = match crate::cluster::is_root() {
+        true => {
+            let filter = Arc::new(Filter::new(scene.film.filter, w, h));
+            crate::markov::checkpoint::load(path.as_ref(), fingerprint, (w, h), &filter)?
+                .map(Arc::new)
+        }
+        false => None,
+    };
+    Ok(Checkpoint {
+        path: path.into(),
+        fingerprint,
+        resume: None,
+        chains,
+    })
 }
 
 /// One stage of a staged render.

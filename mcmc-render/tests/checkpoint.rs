@@ -35,6 +35,12 @@
 //! `pssmlt`/`mmlt` with the adaptive small step (each chain's adaptation
 //! saved with it, format `mcmcMC04`; controls: the streams, the small
 //! steps put back).
+//!
+//! Session 21 (ckptb): online `mcmc-pg` (its last iteration's chains; the
+//! training made again on resume), the adaptive small step in replica
+//! sets (each level's adaptation; controls as for `pssmlt`) and
+//! `regularization_stages` > 1 (a file per stage; control: the stopped
+//! stage's streams put back).
 
 mod common;
 
@@ -540,8 +546,8 @@ fn a_stopped_guided_render_resumed_from_its_checkpoint_ends_bit_identical() {
 /// mutations per pixel: 4 spp of training (1/8), then 28 a pixel over 12
 /// chains, 1344 a chain: rounds of 256 (five) and 64. Stopped after two
 /// rounds and resumed: image and statistics as the uninterrupted run's;
-/// control: every chain's stream put back to its start. Online training
-/// is refused with one line.
+/// control: every chain's stream put back to its start. (Online training
+/// is checkpointed since session 21, tested below.)
 #[test]
 fn a_stopped_pretrained_mcmc_pg_render_resumed_from_its_checkpoint_ends_bit_identical() {
     let scene = repo_scene("cornell-box.xml", 24);
@@ -551,30 +557,6 @@ fn a_stopped_pretrained_mcmc_pg_render_resumed_from_its_checkpoint_ends_bit_iden
         ("mutations_per_pixel", "32"),
     ];
     check_markov_resume(&scene, ("mcmc-pg", &sets), 12 * 256, 24 * 24 * 28);
-    let online = registry::configure(
-        None,
-        Some("mcmc-pg"),
-        &[("training".to_string(), "online".to_string())],
-    )
-    .expect("mcmc-pg");
-    let run = RunSettings {
-        spp: Some(4),
-        checkpoint: Some(Checkpoint {
-            path: std::env::temp_dir().join("mcmc-render-never-written.ckpt"),
-            fingerprint: 7,
-            resume: None,
-            chains: None,
-        }),
-        ..RunSettings::default()
-    };
-    let e = online
-        .render(&scene, &run, &AtomicBool::new(false), &NoObserver)
-        .unwrap_err()
-        .to_string();
-    assert!(
-        e.contains("training=pretrained") && !e.contains('\n'),
-        "{e}"
-    );
 }
 
 /// A Markov render as the command line runs it, with `sets` (the driver's
@@ -743,47 +725,58 @@ fn a_stopped_adaptive_markov_render_resumed_from_its_checkpoint_ends_bit_identic
         ("max_depth", "5"),
         ("small_step", "adaptive"),
     ];
-    let (w, h) = (scene.film.width, scene.film.height);
-    let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
     for name in ["pssmlt", "mmlt"] {
         check_markov_resume(&scene, (name, &sets), 9 * 256, 24 * 24 * 16);
-        let path = std::env::temp_dir().join(format!(
-            "mcmc-render-checkpoint-adaptive-{name}-{}.ckpt",
-            std::process::id()
-        ));
-        let _ = std::fs::remove_file(&path);
-        let stop = AtomicBool::new(false);
-        let observer = StopAfter {
-            stop: &stop,
-            after: 2,
-            seen: AtomicU32::new(0),
-        };
-        chains_render(&scene, (name, &sets), &path, None, &stop, &observer);
-        let mut fresh_steps = load_chains(&path, 7, (w, h), &filter)
-            .unwrap()
-            .expect("a checkpoint");
-        for chain in fresh_steps.tasks.iter_mut().flat_map(|t| &mut t.chains) {
-            // θ, proposals, acceptances, frozen: the small step's words.
-            assert_eq!(chain.kernel.len(), 4, "{name}");
-            chain.kernel[..3].copy_from_slice(&[0.5f64.to_bits(), 0, 0]);
-        }
-        let go = AtomicBool::new(false);
-        let control = chains_render(
-            &scene,
-            (name, &sets),
-            &path,
-            Some(fresh_steps),
-            &go,
-            &NoObserver,
-        );
-        let _ = std::fs::remove_file(&path);
-        let whole = chains_render(&scene, (name, &sets), &path, None, &go, &NoObserver);
-        std::fs::remove_file(&path).unwrap();
-        assert!(
-            bits(&control.image) != bits(&whole.image),
-            "{name}: the small steps' control agreed"
-        );
+        check_small_steps_are_saved(&scene, (name, &sets));
     }
+}
+
+/// The controls and refusal of a checkpointed run `job` with the adaptive
+/// small step: its run stopped after two rounds, resumed with every
+/// chain's θ put back to its start (0.5) with its counts (all else kept),
+/// must end with another image than the uninterrupted run's; resumed with
+/// one chain's small-step words cut to three, it is refused with one line.
+fn check_small_steps_are_saved(scene: &Scene, job: (&str, &[(&str, &str)])) {
+    let name = job.0;
+    let (w, h) = (scene.film.width, scene.film.height);
+    let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
+    let path = std::env::temp_dir().join(format!(
+        "mcmc-render-checkpoint-adaptive-{name}-{}.ckpt",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_file(&path);
+    let stop = AtomicBool::new(false);
+    let observer = StopAfter {
+        stop: &stop,
+        after: 2,
+        seen: AtomicU32::new(0),
+    };
+    chains_render(scene, job, &path, None, &stop, &observer);
+    let saved = load_chains(&path, 7, (w, h), &filter)
+        .unwrap()
+        .expect("a checkpoint");
+    let mut fresh_steps = saved.clone();
+    for chain in fresh_steps.tasks.iter_mut().flat_map(|t| &mut t.chains) {
+        // θ, proposals, acceptances, frozen: the small step's words.
+        assert_eq!(chain.kernel.len(), 4, "{name}");
+        chain.kernel[..3].copy_from_slice(&[0.5f64.to_bits(), 0, 0]);
+    }
+    let mut cut = saved;
+    cut.tasks[0].chains[0].kernel.pop();
+    let go = AtomicBool::new(false);
+    let e = try_chains_render(scene, job, &path, Some(cut), &go, &NoObserver).unwrap_err();
+    assert!(
+        e.contains("kernel state does not decode") && !e.contains('\n'),
+        "{name}: {e}"
+    );
+    let control = chains_render(scene, job, &path, Some(fresh_steps), &go, &NoObserver);
+    let _ = std::fs::remove_file(&path);
+    let whole = chains_render(scene, job, &path, None, &go, &NoObserver);
+    std::fs::remove_file(&path).unwrap();
+    assert!(
+        bits(&control.image) != bits(&whole.image),
+        "{name}: the small steps' control agreed"
+    );
 }
 
 #[test]
@@ -1434,4 +1427,157 @@ fn a_damaged_or_forged_smcmc_checkpoint_is_refused_with_one_line() {
     let done = smcmc_render(&scene, &path, &go, &NoObserver).unwrap();
     assert_eq!(done.statistics["checkpoint"]["resumed_from_iterations"], 2);
     std::fs::remove_file(&path).unwrap();
+}
+
+/// `mcmc-pg` with online training (session 21): only the last iteration,
+/// the one that makes the image, saves its chains; the training
+/// iterations before it are made again on resume (not cut by the clock).
+/// 24×24 × 32 mutations per pixel: training iterations of 1, 2, 4 and 8
+/// mutations per pixel, then the last of 17 (9792 mutations over 12
+/// chains, 816 a chain: rounds of 256, 256, 256 and 48). Stopped after
+/// two of the last iteration's rounds and resumed: image and statistics
+/// as the uninterrupted run's; control: every chain's stream put back.
+#[test]
+fn a_stopped_online_mcmc_pg_render_resumed_from_its_checkpoint_ends_bit_identical() {
+    let scene = repo_scene("cornell-box.xml", 24);
+    let sets = [
+        ("training", "online"),
+        ("bootstrap", "2000"),
+        ("chains", "12"),
+        ("mutations_per_pixel", "32"),
+    ];
+    check_markov_resume(&scene, ("mcmc-pg", &sets), 12 * 256, 24 * 24 * 17);
+}
+
+/// The adaptive small step in replica sets (session 21): every level's
+/// kernel keeps its adaptation at its level while the states are
+/// exchanged, and is saved with the chain at that level
+/// (`ChainRecord::kernel`). `tempered-pssmlt` with even–odd swaps and
+/// `tempered-mmlt` with IS permutations, 4 replica sets of 4 levels on a
+/// 24×24 box, stopped after two rounds of 14 and resumed: image and
+/// statistics as the uninterrupted run's; controls: the streams put back,
+/// and every level's θ put back to 0.5 with its counts, must each differ;
+/// a cut small-step record is refused with one line.
+#[test]
+fn a_stopped_adaptive_tempered_render_resumed_from_its_checkpoint_ends_bit_identical() {
+    let scene = repo_scene("cornell-box.xml", 24);
+    for (name, exchange) in [
+        ("tempered-pssmlt", "even_odd"),
+        ("tempered-mmlt", "is_permutation"),
+    ] {
+        let sets = [
+            ("bootstrap", "1000"),
+            ("chains", "16"),
+            ("mutations_per_pixel", "24"),
+            ("max_depth", "5"),
+            ("levels", "4"),
+            ("exchange", exchange),
+            ("small_step", "adaptive"),
+        ];
+        check_markov_resume(&scene, (name, &sets), 4 * 256, 24 * 24 * 24);
+        check_small_steps_are_saved(&scene, (name, &sets));
+    }
+}
+
+/// `regularization_stages` > 1 (session 21): each stage a run of its own
+/// with its own file (`FILE`, then `FILE.stage1`). `tempered-pssmlt` with
+/// 2 stages on a 24×24 box, 4 replica sets of 4 levels: stage 0 of 8
+/// mutations per pixel (288 sweeps a set: 5 rounds), stage 1 of 16.
+/// Stopped after two rounds of stage 1 and resumed: stage 0 from its
+/// finished file, stage 1 continued; image and statistics (the stages'
+/// samples among them) as the uninterrupted run's. Control: the stage-1
+/// file with every chain's stream put back must differ. Stage 1's file
+/// given as stage 0's is refused with one line (each stage's file is tied
+/// to its index).
+#[test]
+fn a_stopped_staged_tempered_render_resumed_from_its_checkpoints_ends_bit_identical() {
+    let scene = repo_scene("cornell-box.xml", 24);
+    let (w, h) = (scene.film.width, scene.film.height);
+    let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
+    let sets = [
+        ("bootstrap", "1000"),
+        ("chains", "16"),
+        ("mutations_per_pixel", "24"),
+        ("max_depth", "5"),
+        ("levels", "4"),
+        ("exchange", "even_odd"),
+        ("regularization", "geometric"),
+        ("regularization_stages", "2"),
+    ];
+    let job = ("tempered-pssmlt", &sets[..]);
+    let path = std::env::temp_dir().join(format!(
+        "mcmc-render-checkpoint-staged-{}.ckpt",
+        std::process::id()
+    ));
+    let stage1 = std::path::PathBuf::from(format!("{}.stage1", path.display()));
+    let clear = || [&path, &stage1].map(|p| std::fs::remove_file(p).is_ok());
+    clear();
+    let stop = AtomicBool::new(false);
+    let observer = StopAfter {
+        stop: &stop,
+        after: 5 + 2,
+        seen: AtomicU32::new(0),
+    };
+    let first = chains_render(&scene, job, &path, None, &stop, &observer);
+    assert!(first.interrupted);
+    // The stage-1 file is tied to its stage: refused as stage 0's.
+    let e = load_chains(&stage1, 7, (w, h), &filter).unwrap_err();
+    assert!(e.contains("another render") && !e.contains('\n'), "{e}");
+    let load = |p: &std::path::Path, fp| {
+        mcmc_render::markov::checkpoint::load(p, fp, (w, h), &filter)
+            .unwrap()
+            .expect("a checkpoint")
+    };
+    let stage0 = load(&path, 7);
+    assert_eq!(stage0.mutations(), 24 * 24 * 8, "stage 0 finished");
+    // Stage 1's file, read as the run reads it.
+    let fresh = Checkpoint {
+        path: path.clone(),
+        fingerprint: 7,
+        resume: None,
+        chains: None,
+    };
+    let stage1_checkpoint = mcmc_render::staged::stage_checkpoint(&fresh, 1, &scene).unwrap();
+    assert_eq!(stage1_checkpoint.path, stage1);
+    let stage1_fp = stage1_checkpoint.fingerprint;
+    let saved = Arc::unwrap_or_clone(stage1_checkpoint.chains.expect("stage 1's file"));
+    assert_eq!(saved.mutations(), 2 * 4 * 256, "stage 1: two rounds");
+    let mut restarted = saved.clone();
+    for (c, chain) in (restarted.tasks.iter_mut())
+        .flat_map(|t| &mut t.chains)
+        .enumerate()
+    {
+        chain.rng = mcmc_core::rng::rng_words(&mcmc_core::rng::stream_rng(9, c as u64));
+    }
+    let go = AtomicBool::new(false);
+    let resumed = chains_render(&scene, job, &path, Some(stage0.clone()), &go, &NoObserver);
+    let ck = &resumed.statistics["checkpoint"];
+    assert_eq!(ck["resumed_from_mutations"], 24 * 24 * 8 + 2 * 4 * 256);
+    assert_eq!(ck["total_mutations"], 24 * 24 * 24);
+    // The control: stage 0 as saved, stage 1's streams put back.
+    mcmc_render::markov::checkpoint::save(&stage1, stage1_fp, &restarted).unwrap();
+    let control = chains_render(&scene, job, &path, Some(stage0), &go, &NoObserver);
+    clear();
+    let whole = chains_render(&scene, job, &path, None, &go, &NoObserver);
+    clear();
+    assert!(
+        bits(&resumed.image) == bits(&whole.image),
+        "resumed image differs"
+    );
+    for key in ["mutations", "acceptance", "b_running", "exchange", "stages"] {
+        let strip = |v: Option<&serde_json::Value>| {
+            // The stages' seconds are timings, not results.
+            let mut v = v.cloned();
+            if let Some(serde_json::Value::Array(stages)) = &mut v {
+                stages.iter_mut().for_each(|s| s["seconds"] = 0.into());
+            }
+            v
+        };
+        assert_eq!(
+            strip(resumed.statistics.get(key)),
+            strip(whole.statistics.get(key)),
+            "{key}"
+        );
+    }
+    assert!(bits(&control.image) != bits(&whole.image), "control agreed");
 }

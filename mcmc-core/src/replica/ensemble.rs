@@ -139,6 +139,13 @@ where
         &self.algorithms[level]
     }
 
+    /// The algorithm of `level`, mutably: for a caller that saves and
+    /// restores its kernel's adaptation beside [`ReplicaExchange::progress`]
+    /// (which does not hold the algorithms).
+    pub fn algorithm_mut(&mut self, level: usize) -> &mut A {
+        &mut self.algorithms[level]
+    }
+
     /// Exchange statistics.
     pub fn statistics(&self) -> &ReplicaStatistics {
         &self.stats

@@ -487,7 +487,8 @@ impl IntegratorSettings for Erpt {
             ),
         });
         if let Some(c) = &run.checkpoint {
-            statistics["checkpoint"] = c.statistics("passes", resumed_from, &checkpoint_error);
+            statistics["checkpoint"] =
+                c.statistics("passes", resumed_from, passes, &checkpoint_error);
         }
         // On a cluster, every rank's share (on rank 0; collective).
         let statistics = crate::cluster::with_ranks(

@@ -760,7 +760,8 @@ impl GuidedSettings {
             "triangles": scene.geometry.triangles,
         });
         if let (Some(c), true) = (&run.checkpoint, saves) {
-            statistics["checkpoint"] = c.statistics("spp", resumed_from, &checkpoint_error);
+            statistics["checkpoint"] =
+                c.statistics("spp", resumed_from, spp_done, &checkpoint_error);
         }
         let rendered = Rendered {
             image,

@@ -66,7 +66,23 @@
 //! bit (the training's samples per pixel follow from the budget, its
 //! streams from the seed), so the chains' targets, start-up and the image
 //! are the uninterrupted run's. A run stopped in the training has saved
-//! nothing. Online training changes the tree every iteration: refused.
+//! nothing.
+//!
+//! Online training (session 21) is checkpointed the same way: only its
+//! last iteration, the one that makes the image, saves its chains; a
+//! resumed run makes the training iterations before it again. They are a
+//! function of the seed and the mutation budget alone (each iteration's
+//! length follows from the budget, its chains' seed from its index, its
+//! records are exact sums that do not depend on the order of the threads
+//! or ranks), so the tree the last iteration samples, and with it the
+//! chains' target, start-up and image, are the uninterrupted run's. For
+//! that the clock must not cut a training iteration: with a checkpoint
+//! they run to their mutation counts whatever the time budget
+//! ([`markov::startup_deadline`]), as RELT's start-up does; Ctrl-C still
+//! stops them (and nothing is saved). The repeated training costs a
+//! quarter to a half of the budget's mutations on every resume (before a
+//! last iteration of `left ∈ [2^K, 3·2^K)` mutations per pixel the
+//! training did `2^K − 1`), and its chains also record.
 //!
 //! # Random numbers per state
 //! Coordinates 0–1 the raster position (2–3 the lens of a thin-lens
@@ -403,6 +419,7 @@ impl McmcPg {
         let mut phases: Vec<PhaseStats> = Vec::new();
         let mut previous: Option<MltResult> = None;
         let mut training_seconds = 0.0;
+        let checkpointed = run.checkpoint.is_some();
         let mut done = 0u64;
         let mut nominal = 1u64;
         for k in 1u32.. {
@@ -424,11 +441,18 @@ impl McmcPg {
             let seed = splitmix64(run.seed ^ splitmix64(ONLINE_STREAM + u64::from(k)));
             let progress = ProgressOnly(observer);
             let shown: &dyn Observer = if last { observer } else { &progress };
+            // With a checkpoint only the last iteration saves; the
+            // training iterations before it are made again on resume, so
+            // the clock must not cut them (module docs).
+            let (iteration_deadline, checkpoint) = match last {
+                true => (deadline, run.checkpoint.clone()),
+                false => (markov::startup_deadline(deadline, checkpointed), None),
+            };
             let result = self.chains(
                 scene,
                 sampler,
-                (mpp, deadline, seed),
-                (run.snapshot_every, None),
+                (mpp, iteration_deadline, seed),
+                (run.snapshot_every, checkpoint),
                 stop,
                 shown,
             )?;
@@ -501,12 +525,8 @@ impl IntegratorSettings for McmcPg {
         observer: &dyn Observer,
     ) -> Result<Rendered, RenderError> {
         let start = Instant::now();
-        // Checkpoints: the pre-trained variant's chains (module docs).
-        if run.checkpoint.is_some() && self.training == TrainingMode::Online {
-            return Err(RenderError::Invalid(
-                "--checkpoint: mcmc-pg saves only with training=pretrained (online, the tree changes every iteration and is not saved)".into(),
-            ));
-        }
+        // Checkpoints: the chains of the run that makes the image, the
+        // tree trained again on resume (module docs).
         if run.checkpoint.is_some() && self.chain.mutations_per_pixel(run).is_none() {
             return Err(RenderError::Invalid(
                 "--checkpoint: mcmc-pg needs a mutation budget (--spp or mutations_per_pixel): a time budget alone sets its training by the clock, so a resumed run could not repeat it".into(),

@@ -1711,7 +1711,7 @@ impl McmcVcm {
         if let Some(c) = &run.checkpoint {
             rendered.statistics.insert(
                 "checkpoint".into(),
-                c.statistics("iterations", resumed_from, &checkpoint_error),
+                c.statistics("iterations", resumed_from, iterations, &checkpoint_error),
             );
         }
         // On a cluster, every rank's share (on rank 0; collective).

@@ -134,8 +134,10 @@ impl<'a> ChainFamily for TemperedMmltFamily<'a> {
     fn independent_probability(&self, mutation: &Mutation) -> f64 {
         mutation.large_step_probability
     }
-    fn checkpointable(&self, mutation: &Mutation) -> bool {
-        mutation.checkpointable()
+    fn checkpointable(&self, _mutation: &Mutation) -> bool {
+        // Every small step: the adaptive one's state is saved per level
+        // with the chain at that level (`ChainRecord::kernel`, session 21).
+        true
     }
     crate::primary_sample_space_family!();
     fn exchange_move(&self) -> Option<Box<dyn ExchangeMove<TorusPoint, PathSample>>> {

@@ -39,7 +39,7 @@ use crate::pss::{
 use crate::pss_dump::DumpSampler;
 use crate::scene::Scene;
 use crate::settings::check;
-use crate::staged::{MAX_STAGES, Stage, render_in_stages};
+use crate::staged::{MAX_STAGES, Stage, render_in_stages, stage_checkpoint};
 use crate::tempered::{
     MAX_LEVELS, Regularization, RegularizationSchedule, ScheduleKind, TemperedBdpt, TemperedBsdfs,
     chain_mis_factors, ladder_json, level_density, log_of, temperatures,
@@ -178,29 +178,59 @@ impl TemperedLadder {
             &dyn Observer,
         ) -> Result<Rendered, RenderError>,
     ) -> Result<Rendered, RenderError> {
-        // A checkpoint holds one run's chains; stages are several runs.
-        if self.regularization_stages > 1 && run.checkpoint.is_some() {
-            return Err(RenderError::Invalid(
-                "--checkpoint needs regularization_stages=1 (each stage is a run of its own)"
-                    .into(),
-            ));
-        }
+        // Each stage is a run of its own with a checkpoint of its own
+        // (`staged::stage_checkpoint`); their `checkpoint` statistics are
+        // summed below.
+        let stages = self.regularization_stages;
+        let mut stage_checkpoints = Vec::new();
         let pixels = u64::from(scene.film.width) * u64::from(scene.film.height);
         let mut rendered = render_in_stages(
-            self.regularization_stages,
+            stages,
             pixels,
             chain.mutations_per_pixel(run),
             run,
             stop,
             observer,
             |stage: &Stage, observer: &dyn Observer| {
+                let mut stage_run = stage.run.clone();
+                if let (Some(c), true) = (&run.checkpoint, stages > 1) {
+                    stage_run.checkpoint = Some(
+                        stage_checkpoint(c, stage.index, scene).map_err(RenderError::Invalid)?,
+                    );
+                }
                 let settings = ChainSettings {
                     mutations_per_pixel: stage.samples_per_pixel,
-                    ..chain.chain_settings(mutation, &stage.run)
+                    ..chain.chain_settings(mutation, &stage_run)
                 };
-                render_stage(&settings, stage.samples_per_pixel_before, observer)
+                let r = render_stage(&settings, stage.samples_per_pixel_before, observer)?;
+                stage_checkpoints.extend(r.statistics.get("checkpoint").cloned());
+                Ok(r)
             },
         )?;
+        if let (Some(c), true) = (&run.checkpoint, stages > 1) {
+            let sum = |key: &str| -> u64 {
+                (stage_checkpoints.iter())
+                    .filter_map(|s| s[key].as_u64())
+                    .sum()
+            };
+            let error = (stage_checkpoints.iter()).find(|s| !s["error"].is_null());
+            rendered.statistics.insert(
+                "checkpoint".into(),
+                json!({
+                    "path": c.path.display().to_string(),
+                    "resumed_from_mutations": sum("resumed_from_mutations"),
+                    "total_mutations": sum("total_mutations"),
+                    "error": error.map(|s| s["error"].clone()),
+                    // Per stage, under other keys than the sums' (`.ci/run`
+                    // greps for `resumed_from_<unit>`).
+                    "stages": stage_checkpoints.iter().map(|s| json!({
+                        "resumed_from": s["resumed_from_mutations"],
+                        "total": s["total_mutations"],
+                        "error": s["error"],
+                    })).collect::<Vec<_>>(),
+                }),
+            );
+        }
         if let Some(Value::Array(stages)) = rendered.statistics.get_mut("stages") {
             for stage in stages {
                 let n = self.sample_index(stage["n"].as_u64().unwrap_or(0));
@@ -339,8 +369,10 @@ impl<'a> ChainFamily for TemperedFamily<'a> {
     fn independent_probability(&self, mutation: &Mutation) -> f64 {
         mutation.large_step_probability
     }
-    fn checkpointable(&self, mutation: &Mutation) -> bool {
-        mutation.checkpointable()
+    fn checkpointable(&self, _mutation: &Mutation) -> bool {
+        // Every small step: the adaptive one's state is saved per level
+        // with the chain at that level (`ChainRecord::kernel`, session 21).
+        true
     }
     crate::primary_sample_space_family!();
     fn exchange_move(&self) -> Option<Box<dyn ExchangeMove<TorusPoint, PathSample>>> {

@@ -1143,7 +1143,7 @@ impl Vcm {
         if let Some(c) = &run.checkpoint {
             rendered.statistics.insert(
                 "checkpoint".into(),
-                c.statistics("iterations", resumed_from, &checkpoint_error),
+                c.statistics("iterations", resumed_from, iterations, &checkpoint_error),
             );
         }
         if let serde_json::Value::Object(m) = crate::cluster::with_ranks(

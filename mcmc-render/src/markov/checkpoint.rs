@@ -63,8 +63,8 @@ pub struct ChainRecord {
     pub stats: ChainStatistics,
     /// Its kernel's own state ([`mcmc_core::kernel::Kernel::state_words`]:
     /// the adaptive small step's adaptation; empty for kernels without
-    /// state, and for the levels of replica sets, whose kernels are
-    /// refused when they keep state).
+    /// state). In a replica set, the kernel of the level the chain is at
+    /// (since session 21: the levels' kernels stay at their levels).
     pub kernel: Vec<u64>,
 }
 
@@ -298,10 +298,14 @@ pub(crate) fn record_of_task<F: ChainFamily>(
                     .set
                     .progress()
                     .expect("the driver refuses checkpoints of moves that cannot be saved");
-                chains.extend(
-                    (progress.chains.iter())
-                        .map(|c| chain_record(family, &c.current, &c.rng, &c.stats, Vec::new())),
-                );
+                // Each level's kernel (its adaptive small step's state)
+                // with the chain at that level: kernels stay at their
+                // levels while the states are exchanged.
+                chains.extend(progress.chains.iter().enumerate().map(|(level, c)| {
+                    let mut kernel = Vec::new();
+                    slot.set.algorithm(level).kernel().state_words(&mut kernel);
+                    chain_record(family, &c.current, &c.rng, &c.stats, kernel)
+                }));
                 sets.push(SetRecord {
                     sweeps: slot.sweeps,
                     words: progress.words,
@@ -344,6 +348,19 @@ fn restore_chain<F: ChainFamily>(
     Ok(())
 }
 
+/// Puts `saved`'s kernel state back with `restore` (a fresh kernel's
+/// [`Kernel::restore_words`]; a kernel without state takes no words).
+fn restore_kernel(
+    restore: impl FnOnce(&mut &[u64]) -> bool,
+    saved: &ChainRecord,
+) -> Result<(), String> {
+    let mut words = &saved.kernel[..];
+    match restore(&mut words) && words.is_empty() {
+        true => Ok(()),
+        false => Err("a chain's kernel state does not decode".into()),
+    }
+}
+
 /// Puts `record` back into `task` (built afresh by the driver from the
 /// same inputs): its sums, and every chain's state, stream and
 /// statistics (and every replica set's own progress); a chain's (set's)
@@ -373,13 +390,10 @@ pub(crate) fn restore_task<F: ChainFamily>(
             }
             for (slot, saved) in chains.iter_mut().zip(&record.chains) {
                 restore_chain(family, slot.chain.parts_mut(), saved)?;
-                let mut kernel = &saved.kernel[..];
-                let kernel_restored = (slot.chain.algorithm_mut().kernel_mut())
-                    .restore_words(&mut kernel)
-                    && kernel.is_empty();
-                if !kernel_restored {
-                    return Err("a chain's kernel state does not decode".into());
-                }
+                restore_kernel(
+                    |w| slot.chain.algorithm_mut().kernel_mut().restore_words(w),
+                    saved,
+                )?;
                 slot.remaining = slot.remaining.map(|r| r.saturating_sub(saved.stats.steps));
             }
         }
@@ -395,11 +409,12 @@ pub(crate) fn restore_task<F: ChainFamily>(
             for ((slot, set), saved) in slots.iter_mut().zip(&record.sets).zip(saved_chains) {
                 let mut progress =
                     (slot.set.progress()).ok_or("the run's exchange move cannot be restored")?;
-                for (parts, saved) in progress.chains.iter_mut().zip(saved) {
-                    if !saved.kernel.is_empty() {
-                        return Err("a replica's chain holds a kernel state".into());
-                    }
+                for (level, (parts, saved)) in progress.chains.iter_mut().zip(saved).enumerate() {
                     restore_chain(family, parts, saved)?;
+                    restore_kernel(
+                        |w| slot.set.algorithm_mut(level).kernel_mut().restore_words(w),
+                        saved,
+                    )?;
                 }
                 progress.words.clone_from(&set.words);
                 slot.set.restore(progress).map_err(|e| e.to_string())?;

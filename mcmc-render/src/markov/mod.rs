@@ -311,10 +311,10 @@ pub trait ChainFamily: Sync {
     /// ([`checkpoint`]): its states encode exactly
     /// ([`ChainFamily::state_words`]) and its kernels keep no state of
     /// their own, or write it ([`mcmc_core::kernel::Kernel::state_words`]:
-    /// the adaptive small step; saved for independent chains only, not
-    /// for the levels of replica sets). A family with an exchange move
-    /// also needs a move that can be saved (the driver checks
-    /// [`ExchangeMove::state_words`]). Default: no.
+    /// the adaptive small step, saved with each independent chain and,
+    /// since session 21, with each level of a replica set). A family with
+    /// an exchange move also needs a move that can be saved (the driver
+    /// checks [`ExchangeMove::state_words`]). Default: no.
     fn checkpointable(&self, _mutation: &Self::Mutation) -> bool {
         false
     }
@@ -856,7 +856,7 @@ pub fn run<F: ChainFamily>(
         && (unsaved_move() || !family.checkpointable(&settings.mutation))
     {
         return Err(MltError::Setting(format!(
-            "these chains cannot be checkpointed (only those of {}, without the adaptive small step in replica sets)",
+            "these chains cannot be checkpointed (only those of {}, with exchange moves that keep no stores of past states)",
             crate::checkpoint::CHAIN_INTEGRATORS.join(", ")
         )));
     }

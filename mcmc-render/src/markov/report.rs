@@ -92,7 +92,13 @@ pub fn rendered(
     if let Some((resumed, error)) = &result.checkpoint {
         statistics.insert(
             "checkpoint".into(),
-            json!({"resumed_from_mutations": resumed, "error": error}),
+            // `total_mutations`: where the run ended, as
+            // `crate::checkpoint::Checkpoint::statistics` has it.
+            json!({
+                "resumed_from_mutations": resumed,
+                "total_mutations": result.mutations,
+                "error": error,
+            }),
         );
     }
     Rendered {
