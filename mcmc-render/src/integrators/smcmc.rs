@@ -1310,7 +1310,7 @@ impl Smcmc {
             "samples_per_pixel_max_over_median": if median > 0.0 { max / median } else { f64::NAN },
             "nonfinite_contributions": cs.invalid_density,
             "checkpoint": run.checkpoint.as_ref().map(|ck| {
-                ck.statistics("iterations", resumed_from.unwrap_or(0), &checkpoint_error)
+                ck.statistics("iterations", resumed_from.unwrap_or(0), iterations, &checkpoint_error)
             }),
         });
         // On a cluster, every rank's share (on rank 0; collective).
