@@ -169,6 +169,16 @@ pub fn load(
     size: (u32, u32),
     filter: &Arc<Filter>,
 ) -> Result<Option<ChainProgress>, String> {
+    read_bytes(path)?
+        .map(|bytes| progress_from_bytes(&bytes, path, fingerprint, size, filter))
+        .transpose()
+}
+
+/// The bytes of the checkpoint at `path` (this driver's, or `smcmc`'s):
+/// `None` when there is no file; an error (one line) when it is not a
+/// regular file (refused before it is opened) or too long to read (twice
+/// its length must fit in the available memory).
+pub(crate) fn read_bytes(path: &Path) -> Result<Option<Vec<u8>>, String> {
     let len = match std::fs::metadata(path) {
         Ok(m) => m.len(),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
@@ -181,7 +191,36 @@ pub fn load(
     )?;
     let bytes = std::fs::read(path)
         .map_err(|e| format!("cannot read checkpoint {}: {e}", path.display()))?;
-    progress_from_bytes(&bytes, path, fingerprint, size, filter).map(Some)
+    Ok(Some(bytes))
+}
+
+/// `body` (the bytes of checkpoint `bytes` after its magic) without its
+/// fingerprint and checksum, once both are checked: refused (one line
+/// naming `path`) when the checksum (FNV-1a of all bytes before its last
+/// 8) does not match — a flipped bit, a cut or a file written over — or
+/// the fingerprint is not `fingerprint` (another render's file).
+pub(crate) fn checked_body<'a>(
+    bytes: &[u8],
+    body: &'a [u8],
+    path: &Path,
+    fingerprint: u64,
+) -> Result<&'a [u8], String> {
+    let bad = |why: &str| format!("checkpoint {}: {why}", path.display());
+    let Some((body, checksum)) = body.split_last_chunk::<8>() else {
+        return Err(bad("truncated"));
+    };
+    if fnv1a(&bytes[..bytes.len() - 8], FNV_OFFSET) != u64::from_le_bytes(*checksum) {
+        return Err(bad("damaged (its checksum does not match its contents)"));
+    }
+    let Some((fp, body)) = body.split_first_chunk::<8>() else {
+        return Err(bad("truncated"));
+    };
+    if u64::from_le_bytes(*fp) != fingerprint {
+        return Err(bad(
+            "written by another render (scene, defines, integrator, its settings or seed differ)",
+        ));
+    }
+    Ok(body)
 }
 
 /// The progress a checkpoint's bytes hold (`path` names it in messages):
@@ -208,20 +247,7 @@ pub fn progress_from_bytes(
         (None, Some(body)) => (body, false),
         (None, None) => return Err(bad("not a checkpoint of mcmc-render's Markov-chain driver")),
     };
-    let Some((body, checksum)) = body.split_last_chunk::<8>() else {
-        return Err(bad("truncated"));
-    };
-    if fnv1a(&bytes[..bytes.len() - 8], FNV_OFFSET) != u64::from_le_bytes(*checksum) {
-        return Err(bad("damaged (its checksum does not match its contents)"));
-    }
-    let Some((fp, body)) = body.split_first_chunk::<8>() else {
-        return Err(bad("truncated"));
-    };
-    if u64::from_le_bytes(*fp) != fingerprint {
-        return Err(bad(
-            "written by another render (scene, defines, integrator, its settings or seed differ)",
-        ));
-    }
+    let body = checked_body(bytes, body, path, fingerprint)?;
     let progress = ChainProgress::from_bytes(body, filter, kernels).map_err(|e| bad(&e))?;
     for f in progress
         .tasks

@@ -19,7 +19,7 @@
 use super::{MAX_TILE_PIXELS, TileSums, TileValues};
 use crate::checkpoint::{FNV_OFFSET, MAX_COUNT, fnv1a};
 use crate::color::Rgb;
-use crate::markov::checkpoint::{stats_from_words, stats_words};
+use crate::markov::checkpoint::{checked_body, read_bytes, stats_from_words, stats_words};
 use mcmc_core::space::TorusPoint;
 use mcmc_core::stats::ChainStatistics;
 use std::path::Path;
@@ -301,40 +301,21 @@ pub fn load(
     fingerprint: u64,
     size: (u32, u32),
 ) -> Result<Option<(Header, Vec<u64>)>, String> {
-    let len = match std::fs::metadata(path) {
-        Ok(m) => m.len(),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(format!("cannot read checkpoint {}: {e}", path.display())),
+    let Some(bytes) = read_bytes(path)? else {
+        return Ok(None);
     };
-    crate::resources::regular_file(path).map_err(|e| format!("checkpoint: {e}"))?;
-    crate::resources::check_memory(
-        &format!("checkpoint {} ({len} bytes)", path.display()),
-        2 * u128::from(len),
-    )?;
-    let bytes = std::fs::read(path)
-        .map_err(|e| format!("cannot read checkpoint {}: {e}", path.display()))?;
     let bad = |why: &str| format!("checkpoint {}: {why}", path.display());
     let body = bytes
         .strip_prefix(MAGIC)
         .ok_or_else(|| bad("not a checkpoint of smcmc"))?;
-    let Some((body, checksum)) = body.split_last_chunk::<8>() else {
-        return Err(bad("truncated"));
-    };
-    if fnv1a(&bytes[..bytes.len() - 8], FNV_OFFSET) != u64::from_le_bytes(*checksum) {
-        return Err(bad("damaged (its checksum does not match its contents)"));
-    }
-    if body.len() % 8 != 0 || body.len() < 8 * (1 + HEADER_WORDS) {
+    let body = checked_body(&bytes, body, path, fingerprint)?;
+    if body.len() % 8 != 0 || body.len() < 8 * HEADER_WORDS {
         return Err(bad("truncated"));
     }
     let words: Vec<u64> = (body.chunks_exact(8))
         .map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")))
         .collect();
-    if words[0] != fingerprint {
-        return Err(bad(
-            "written by another render (scene, defines, integrator, its settings or seed differ)",
-        ));
-    }
-    let head: &[u64; HEADER_WORDS] = words[1..=HEADER_WORDS].try_into().expect("header");
+    let head: &[u64; HEADER_WORDS] = words[..HEADER_WORDS].try_into().expect("header");
     let header = Header::from_words(head).ok_or_else(|| bad("its image size overflows"))?;
     if header.size != size {
         return Err(bad(&format!(
@@ -342,7 +323,7 @@ pub fn load(
             header.size.0, header.size.1, size.0, size.1
         )));
     }
-    Ok(Some((header, words[1 + HEADER_WORDS..].to_vec())))
+    Ok(Some((header, words[HEADER_WORDS..].to_vec())))
 }
 
 /// `header` and `tiles` as one list of words (for a broadcast), and back.
