@@ -57,7 +57,11 @@ pub fn min_segments(direct_samples: i64) -> usize {
 
 /// Refuses a direct-lighting pass with a `max_depth` that leaves the
 /// chains no path (1 or 2 segments), in one line naming `integrator`.
-pub fn check_direct_depth(integrator: &str, direct_samples: i64, max_depth: i64) -> Result<(), String> {
+pub fn check_direct_depth(
+    integrator: &str,
+    direct_samples: i64,
+    max_depth: i64,
+) -> Result<(), String> {
     if pass_samples(direct_samples).is_some() && (1..=2).contains(&max_depth) {
         return Err(format!(
             "with direct_samples the chains of {integrator} sample paths of 3 or more segments: give max_depth ≥ 3 or -1, or direct_samples = -1"
@@ -118,7 +122,14 @@ pub fn fixed_spp(run: &RunSettings, spp: u32, deadline: Deadline) -> RunSettings
 /// Adds a per-pixel pass (`spp` samples per pixel) to the chains' report
 /// `out`: its image, its statistics under `key`, its time (the run's
 /// wall-clock since `start`) and `label` in the summary.
-pub fn add_pass(out: &mut Rendered, pass: &Rendered, key: &str, label: &str, spp: u32, start: Instant) {
+pub fn add_pass(
+    out: &mut Rendered,
+    pass: &Rendered,
+    key: &str,
+    label: &str,
+    spp: u32,
+    start: Instant,
+) {
     for (p, d) in out.image.iter_mut().zip(&pass.image) {
         *p += *d;
     }

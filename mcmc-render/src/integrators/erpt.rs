@@ -221,7 +221,10 @@ fn seeds<'s>(
             }
         }
         // The shorter paths are the direct pass's.
-        for path in candidates.into_iter().filter(|p| p.segments() >= min_segments) {
+        for path in candidates
+            .into_iter()
+            .filter(|p| p.segments() >= min_segments)
+        {
             let i = path.luminance();
             if !(i > 0.0) || !path.contribution.is_finite() {
                 continue;
