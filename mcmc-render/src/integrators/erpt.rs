@@ -41,8 +41,14 @@
 //! `numChains` 1, `maxChains` 0 (no cap), `chainLength` 100 (its code;
 //! its doc block says 1), `luminanceSamples` 15 000, `bidirectionalMutation`
 //! off, the lens, caustic and multi-chain perturbations on (the last two
-//! since session 20), manifold perturbation off. Mitsuba's 16-spp direct
-//! pass (`directSamples`) is not built here (see `docs/path-space.md`).
+//! since session 20), manifold perturbation off. Mitsuba's direct-lighting
+//! pass (`directSamples`, 16 there) is `direct_samples`, −1 (off) here
+//! (session 21; [`super::chain_passes`], shared with `mlt`): paths of one
+//! and two segments by path tracing at `direct_samples` spp, and the seeds,
+//! the luminance estimate and the chains on three segments or more, as
+//! Mitsuba's `separateDirect`. The estimate `L̄` then holds the chains'
+//! paths alone, so a pass still starts `num_chains` chains per pixel on
+//! average.
 //!
 //! Each chain draws from its own stream, seeded by one draw of its band's
 //! stream (session 20): the band's stream then gives the same seeds and
@@ -76,6 +82,10 @@
 //! from the next pass, whose streams `(seed, pass, band)` and additions are
 //! the uninterrupted run's, so it ends with its bits.
 
+use super::chain_passes::{
+    WithPasses, add_pass, check_direct_depth, check_pass_samples, direct_pass, min_segments,
+    pass_samples,
+};
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
 use crate::checkpoint::{Checkpoint, Progress};
@@ -126,8 +136,10 @@ crate::settings! {
         pub caustic_perturbation: f64 = 1.0, check check::non_negative;
         /// Selection weight of the multi-chain perturbation (Mitsuba: on; 1 here since session 20).
         pub multi_chain_perturbation: f64 = 1.0, check check::non_negative;
+        /// Samples per pixel of the direct-lighting pass (path tracing of paths up to two segments; the seeds and chains take the rest); -1: off, the chains do everything (Mitsuba's default is 16).
+        pub direct_samples: i64 = -1, check check_pass_samples;
         flatten {
-            /// Path depth (rr_depth is not used: seeds are walked without roulette).
+            /// Path depth (rr_depth applies to the direct pass only: seeds are walked without roulette).
             pub depth: DepthParams = DepthParams::default();
         }
     }
@@ -161,21 +173,28 @@ impl Erpt {
         }
     }
 
+    /// Shortest path of the seeds and chains: 3 segments with the direct
+    /// pass.
+    fn min_segments(&self) -> usize {
+        min_segments(self.direct_samples)
+    }
+
     fn kernel<'s>(
         &self,
         clock: Option<&Arc<ProposalClock>>,
     ) -> Result<Mixture<Path<'s>, PathSample>, String> {
         let max = (self.depth.max_depth >= 0).then_some(self.depth.max_depth as usize);
-        self.mutations().kernel_timed(1, max, clock)
+        self.mutations()
+            .kernel_timed(self.min_segments(), max, clock)
     }
 }
 
-/// The seeds of one camera walk through `raster`: paths with their
-/// energies (module docs).
+/// The seeds of one camera walk through `raster`: paths of `min_segments`
+/// segments or more with their energies (module docs).
 fn seeds<'s>(
     scene: &'s Scene,
     raster: Vec2,
-    vertices: usize,
+    (min_segments, vertices): (usize, usize),
     rng: &mut ChainRng,
     camera: &mut Vec<Vertex>,
     light: &mut Vec<Vertex>,
@@ -201,7 +220,11 @@ fn seeds<'s>(
                 candidates.push(path);
             }
         }
-        for path in candidates {
+        // The shorter paths are the direct pass's.
+        for path in candidates
+            .into_iter()
+            .filter(|p| p.segments() >= min_segments)
+        {
             let i = path.luminance();
             if !(i > 0.0) || !path.contribution.is_finite() {
                 continue;
@@ -250,6 +273,7 @@ impl IntegratorSettings for Erpt {
         if self.depth.max_depth == 0 {
             return Err("erpt needs max_depth ≥ 1 or -1 (unbounded)".into());
         }
+        check_direct_depth(Self::NAME, self.direct_samples, self.depth.max_depth)?;
         self.mutations().check_weights()
     }
 
@@ -263,7 +287,7 @@ impl IntegratorSettings for Erpt {
         IntegratorSettings::validate(self).map_err(RenderError::Invalid)?;
         let start = Instant::now();
         let (w, h) = (scene.film.width, scene.film.height);
-        let vertices = self.walk_vertices();
+        let walk = (self.min_segments(), self.walk_vertices());
         let deadline = Deadline::new(start, run.time_budget);
         let time_up = || stop.load(Ordering::Relaxed) || deadline.passed();
         // Whether any rank is stopped: every rank then stops at the same
@@ -279,6 +303,20 @@ impl IntegratorSettings for Erpt {
             Some(c) => resume_point(c, cluster, &filter, &names).map_err(RenderError::Invalid)?,
             None => None,
         };
+        // The direct pass first (module docs): with a checkpoint it is
+        // rendered again on resume, to its sample count whatever the
+        // clock; its image is added to every snapshot and to the result.
+        let direct = pass_samples(self.direct_samples).map(|spp| {
+            direct_pass(
+                scene,
+                run,
+                (spp, self.depth.rr_depth),
+                crate::markov::startup_deadline(deadline, run.checkpoint.is_some()),
+                stop,
+                &WithPasses::progress_only(observer),
+            )
+        });
+        let observer = WithPasses::new(observer, direct.iter().map(|(_, d)| d.image.as_slice()));
         // L̄: mean pixel luminance from independent camera walks (a resumed
         // run's from its checkpoint, on every rank).
         let lum = match &resumed {
@@ -294,7 +332,7 @@ impl IntegratorSettings for Erpt {
                         (uniform(&mut rng) * h as f64) as u32 % h,
                         &mut rng,
                     );
-                    seeds(scene, raster, vertices, &mut rng, &mut camera, &mut light)
+                    seeds(scene, raster, walk, &mut rng, &mut camera, &mut light)
                         .iter()
                         .map(|s| s.1)
                         .sum()
@@ -353,7 +391,7 @@ impl IntegratorSettings for Erpt {
                     for x in 0..w {
                         let raster = in_pixel(x, y, &mut rng);
                         for (path, e) in
-                            seeds(scene, raster, vertices, &mut rng, &mut camera, &mut light)
+                            seeds(scene, raster, walk, &mut rng, &mut camera, &mut light)
                         {
                             out.seeds += 1;
                             let mut chains =
@@ -502,7 +540,7 @@ impl IntegratorSettings for Erpt {
         let serde_json::Value::Object(statistics) = statistics else {
             unreachable!("json! of an object literal is an object")
         };
-        Ok(Rendered {
+        let mut out = Rendered {
             image,
             seconds,
             samples: stats.steps,
@@ -523,7 +561,11 @@ impl IntegratorSettings for Erpt {
                 },
                 if interrupted { ", stopped early" } else { "" }
             ),
-        })
+        };
+        if let Some((spp, pass)) = &direct {
+            add_pass(&mut out, pass, "direct_pass", "direct pass", *spp, start);
+        }
+        Ok(out)
     }
 }
 

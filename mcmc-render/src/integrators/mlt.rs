@@ -23,14 +23,9 @@
 //!   draws that count every technique of their two walks
 //!   ([`crate::path_space::bdpt_startup`]).
 //! - **Direct-lighting pass** (`direct_samples`, Mitsuba's `directSamples`;
-//!   off by default here, 16 in Mitsuba): paths of one and two segments
-//!   (emitters seen directly, direct light) are rendered by path tracing
-//!   with `max_depth` 2 at `direct_samples` samples per pixel, the chains
-//!   keep to paths of three or more segments, and the two images are
-//!   summed. With a time budget the pass runs first and the chains get
-//!   the rest; a pass the budget cuts short keeps the samples per pixel
-//!   it finished (reported in the statistics), so `--time` bounds the run
-//!   whatever `direct_samples` or `specular_samples` say.
+//!   off by default here, 16 in Mitsuba): paths of one and two segments by
+//!   path tracing, the chains on three segments or more
+//!   ([`super::chain_passes`], shared with `erpt`).
 //! - **Specular-chain pass** (`specular_samples`, default 16 spp; not in
 //!   Mitsuba): the paths `L S* E` (emitters seen directly or through
 //!   Dirac vertices only) are path traced
@@ -49,10 +44,12 @@
 //!   saved but rendered again on resume, so with a checkpoint they run to
 //!   their sample counts whatever the time budget.
 
-use super::pt::PathTracer;
+use super::chain_passes::{
+    WithPasses, add_pass, check_direct_depth, check_pass_samples, direct_pass, fixed_spp,
+    pass_done, pass_samples,
+};
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
-use crate::color::Rgb;
 use crate::deadline::Deadline;
 use crate::markov::{self, ChainParams, MltError, MltResult};
 use crate::observer::Observer;
@@ -63,7 +60,6 @@ use crate::path_space::{PathFamily, PathMutations};
 use crate::pss_dump::DumpSampler;
 use crate::scene::Scene;
 use crate::settings::check;
-use serde_json::json;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
@@ -90,9 +86,9 @@ crate::settings! {
         /// Mitsuba 0.6's suitability selection: mutations whose pattern the path does not match are not selected, the others' weights renormalised (the selection ratio enters the acceptance); false: fixed weights.
         pub suitability: bool = false;
         /// Samples per pixel of the direct-lighting pass (path tracing of paths up to two segments; the chains take the rest); -1: off, the chains do everything (Mitsuba's default is 16).
-        pub direct_samples: i64 = -1, check direct_samples;
+        pub direct_samples: i64 = -1, check check_pass_samples;
         /// Samples per pixel of the specular-chain pass (path tracing of the paths L S* E, emitters seen directly or through mirrors and glass, which the chains then leave out: no bidirectional move keeps a vertex of them); -1: off, the chains do them (not in Mitsuba).
-        pub specular_samples: i64 = 16, check direct_samples;
+        pub specular_samples: i64 = 16, check check_pass_samples;
         /// With a time budget, the specular-chain pass runs for this share of it (at least specular_samples spp), so that its noise falls with the budget like the chains'; 0: specular_samples spp alone (the only rule without a time budget).
         pub specular_time_share: f64 = 0.05, check time_share;
         /// Smallest film offset of the lens perturbation (pixels; -1 with lens_perturbation_max = -1: Mitsuba's 0.1).
@@ -175,17 +171,17 @@ impl Mlt {
 
     /// Samples per pixel of the direct-lighting pass, if it runs.
     pub fn direct_pass(&self) -> Option<u32> {
-        u32::try_from(self.direct_samples).ok()
+        pass_samples(self.direct_samples)
     }
 
     /// Samples per pixel of the specular-chain pass, if it runs.
     pub fn specular_pass(&self) -> Option<u32> {
-        u32::try_from(self.specular_samples).ok()
+        pass_samples(self.specular_samples)
     }
 
     /// Shortest path the chains sample: 3 segments with the direct pass.
     pub fn min_segments(&self) -> usize {
-        if self.direct_pass().is_some() { 3 } else { 1 }
+        super::chain_passes::min_segments(self.direct_samples)
     }
 }
 
@@ -198,16 +194,6 @@ fn time_share(v: &f64) -> Result<(), String> {
     }
 }
 
-/// `direct_samples`, `specular_samples`: -1 (off) or a sample count from 1
-/// to 2^32 − 1 (a larger one was clamped silently).
-fn direct_samples(v: &i64) -> Result<(), String> {
-    if *v == -1 || (1..=i64::from(u32::MAX)).contains(v) {
-        Ok(())
-    } else {
-        Err(format!("must be -1 (off) or between 1 and {}", u32::MAX))
-    }
-}
-
 impl IntegratorSettings for Mlt {
     const NAME: &'static str = "mlt";
     const DESCRIPTION: &'static str = "Path-space Metropolis light transport (Veach 1997): the bidirectional mutation and the lens, caustic and multi-chain perturbations (Mitsuba 0.6's selection) on the Markov-chain driver.";
@@ -216,12 +202,7 @@ impl IntegratorSettings for Mlt {
         if self.depth.max_depth == 0 {
             return Err("mlt needs max_depth ≥ 1 or -1 (unbounded)".into());
         }
-        if self.direct_pass().is_some() && (1..=2).contains(&self.depth.max_depth) {
-            return Err(
-                "with direct_samples the chains sample paths of 3 or more segments: give max_depth ≥ 3 or -1, or direct_samples = -1"
-                    .into(),
-            );
-        }
+        check_direct_depth(Self::NAME, self.direct_samples, self.depth.max_depth)?;
         self.sizes()?;
         self.mutations().check()
     }
@@ -249,18 +230,14 @@ impl IntegratorSettings for Mlt {
         // not passed on; the chains' snapshots carry the passes' images.
         let quiet = WithPasses::progress_only(observer);
         let direct = self.direct_pass().map(|spp| {
-            let pt = PathTracer {
-                max_depth: 2,
-                rr_depth: self.depth.rr_depth,
-            };
-            let r = crate::render::run_per_pixel(
+            direct_pass(
                 scene,
-                &pt,
-                &fixed_spp(run, spp, pass_deadline),
+                run,
+                (spp, self.depth.rr_depth),
+                pass_deadline,
                 stop,
                 &quiet,
-            );
-            pass_done(r, stop)
+            )
         });
         // The specular chains of the lengths the chains would sample
         // (the direct pass has those of one and two segments).
@@ -333,54 +310,6 @@ impl IntegratorSettings for Mlt {
     }
 }
 
-/// Passes progress on, and the chains' snapshots with the per-pixel
-/// passes' images added (`None`: no snapshots at all).
-struct WithPasses<'a> {
-    inner: &'a dyn Observer,
-    passes: Option<Vec<&'a [Rgb]>>,
-}
-
-impl<'a> WithPasses<'a> {
-    /// Progress only: no snapshot is passed on.
-    fn progress_only(inner: &'a dyn Observer) -> Self {
-        WithPasses {
-            inner,
-            passes: None,
-        }
-    }
-
-    /// Snapshots with `passes` added one after the other, in the order
-    /// given (as [`add_pass`] adds them to the final image).
-    fn new(inner: &'a dyn Observer, passes: impl Iterator<Item = &'a [Rgb]>) -> Self {
-        WithPasses {
-            inner,
-            passes: Some(passes.collect()),
-        }
-    }
-}
-
-impl Observer for WithPasses<'_> {
-    fn progress(&self, n: u64) {
-        self.inner.progress(n);
-    }
-
-    fn snapshot(&self, image: &dyn Fn() -> Vec<Rgb>, samples: u64) {
-        let Some(passes) = &self.passes else {
-            return;
-        };
-        self.inner.snapshot(
-            &|| {
-                let mut img = image();
-                for pass in passes {
-                    img.iter_mut().zip(*pass).for_each(|(p, d)| *p += *d);
-                }
-                img
-            },
-            samples,
-        );
-    }
-}
-
 /// The specular-chain pass: with a time budget and a positive `share`,
 /// path tracing for `share` of the budget (passes of 1, 2, 4, … spp; the
 /// one cut by the deadline is discarded), else, or when that gave fewer
@@ -421,60 +350,10 @@ fn specular_chains_pass(
     )
 }
 
-/// The samples per pixel a per-pixel pass finished, and the pass marked
-/// interrupted only by a stop (Ctrl-C): ending at its time share or at the
-/// run's deadline is the plan.
-fn pass_done(mut r: Rendered, stop: &AtomicBool) -> (u32, Rendered) {
-    r.interrupted = stop.load(std::sync::atomic::Ordering::Relaxed);
-    let done = r
-        .statistics
-        .get("spp")
-        .and_then(|v| v.as_u64())
-        .unwrap_or(0);
-    (u32::try_from(done).unwrap_or(u32::MAX), r)
-}
-
 /// Bytes a BDPT start-up keeps per draw, at least: its entry (the weighted
 /// techniques' vector and the draw's total, 32 B), the total kept for `b̂`
 /// (8 B) and one weighted technique of the start states (16 B).
 const BDPT_STARTUP_BYTES_PER_DRAW: u128 = 56;
-
-/// `run` with a fixed `spp` per pixel (the per-pixel passes beside the
-/// chains), cut short at the run's `deadline`: without it a pass sized by
-/// a setting (10^15 spp) ran on past `--time`.
-fn fixed_spp(run: &RunSettings, spp: u32, deadline: Deadline) -> RunSettings {
-    RunSettings {
-        spp: Some(spp),
-        time_budget: deadline.time_left(),
-        // The chains' run saves the checkpoint; a resumed run renders
-        // these passes again (to the same images).
-        checkpoint: None,
-        ..run.clone()
-    }
-}
-
-/// Adds a per-pixel pass (`spp` samples per pixel) to the chains' report
-/// `out`: its image, its statistics under `key`, its time (the run's
-/// wall-clock since `start`) and `label` in the summary.
-fn add_pass(out: &mut Rendered, pass: &Rendered, key: &str, label: &str, spp: u32, start: Instant) {
-    for (p, d) in out.image.iter_mut().zip(&pass.image) {
-        *p += *d;
-    }
-    out.statistics.insert(
-        key.into(),
-        json!({
-            "samples_per_pixel": spp,
-            "seconds": pass.seconds,
-            "interrupted": pass.interrupted,
-        }),
-    );
-    out.seconds = start.elapsed().as_secs_f64();
-    out.interrupted |= pass.interrupted;
-    out.summary = format!(
-        "{label} {spp} spp in {:.2} s; {}",
-        pass.seconds, out.summary
-    );
-}
 
 /// Renders `scene` with path-space MLT as `settings` say, timing each
 /// mutation type's proposals into `clock`.

@@ -51,6 +51,7 @@
 //! connection); see the module documentation there.
 
 pub mod bdpt;
+pub mod chain_passes;
 pub mod erpt;
 pub mod fused;
 pub mod guided;
