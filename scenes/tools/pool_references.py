@@ -45,8 +45,12 @@ def main() -> int:
         return 2
     out, out_var = sys.argv[1], sys.argv[2]
     refs = [parse(s) for s in sys.argv[3:5]]
-    imgs = [load(r["image"]) for r in refs]
-    vars_ = [load(r["variance"]) for r in refs]
+    try:
+        imgs = [load(r["image"]) for r in refs]
+        vars_ = [load(r["variance"]) for r in refs]
+    except Exception as e:  # a missing or unreadable EXR: one line, not a traceback
+        print(f"cannot read the inputs: {e}", file=sys.stderr)
+        return 2
     if any(a.shape != imgs[0].shape for a in imgs + vars_):
         print("the images differ in size", file=sys.stderr)
         return 2
