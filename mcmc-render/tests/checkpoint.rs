@@ -76,6 +76,17 @@ impl Observer for StopAfter<'_> {
     }
 }
 
+/// A checkpoint file's path in the temporary directory, unique to this
+/// test process and `tag`, with any stale file of an earlier run removed.
+fn fresh_checkpoint_path(tag: &str) -> std::path::PathBuf {
+    let path = std::env::temp_dir().join(format!(
+        "mcmc-render-checkpoint-{tag}-{}.ckpt",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_file(&path);
+    path
+}
+
 fn bits(img: &[Rgb]) -> Vec<u32> {
     img.iter()
         .flat_map(|c| [c.r.to_bits(), c.g.to_bits(), c.b.to_bits()])
@@ -99,11 +110,7 @@ fn stopped_after_two_passes(
     integ: &dyn Integrator,
     name: &str,
 ) -> (Checkpoint, RenderResult) {
-    let path = std::env::temp_dir().join(format!(
-        "mcmc-render-checkpoint-{name}-{}.ckpt",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_file(&path);
+    let path = fresh_checkpoint_path(name);
     let fresh = Checkpoint {
         path,
         fingerprint: 42,
@@ -240,11 +247,7 @@ fn check_per_pixel_resume(
         .map(|(k, v)| (k.to_string(), v.to_string()))
         .collect();
     let integ = registry::configure(None, Some(name), &sets).expect(name);
-    let path = std::env::temp_dir().join(format!(
-        "mcmc-render-checkpoint-{name}-{}.ckpt",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_file(&path);
+    let path = fresh_checkpoint_path(name);
     let run = |resume: Option<Progress>| RunSettings {
         spp: Some(spp),
         seed: 9,
@@ -353,10 +356,7 @@ fn assert_cut_checkpoint_is_refused(
         spp: Some(4),
         seed: 9,
         checkpoint: Some(Checkpoint {
-            path: std::env::temp_dir().join(format!(
-                "mcmc-render-checkpoint-{name}-cut-{}.ckpt",
-                std::process::id()
-            )),
+            path: fresh_checkpoint_path(&format!("{name}-cut")),
             fingerprint: 42,
             resume: Some(Arc::new(cut)),
             chains: None,
@@ -616,11 +616,7 @@ fn check_markov_resume(
 ) -> (Rendered, Rendered) {
     let (w, h) = (scene.film.width, scene.film.height);
     let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
-    let path = std::env::temp_dir().join(format!(
-        "mcmc-render-checkpoint-{name}-{}.ckpt",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_file(&path);
+    let path = fresh_checkpoint_path(name);
     let load = || {
         load_chains(&path, 7, (w, h), &filter)
             .unwrap()
@@ -740,11 +736,7 @@ fn check_small_steps_are_saved(scene: &Scene, job: (&str, &[(&str, &str)])) {
     let name = job.0;
     let (w, h) = (scene.film.width, scene.film.height);
     let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
-    let path = std::env::temp_dir().join(format!(
-        "mcmc-render-checkpoint-adaptive-{name}-{}.ckpt",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_file(&path);
+    let path = fresh_checkpoint_path(&format!("adaptive-{name}"));
     let stop = AtomicBool::new(false);
     let observer = StopAfter {
         stop: &stop,
@@ -868,10 +860,7 @@ fn a_forged_or_foreign_path_space_checkpoint_is_refused_with_one_line() {
     let scene = repo_scene("cornell-box.xml", 16);
     let (w, h) = (scene.film.width, scene.film.height);
     let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
-    let path = std::env::temp_dir().join(format!(
-        "mcmc-render-checkpoint-mlt-forged-{}.ckpt",
-        std::process::id()
-    ));
+    let path = fresh_checkpoint_path("mlt-forged");
     let after_one = |name: &str| {
         let _ = std::fs::remove_file(&path);
         let stop = AtomicBool::new(false);
@@ -945,11 +934,7 @@ fn a_checkpointed_relt_start_up_is_not_cut_by_the_time_budget() {
     // start-up again and must get the same b̂ and replica sets); without
     // one (the control) the budget cuts both at once.
     let scene = repo_scene_tilted("cornell-glossy-glass.xml", 16, 5);
-    let path = std::env::temp_dir().join(format!(
-        "mcmc-render-checkpoint-relt-startup-{}.ckpt",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_file(&path);
+    let path = fresh_checkpoint_path("relt-startup");
     let run = |checkpoint: bool| RunSettings {
         seed: 5,
         time_budget: Some(Duration::ZERO),
@@ -983,11 +968,7 @@ fn a_damaged_foreign_or_misfitting_markov_checkpoint_is_refused_with_one_line() 
     let scene = repo_scene_tilted("cornell-glossy-glass.xml", 16, 5);
     let (w, h) = (scene.film.width, scene.film.height);
     let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
-    let path = std::env::temp_dir().join(format!(
-        "mcmc-render-checkpoint-relt-damaged-{}.ckpt",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_file(&path);
+    let path = fresh_checkpoint_path("relt-damaged");
     // A checkpoint after one round.
     let stop = AtomicBool::new(false);
     let observer = StopAfter {
@@ -1093,11 +1074,7 @@ fn a_stopped_fused_render_resumed_from_its_checkpoint_ends_bit_identical() {
     assert_eq!(tallies(&resumed), tallies(&whole));
     let (w, h) = (scene.film.width, scene.film.height);
     let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
-    let path = std::env::temp_dir().join(format!(
-        "mcmc-render-checkpoint-fused-kernels-{}.ckpt",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_file(&path);
+    let path = fresh_checkpoint_path("fused-kernels");
     let stop = AtomicBool::new(false);
     let observer = StopAfter {
         stop: &stop,
@@ -1143,11 +1120,7 @@ fn a_forged_fused_checkpoint_is_refused_with_one_line() {
     let scene = repo_scene("cornell-box.xml", 16);
     let (w, h) = (scene.film.width, scene.film.height);
     let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
-    let path = std::env::temp_dir().join(format!(
-        "mcmc-render-checkpoint-fused-forged-{}.ckpt",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_file(&path);
+    let path = fresh_checkpoint_path("fused-forged");
     let stop = AtomicBool::new(false);
     let observer = StopAfter {
         stop: &stop,
@@ -1293,11 +1266,7 @@ fn save_smcmc_tiles(
 #[test]
 fn a_stopped_smcmc_render_resumed_from_its_checkpoint_ends_bit_identical() {
     let scene = repo_scene("cornell-box.xml", 12);
-    let path = std::env::temp_dir().join(format!(
-        "mcmc-render-checkpoint-smcmc-{}.ckpt",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_file(&path);
+    let path = fresh_checkpoint_path("smcmc");
     let stop = AtomicBool::new(false);
     let at_three = StopAfter {
         stop: &stop,
@@ -1378,11 +1347,7 @@ fn a_stopped_smcmc_render_resumed_from_its_checkpoint_ends_bit_identical() {
 fn a_damaged_or_forged_smcmc_checkpoint_is_refused_with_one_line() {
     let scene = repo_scene("cornell-box.xml", 12);
     let size = (scene.film.width, scene.film.height);
-    let path = std::env::temp_dir().join(format!(
-        "mcmc-render-checkpoint-smcmc-forged-{}.ckpt",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_file(&path);
+    let path = fresh_checkpoint_path("smcmc-forged");
     let stop = AtomicBool::new(false);
     let at_two = StopAfter {
         stop: &stop,
@@ -1505,10 +1470,7 @@ fn a_stopped_staged_tempered_render_resumed_from_its_checkpoints_ends_bit_identi
         ("regularization_stages", "2"),
     ];
     let job = ("tempered-pssmlt", &sets[..]);
-    let path = std::env::temp_dir().join(format!(
-        "mcmc-render-checkpoint-staged-{}.ckpt",
-        std::process::id()
-    ));
+    let path = fresh_checkpoint_path("staged");
     let stage1 = std::path::PathBuf::from(format!("{}.stage1", path.display()));
     let clear = || [&path, &stage1].map(|p| std::fs::remove_file(p).is_ok());
     clear();
