@@ -98,7 +98,10 @@ const CHAINS_FAMILY: &[u8; 6] = b"mcmcCH";
 /// kind, their number, the seed and the caller's fingerprint of the rest
 /// of the input.
 pub(crate) fn chains_fingerprint(kind: &str, chains: usize, seed: u64, input: u64) -> u64 {
-    fnv1a_words(&[chains as u64, seed, input], fnv1a(kind.as_bytes(), FNV_OFFSET))
+    fnv1a_words(
+        &[chains as u64, seed, input],
+        fnv1a(kind.as_bytes(), FNV_OFFSET),
+    )
 }
 
 /// A multi-chain checkpoint: the magic, the fingerprint, the number of
@@ -216,7 +219,10 @@ mod tests {
         assert_eq!(decode_chains(p, &bytes, fp, 3).unwrap(), chains);
         let message = |b: &[u8], fp: u64, n: usize| {
             let e = decode_chains(p, b, fp, n).unwrap_err().to_string();
-            assert!(e.starts_with("checkpoint run.ckpt ") && !e.contains('\n'), "{e}");
+            assert!(
+                e.starts_with("checkpoint run.ckpt ") && !e.contains('\n'),
+                "{e}"
+            );
             e
         };
         // Another seed, chain count, kind or input fingerprint.

@@ -12,8 +12,8 @@
 //! threads changes nothing in the result. [`crate::fit::sample_nuts_resumable`]
 //! is a NUTS fit on it; `docs/user-guide-hmc.md` has a recipe.
 
-use crate::checkpoint::{chains_fingerprint, decode_chains, encode_chains, read_optional};
 use crate::checkpoint::write_atomically;
+use crate::checkpoint::{chains_fingerprint, decode_chains, encode_chains, read_optional};
 use crate::error::{CoreError, Result};
 use crate::rng::ChainRng;
 use crate::runner::run_chains;
@@ -95,7 +95,10 @@ impl Stop {
     /// Whether to stop after `iterations` per chain in this session.
     pub(crate) fn requested(&self, iterations: u64) -> bool {
         self.deadline.is_some_and(|d| Instant::now() >= d)
-            || self.flag.as_ref().is_some_and(|f| f.load(Ordering::Relaxed))
+            || self
+                .flag
+                .as_ref()
+                .is_some_and(|f| f.load(Ordering::Relaxed))
             || self.iterations.is_some_and(|n| iterations >= n)
     }
 }
@@ -282,7 +285,11 @@ pub(crate) fn restore_all<C: ResumableChain>(
         .zip(words)
         .map(|(c, w)| c.restore(w).err())
         .collect();
-    match failed.into_iter().enumerate().find_map(|(i, e)| Some((i, e?))) {
+    match failed
+        .into_iter()
+        .enumerate()
+        .find_map(|(i, e)| Some((i, e?)))
+    {
         Some((i, why)) => Err(CoreError::Checkpoint(format!(
             "{} is corrupt or of another input: chain {}: {why}",
             path.display(),

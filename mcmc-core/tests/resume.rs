@@ -222,7 +222,10 @@ fn controls_a_reset_stream_or_dropped_adaptation_gives_other_draws() {
     let mut dropped = at_100.clone();
     for (c, i) in dropped.iter_mut().zip(&initial) {
         let n = i.len() - KERNEL; // the kernel's words and 2 of seconds
-        c.splice(KERNEL..KERNEL + n - 2, i[KERNEL..KERNEL + n - 2].iter().copied());
+        c.splice(
+            KERNEL..KERNEL + n - 2,
+            i[KERNEL..KERNEL + n - 2].iter().copied(),
+        );
     }
     for (name, chains) in [("streams reset", reset), ("adaptation dropped", dropped)] {
         let fit = resume_with(&chains);

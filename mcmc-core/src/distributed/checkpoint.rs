@@ -67,9 +67,9 @@ pub(crate) fn read_on_rank_0(
             message.remove(0);
             Ok(Some(message))
         }
-        _ => Err(DistributedError::Checkpoint(own_error.unwrap_or_else(|| {
-            "rank 0 could not read the checkpoint (its error is printed there)".into()
-        }))),
+        _ => Err(DistributedError::Checkpoint(own_error.unwrap_or_else(
+            || "rank 0 could not read the checkpoint (its error is printed there)".into(),
+        ))),
     }
 }
 

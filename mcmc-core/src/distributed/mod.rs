@@ -39,8 +39,8 @@ mod comm;
 mod replica;
 mod wire;
 
-pub use chains::{run_chains_distributed, run_resumable_distributed};
 pub use crate::checkpoint::{FNV_OFFSET, fnv1a};
+pub use chains::{run_chains_distributed, run_resumable_distributed};
 pub use comm::{Traffic, agree, all_gather_u64, broadcast_bytes, gather_bytes, share};
 pub use mpi;
 pub use replica::{DistributedReplicaExchange, DistributedSchedule};

@@ -4,13 +4,13 @@ use super::DistributedError;
 use super::checkpoint::{
     REPLICA_MAGIC, REPLICA_MAGIC_V1, read_on_rank_0, rng_from_words, rng_words, write_on_rank_0,
 };
-use crate::checkpoint::{FNV_OFFSET, fnv1a};
 use super::comm::{
-    Traffic, agree, all_gather_u64, exchange_bytes, exchange_pair,
-    gather_bytes, receive_bytes, send_bytes, share, tag,
+    Traffic, agree, all_gather_u64, exchange_bytes, exchange_pair, gather_bytes, receive_bytes,
+    send_bytes, share, tag,
 };
 use super::wire::{Wire, decode, encode};
 use crate::chain::{Algorithm, ChainState, Transition};
+use crate::checkpoint::{FNV_OFFSET, fnv1a};
 use crate::mh::accept;
 use crate::replica::ensemble::{EXCHANGE_STREAM, Observer, level_chains};
 use crate::replica::{
@@ -658,34 +658,34 @@ where
             .collect();
         let local = encode(&(levels, self.local_pairs()));
         let bytes = gather_bytes(&self.comm, &mut self.traffic, &local).map(|blocks| {
-                let mut all = Vec::with_capacity(self.levels());
-                let mut pairs = Vec::with_capacity(blocks.len());
-                for b in blocks {
-                    let (l, p): (Vec<LevelRecord<S, F::Payload>>, Vec<PairCounts>) =
-                        decode(&b).expect("a rank's checkpoint block");
-                    all.extend(l);
-                    pairs.push(p);
-                }
-                let pooled = pool_pairs(self.levels(), pairs)
-                    .iter()
-                    .map(|p| (p.attempted, (p.accepted, p.sum_alpha)))
-                    .collect();
-                // Rank 0 ends every sweep, so its stream position is the
-                // run's (in a neighbour sweep the others' may lag).
-                let file: CheckpointFile<S, F::Payload> = (
-                    REPLICA_MAGIC,
+            let mut all = Vec::with_capacity(self.levels());
+            let mut pairs = Vec::with_capacity(blocks.len());
+            for b in blocks {
+                let (l, p): (Vec<LevelRecord<S, F::Payload>>, Vec<PairCounts>) =
+                    decode(&b).expect("a rank's checkpoint block");
+                all.extend(l);
+                pairs.push(p);
+            }
+            let pooled = pool_pairs(self.levels(), pairs)
+                .iter()
+                .map(|p| (p.attempted, (p.accepted, p.sum_alpha)))
+                .collect();
+            // Rank 0 ends every sweep, so its stream position is the
+            // run's (in a neighbour sweep the others' may lag).
+            let file: CheckpointFile<S, F::Payload> = (
+                REPLICA_MAGIC,
+                (
+                    self.fingerprint,
                     (
-                        self.fingerprint,
-                        (
-                            self.sweeps,
-                            (self.drawn, (rng_words(&self.rng), (all, pooled))),
-                        ),
+                        self.sweeps,
+                        (self.drawn, (rng_words(&self.rng), (all, pooled))),
                     ),
-                );
-                let mut bytes = encode(&file);
-                let checksum = fnv1a(&bytes, FNV_OFFSET);
-                bytes.extend_from_slice(&checksum.to_le_bytes());
-                bytes
+                ),
+            );
+            let mut bytes = encode(&file);
+            let checksum = fnv1a(&bytes, FNV_OFFSET);
+            bytes.extend_from_slice(&checksum.to_le_bytes());
+            bytes
         });
         write_on_rank_0(&self.comm, &mut self.traffic, path, bytes)
     }
