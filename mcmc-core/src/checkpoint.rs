@@ -143,7 +143,7 @@ pub(crate) fn decode_chains(
     }
     // Checked before anything in it is read: a flipped bit or a cut copy
     // is refused, not continued.
-    if bytes.len() % 8 != 0 || bytes.len() < 32 {
+    if !bytes.len().is_multiple_of(8) || bytes.len() < 32 {
         return Err(refuse(
             "is damaged: cut short (not a whole number of words)".into(),
         ));

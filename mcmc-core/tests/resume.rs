@@ -112,6 +112,10 @@ fn stopped_and_resumed(name: &str, sessions: &[(u64, u64)], last_block: u64) -> 
     timeless(fit.expect("finished"))
 }
 
+/// A name, the sessions that stop (iterations per chain, block size),
+/// the last session's block size.
+type Plan = (&'static str, &'static [(u64, u64)], u64);
+
 #[test]
 fn a_fit_stopped_anywhere_and_resumed_is_bit_identical_on_1_and_3_threads() {
     let whole = timeless(sample_nuts(&TARGET, &settings(), NO_INIT).unwrap());
@@ -121,7 +125,7 @@ fn a_fit_stopped_anywhere_and_resumed_is_bit_identical_on_1_and_3_threads() {
         // warm-up's first window, at its end exactly (150), in the draws,
         // one iteration before the end, and blocks that straddle the end
         // of the warm-up.
-        let plans: [(&str, &[(u64, u64)], u64); 4] = [
+        let plans: [Plan; 4] = [
             ("early", &[(1, 1), (39, 13)], 50),
             ("warmup-end", &[(150, 50)], 7),
             ("draws", &[(70, 7), (100, 100), (79, 1)], 33),
