@@ -111,7 +111,9 @@ pub struct Checkpointing {
     /// when the run stops and at its end.
     pub path: PathBuf,
     /// Iterations each chain makes between two looks at the clock and at
-    /// [`Self::stop`] (at least 1; default 100).
+    /// [`Self::stop`] (at least 1; default 100). On MPI ranks the ranks
+    /// meet between blocks: make a block take milliseconds, not
+    /// microseconds (oversubscribed ranks meet slowly).
     pub block: u64,
     /// Time between two checkpoints (zero: after every block; default 60 s).
     pub every: Duration,
