@@ -351,6 +351,10 @@ fn walks_single(steps: u64) -> Vec<Vec<u64>> {
     })
 }
 
+/// Where a walks run resumed from, its total iterations, its outputs
+/// (when it finished).
+type WalksRun = (u64, u64, Option<Vec<Vec<u64>>>);
+
 /// The walks on the ranks of `world`, through `path`: on rank 0 where the
 /// run resumed from and the outputs when it finished.
 fn walks_distributed<C: Communicator>(
@@ -359,7 +363,7 @@ fn walks_distributed<C: Communicator>(
     path: &Path,
     (block, every): (u64, Duration),
     stop: Stop,
-) -> std::result::Result<Option<(u64, u64, Option<Vec<Vec<u64>>>)>, DistributedError> {
+) -> std::result::Result<Option<WalksRun>, DistributedError> {
     let mut ck = ChainCheckpointing::new(path);
     (ck.block, ck.every, ck.stop) = (block, every, stop);
     let make = |c: usize, rng: ChainRng| WalkChain::new(c, rng, steps);

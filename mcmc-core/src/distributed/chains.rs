@@ -60,6 +60,11 @@ where
     Ok((Some(out), traffic))
 }
 
+/// What [`run_resumable_distributed`] returns on a rank: the run's
+/// outputs and progress on rank 0 (`None` on the others), and the rank's
+/// traffic.
+pub type RankOutcome<T> = (Option<Checkpointed<T>>, Traffic);
+
 /// [`crate::resume::run_resumable`] over ranks: each rank makes, advances
 /// and saves the chains of its block [`share`]`(chains, size, rank)`, and
 /// the run continues from `checkpointing.path` on any number of ranks.
@@ -87,7 +92,7 @@ pub fn run_resumable_distributed<C, Comm>(
     seed: u64,
     make: impl Fn(usize, ChainRng) -> crate::Result<C> + Sync + Send,
     checkpointing: &Checkpointing,
-) -> Result<(Option<Checkpointed<C::Output>>, Traffic), DistributedError>
+) -> Result<RankOutcome<C::Output>, DistributedError>
 where
     C: ResumableChain,
     C::Output: Wire,

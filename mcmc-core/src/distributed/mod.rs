@@ -40,7 +40,7 @@ mod replica;
 mod wire;
 
 pub use crate::checkpoint::{FNV_OFFSET, fnv1a};
-pub use chains::{run_chains_distributed, run_resumable_distributed};
+pub use chains::{RankOutcome, run_chains_distributed, run_resumable_distributed};
 pub use comm::{Traffic, agree, all_gather_u64, broadcast_bytes, gather_bytes, share};
 pub use mpi;
 pub use replica::{DistributedReplicaExchange, DistributedSchedule};
