@@ -30,19 +30,35 @@
 //! if it exists, checkpoints every `E` sweeps and at the end compares with
 //! one process, so a run killed at any moment (`timeout -s TERM`) and
 //! started again, on any number of ranks, must still agree.
+//!
+//! Resumable chains (`run_resumable_distributed`): (4) 10 random-walk
+//! chains stopped after 120 of 300 iterations per chain, resumed from the
+//! file and finished, must equal `run_chains` of the same chains run
+//! without a stop (each chain's output is a hash of every draw, its last
+//! state and `ln π`). `--chains-checkpoint FILE` (with `--steps N`
+//! iterations per chain, `--every-ms M` between checkpoints) runs only
+//! that, resuming from `FILE` if it exists, and prints where it resumed
+//! from (`resumed from R of T iterations`); a resumed run (R > 0) is then
+//! compared with one process, so a run killed at any moment and started
+//! again on another number of ranks must still agree.
 
+use mcmc_core::checkpoint::{FNV_OFFSET, fnv1a};
 use mcmc_core::distributed::mpi::topology::Communicator;
 use mcmc_core::distributed::{
     DistributedError, DistributedReplicaExchange, DistributedSchedule, mpi, run_chains_distributed,
+    run_resumable_distributed,
 };
 use mcmc_core::prelude::*;
 use mcmc_core::replica::{
     EvenOdd, ExchangeMove, NeighbourSwap, PowerFamily, ReplicaExchange, Tempered,
     betas_from_temperatures, geometric_temperatures, kernel_scales,
 };
+use mcmc_core::resume::{Checkpointing as ChainCheckpointing, ResumableChain, Stop};
+use mcmc_core::rng::{rng_from_words, rng_words};
 use mcmc_core::runner::run_chains;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::time::Duration;
 
 const SEED: u64 = 20;
 const LEVELS: usize = 7;
@@ -246,6 +262,115 @@ fn chain_work(c: usize, rng: ChainRng) -> Vec<f64> {
     out
 }
 
+type WalkAlg = MetropolisHastings<GaussianRandomWalk, Vec<f64>, ()>;
+
+/// A random-walk chain on the four modes as a resumable state: its chain
+/// (state, `ln π`, generator), iterations done, and an FNV-1a hash of
+/// every draw's bits so far (the draws themselves would not fit in memory
+/// for long runs).
+struct WalkChain {
+    chain: Chain<Vec<f64>, (), WalkAlg>,
+    done: u64,
+    total: u64,
+    hash: u64,
+}
+
+impl WalkChain {
+    fn new(c: usize, rng: ChainRng, total: u64) -> mcmc_core::Result<Self> {
+        let mh = MetropolisHastings::new(GaussianRandomWalk::isotropic(0.5)?);
+        let start = vec![c as f64 - 2.0, 1.0];
+        Ok(WalkChain {
+            chain: Chain::new(&log_target, start, mh, rng)?,
+            done: 0,
+            total,
+            hash: FNV_OFFSET,
+        })
+    }
+}
+
+impl ResumableChain for WalkChain {
+    /// The hash of the draws, the last state's bits and its `ln π`'s.
+    type Output = Vec<u64>;
+    const KIND: &'static str = "mpi-determinism-walk";
+
+    fn total(&self) -> u64 {
+        self.total
+    }
+    fn done(&self) -> u64 {
+        self.done
+    }
+    fn advance(&mut self, n: u64) {
+        for _ in 0..n.min(self.total - self.done) {
+            self.chain.step(&log_target);
+            for x in self.chain.state() {
+                self.hash = fnv1a(&x.to_bits().to_le_bytes(), self.hash);
+            }
+            self.done += 1;
+        }
+    }
+    fn save(&self, out: &mut Vec<u64>) {
+        out.extend([self.done, self.hash]);
+        out.extend(rng_words(self.chain.rng()));
+        out.extend(bits(self.chain.state()));
+    }
+    fn restore(&mut self, words: &[u64]) -> std::result::Result<(), String> {
+        let [done, hash, r0, r1, r2, r3, x0, x1] = words
+            .try_into()
+            .map_err(|_| format!("{} words, not 8", words.len()))?;
+        if done > self.total {
+            return Err(format!("{done} of {} iterations", self.total));
+        }
+        let rng = rng_from_words([r0, r1, r2, r3]).ok_or("a zero generator")?;
+        let state = vec![f64::from_bits(x0), f64::from_bits(x1)];
+        let current = Sample::evaluate(&log_target, state);
+        if !current.log_density.is_finite() {
+            return Err("a state outside the support".into());
+        }
+        let parts = self.chain.parts_mut();
+        (parts.current, parts.rng) = (current, rng);
+        (self.done, self.hash) = (done, hash);
+        Ok(())
+    }
+    fn finish(self) -> Vec<u64> {
+        let mut out = vec![self.hash];
+        out.extend(bits(self.chain.state()));
+        out.push(self.chain.current().log_density.to_bits());
+        out
+    }
+}
+
+/// Resumable chains of the `--chains-checkpoint` run and of check (4).
+const WALKS: usize = 10;
+
+/// The walks run to their end in one process, without a stop.
+fn walks_single(steps: u64) -> Vec<Vec<u64>> {
+    run_chains(WALKS, SEED, |c, rng| {
+        let mut w = WalkChain::new(c, rng, steps).expect("walk");
+        w.advance(steps);
+        w.finish()
+    })
+}
+
+/// Where a walks run resumed from, its total iterations, its outputs
+/// (when it finished).
+type WalksRun = (u64, u64, Option<Vec<Vec<u64>>>);
+
+/// The walks on the ranks of `world`, through `path`: on rank 0 where the
+/// run resumed from and the outputs when it finished.
+fn walks_distributed<C: Communicator>(
+    world: &C,
+    steps: u64,
+    path: &Path,
+    (block, every): (u64, Duration),
+    stop: Stop,
+) -> std::result::Result<Option<WalksRun>, DistributedError> {
+    let mut ck = ChainCheckpointing::new(path);
+    (ck.block, ck.every, ck.stop) = (block, every, stop);
+    let make = |c: usize, rng: ChainRng| WalkChain::new(c, rng, steps);
+    let (out, _) = run_resumable_distributed(world, WALKS, SEED, make, &ck)?;
+    Ok(out.map(|r| (r.progress.resumed_from, r.progress.total, r.outputs)))
+}
+
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().collect();
     let flag = |name: &str| {
@@ -273,6 +398,16 @@ fn main() -> ExitCode {
 
     if let Some(file) = checkpoint_file {
         return resume_only(&world, &file, sweeps, every);
+    }
+    let chains_file = args
+        .iter()
+        .position(|a| a == "--chains-checkpoint")
+        .and_then(|i| args.get(i + 1))
+        .map(PathBuf::from);
+    if let Some(file) = chains_file {
+        let steps = flag("--steps").unwrap_or(1_000_000) as u64;
+        let every = Duration::from_millis(flag("--every-ms").unwrap_or(500) as u64);
+        return walks_resume_only(&world, &file, steps, every);
     }
 
     // (1) Independent chains.
@@ -377,13 +512,89 @@ fn main() -> ExitCode {
             Ok(None) => {}
         }
     }
+
+    // (4) Resumable chains: stopped after 120 iterations per chain,
+    // resumed from the file (on the same ranks), finished.
+    let path =
+        std::env::temp_dir().join(format!("mpi_determinism_walks_{}.ckpt", std::process::id()));
+    let _ = std::fs::remove_file(&path);
+    let stop = Stop::never().after_iterations(120);
+    let often = (20, Duration::ZERO);
+    let resumed = walks_distributed(&world, 300, &path, often, stop)
+        .and_then(|_| walks_distributed(&world, 300, &path, often, Stop::never()));
+    let _ = std::fs::remove_file(&path);
+    match resumed {
+        Err(e) => {
+            if rank == 0 {
+                eprintln!("mpi_determinism: error: {e}");
+            }
+            return ExitCode::from(2);
+        }
+        Ok(Some((from, _, outputs))) => {
+            if from != 120 * WALKS as u64 {
+                mismatches.push(format!("resumable chains resumed from {from}, not 1200"));
+            }
+            if outputs != Some(walks_single(300)) {
+                mismatches.push("resumable chains' outputs after the resume".into());
+            }
+            // Control: another number of iterations gives other outputs.
+            if outputs == Some(walks_single(299)) {
+                mismatches.push("resumable chains: control with 299 iterations agreed".into());
+            }
+        }
+        Ok(None) => {}
+    }
     report(
         rank,
         size,
         sweeps,
         mismatches,
-        "multi-chain and replica exchange (even-odd, neighbour",
+        "multi-chain, resumable chains and replica exchange (even-odd, neighbour",
     )
+}
+
+/// `--chains-checkpoint FILE`: the walks of `steps` iterations per chain,
+/// resumed from `FILE` when it exists, checkpointed every `every`,
+/// compared with one process at the end.
+fn walks_resume_only<C: Communicator>(
+    world: &C,
+    file: &Path,
+    steps: u64,
+    every: Duration,
+) -> ExitCode {
+    let rank = world.rank() as usize;
+    // Blocks of 50 000 iterations (~15 ms a chain): the ranks meet
+    // between blocks, and oversubscribed ranks meet slowly.
+    match walks_distributed(world, steps, file, (50_000, every), Stop::never()) {
+        Err(e) => {
+            if rank == 0 {
+                eprintln!("mpi_determinism: error: {e}");
+            }
+            ExitCode::from(2)
+        }
+        Ok(Some((from, total, outputs))) => {
+            println!("mpi_determinism: resumable chains resumed from {from} of {total} iterations");
+            // A fresh run is the one a test kills: it leaves at once
+            // (after its last checkpoint, a kill would leave a finished
+            // file, and the resume would test nothing).
+            if from == 0 {
+                return ExitCode::SUCCESS;
+            }
+            if outputs == Some(walks_single(steps)) {
+                println!(
+                    "mpi_determinism: {} rank(s): resumable chains ({WALKS} x {steps} iterations) bit-identical to one process",
+                    world.size()
+                );
+                ExitCode::SUCCESS
+            } else {
+                eprintln!(
+                    "mpi_determinism: MISMATCH: resumable chains' outputs against one process"
+                );
+                ExitCode::from(1)
+            }
+        }
+        Ok(None) => ExitCode::SUCCESS,
+    }
 }
 
 /// Prints the outcome on rank 0; the exit status.

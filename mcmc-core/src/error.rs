@@ -41,6 +41,10 @@ pub enum CoreError {
     /// The kernel cannot evaluate its proposal density, which the requested algorithm needs.
     #[error("the kernel does not provide its proposal density, which {0} needs")]
     MissingProposalDensity(&'static str),
+    /// A checkpoint could not be written, read or continued: of another
+    /// run, another format version, damaged, cut, or inconsistent.
+    #[error("checkpoint {0}")]
+    Checkpoint(String),
 }
 
 /// Shorthand for results of this crate.

@@ -5,17 +5,21 @@
 //! Chains run in parallel on rayon through [`run_chains`]: chain `c` draws
 //! its initial point and every transition from `stream_rng(seed, c)` only,
 //! so a fit is bit-identical for any number of threads.
+//! [`sample_nuts_resumable`] is the same fit saved to a checkpoint file and
+//! continued from it ([`crate::resume`]), with the same bits.
 
 use crate::adaptation::{
     AcceptanceStatistic, MetricAdaptation, StepSizeAdaptation, WarmupSchedule,
 };
 use crate::chain::Chain;
+use crate::checkpoint::{fnv1a, put_f64s, take_f64s, take_word, take_words};
 use crate::diagnostics::{DiagnosticsError, Summary, e_bfmi, summarize};
 use crate::error::{Result, invalid};
-use crate::gradient::{Differentiable, GradientTarget};
+use crate::gradient::{Differentiable, GradientPayload, GradientTarget};
 use crate::kernel::{GradientKernelStatistics, Nuts, NutsDrawStatistics};
 use crate::mh::MetropolisHastings;
-use crate::rng::uniform;
+use crate::resume::{Checkpointing, Progress, ResumableChain, run_resumable};
+use crate::rng::{rng_from_words, rng_words, uniform};
 use crate::runner::run_chains;
 use crate::sample::Sample;
 use std::time::Instant;
@@ -220,16 +224,126 @@ where
     G: GradientTarget + Clone + Send + Sync,
     I: Fn(usize) -> Vec<f64> + Sync,
 {
+    check_settings(settings)?;
+    let t = Differentiable(target.clone());
+    let chains = run_chains(settings.chains, settings.seed, |c, rng| {
+        let mut chain = NutsChain::new(&t, settings, init.as_ref(), c, rng)?;
+        chain.advance(chain.total());
+        Ok(chain.finish())
+    });
+    Ok(Fit {
+        settings: settings.clone(),
+        chains: chains.into_iter().collect::<Result<_>>()?,
+    })
+}
+
+/// [`sample_nuts`] that can be stopped and continued: its chains run in
+/// blocks through [`run_resumable`], saved to `checkpointing.path` every
+/// [`Checkpointing::every`], when `checkpointing.stop` stops the run and
+/// at the end, and continued from that file when it exists. Returns the
+/// fit when the run got to its end (`None` when it stopped first) and how
+/// far it got. The fit is bit-identical to [`sample_nuts`]'s (but for
+/// [`ChainFit::seconds`]), for any number of threads and however the run
+/// was cut into sessions.
+///
+/// The file holds, per chain, its position (state, `ln π`, gradient), its
+/// generator, the kernel's step size, metric and warm-up (dual averaging,
+/// the metric estimator's sums, the iteration), its counters and its draws
+/// so far with their statistics (about `(d + 8)·8` bytes per draw). It is
+/// tied to `settings` (all of them), the dimension and
+/// `checkpointing.fingerprint`; a resume evaluates each chain's state once
+/// and refuses a log density other than the recorded one (another target).
+/// Errors as [`sample_nuts`], and [`CoreError::Checkpoint`] (one line) for
+/// a file of another run, of another format version, damaged or cut.
+///
+/// ```
+/// use mcmc_core::fit::{NutsSettings, sample_nuts, sample_nuts_resumable};
+/// use mcmc_core::gradient::FiniteDifference;
+/// use mcmc_core::resume::{Checkpointing, Stop};
+/// let g = FiniteDifference::new(|x: &[f64]| -0.5 * x[0] * x[0], 1);
+/// let s = NutsSettings { chains: 2, warmup: 100, draws: 100, ..Default::default() };
+/// let path = std::env::temp_dir().join(format!("fit-{}.ckpt", std::process::id()));
+/// let _ = std::fs::remove_file(&path);
+/// let mut ck = Checkpointing::new(&path);
+/// ck.block = 50;
+/// ck.stop = Stop::never().after_iterations(120); // or .after(time), .on_flag(ctrl_c)
+/// let (fit, progress) = sample_nuts_resumable(&g, &s, None::<fn(usize) -> Vec<f64>>, &ck).unwrap();
+/// assert!(fit.is_none() && progress.done == 2 * 150);
+/// ck.stop = Stop::never();
+/// let (fit, progress) = sample_nuts_resumable(&g, &s, None::<fn(usize) -> Vec<f64>>, &ck).unwrap();
+/// assert_eq!(progress.resumed_from, 2 * 150);
+/// let whole = sample_nuts(&g, &s, None::<fn(usize) -> Vec<f64>>).unwrap();
+/// assert_eq!(fit.unwrap().draws(), whole.draws());
+/// # let _ = std::fs::remove_file(&path);
+/// ```
+pub fn sample_nuts_resumable<G, I>(
+    target: &G,
+    settings: &NutsSettings,
+    init: Option<I>,
+    checkpointing: &Checkpointing,
+) -> Result<(Option<Fit>, Progress)>
+where
+    G: GradientTarget + Clone + Send + Sync,
+    I: Fn(usize) -> Vec<f64> + Sync,
+{
+    check_settings(settings)?;
+    let t = Differentiable(target.clone());
+    let mut checkpointing = checkpointing.clone();
+    // Every setting (Debug prints each number exactly) and the dimension.
+    let fingerprint = format!("{settings:?} d={}", target.dim());
+    checkpointing.fingerprint = fnv1a(fingerprint.as_bytes(), checkpointing.fingerprint);
+    let run = run_resumable(
+        settings.chains,
+        settings.seed,
+        |c, rng| NutsChain::new(&t, settings, init.as_ref(), c, rng),
+        &checkpointing,
+    )?;
+    let fit = run.outputs.map(|chains| Fit {
+        settings: settings.clone(),
+        chains,
+    });
+    Ok((fit, run.progress))
+}
+
+fn check_settings(settings: &NutsSettings) -> Result<()> {
     if settings.chains == 0 {
         return Err(invalid("chains", "must be at least 1"));
     }
     if !(settings.init_radius.is_finite() && settings.init_radius >= 0.0) {
         return Err(invalid("init_radius", "must be finite and non-negative"));
     }
-    let d = target.dim();
-    let t = Differentiable(target.clone());
-    let chains = run_chains(settings.chains, settings.seed, |c, mut rng| {
-        let mut nuts = Nuts::new(target.clone(), settings.initial_step_size)?
+    Ok(())
+}
+
+/// A restored chain's recorded `ln π` and its state's evaluation must
+/// agree to this relative precision (they are the same computation; a
+/// larger difference is another target).
+const RESTORED_DENSITY_TOLERANCE: f64 = 1e-9;
+
+type NutsAlgorithm<G> = MetropolisHastings<Nuts<G>, Vec<f64>, GradientPayload>;
+
+/// One chain of a fit as an explicit state: warm-up iterations, then
+/// draws, `iteration` of them made so far.
+struct NutsChain<'a, G: GradientTarget> {
+    target: &'a Differentiable<G>,
+    warmup: u64,
+    total: u64,
+    chain: Chain<Vec<f64>, GradientPayload, NutsAlgorithm<G>>,
+    iteration: u64,
+    fit: ChainFit,
+}
+
+impl<'a, G: GradientTarget + Clone> NutsChain<'a, G> {
+    /// Chain `c` at its initial point (`init(c)`, or drawn from `rng`).
+    fn new<I: Fn(usize) -> Vec<f64>>(
+        target: &'a Differentiable<G>,
+        settings: &NutsSettings,
+        init: Option<&I>,
+        c: usize,
+        mut rng: crate::rng::ChainRng,
+    ) -> Result<Self> {
+        let d = target.0.dim();
+        let mut nuts = Nuts::new(target.0.clone(), settings.initial_step_size)?
             .with_max_depth(settings.max_depth)?
             .with_warmup(settings.warmup, settings.target_accept, settings.metric)?
             .with_warmup_schedule(WarmupSchedule::new(
@@ -240,7 +354,7 @@ where
             ))?
             .with_step_size_adaptation(settings.step_size_adaptation)
             .with_acceptance_statistic(settings.acceptance_statistic);
-        let start = match &init {
+        let start = match init {
             Some(f) => f(c),
             // Like Stan, up to 100 attempts at a point of finite density
             // (a non-finite gradient makes it NaN); optionally also at a
@@ -253,7 +367,7 @@ where
                     x = (0..d)
                         .map(|_| settings.init_radius * (2.0 * uniform(&mut rng) - 1.0))
                         .collect();
-                    let s = Sample::evaluate(&t, x.clone());
+                    let s = Sample::evaluate(target, x.clone());
                     if s.log_density.is_finite()
                         && (!settings.retry_stiff_inits
                             || nuts.search_initial_step_size(&s, &mut rng).is_some())
@@ -270,39 +384,168 @@ where
                 got: start.len(),
             });
         }
-        let mut chain = Chain::new(&t, start, MetropolisHastings::new(nuts), rng)?;
+        let mut chain = Chain::new(target, start, MetropolisHastings::new(nuts), rng)?;
+        if settings.warmup == 0 {
+            chain.freeze();
+        }
+        Ok(NutsChain {
+            target,
+            warmup: settings.warmup as u64,
+            total: (settings.warmup + settings.draws) as u64,
+            chain,
+            iteration: 0,
+            fit: ChainFit {
+                draws: Vec::with_capacity(settings.draws),
+                log_density: Vec::with_capacity(settings.draws),
+                statistics: Vec::with_capacity(settings.draws),
+                step_size: 0.0,
+                inverse_metric: Vec::new(),
+                dense_metric: false,
+                kernel: GradientKernelStatistics::default(),
+                seconds: (0.0, 0.0),
+            },
+        })
+    }
+}
+
+impl<G: GradientTarget + Clone + Send + Sync> ResumableChain for NutsChain<'_, G> {
+    type Output = ChainFit;
+    const KIND: &'static str = "nuts-fit";
+
+    fn total(&self) -> u64 {
+        self.total
+    }
+
+    fn done(&self) -> u64 {
+        self.iteration
+    }
+
+    fn advance(&mut self, n: u64) {
+        let end = self.iteration.saturating_add(n).min(self.total);
         let clock = Instant::now();
-        for _ in 0..settings.warmup {
-            chain.step(&t);
+        while self.iteration < end.min(self.warmup) {
+            self.chain.step(self.target);
+            self.iteration += 1;
+            if self.iteration == self.warmup {
+                self.chain.freeze();
+            }
         }
-        chain.freeze();
         let warm = clock.elapsed().as_secs_f64();
-        let mut fit = ChainFit {
-            draws: Vec::with_capacity(settings.draws),
-            log_density: Vec::with_capacity(settings.draws),
-            statistics: Vec::with_capacity(settings.draws),
-            step_size: 0.0,
-            inverse_metric: Vec::new(),
-            dense_metric: false,
-            kernel: GradientKernelStatistics::default(),
-            seconds: (warm, 0.0),
-        };
-        for _ in 0..settings.draws {
-            chain.step(&t);
-            fit.draws.push(chain.state().clone());
-            fit.log_density.push(chain.current().log_density);
-            fit.statistics.push(chain.algorithm().kernel().last_draw());
+        while self.iteration < end {
+            self.chain.step(self.target);
+            self.fit.draws.push(self.chain.state().clone());
+            self.fit.log_density.push(self.chain.current().log_density);
+            self.fit
+                .statistics
+                .push(self.chain.algorithm().kernel().last_draw());
+            self.iteration += 1;
         }
-        fit.seconds.1 = clock.elapsed().as_secs_f64() - warm;
-        let k = chain.algorithm().kernel();
-        fit.step_size = k.step_size();
-        fit.inverse_metric = k.metric().inverse_mass_matrix();
-        fit.dense_metric = k.metric().is_dense();
-        fit.kernel = k.statistics().clone();
-        Ok(fit)
-    });
-    Ok(Fit {
-        settings: settings.clone(),
-        chains: chains.into_iter().collect::<Result<_>>()?,
-    })
+        self.fit.seconds.0 += warm;
+        self.fit.seconds.1 += clock.elapsed().as_secs_f64() - warm;
+    }
+
+    /// The iteration, the generator's 4 words, the state, its `ln π` and
+    /// gradient, the kernel's words ([`Nuts`]'s
+    /// [`Kernel::state_words`](crate::kernel::Kernel::state_words)), every
+    /// draw so far (its `d` coordinates, `ln π`, and statistics: accept
+    /// statistic, step size, depth, leapfrog steps, divergent, energy),
+    /// then the seconds of warm-up and sampling.
+    fn save(&self, out: &mut Vec<u64>) {
+        use crate::kernel::Kernel;
+        out.push(self.iteration);
+        out.extend(rng_words(self.chain.rng()));
+        let current = self.chain.current();
+        put_f64s(out, &current.state);
+        out.push(current.log_density.to_bits());
+        put_f64s(out, &current.payload.gradient);
+        self.chain.algorithm().kernel().state_words(out);
+        let f = &self.fit;
+        for ((x, lp), s) in f.draws.iter().zip(&f.log_density).zip(&f.statistics) {
+            put_f64s(out, x);
+            put_f64s(out, &[*lp, s.accept_stat, s.step_size]);
+            out.extend([s.tree_depth as u64, s.n_leapfrog as u64, s.divergent as u64]);
+            out.push(s.energy.to_bits());
+        }
+        put_f64s(out, &[f.seconds.0, f.seconds.1]);
+    }
+
+    fn restore(&mut self, words: &[u64]) -> std::result::Result<(), String> {
+        use crate::kernel::Kernel;
+        let d = self.target.0.dim();
+        let mut input = words;
+        let cut = || "its words are cut".to_string();
+        let iteration = take_word(&mut input).ok_or_else(cut)?;
+        if iteration > self.total {
+            return Err(format!("iteration {iteration} of {}", self.total));
+        }
+        let rng = take_words(&mut input, 4)
+            .and_then(|w| rng_from_words(w.try_into().ok()?))
+            .ok_or("its generator's state is cut or zero")?;
+        let state = take_f64s(&mut input, d).ok_or_else(cut)?;
+        let log_density = take_f64s(&mut input, 1).ok_or_else(cut)?[0];
+        let gradient = take_f64s(&mut input, d).ok_or_else(cut)?;
+        let now = Sample::evaluate(self.target, state.clone()).log_density;
+        if !(log_density.is_finite()
+            && now.is_finite()
+            && (log_density - now).abs() <= RESTORED_DENSITY_TOLERANCE * (1.0 + now.abs()))
+        {
+            return Err(format!(
+                "its state's log density is {now}, not the recorded {log_density} (another target?)"
+            ));
+        }
+        let kernel = self.chain.algorithm_mut().kernel_mut();
+        if !kernel.restore_words(&mut input) {
+            return Err("its kernel's state is cut or inconsistent".into());
+        }
+        let draws = iteration.saturating_sub(self.warmup) as usize;
+        let mut fit = ChainFit {
+            draws: Vec::with_capacity(draws),
+            log_density: Vec::with_capacity(draws),
+            statistics: Vec::with_capacity(draws),
+            ..self.fit.clone()
+        };
+        for _ in 0..draws {
+            fit.draws.push(take_f64s(&mut input, d).ok_or_else(cut)?);
+            let f = take_f64s(&mut input, 3).ok_or_else(cut)?;
+            let Some(&[depth, leapfrog, divergent, energy]) = take_words(&mut input, 4) else {
+                return Err(cut());
+            };
+            if divergent > 1 {
+                return Err(format!("a draw's divergent flag is {divergent}"));
+            }
+            fit.log_density.push(f[0]);
+            fit.statistics.push(NutsDrawStatistics {
+                accept_stat: f[1],
+                step_size: f[2],
+                tree_depth: depth as usize,
+                n_leapfrog: leapfrog as usize,
+                divergent: divergent == 1,
+                energy: f64::from_bits(energy),
+            });
+        }
+        let seconds = take_f64s(&mut input, 2).ok_or_else(cut)?;
+        if !input.is_empty() {
+            return Err(format!("{} words after its last field", input.len()));
+        }
+        fit.seconds = (seconds[0], seconds[1]);
+        let parts = self.chain.parts_mut();
+        parts.current = Sample {
+            state,
+            log_density,
+            payload: GradientPayload { gradient },
+        };
+        parts.rng = rng;
+        self.iteration = iteration;
+        self.fit = fit;
+        Ok(())
+    }
+
+    fn finish(mut self) -> ChainFit {
+        let k = self.chain.algorithm().kernel();
+        self.fit.step_size = k.step_size();
+        self.fit.inverse_metric = k.metric().inverse_mass_matrix();
+        self.fit.dense_metric = k.metric().is_dense();
+        self.fit.kernel = k.statistics().clone();
+        self.fit
+    }
 }

@@ -39,6 +39,7 @@
 
 pub mod adaptation;
 pub mod chain;
+pub mod checkpoint;
 pub mod cmdstan;
 pub mod delayed_rejection;
 pub mod diagnostics;
@@ -56,6 +57,7 @@ pub mod mh;
 pub mod mtm;
 pub mod npz;
 pub mod replica;
+pub mod resume;
 pub mod rng;
 pub mod runner;
 pub mod sample;

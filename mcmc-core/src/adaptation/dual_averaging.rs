@@ -63,6 +63,33 @@ impl DualAveraging {
         self.log_step.exp()
     }
 
+    /// Appends the state (every field, bit for bit) for checkpoints.
+    pub(crate) fn words(&self, out: &mut Vec<u64>) {
+        let f = [
+            self.delta,
+            self.mu,
+            self.h_bar,
+            self.log_step,
+            self.log_step_bar,
+            self.t,
+        ];
+        crate::checkpoint::put_f64s(out, &f);
+    }
+
+    /// Restores [`Self::words`] from the front of `input`; false when cut
+    /// or when the iteration count `t` is not a whole number ≥ 0.
+    pub(crate) fn restore(&mut self, input: &mut &[u64]) -> bool {
+        let Some(f) = crate::checkpoint::take_f64s(input, 6) else {
+            return false;
+        };
+        if !(f[5] >= 0.0 && f[5].fract() == 0.0) {
+            return false;
+        }
+        (self.delta, self.mu, self.h_bar) = (f[0], f[1], f[2]);
+        (self.log_step, self.log_step_bar, self.t) = (f[3], f[4], f[5]);
+        true
+    }
+
     /// The averaged step size to use after warm-up.
     pub fn final_step_size(&self) -> f64 {
         if self.t == 0.0 {

@@ -42,6 +42,17 @@ impl GradientMetricEstimator {
         }
     }
 
+    /// Appends both estimators' state for checkpoints.
+    pub(crate) fn words(&self, out: &mut Vec<u64>) {
+        self.draws.words(out);
+        self.gradients.words(out);
+    }
+
+    /// Restores [`Self::words`] from the front of `input`; false when cut.
+    pub(crate) fn restore(&mut self, input: &mut &[u64]) -> bool {
+        self.draws.restore(input) && self.gradients.restore(input)
+    }
+
     /// Forgets every pair.
     pub fn reset(&mut self) {
         self.draws.reset();

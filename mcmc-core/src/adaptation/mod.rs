@@ -216,6 +216,43 @@ impl Warmup {
         self.iteration
     }
 
+    /// Appends what the warm-up has learnt and where it is (iteration,
+    /// frozen, dual averaging, the metric estimator's sums) for
+    /// checkpoints; its schedule and options are settings, not saved.
+    pub(crate) fn words(&self, out: &mut Vec<u64>) {
+        out.extend([self.iteration as u64, u64::from(self.frozen)]);
+        self.step.words(out);
+        match &self.estimator {
+            None => {}
+            Some(Estimator::Draws(e)) => e.words(out),
+            Some(Estimator::Gradient(e)) => e.words(out),
+            Some(Estimator::GradientEarly(g, v)) => {
+                g.words(out);
+                v.words(out);
+            }
+        }
+    }
+
+    /// Restores [`Self::words`] into a warm-up made with the same settings,
+    /// from the front of `input`; false when cut or inconsistent (an
+    /// iteration beyond the schedule, a frozen flag not 0 or 1).
+    pub(crate) fn restore(&mut self, input: &mut &[u64]) -> bool {
+        let Some(&[iteration, frozen]) = crate::checkpoint::take_words(input, 2) else {
+            return false;
+        };
+        if iteration > self.schedule.iterations() as u64 || frozen > 1 {
+            return false;
+        }
+        (self.iteration, self.frozen) = (iteration as usize, frozen == 1);
+        self.step.restore(input)
+            && match &mut self.estimator {
+                None => true,
+                Some(Estimator::Draws(e)) => e.restore(input),
+                Some(Estimator::Gradient(e)) => e.restore(input),
+                Some(Estimator::GradientEarly(g, v)) => g.restore(input) && v.restore(input),
+            }
+    }
+
     /// Ends warm-up now; returns the final step size (the dual-averaging
     /// iterate average).
     pub fn freeze(&mut self) -> f64 {

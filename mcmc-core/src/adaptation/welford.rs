@@ -67,6 +67,28 @@ impl MetricEstimator {
         }
     }
 
+    /// Appends the draws' count, mean and co-moments (bit for bit) for
+    /// checkpoints; the shape is the estimator's setting, not saved.
+    pub(crate) fn words(&self, out: &mut Vec<u64>) {
+        out.push(self.n as u64);
+        crate::checkpoint::put_f64s(out, &self.mean);
+        crate::checkpoint::put_f64s(out, &self.m2);
+    }
+
+    /// Restores [`Self::words`] of an estimator of this shape from the
+    /// front of `input`; false when cut.
+    pub(crate) fn restore(&mut self, input: &mut &[u64]) -> bool {
+        use crate::checkpoint::{take_f64s, take_word};
+        let n = take_word(input).and_then(|n| usize::try_from(n).ok());
+        let mean = take_f64s(input, self.mean.len());
+        let m2 = take_f64s(input, self.m2.len());
+        let (Some(n), Some(mean), Some(m2)) = (n, mean, m2) else {
+            return false;
+        };
+        (self.n, self.mean, self.m2) = (n, mean, m2);
+        true
+    }
+
     /// Dimension.
     pub fn dim(&self) -> usize {
         self.mean.len()

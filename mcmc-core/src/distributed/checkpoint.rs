@@ -1,13 +1,16 @@
-//! Checkpoint files of distributed runs: how a generator's state and a
-//! whole file are saved and read back (the runs decide what goes in).
+//! Checkpoint files of distributed runs: how a generator's state is saved
+//! and read back (the runs decide what goes in; the file pieces are
+//! [`crate::checkpoint`]'s).
 //!
-//! A checkpoint is written by rank 0 alone, to a temporary file beside the
-//! target that is then renamed over it, so a run killed while writing
-//! leaves the previous checkpoint intact; it is read by rank 0 and
-//! broadcast, so the other ranks need no shared file system.
+//! A checkpoint is written by rank 0 alone (atomically, see
+//! [`crate::checkpoint`]); it is read by rank 0 and broadcast, so the
+//! other ranks need no shared file system.
 
 use super::DistributedError;
+use super::comm::{Traffic, all_gather_u64, broadcast_bytes};
+use crate::checkpoint::{read_optional, write_atomically};
 use crate::rng::ChainRng;
+use mpi::topology::{Communicator, SimpleCommunicator};
 use std::path::Path;
 
 /// First word of a replica-exchange checkpoint ("mcmcRE02": the exchange
@@ -36,39 +39,57 @@ pub(crate) fn rng_from_words(words: &[u64]) -> Result<ChainRng, DistributedError
         })
 }
 
-/// Writes `bytes` to `path` through a temporary file renamed over it.
-pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), String> {
-    use std::io::Write;
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = std::path::PathBuf::from(tmp);
-    let write = || -> std::io::Result<()> {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
+/// The file at `path` as rank 0 reads it, on every rank (collective):
+/// `None` when there is none; an unreadable file is the same error on
+/// every rank (rank 0's own message there).
+pub(crate) fn read_on_rank_0(
+    comm: &SimpleCommunicator,
+    traffic: &mut Traffic,
+    path: &Path,
+) -> Result<Option<Vec<u8>>, DistributedError> {
+    // Rank 0's file, prefixed by a status byte: 0 none, 1 unreadable, 2 read.
+    let (own_error, message) = if comm.rank() == 0 {
+        match read_optional(path) {
+            Ok(None) => (None, vec![0u8]),
+            Ok(Some(mut b)) => {
+                b.insert(0, 2);
+                (None, b)
+            }
+            Err(e) => (Some(e), vec![1u8]),
+        }
+    } else {
+        (None, Vec::new())
     };
-    write().map_err(|e| format!("cannot write {}: {e}", path.display()))
+    let mut message = broadcast_bytes(comm, traffic, &message);
+    match message.first() {
+        Some(0) => Ok(None),
+        Some(2) => {
+            message.remove(0);
+            Ok(Some(message))
+        }
+        _ => Err(DistributedError::Checkpoint(own_error.unwrap_or_else(
+            || "rank 0 could not read the checkpoint (its error is printed there)".into(),
+        ))),
+    }
 }
 
-/// The file at `path`, or `None` when there is none. A path that is not a
-/// regular file (a directory, FIFO or device) is refused before it is
-/// opened: a FIFO would block rank 0, `/dev/zero` would never end.
-pub(crate) fn read_optional(path: &Path) -> Result<Option<Vec<u8>>, String> {
-    match std::fs::metadata(path) {
-        Ok(m) if !m.is_file() => {
-            return Err(format!(
-                "cannot read {}: not a regular file (a directory, FIFO or device)",
-                path.display()
-            ));
-        }
-        Ok(_) => {}
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(format!("cannot read {}: {e}", path.display())),
+/// Writes `bytes` (rank 0's; `None` on the other ranks) to `path` on rank
+/// 0 (collective): every rank returns the same result.
+pub(crate) fn write_on_rank_0(
+    comm: &SimpleCommunicator,
+    traffic: &mut Traffic,
+    path: &Path,
+    bytes: Option<Vec<u8>>,
+) -> Result<(), DistributedError> {
+    let written = bytes.map_or(Ok(()), |b| write_atomically(path, &b));
+    let failed = all_gather_u64(comm, traffic, written.is_err() as u64);
+    match written {
+        Err(e) => Err(DistributedError::Checkpoint(e)),
+        Ok(()) if failed[0] != 0 => Err(DistributedError::Checkpoint(
+            "rank 0 could not write the checkpoint (its error is printed there)".into(),
+        )),
+        Ok(()) => Ok(()),
     }
-    std::fs::read(path)
-        .map(Some)
-        .map_err(|e| format!("cannot read {}: {e}", path.display()))
 }
 
 #[cfg(test)]
@@ -95,27 +116,5 @@ mod tests {
         assert_ne!(d.next_u64(), x[0]);
         assert!(rng_from_words(&[0, 0, 0, 0]).is_err());
         assert!(rng_from_words(&[1, 2, 3]).is_err());
-    }
-
-    #[test]
-    fn files_are_replaced_whole_and_absence_is_not_an_error() {
-        let dir = std::env::temp_dir().join(format!("mcmc-ckpt-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let p = dir.join("c.bin");
-        assert_eq!(read_optional(&p).unwrap(), None);
-        write_atomically(&p, b"one").unwrap();
-        write_atomically(&p, b"second").unwrap();
-        assert_eq!(read_optional(&p).unwrap().unwrap(), b"second");
-        assert!(!dir.join("c.bin.tmp").exists());
-        // Not regular files: refused before they are opened (a FIFO
-        // blocked the read, `/dev/zero` never ended).
-        let fifo = dir.join("fifo");
-        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
-        assert!(made.is_ok_and(|s| s.success()), "mkfifo failed");
-        for p in [fifo.as_path(), dir.as_path(), Path::new("/dev/zero")] {
-            let e = read_optional(p).unwrap_err();
-            assert!(e.contains("not a regular file"), "{e}");
-        }
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -4,6 +4,7 @@
 //! the bytes and messages it sends, for the communication-volume figures.
 
 use super::DistributedError;
+use crate::checkpoint::{FNV_OFFSET, fnv1a};
 use mpi::point_to_point::{Destination, Source, send_receive_into_with_tags};
 use mpi::topology::{Communicator, Rank, SimpleCommunicator};
 use mpi::traits::*;
@@ -163,18 +164,6 @@ pub fn broadcast_bytes(comm: &SimpleCommunicator, traffic: &mut Traffic, bytes: 
     }
     buf
 }
-
-/// FNV-1a, 64 bits: a fingerprint, not a cryptographic hash.
-pub fn fnv1a(bytes: &[u8], mut h: u64) -> u64 {
-    for &b in bytes {
-        h ^= b as u64;
-        h = h.wrapping_mul(0x0100_0000_01b3);
-    }
-    h
-}
-
-/// Start value of [`fnv1a`].
-pub const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
 
 /// A fingerprint of the running executable (0 when it cannot be read), so
 /// that ranks started from different builds refuse to run together.

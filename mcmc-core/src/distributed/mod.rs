@@ -5,6 +5,9 @@
 //!   contiguous blocks ([`share`]); chain `c` draws from
 //!   `stream_rng(seed, c)` exactly as in [`crate::runner::run_chains`], and
 //!   rank 0 gets the results in chain order.
+//!   [`run_resumable_distributed`] is its resumable form
+//!   ([`crate::resume`]): checkpointed by rank 0, continued on any number
+//!   of ranks.
 //! - [`DistributedReplicaExchange`]: replica exchange with the levels
 //!   spread over ranks in contiguous blocks, for the deterministic even–odd
 //!   and the neighbour-sweep schedules. Each level mutates with its own
@@ -36,10 +39,9 @@ mod comm;
 mod replica;
 mod wire;
 
-pub use chains::run_chains_distributed;
-pub use comm::{
-    FNV_OFFSET, Traffic, agree, all_gather_u64, broadcast_bytes, fnv1a, gather_bytes, share,
-};
+pub use crate::checkpoint::{FNV_OFFSET, fnv1a};
+pub use chains::{RankOutcome, run_chains_distributed, run_resumable_distributed};
+pub use comm::{Traffic, agree, all_gather_u64, broadcast_bytes, gather_bytes, share};
 pub use mpi;
 pub use replica::{DistributedReplicaExchange, DistributedSchedule};
 pub use wire::{Wire, decode, encode};

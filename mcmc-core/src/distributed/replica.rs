@@ -2,14 +2,15 @@
 
 use super::DistributedError;
 use super::checkpoint::{
-    REPLICA_MAGIC, REPLICA_MAGIC_V1, read_optional, rng_from_words, rng_words, write_atomically,
+    REPLICA_MAGIC, REPLICA_MAGIC_V1, read_on_rank_0, rng_from_words, rng_words, write_on_rank_0,
 };
 use super::comm::{
-    FNV_OFFSET, Traffic, agree, all_gather_u64, broadcast_bytes, exchange_bytes, exchange_pair,
-    fnv1a, gather_bytes, receive_bytes, send_bytes, share, tag,
+    Traffic, agree, all_gather_u64, exchange_bytes, exchange_pair, gather_bytes, receive_bytes,
+    send_bytes, share, tag,
 };
 use super::wire::{Wire, decode, encode};
 use crate::chain::{Algorithm, ChainState, Transition};
+use crate::checkpoint::{FNV_OFFSET, fnv1a};
 use crate::mh::accept;
 use crate::replica::ensemble::{EXCHANGE_STREAM, Observer, level_chains};
 use crate::replica::{
@@ -656,47 +657,37 @@ where
             })
             .collect();
         let local = encode(&(levels, self.local_pairs()));
-        let written = match gather_bytes(&self.comm, &mut self.traffic, &local) {
-            Some(blocks) => {
-                let mut all = Vec::with_capacity(self.levels());
-                let mut pairs = Vec::with_capacity(blocks.len());
-                for b in blocks {
-                    let (l, p): (Vec<LevelRecord<S, F::Payload>>, Vec<PairCounts>) =
-                        decode(&b).expect("a rank's checkpoint block");
-                    all.extend(l);
-                    pairs.push(p);
-                }
-                let pooled = pool_pairs(self.levels(), pairs)
-                    .iter()
-                    .map(|p| (p.attempted, (p.accepted, p.sum_alpha)))
-                    .collect();
-                // Rank 0 ends every sweep, so its stream position is the
-                // run's (in a neighbour sweep the others' may lag).
-                let file: CheckpointFile<S, F::Payload> = (
-                    REPLICA_MAGIC,
-                    (
-                        self.fingerprint,
-                        (
-                            self.sweeps,
-                            (self.drawn, (rng_words(&self.rng), (all, pooled))),
-                        ),
-                    ),
-                );
-                let mut bytes = encode(&file);
-                let checksum = fnv1a(&bytes, FNV_OFFSET);
-                bytes.extend_from_slice(&checksum.to_le_bytes());
-                write_atomically(path, &bytes)
+        let bytes = gather_bytes(&self.comm, &mut self.traffic, &local).map(|blocks| {
+            let mut all = Vec::with_capacity(self.levels());
+            let mut pairs = Vec::with_capacity(blocks.len());
+            for b in blocks {
+                let (l, p): (Vec<LevelRecord<S, F::Payload>>, Vec<PairCounts>) =
+                    decode(&b).expect("a rank's checkpoint block");
+                all.extend(l);
+                pairs.push(p);
             }
-            None => Ok(()),
-        };
-        let failed = all_gather_u64(&self.comm, &mut self.traffic, written.is_err() as u64);
-        match written {
-            Err(e) => Err(DistributedError::Checkpoint(e)),
-            Ok(()) if failed[0] != 0 => Err(DistributedError::Checkpoint(
-                "rank 0 could not write the checkpoint (its error is printed there)".into(),
-            )),
-            Ok(()) => Ok(()),
-        }
+            let pooled = pool_pairs(self.levels(), pairs)
+                .iter()
+                .map(|p| (p.attempted, (p.accepted, p.sum_alpha)))
+                .collect();
+            // Rank 0 ends every sweep, so its stream position is the
+            // run's (in a neighbour sweep the others' may lag).
+            let file: CheckpointFile<S, F::Payload> = (
+                REPLICA_MAGIC,
+                (
+                    self.fingerprint,
+                    (
+                        self.sweeps,
+                        (self.drawn, (rng_words(&self.rng), (all, pooled))),
+                    ),
+                ),
+            );
+            let mut bytes = encode(&file);
+            let checksum = fnv1a(&bytes, FNV_OFFSET);
+            bytes.extend_from_slice(&checksum.to_le_bytes());
+            bytes
+        });
+        write_on_rank_0(&self.comm, &mut self.traffic, path, bytes)
     }
 
     /// Continues from the checkpoint at `path` (collective; call it right
@@ -719,32 +710,12 @@ where
                 "resume must come before the first sweep".into(),
             ));
         }
-        // Rank 0's file, prefixed by a status byte: 0 none, 1 unreadable, 2 read.
-        let (own_error, message) = if self.rank == 0 {
-            match read_optional(path) {
-                Ok(None) => (None, vec![0u8]),
-                Ok(Some(mut b)) => {
-                    b.insert(0, 2);
-                    (None, b)
-                }
-                Err(e) => (Some(e), vec![1u8]),
-            }
-        } else {
-            (None, Vec::new())
+        let Some(message) = read_on_rank_0(&self.comm, &mut self.traffic, path)? else {
+            return Ok(false);
         };
-        let message = broadcast_bytes(&self.comm, &mut self.traffic, &message);
-        match message.first() {
-            Some(0) => return Ok(false),
-            Some(2) => {}
-            _ => {
-                return Err(DistributedError::Checkpoint(own_error.unwrap_or_else(
-                    || "rank 0 could not read the checkpoint (its error is printed there)".into(),
-                )));
-            }
-        }
         let not_ours =
             |why: &str| DistributedError::Checkpoint(format!("{} {why}", path.display()));
-        let bytes = &message[1..];
+        let bytes = &message[..];
         match bytes.get(..8) {
             Some(m) if m == REPLICA_MAGIC.to_le_bytes() => {}
             Some(m) if m == REPLICA_MAGIC_V1.to_le_bytes() => {

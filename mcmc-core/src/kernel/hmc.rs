@@ -304,6 +304,52 @@ impl<G: GradientTarget> Hmc<G> {
         }
     }
 
+    /// Appends the kernel's state for checkpoints: step size, counters,
+    /// metric and warm-up (its settings are not saved: the kernel it is
+    /// restored into is built with the same).
+    pub(crate) fn words(&self, out: &mut Vec<u64>) {
+        let s = &self.stats;
+        out.push(self.step_size.to_bits());
+        out.extend([
+            s.trajectories,
+            s.leapfrog_steps,
+            s.gradient_evaluations,
+            s.divergences,
+            s.invalid,
+            s.outside_support,
+        ]);
+        self.metric.words(out);
+        if let Some(w) = &self.warmup {
+            w.words(out);
+        }
+    }
+
+    /// Restores [`Self::words`] from the front of `input`; false when cut
+    /// or inconsistent (the kernel is then not to be used).
+    pub(crate) fn restore(&mut self, input: &mut &[u64]) -> bool {
+        let Some(w) = crate::checkpoint::take_words(input, 7) else {
+            return false;
+        };
+        let step_size = f64::from_bits(w[0]);
+        let Some(metric) = Metric::from_words(input, self.dim) else {
+            return false;
+        };
+        if !(step_size.is_finite() && step_size > 0.0) {
+            return false;
+        }
+        self.step_size = step_size;
+        self.stats = GradientKernelStatistics {
+            trajectories: w[1],
+            leapfrog_steps: w[2],
+            gradient_evaluations: w[3],
+            divergences: w[4],
+            invalid: w[5],
+            outside_support: w[6],
+        };
+        self.metric = metric;
+        self.warmup.as_mut().is_none_or(|w| w.restore(input))
+    }
+
     pub(crate) fn statistics_mut(&mut self) -> &mut GradientKernelStatistics {
         &mut self.stats
     }
@@ -558,6 +604,14 @@ impl<G: GradientTarget> Kernel<Vec<f64>, GradientPayload> for Hmc<G> {
 
     fn component_names(&self) -> Vec<String> {
         vec![self.name.to_string()]
+    }
+
+    fn state_words(&self, out: &mut Vec<u64>) {
+        self.words(out);
+    }
+
+    fn restore_words(&mut self, input: &mut &[u64]) -> bool {
+        self.restore(input)
     }
 
     fn check_state(&self, state: &Vec<f64>) -> Result<()> {

@@ -81,6 +81,33 @@ impl Metric {
         })
     }
 
+    /// Appends the metric for checkpoints: 1 when dense, then `M⁻¹`
+    /// (its diagonal, or all of it row-major), bit for bit.
+    pub(crate) fn words(&self, out: &mut Vec<u64>) {
+        let (dense, inv_mass) = match &self.shape {
+            Shape::Diagonal { inv_mass, .. } => (0, inv_mass),
+            Shape::Dense { inv_mass, .. } => (1, inv_mass),
+        };
+        out.push(dense);
+        crate::checkpoint::put_f64s(out, inv_mass);
+    }
+
+    /// The metric of dimension `d` [`Self::words`] wrote at the front of
+    /// `input` (rebuilt by [`Self::diagonal`] or [`Self::dense`], which
+    /// give the saved metric's bits and refuse a non-positive one).
+    pub(crate) fn from_words(input: &mut &[u64], d: usize) -> Option<Metric> {
+        use crate::checkpoint::{take_f64s, take_word};
+        match take_word(input)? {
+            0 => Metric::diagonal(take_f64s(input, d)?).ok(),
+            1 => {
+                let m = take_f64s(input, d * d)?;
+                let rows: Vec<Vec<f64>> = m.chunks(d.max(1)).map(<[f64]>::to_vec).collect();
+                Metric::dense(&rows).ok()
+            }
+            _ => None,
+        }
+    }
+
     /// Dimension.
     pub fn dim(&self) -> usize {
         match &self.shape {

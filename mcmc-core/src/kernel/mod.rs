@@ -161,9 +161,10 @@ pub trait Kernel<S, P = ()> {
     /// `out`, bit for bit, for checkpoints: a kernel restored from these
     /// words ([`Kernel::restore_words`]) makes the proposals the saved one
     /// would have made. The default, for kernels without state of their
-    /// own, appends nothing; of the adaptive kernels only
-    /// [`AdaptiveTorusStep`] writes its state so far (the others' runs
-    /// cannot be checkpointed).
+    /// own, appends nothing; of the adaptive kernels
+    /// [`AdaptiveTorusStep`], [`Hmc`] and [`Nuts`] (step size, metric and
+    /// warm-up) write their state so far (the others' runs cannot be
+    /// checkpointed).
     fn state_words(&self, _out: &mut Vec<u64>) {}
 
     /// Restores the state [`Kernel::state_words`] wrote at the front of

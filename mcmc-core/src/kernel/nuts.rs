@@ -753,6 +753,27 @@ impl<G: GradientTarget> Kernel<Vec<f64>, GradientPayload> for Nuts<G> {
         self.hmc.component_names()
     }
 
+    /// HMC's state ([`Kernel::state_words`] of [`Hmc`]: step size,
+    /// counters, metric, warm-up) after whether Stan's step-size heuristic
+    /// is due and the saturated-depth count. The last transition's
+    /// statistics and selected point are not in it: each transition
+    /// writes them before they are read.
+    fn state_words(&self, out: &mut Vec<u64>) {
+        out.extend([u64::from(self.init_step_pending), self.depth_saturated]);
+        self.hmc.words(out);
+    }
+
+    fn restore_words(&mut self, input: &mut &[u64]) -> bool {
+        let Some(&[pending, saturated]) = crate::checkpoint::take_words(input, 2) else {
+            return false;
+        };
+        if pending > 1 {
+            return false;
+        }
+        (self.init_step_pending, self.depth_saturated) = (pending == 1, saturated);
+        self.hmc.restore(input)
+    }
+
     fn check_state(&self, state: &Vec<f64>) -> crate::Result<()> {
         self.hmc.check_state(state)
     }

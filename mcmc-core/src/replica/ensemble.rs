@@ -202,13 +202,13 @@ where
         }
         let mut input = &progress.words[..];
         let cut = || bad("its words are cut short or corrupt");
-        let rng = super::stats::take_words(&mut input, 4)
+        let rng = crate::checkpoint::take_words(&mut input, 4)
             .and_then(|w| crate::rng::rng_from_words(w.try_into().ok()?))
             .ok_or_else(cut)?;
         let index = IndexProcess::from_words(m, &mut input).ok_or_else(cut)?;
         let mut stats = self.stats.clone();
         stats.read_words(&mut input).ok_or_else(cut)?;
-        let frozen = match super::stats::take_words(&mut input, 1) {
+        let frozen = match crate::checkpoint::take_words(&mut input, 1) {
             Some(&[f]) if f <= 1 => f == 1,
             _ => return Err(cut()),
         };

@@ -3,6 +3,8 @@
 //! Table 5.3 quantity), the index process with round trips, and the
 //! communication barrier `Λ`.
 
+use crate::checkpoint::take_words;
+
 /// Which replica (an identity that travels with a state through exchanges)
 /// sits at which level, and the round trips each replica has completed.
 ///
@@ -426,17 +428,6 @@ impl IndexProcess {
             }
         }
     }
-}
-
-/// The first `n` words of `input` (which is advanced past them), `None`
-/// when it holds fewer.
-pub(crate) fn take_words<'a>(input: &mut &'a [u64], n: usize) -> Option<&'a [u64]> {
-    if input.len() < n {
-        return None;
-    }
-    let (head, rest) = input.split_at(n);
-    *input = rest;
-    Some(head)
 }
 
 #[cfg(test)]
