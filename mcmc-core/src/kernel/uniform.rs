@@ -285,7 +285,11 @@ mod tests {
                 for (i, (y, x)) in out.iter().zip(&current).enumerate() {
                     let quarter = (words[i / 4] >> SHIFTS[i % 4]) as u16 as i16;
                     let expected = x + 0.3 / 65536.0 * (2.0 * f64::from(quarter) + 1.0);
-                    assert_eq!(y.to_bits(), expected.to_bits(), "{name}: d = {d}, coordinate {i}");
+                    assert_eq!(
+                        y.to_bits(),
+                        expected.to_bits(),
+                        "{name}: d = {d}, coordinate {i}"
+                    );
                 }
                 assert_eq!(out.len(), d);
                 // Exactly ⌈d/4⌉ words drawn.
