@@ -92,38 +92,95 @@ impl UniformRandomWalk {
         self.half_width
     }
 
-    /// Writes `current + step` into `out`.
+    /// Writes `current + step` into `out`: through the AVX2 copy of the
+    /// loop on CPUs that have AVX2 (the same bits, fewer instructions), else
+    /// the portable one. Below 4 coordinates there is no block to convert
+    /// and the portable loop, inlined, costs less than a call.
     #[inline(always)]
     fn step_into(&self, current: &[f64], out: &mut Vec<f64>, rng: &mut ChainRng) {
-        use rand::Rng;
-        // One pass that copies and perturbs, as the Gaussian walk does, four
-        // coordinates per generator word (`docs/performance.md`, item 4,
-        // sessions 19 and 21: 31 instructions per word in a 100-d step,
-        // 11 of them the generator's). The generator's state is worked on
-        // in a local copy that stays in registers (through `rng` the
-        // compiler stored its four state words after every word, as `out`
-        // might alias them).
-        out.resize(current.len(), 0.0);
-        let unit = self.unit;
-        let mut words = rng.clone();
-        // Word j moves coordinates 4j to 4j + 3; each block of 4 is read
-        // whole before it is written (so the compiler need not fear `out`
-        // aliasing `current` and converts, scales and adds two offsets per
-        // SSE2 instruction), then the last 1 to 3 coordinates.
-        let (blocks_out, rest_out) = out.as_chunks_mut::<4>();
-        let (blocks_in, rest_in) = current.as_chunks::<4>();
-        for (o, c) in blocks_out.iter_mut().zip(blocks_in) {
-            let (x, u) = (*c, odd_offsets(words.next_u64()));
-            *o = std::array::from_fn(|k| x[k] + unit * u[k]);
+        #[cfg(target_arch = "x86_64")]
+        if current.len() >= 4 && std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2, the one feature the function is
+            // compiled for (`is_x86_feature_detected!` caches the answer).
+            unsafe { self.step_into_avx2(current, out, rng) };
+            return;
         }
-        if !rest_in.is_empty() {
-            let u = odd_offsets(words.next_u64());
-            for ((o, c), u) in rest_out.iter_mut().zip(rest_in).zip(u) {
-                *o = c + unit * u;
-            }
-        }
-        *rng = words;
+        self.step_into_portable(current, out, rng);
     }
+
+    /// [`Self::step_into`] in portable code: SSE2 on every x86-64.
+    #[inline(always)]
+    fn step_into_portable(&self, current: &[f64], out: &mut Vec<f64>, rng: &mut ChainRng) {
+        let unit = self.unit;
+        step_blocks(current, out, rng, unit, |x, w| {
+            let u = odd_offsets(w);
+            std::array::from_fn(|k| x[k] + unit * u[k])
+        });
+    }
+
+    /// [`Self::step_into`] compiled for AVX2, a block of four coordinates
+    /// per instruction: one 4-lane conversion, multiplication and addition
+    /// per generator word (`docs/performance.md`, item 4, session 22: 23
+    /// instructions per word, 31 in the portable loop). The lanes hold the
+    /// word's quarters in `odd_offsets`' order and each result is
+    /// `x + unit·(2h + 1)` with the same two roundings (no fused
+    /// multiply-add), so the bits equal the portable loop's.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn step_into_avx2(&self, current: &[f64], out: &mut Vec<f64>, rng: &mut ChainRng) {
+        use std::arch::x86_64::*;
+        let unit = _mm256_set1_pd(self.unit);
+        let one = _mm_set1_epi32(1);
+        step_blocks(current, out, rng, self.unit, |x, w| {
+            // 32-bit lanes lo(w << 16), hi(w << 16), lo(w), hi(w): shifted
+            // right by 15 and or-ed with 1, the odd offsets of the quarters
+            // at bits 0–15, 32–47, 16–31, 48–63, as in `odd_offsets`.
+            let v = _mm_cvtsi64_si128(w as i64);
+            let lanes = _mm_unpacklo_epi64(_mm_slli_epi64::<16>(v), v);
+            let odd = _mm_or_si128(_mm_srai_epi32::<15>(lanes), one);
+            let x = _mm256_set_pd(x[3], x[2], x[1], x[0]);
+            let y = _mm256_add_pd(x, _mm256_mul_pd(unit, _mm256_cvtepi32_pd(odd)));
+            // SAFETY: `__m256d` and `[f64; 4]` have the same size, and
+            // every bit pattern is a valid `f64`.
+            unsafe { std::mem::transmute::<__m256d, [f64; 4]>(y) }
+        });
+    }
+}
+
+/// The loop of [`UniformRandomWalk::step_into`]: word `j` of `rng` moves
+/// coordinates `4j` to `4j + 3` through `block(x, word)`, then the last 1
+/// to 3 coordinates move by the offsets of one more word.
+///
+/// One pass that copies and perturbs, as the Gaussian walk does
+/// (`docs/performance.md`, item 4, sessions 19, 21 and 22). The
+/// generator's state is worked on in a local copy that stays in registers
+/// (through `rng` the compiler stored its four state words after every
+/// word, as `out` might alias them). Each block of 4 is read whole before
+/// it is written, so the compiler need not fear `out` aliasing `current`
+/// and converts, scales and adds several offsets per SIMD instruction.
+#[inline(always)]
+fn step_blocks(
+    current: &[f64],
+    out: &mut Vec<f64>,
+    rng: &mut ChainRng,
+    unit: f64,
+    block: impl Fn([f64; 4], u64) -> [f64; 4],
+) {
+    use rand::Rng;
+    out.resize(current.len(), 0.0);
+    let mut words = rng.clone();
+    let (blocks_out, rest_out) = out.as_chunks_mut::<4>();
+    let (blocks_in, rest_in) = current.as_chunks::<4>();
+    for (o, c) in blocks_out.iter_mut().zip(blocks_in) {
+        *o = block(*c, words.next_u64());
+    }
+    if !rest_in.is_empty() {
+        let u = odd_offsets(words.next_u64());
+        for ((o, c), u) in rest_out.iter_mut().zip(rest_in).zip(u) {
+            *o = c + unit * u;
+        }
+    }
+    *rng = words;
 }
 
 impl<P> Kernel<Vec<f64>, P> for UniformRandomWalk {
@@ -186,27 +243,58 @@ mod tests {
         assert_eq!(odd((1 << 15) - 1, 2), LEVELS - 1.0);
     }
 
+    /// A way through `step_into`.
+    type Path = fn(&UniformRandomWalk, &[f64], &mut Vec<f64>, &mut ChainRng);
+
+    /// Every path `step_into` can take on this CPU: itself (as dispatched),
+    /// the portable loop, and the AVX2 loop where the CPU has AVX2.
+    fn paths() -> Vec<(&'static str, Path)> {
+        let mut paths: Vec<(&'static str, Path)> = vec![
+            ("dispatched", |w, c, o, r| w.step_into(c, o, r)),
+            ("portable", |w, c, o, r| w.step_into_portable(c, o, r)),
+        ];
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: only pushed when the CPU has AVX2.
+            paths.push(("avx2", |w, c, o, r| unsafe { w.step_into_avx2(c, o, r) }));
+        }
+        paths
+    }
+
     /// The blocks and the remainder of `step_into` follow the definition
     /// (word `j` moves coordinates `4j` to `4j + 3` by its quarters in the
-    /// order of `SHIFTS`) bit for bit, for every dimension modulo 4.
+    /// order of `SHIFTS`) bit for bit, for every dimension modulo 4, on
+    /// every path (so the AVX2 and portable loops give the same bits), from
+    /// states of every magnitude and sign.
     #[test]
     fn every_dimension_moves_by_its_words_in_order() {
         let walk = UniformRandomWalk::new(0.3).unwrap();
         let mut out = Vec::new();
-        for d in 1..=11usize {
-            let current: Vec<f64> = (0..d).map(|i| i as f64 - 4.5).collect();
-            let mut rng = stream_rng(19, d as u64);
-            let mut reference = rng.clone();
-            walk.step_into(&current, &mut out, &mut rng);
-            let words: Vec<u64> = (0..d.div_ceil(4)).map(|_| reference.next_u64()).collect();
-            for (i, (y, x)) in out.iter().zip(&current).enumerate() {
-                let quarter = (words[i / 4] >> SHIFTS[i % 4]) as u16 as i16;
-                let expected = x + 0.3 / 65536.0 * (2.0 * f64::from(quarter) + 1.0);
-                assert_eq!(y.to_bits(), expected.to_bits(), "d = {d}, coordinate {i}");
+        let mut states = stream_rng(22, 0);
+        let paths = paths();
+        eprintln!("paths: {:?}", paths.iter().map(|p| p.0).collect::<Vec<_>>());
+        for (name, path) in paths {
+            for d in (1..=11usize).chain([37, 100]) {
+                let current: Vec<f64> = (0..d)
+                    .map(|i| standard_normal(&mut states) * 10f64.powi(i as i32 % 9 - 4))
+                    .collect();
+                let mut rng = stream_rng(19, d as u64);
+                let mut reference = rng.clone();
+                path(&walk, &current, &mut out, &mut rng);
+                let words: Vec<u64> = (0..d.div_ceil(4)).map(|_| reference.next_u64()).collect();
+                for (i, (y, x)) in out.iter().zip(&current).enumerate() {
+                    let quarter = (words[i / 4] >> SHIFTS[i % 4]) as u16 as i16;
+                    let expected = x + 0.3 / 65536.0 * (2.0 * f64::from(quarter) + 1.0);
+                    assert_eq!(
+                        y.to_bits(),
+                        expected.to_bits(),
+                        "{name}: d = {d}, coordinate {i}"
+                    );
+                }
+                assert_eq!(out.len(), d);
+                // Exactly ⌈d/4⌉ words drawn.
+                assert_eq!(rng.next_u64(), reference.next_u64(), "{name}: d = {d}");
             }
-            assert_eq!(out.len(), d);
-            // Exactly ⌈d/4⌉ words drawn.
-            assert_eq!(rng.next_u64(), reference.next_u64(), "d = {d}");
         }
     }
 
