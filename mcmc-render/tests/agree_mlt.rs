@@ -42,6 +42,7 @@ use common::{
     Budget, MeanAgreement, Mlt, bdpt_of, image_mean, mc_reps, mlt_reps, pt_of, repo_scene_tilted,
 };
 use mcmc_core::replica::{ExchangeContext, ExchangeMove, Schedule};
+use mcmc_render::fused_space::{Conversion, FusedFamily, FusedMutation};
 use mcmc_render::integrators::relt::{
     MakeExchange, Relt, ReltExchange, ReltFamily, ReltMisClasses,
 };
@@ -471,15 +472,22 @@ fn mmlt_agrees_with_pt_on_the_glossy_glass_box() {
 }
 
 /// Image means of `k` runs of `fused` (MMLT's depths with path-space
-/// moves half of the time) on `scene`.
-fn fused_reps(scene: &Scene, budget: Budget, k: u64, seed0: u64) -> Vec<[f64; 3]> {
-    use mcmc_render::fused_space::{FusedFamily, FusedMutation};
+/// moves half of the time) on `scene`, converting by `conversion`.
+fn fused_reps(
+    scene: &Scene,
+    (budget, conversion): (Budget, Conversion),
+    k: u64,
+    seed0: u64,
+) -> Vec<[f64; 3]> {
     let stop = AtomicBool::new(false);
     (0..k)
         .map(|s| {
             let family = FusedFamily::new(scene, common::mmlt_depths(scene));
             let settings = ChainSettings {
-                mutation: FusedMutation::default(),
+                mutation: FusedMutation {
+                    conversion,
+                    ..FusedMutation::default()
+                },
                 bootstrap: budget.bootstrap,
                 chains: budget.chains,
                 mutations_per_pixel: Some(budget.mpp),
@@ -510,7 +518,23 @@ fn fused_agrees_with_pt_on_the_cornell_box() {
     check(
         "fused",
         pt_reference(),
-        &fused_reps(cornell(), budget, 32, 7000),
+        &fused_reps(cornell(), (budget, Conversion::Eager), 32, 7000),
+    );
+}
+
+#[test]
+#[ignore = "minutes: fused with lazy conversion to 1% on the Cornell box"]
+fn fused_with_lazy_conversion_agrees_with_pt_on_the_cornell_box() {
+    // The test above with conversion=lazy (docs/fused.md, Session 22).
+    let budget = Budget {
+        bootstrap: 5000,
+        chains: 1024,
+        mpp: 4096,
+    };
+    check(
+        "fused (lazy)",
+        pt_reference(),
+        &fused_reps(cornell(), (budget, Conversion::Lazy), 32, 7000),
     );
 }
 
@@ -524,7 +548,7 @@ fn fused_agrees_with_pt_on_the_glossy_glass_box() {
         chains: 1024,
         mpp: 16_384,
     };
-    let reps = fused_reps(&scene, budget, 48, 8000);
+    let reps = fused_reps(&scene, (budget, Conversion::Eager), 48, 8000);
     let a = MeanAgreement::new(&pt, &reps);
     eprintln!("fused: rel {:?}\n  {a:?}", a.rel());
     assert!(

@@ -14,7 +14,7 @@ use mcmc_render::bsdf::textured::BsdfAt;
 use mcmc_render::color::Rgb;
 use mcmc_render::fused_space::inverse_path::{InverseFailure, RoundTripFailure, round_trip};
 use mcmc_render::fused_space::technique::log_target;
-use mcmc_render::fused_space::{FusedFamily, FusedMutation, FusedState};
+use mcmc_render::fused_space::{Conversion, FusedFamily, FusedMutation, FusedState};
 use mcmc_render::integrators::bdpt::{Bdpt, MisHeuristic};
 use mcmc_render::integrators::path_vertex::VertexKind;
 use mcmc_render::markov::{ChainSettings, Normalization};
@@ -376,7 +376,11 @@ fn oblique_plane_exact(scene: &Scene) -> (f64, f64) {
 
 /// Image means and top-half fractions of `k` fused runs on `scene` (paths
 /// of two segments; one family member), path-space moves 90% of the time.
-fn plane_reps(scene: &Scene, drop_jacobian: bool, k: u64) -> (Vec<f64>, Vec<f64>) {
+fn plane_reps(
+    scene: &Scene,
+    (drop_jacobian, conversion): (bool, Conversion),
+    k: u64,
+) -> (Vec<f64>, Vec<f64>) {
     let stop = AtomicBool::new(false);
     let (w, h) = scene.camera.resolution();
     let bdpt = Bdpt {
@@ -391,6 +395,7 @@ fn plane_reps(scene: &Scene, drop_jacobian: bool, k: u64) -> (Vec<f64>, Vec<f64>
             mutation: FusedMutation {
                 path_probability: 0.9,
                 drop_jacobian,
+                conversion,
                 ..FusedMutation::default()
             },
             bootstrap: 2000,
@@ -429,9 +434,22 @@ fn plane_reps(scene: &Scene, drop_jacobian: bool, k: u64) -> (Vec<f64>, Vec<f64>
 /// false-alarm rate of 7e-4 for Student's t with 11 degrees of freedom.
 #[test]
 fn the_mixed_chain_is_exact_and_a_dropped_jacobian_is_not() {
+    mixed_chain_exactness(Conversion::Eager);
+}
+
+/// The test above with lazy conversion (docs/fused.md, Session 22):
+/// path-space moves 90% of the time, so most states are paths not yet
+/// mapped back, and every primary-sample move first converts one.
+#[test]
+fn lazy_conversion_keeps_the_mixed_chain_exact_and_a_dropped_jacobian_is_not() {
+    mixed_chain_exactness(Conversion::Lazy);
+}
+
+/// The body of the two tests above, with `conversion`.
+fn mixed_chain_exactness(conversion: Conversion) {
     let scene = oblique_plane();
     let (exact_mean, exact) = oblique_plane_exact(&scene);
-    let (means, fr) = plane_reps(&scene, false, 12);
+    let (means, fr) = plane_reps(&scene, (false, conversion), 12);
     let (f, f_se) = mean_se1(&fr);
     let (m, m_se) = mean_se1(&means);
     eprintln!(
@@ -442,7 +460,7 @@ fn the_mixed_chain_is_exact_and_a_dropped_jacobian_is_not() {
         (m - exact_mean).abs() < 4.5 * m_se,
         "mean {m} vs {exact_mean}"
     );
-    let (_, fr) = plane_reps(&scene, true, 12);
+    let (_, fr) = plane_reps(&scene, (true, conversion), 12);
     let (fc, fc_se) = mean_se1(&fr);
     eprintln!("control (no Jacobian): top fraction {fc:.5} ± {fc_se:.5}");
     assert!(
@@ -457,7 +475,7 @@ fn the_mixed_chain_is_exact_and_a_dropped_jacobian_is_not() {
 /// run): image means, top-half fractions and the chosen probabilities.
 fn plane_auto_reps(
     scene: &Scene,
-    drop_jacobian: bool,
+    (drop_jacobian, conversion): (bool, Conversion),
     (k, mpp): (u64, u64),
 ) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     use mcmc_render::integrators::fused::Fused;
@@ -468,6 +486,7 @@ fn plane_auto_reps(
     let fused = Fused {
         path_space_probability: None,
         adaptation_mutations_per_pixel: 16,
+        conversion,
         depth: DepthParams {
             max_depth: 2,
             ..DepthParams::default()
@@ -525,9 +544,21 @@ fn plane_auto_reps(
 /// control runs 8 × 720 (SE ≈ 0.003, ≈ 7 SE), the agreement 8 × 200.
 #[test]
 fn auto_keeps_the_chain_exact_and_a_dropped_jacobian_still_fails() {
+    auto_exactness(Conversion::Eager);
+}
+
+/// The test above with lazy conversion: the pilot runs with it too (its
+/// cost model then counts the deferred conversions).
+#[test]
+fn auto_with_lazy_conversion_stays_exact_and_a_dropped_jacobian_still_fails() {
+    auto_exactness(Conversion::Lazy);
+}
+
+/// The body of the two tests above, with `conversion`.
+fn auto_exactness(conversion: Conversion) {
     let scene = oblique_plane();
     let (exact_mean, exact) = oblique_plane_exact(&scene);
-    let (means, fr, chosen) = plane_auto_reps(&scene, false, (8, 200));
+    let (means, fr, chosen) = plane_auto_reps(&scene, (false, conversion), (8, 200));
     let (f, f_se) = mean_se1(&fr);
     let (m, m_se) = mean_se1(&means);
     eprintln!(
@@ -538,7 +569,7 @@ fn auto_keeps_the_chain_exact_and_a_dropped_jacobian_still_fails() {
         (m - exact_mean).abs() < 5.4 * m_se,
         "mean {m} vs {exact_mean}"
     );
-    let (_, fr, chosen) = plane_auto_reps(&scene, true, (8, 720));
+    let (_, fr, chosen) = plane_auto_reps(&scene, (true, conversion), (8, 720));
     let (fc, fc_se) = mean_se1(&fr);
     eprintln!("control (no Jacobian): chose {chosen:?}; top fraction {fc:.5} ± {fc_se:.5}");
     assert!(
@@ -611,6 +642,73 @@ fn auto_is_bit_identical_across_thread_counts_and_reported() {
     assert_eq!(choice, choice2, "1 vs 2 threads chose differently");
     assert!(one == two, "1 vs 2 threads differ");
     assert!(one != render(2, 43).0, "seed ignored");
+}
+
+/// `conversion=lazy` through the registry: the same image for 1 and 2
+/// threads, a seed that matters, deferred conversions reported (every
+/// inversion is one: no path-space proposal is converted at once), and a
+/// checkpoint refused with one line (a state's point may be stale).
+#[test]
+fn lazy_conversion_is_deterministic_reported_and_not_checkpointed() {
+    use mcmc_render::checkpoint::Checkpoint;
+    use mcmc_render::integrators::{RunSettings, registry};
+    let scene = repo_scene("cornell-glossy-glass.xml", 12);
+    let integ = registry::configure(
+        None,
+        Some("fused"),
+        &[
+            ("max_depth".into(), "4".into()),
+            ("bootstrap".into(), "2000".into()),
+            ("chains".into(), "64".into()),
+            ("mutations_per_pixel".into(), "8".into()),
+            ("path_space_probability".into(), "0.5".into()),
+            ("conversion".into(), "lazy".into()),
+        ],
+    )
+    .expect("fused configures");
+    let stop = AtomicBool::new(false);
+    let render = |threads: usize, seed: u64| {
+        let run = RunSettings {
+            seed,
+            ..RunSettings::default()
+        };
+        let out = with_threads(threads, || integ.render(&scene, &run, &stop, &NoObserver))
+            .expect("fused renders");
+        let bits: Vec<u32> = (out.image.iter())
+            .flat_map(|p| [p.r.to_bits(), p.g.to_bits(), p.b.to_bits()])
+            .collect();
+        (bits, out.statistics["fused"].clone())
+    };
+    let (one, stats) = render(1, 42);
+    let count = |k: &str| stats[k].as_u64().expect(k);
+    eprintln!(
+        "lazy: {} deferred conversions, {} failed, {} inversions",
+        count("deferred_conversions"),
+        count("deferred_conversion_failures"),
+        count("inversions")
+    );
+    assert_eq!(stats["conversion"], "lazy");
+    assert!(count("deferred_conversions") > 0);
+    assert_eq!(count("deferred_conversions"), count("inversions"));
+    assert!(one == render(2, 42).0, "1 vs 2 threads differ");
+    assert!(one != render(2, 43).0, "seed ignored");
+    let run = RunSettings {
+        checkpoint: Some(Checkpoint {
+            path: std::env::temp_dir().join("fused-lazy-never-written.ckpt"),
+            fingerprint: 1,
+            resume: None,
+            chains: None,
+        }),
+        ..RunSettings::default()
+    };
+    let err = match integ.render(&scene, &run, &stop, &NoObserver) {
+        Err(e) => e.to_string(),
+        Ok(_) => panic!("lazy conversion was checkpointed"),
+    };
+    assert!(
+        err.contains("conversion=lazy") && !err.contains('\n'),
+        "{err}"
+    );
 }
 
 #[test]

@@ -80,6 +80,7 @@ thread_local! {
 pub fn trace<'s>(scene: &'s Scene, depth: &MmltDepth, state: &mut FusedState<'s>) {
     let mut source = PssSource::new(&state.point, Stream::COUNT);
     state.depth = Some(depth.depth);
+    state.point_stale = false;
     state.technique = None;
     state.path.vertices.clear();
     state.path.contribution = crate::color::Rgb::BLACK;
@@ -113,16 +114,21 @@ pub fn trace<'s>(scene: &'s Scene, depth: &MmltDepth, state: &mut FusedState<'s>
         return;
     };
     state.technique = Some((s, t));
-    let l = splat.l;
+    state.log_density = log_luminance(splat.l);
     state.sample.splats.push(splat);
+}
+
+/// MMLT's `ln π` of a splat: `ln lum(l)`, `−∞` for nothing, NaN for a
+/// NaN or infinite one.
+pub(crate) fn log_luminance(l: crate::color::Rgb) -> f64 {
     let i = f64::from(l.luminance());
-    state.log_density = if !l.is_finite() || !i.is_finite() {
+    if !l.is_finite() || !i.is_finite() {
         f64::NAN
     } else if i > 0.0 {
         i.ln()
     } else {
         f64::NEG_INFINITY
-    };
+    }
 }
 
 /// One stream's numbers while inverting: `None` is a fresh uniform.

@@ -64,9 +64,9 @@
 //! cover everything. What remains is `f32` rounding between `y` and its
 //! re-trace.
 
-use super::inverse_path::{RoundTripFailure, round_trip, trace};
-use super::technique::{log_target, log_technique_density};
-use super::{FusedMutation, FusedState};
+use super::inverse_path::{RoundTripFailure, log_luminance, round_trip, trace};
+use super::technique::{log_target, log_technique_density, splat};
+use super::{Conversion, FusedMutation, FusedState};
 use crate::integrators::path_vertex::VertexKind;
 use crate::path_space::Path;
 use crate::pss::{MmltDepth, PathSample};
@@ -101,6 +101,12 @@ pub struct FusedCounters {
     pub pss_nanos: AtomicU64,
     /// Of those, in path-space moves.
     pub path_nanos: AtomicU64,
+    /// Lazy conversion: paths mapped back before a primary-sample move
+    /// (each also counted in `inversions`).
+    pub deferred_conversions: AtomicU64,
+    /// Of those, the ones whose round trip failed (the primary-sample
+    /// move was then rejected, the chain stayed on the path).
+    pub deferred_conversion_failures: AtomicU64,
     /// Per path depth (index = depth), what each kind of move achieved.
     pub per_depth: Vec<MoveTally>,
 }
@@ -139,6 +145,9 @@ struct LocalCounts {
     pss_jump: u64,
     path_proposals: u64,
     path_jump: u64,
+    /// Not in [`LocalCounts::words`]: lazy conversion is not checkpointed.
+    deferred_conversions: u64,
+    deferred_conversion_failures: u64,
 }
 
 impl LocalCounts {
@@ -176,6 +185,7 @@ impl LocalCounts {
             pss_jump: w[8],
             path_proposals: w[9],
             path_jump: w[10],
+            ..LocalCounts::default()
         }
     }
 
@@ -193,6 +203,11 @@ impl LocalCounts {
         add(&c.propose_nanos, self.propose_nanos);
         add(&c.pss_nanos, self.pss_nanos);
         add(&c.path_nanos, self.path_nanos);
+        add(&c.deferred_conversions, self.deferred_conversions);
+        add(
+            &c.deferred_conversion_failures,
+            self.deferred_conversion_failures,
+        );
         if let Some(t) = c.per_depth.get(depth) {
             add(&t.pss_proposals, self.pss_proposals);
             add(&t.pss_jump, self.pss_jump);
@@ -322,6 +337,47 @@ fn image_jump(scene: &Scene, a: &PathSample, b: &PathSample) -> f64 {
     }
 }
 
+/// Lazy conversion: writes the evaluated path `y` of technique `s` of
+/// `depth` into `proposal` as an unconverted state (its point stale, its splat
+/// and `ln π` MMLT's, computed on the path as a trace would give them
+/// up to `f32` rounding).
+fn write_unconverted<'s>(
+    depth: &MmltDepth,
+    y: &Path<'s>,
+    s: usize,
+    proposal: &mut Sample<FusedState<'s>, PathSample>,
+) {
+    let out = &mut proposal.state;
+    out.path.clone_from(y);
+    out.depth = Some(depth.depth);
+    out.technique = Some((s, depth.depth + 1 - s));
+    out.point_stale = true;
+    out.sample.splats.clear();
+    out.sample.depth = depth.depth as u32;
+    out.log_density = f64::NEG_INFINITY;
+    if let Some(splat) = splat(depth, y, s) {
+        out.log_density = log_luminance(splat.l);
+        out.sample.splats.push(splat);
+    }
+    proposal.log_density = out.log_density;
+    proposal.payload.clone_from(&out.sample);
+}
+
+/// Whether two paths hold the same vertices (positions, emitters, kinds;
+/// a vertex at infinity is its direction `wo`, its position being 0;
+/// other vertices' `wo` is rewritten by [`Path::evaluate`], so not
+/// compared). Never for an empty path.
+fn same_vertices(a: &Path<'_>, b: &Path<'_>) -> bool {
+    a.vertices.len() == b.vertices.len()
+        && !a.vertices.is_empty()
+        && (a.vertices.iter()).zip(&b.vertices).all(|(a, b)| {
+            a.p() == b.p()
+                && a.light == b.light
+                && a.kind == b.kind
+                && (a.kind != VertexKind::Infinite || a.wo == b.wo)
+        })
+}
+
 /// Probability of a primary-sample (small or large step) mutation.
 pub fn pss_probability(m: &FusedMutation) -> f64 {
     (1.0 - m.technique_change - m.path_probability).max(0.0)
@@ -336,6 +392,11 @@ const PATH_FAILURES: [&str; 5] = [
     "path: current path has no target value",
 ];
 
+/// The failure of a primary-sample move (or change of technique) whose
+/// current path, reached by path-space moves under lazy conversion, does
+/// not survive its conversion to primary samples.
+pub const CONVERSION_FAILURE: &str = "pss: current path not convertible (lazy)";
+
 /// The fused kernel of one depth (one per chain).
 pub struct FusedKernel<'s> {
     scene: &'s Scene,
@@ -345,6 +406,8 @@ pub struct FusedKernel<'s> {
     p_pss: f64,
     p_tc: f64,
     drop_jacobian: bool,
+    /// [`Conversion::Lazy`].
+    lazy: bool,
     counters: Arc<FusedCounters>,
     n_pss: usize,
     n_path: usize,
@@ -358,10 +421,23 @@ pub struct FusedKernel<'s> {
     /// next ones while the path stays (cleared when it changes). Pure
     /// functions of the path, so reusing them changes nothing.
     cur_stage1: Option<(usize, f64, f64)>,
+    /// Lazy conversion: the same values of the last path-space proposal
+    /// `path_prop` that became an unconverted state, for when that state
+    /// next takes a path-space move (`None` after any other proposal).
+    prop_stage1: Option<(usize, f64, f64)>,
     scratch: Option<FusedState<'s>>,
     /// The state the current path's round trip writes into (reused: a
     /// new one per check allocated its point, path and splats again).
     probe: Option<FusedState<'s>>,
+    /// Lazy conversion: the state a stale current state's path is mapped
+    /// back into before a primary-sample move (kept for its allocations).
+    lifted: Option<FusedState<'s>>,
+    /// The path `lifted` was converted from, and whether that round trip
+    /// succeeded (`None`: nothing converted yet). Drawn once per state,
+    /// as the eager rule's current-path check: a primary-sample move
+    /// rejected from an unconverted state leaves it where it was, and the
+    /// next one starts from the same conversion (the state is then `v`).
+    lifted_from: Option<(Path<'s>, bool)>,
     /// Whether the current state's path survives the round trip (`None`:
     /// not checked since the state last changed).
     current_invertible: Option<bool>,
@@ -404,6 +480,7 @@ impl<'s> FusedKernel<'s> {
             p_pss: pss_probability(mutation),
             p_tc: mutation.technique_change,
             drop_jacobian: mutation.drop_jacobian,
+            lazy: mutation.conversion == Conversion::Lazy,
             counters,
             n_pss,
             n_path,
@@ -412,8 +489,11 @@ impl<'s> FusedKernel<'s> {
             path_cur: None,
             path_prop: None,
             cur_stage1: None,
+            prop_stage1: None,
             scratch: None,
             probe: None,
+            lifted: None,
+            lifted_from: None,
             current_invertible: None,
             proposal_invertible: None,
             last_move: (false, 0.0),
@@ -462,19 +542,22 @@ impl<'s> FusedKernel<'s> {
         }
     }
 
+    /// A small or large step from `point`, the current state's primary
+    /// sample, whose target is `log_density`.
     fn propose_pss(
         &mut self,
-        current: &Sample<FusedState<'s>, PathSample>,
+        point: &TorusPoint,
+        log_density: f64,
         proposal: &mut Sample<FusedState<'s>, PathSample>,
         rng: &mut ChainRng,
     ) -> Proposal {
         let cur = self.pss_cur.get_or_insert_with(|| Sample {
-            state: current.state.point.clone(),
-            log_density: current.log_density,
+            state: point.clone(),
+            log_density,
             payload: PathSample::default(),
         });
-        cur.state.clone_from(&current.state.point);
-        cur.log_density = current.log_density;
+        cur.state.clone_from(point);
+        cur.log_density = log_density;
         let prop = self.pss_prop.get_or_insert_with(|| cur.clone());
         let p = self.pss.propose(cur, prop, rng);
         if p.failed {
@@ -487,18 +570,19 @@ impl<'s> FusedKernel<'s> {
         self.finish_in_place(proposal, p.log_q_ratio, p.component)
     }
 
+    /// A change of technique from `point`, the current state's primary sample.
     fn propose_technique(
         &mut self,
-        current: &Sample<FusedState<'s>, PathSample>,
+        point: &TorusPoint,
         proposal: &mut Sample<FusedState<'s>, PathSample>,
         rng: &mut ChainRng,
     ) -> Proposal {
         // Connection stream, number 0: coordinate 2 of the interleaved layout.
-        let mut values = current.state.point.materialize();
+        let mut values = point.materialize();
         if values.len() < 3 {
             values.resize(3, 0.5);
             // Coordinates never read are uniform: draw the missing ones.
-            for v in values.iter_mut().skip(current.state.point.len()) {
+            for v in values.iter_mut().skip(point.len()) {
                 *v = uniform(rng);
             }
         }
@@ -535,30 +619,34 @@ impl<'s> FusedKernel<'s> {
         // contribution are evaluated here, once per current path (a state
         // sees several path-space proposals while it is current). The copy
         // is reused while its vertices are the current path's: a content
-        // check, so nothing depends on how the driver moves states. A
-        // vertex at infinity is its direction `wo` (its position is 0);
-        // other vertices' `wo` is rewritten by `evaluate`, so not compared.
-        let cur = self.path_cur.get_or_insert_with(|| Sample {
+        // check ([`same_vertices`]), so nothing depends on how the driver
+        // moves states.
+        let new_sample = || Sample {
             state: Path::new(scene),
             log_density: f64::NEG_INFINITY,
             payload: PathSample::default(),
-        });
-        let same_path = cur.state.vertices.len() == x.path.vertices.len()
-            && !cur.state.vertices.is_empty()
-            && (cur.state.vertices.iter())
-                .zip(&x.path.vertices)
-                .all(|(a, b)| {
-                    a.p() == b.p()
-                        && a.light == b.light
-                        && a.kind == b.kind
-                        && (a.kind != VertexKind::Infinite || a.wo == b.wo)
-                });
-        if !same_path {
-            cur.state.clone_from(&x.path);
-            cur.state.evaluate();
-            cur.log_density = cur.state.log_density();
-            self.cur_stage1 = None;
+        };
+        let cur = self.path_cur.get_or_insert_with(new_sample);
+        if !same_vertices(&cur.state, &x.path) {
+            // Lazy conversion: a state reached by the last path-space
+            // proposal is that proposal, evaluated by its mutation, with
+            // its stage-1 values: swap it in instead of evaluating again.
+            let prop = self.path_prop.get_or_insert_with(new_sample);
+            match self.prop_stage1.take() {
+                Some(values) if x.point_stale && same_vertices(&prop.state, &x.path) => {
+                    std::mem::swap(cur, prop);
+                    cur.log_density = cur.state.log_density();
+                    self.cur_stage1 = Some(values);
+                }
+                _ => {
+                    cur.state.clone_from(&x.path);
+                    cur.state.evaluate();
+                    cur.log_density = cur.state.log_density();
+                    self.cur_stage1 = None;
+                }
+            }
         }
+        self.prop_stage1 = None;
         let prop = self.path_prop.get_or_insert_with(|| cur.clone());
         let p = self.path.propose(cur, prop, rng);
         if p.failed {
@@ -599,6 +687,18 @@ impl<'s> FusedKernel<'s> {
             self.local.rejected_before_conversion += 1;
             // Counted as a rejection of the mutation that proposed.
             return Proposal::failed(offset + p.component);
+        }
+        if self.lazy {
+            // Lazy conversion: the accepted path is the proposal, mapped
+            // back only before a primary-sample move needs its point.
+            write_unconverted(&depth, y, s, proposal);
+            self.prop_stage1 = Some((s, log_p_y, log_pi_y));
+            return Proposal {
+                log_q_ratio: log_pi_x - log_pi_y,
+                component: offset + p.component,
+                evaluated: true,
+                failed: false,
+            };
         }
         // Stage 2: the current path's round trip (once per state), then the
         // proposal's; either failing rejects the move (module docs).
@@ -655,6 +755,68 @@ impl<'s> FusedKernel<'s> {
     }
 }
 
+impl<'s> FusedKernel<'s> {
+    /// The primary sample a primary-sample move starts from: the current
+    /// state's own (`Ok(None)`), or under lazy conversion, when the state
+    /// was reached by path-space moves, its path mapped back now (the
+    /// round trip: inverted with fresh uniforms where the sampler is
+    /// many-to-one, re-traced, same technique and non-zero) into the
+    /// returned state; `Err` with the failure's component when the round
+    /// trip fails. The caller hands the state back to `self.lifted`.
+    fn convert_current(
+        &mut self,
+        current: &Sample<FusedState<'s>, PathSample>,
+        rng: &mut ChainRng,
+    ) -> Result<Option<FusedState<'s>>, usize> {
+        if !current.state.point_stale {
+            return Ok(None);
+        }
+        let cached = match &self.lifted_from {
+            Some((from, ok)) if same_vertices(from, &current.state.path) => Some(*ok),
+            _ => None,
+        };
+        let ok = match cached {
+            Some(ok) => ok,
+            None => {
+                let start = self.timed.then(Instant::now);
+                let scene = self.scene;
+                let path = &current.state.path;
+                let lifted = self.lifted.get_or_insert_with(|| {
+                    FusedState::untraced(scene, TorusPoint::fresh(child_rng(rng)))
+                });
+                let ok = match current.state.technique {
+                    Some((s, _)) => round_trip(scene, &self.depth, path, s, rng, lifted).is_ok(),
+                    None => false,
+                };
+                match &mut self.lifted_from {
+                    Some((from, was)) => {
+                        from.clone_from(path);
+                        *was = ok;
+                    }
+                    None => self.lifted_from = Some((path.clone(), ok)),
+                }
+                let c = &mut self.local;
+                c.inversions += 1;
+                c.deferred_conversions += 1;
+                c.deferred_conversion_failures += u64::from(!ok);
+                if let Some(start) = start {
+                    c.conversion_nanos += start.elapsed().as_nanos() as u64 * TIMED_EVERY;
+                }
+                ok
+            }
+        };
+        if !ok {
+            return Err(self.conversion_failure());
+        }
+        Ok(self.lifted.take())
+    }
+
+    /// Component index of [`CONVERSION_FAILURE`].
+    fn conversion_failure(&self) -> usize {
+        self.failure(PATH_FAILURES.len())
+    }
+}
+
 impl<'s> Kernel<FusedState<'s>, PathSample> for FusedKernel<'s> {
     fn propose(
         &mut self,
@@ -668,12 +830,24 @@ impl<'s> Kernel<FusedState<'s>, PathSample> for FusedKernel<'s> {
         self.proposal_invertible = None;
         let r = uniform(rng);
         let path_move = r >= self.p_pss + self.p_tc;
-        let p = if r < self.p_pss {
-            self.propose_pss(current, proposal, rng)
-        } else if !path_move {
-            self.propose_technique(current, proposal, rng)
-        } else {
+        let p = if path_move {
             self.propose_path(current, proposal, rng)
+        } else {
+            match self.convert_current(current, rng) {
+                Err(component) => Proposal::failed(component),
+                Ok(lifted) => {
+                    let point = lifted.as_ref().map_or(&current.state.point, |l| &l.point);
+                    let p = if r < self.p_pss {
+                        self.propose_pss(point, current.log_density, proposal, rng)
+                    } else {
+                        self.propose_technique(point, proposal, rng)
+                    };
+                    if lifted.is_some() {
+                        self.lifted = lifted;
+                    }
+                    p
+                }
+            }
         };
         let nanos = start.map_or(0, |s| s.elapsed().as_nanos() as u64 * TIMED_EVERY);
         let c = &mut self.local;
@@ -793,6 +967,7 @@ impl<'s> Kernel<FusedState<'s>, PathSample> for FusedKernel<'s> {
                 .map(|n| format!("path: {n}")),
         );
         names.extend(PATH_FAILURES.iter().map(|s| s.to_string()));
+        names.push(CONVERSION_FAILURE.into());
         names
     }
 }

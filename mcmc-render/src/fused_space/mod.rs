@@ -59,6 +59,11 @@ pub struct FusedState<'s> {
     pub sample: PathSample,
     /// `ln π(u)` of the cached path (MMLT's target).
     pub log_density: f64,
+    /// The state was reached by a path-space move under
+    /// [`Conversion::Lazy`] and its path not yet mapped back: `point` is
+    /// an earlier state's, not `P_t(path)` (the kernel converts the path
+    /// before a primary-sample move reads the point).
+    pub point_stale: bool,
 }
 
 impl<'s> FusedState<'s> {
@@ -71,6 +76,7 @@ impl<'s> FusedState<'s> {
             technique: None,
             sample: empty_sample(0),
             log_density: f64::NEG_INFINITY,
+            point_stale: false,
         }
     }
 
@@ -117,6 +123,23 @@ impl<'s> Target<FusedState<'s>> for FusedTarget<'s> {
     }
 }
 
+crate::choice! {
+    /// When an accepted path-space proposal is mapped back to primary
+    /// samples (docs/fused.md, "Session 22").
+    pub enum Conversion {
+        /// At once: every accepted path-space proposal is inverted and
+        /// re-traced (its round trip), and the current path's round trip
+        /// is checked too, so path-space moves stay among paths that
+        /// survive it.
+        Eager = "eager",
+        /// Only before the next primary-sample move (the paper's): the
+        /// accepted path is the state, unconverted, until a primary-sample
+        /// move needs its point; a path whose conversion then fails cannot
+        /// take that move (rejected, counted).
+        Lazy = "lazy"
+    }
+}
+
 /// The fused chain's mutation settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FusedMutation {
@@ -133,6 +156,8 @@ pub struct FusedMutation {
     /// A control for the tests: leave out the inverse sampler's Jacobian
     /// `p_t(y)/p_t(x)` from the path-space moves' ratio (wrong on purpose).
     pub drop_jacobian: bool,
+    /// When accepted path-space proposals are converted.
+    pub conversion: Conversion,
 }
 
 impl Default for FusedMutation {
@@ -155,6 +180,7 @@ impl Default for FusedMutation {
             },
             path_probability: 0.5,
             drop_jacobian: false,
+            conversion: Conversion::Eager,
         }
     }
 }
@@ -266,13 +292,16 @@ impl<'s> ChainFamily for FusedFamily<'s> {
         0.0
     }
     fn coordinates(&self, state: &FusedState<'s>) -> Option<Vec<f64>> {
-        Some(state.point.materialize())
+        // A stale point (lazy conversion) is not the state's.
+        (!state.point_stale).then(|| state.point.materialize())
     }
-    fn checkpointable(&self, _mutation: &FusedMutation) -> bool {
+    fn checkpointable(&self, mutation: &FusedMutation) -> bool {
         // A state is its point (the cached path is re-traced from it) and
         // a kernel's own state (the current path's round-trip outcome, its
         // scratch, its counts, the adaptive small step) is in its words.
-        true
+        // Under lazy conversion a state's point can be stale (its path is
+        // the state): not saved.
+        mutation.conversion == Conversion::Eager
     }
     /// The depth the cache was traced for ([`UNTRACED`] if none), the
     /// point ([`TorusPoint::to_words`]), and for a traced state its

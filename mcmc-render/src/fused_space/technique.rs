@@ -13,11 +13,12 @@
 //! densities, with BDPT's own MIS routine ([`mis_weight`]) on the path cut
 //! into BDPT's subpaths.
 
+use crate::color::Rgb;
 use crate::integrators::bdpt::mis_weight;
 use crate::integrators::path_vertex::Vertex;
 use crate::light::Light;
 use crate::path_space::Path;
-use crate::pss::MmltDepth;
+use crate::pss::{MmltDepth, Splat};
 use std::cell::RefCell;
 
 thread_local! {
@@ -84,9 +85,42 @@ pub fn log_target(depth: &MmltDepth, path: &Path<'_>, s: usize) -> f64 {
     if !(i > 0.0) {
         return f64::NEG_INFINITY;
     }
+    match log_weight(depth, path, s) {
+        Some((log_nw, log_p)) => log_nw + i.ln() - log_p,
+        None => f64::NEG_INFINITY,
+    }
+}
+
+/// MMLT's splat of `path` under technique `s` without tracing it:
+/// `n · w_{s,t} · f / p_{s,t}` at the path's raster position (what the
+/// traced sample splats, up to `f32` rounding; [`log_target`] is the
+/// logarithm of its luminance). `None` when the path is not of `depth`
+/// or the technique cannot produce it. For lazy conversion
+/// (`fused_space::kernel`): an accepted path-space proposal is the state
+/// without being traced.
+pub fn splat(depth: &MmltDepth, path: &Path<'_>, s: usize) -> Option<Splat> {
+    if path.segments() != depth.depth || s > depth.depth {
+        return None;
+    }
+    let (log_nw, log_p) = log_weight(depth, path, s)?;
+    // In f64: `1/p` alone can overflow f32 where `f/p` does not.
+    let scale = (log_nw - log_p).exp();
+    let c = path.contribution;
+    let l = |x: f32| (f64::from(x) * scale) as f32;
+    Some(Splat {
+        p: path.raster,
+        l: Rgb::new(l(c.r), l(c.g), l(c.b)),
+        class: 0,
+    })
+}
+
+/// `(ln(n · w_{s,t}(x)), ln p_{s,t}(x))` (see the module docs), `None`
+/// when the technique cannot produce `path` or its MIS weight is 0.
+fn log_weight(depth: &MmltDepth, path: &Path<'_>, s: usize) -> Option<(f64, f64)> {
+    let k = path.segments();
     let log_p = log_technique_density(path, s);
     if !(log_p > f64::NEG_INFINITY) {
-        return f64::NEG_INFINITY;
+        return None;
     }
     let t = k + 1 - s;
     let n = depth.technique_count();
@@ -120,7 +154,7 @@ pub fn log_target(depth: &MmltDepth, path: &Path<'_>, s: usize) -> f64 {
         mis_weight(path.scene, camera, light, s, t, None, depth.bdpt.heuristic)
     });
     if !(w > 0.0) {
-        return f64::NEG_INFINITY;
+        return None;
     }
-    (n as f64).ln() + f64::from(w).ln() + i.ln() - log_p
+    Some(((n as f64).ln() + f64::from(w).ln(), log_p))
 }

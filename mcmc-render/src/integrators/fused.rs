@@ -11,8 +11,8 @@
 use super::mmlt::Mmlt;
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
-use crate::fused_space::kernel::{MUTATION_COST, MoveTotals, ROUND_TRIP_COST};
-use crate::fused_space::{FusedFamily, FusedMutation};
+use crate::fused_space::kernel::{CONVERSION_FAILURE, MUTATION_COST, MoveTotals, ROUND_TRIP_COST};
+use crate::fused_space::{Conversion, FusedFamily, FusedMutation};
 use crate::markov::{self, ChainParams, MltResult};
 use crate::observer::{NoObserver, Observer};
 use crate::path_space::PathMutations;
@@ -46,6 +46,8 @@ crate::settings! {
         pub multi_chain_perturbation: f64 = 0.0, check check::non_negative;
         /// Relative weight of the manifold perturbation (must be 0 until it is built).
         pub manifold_perturbation: f64 = 0.0, check check::non_negative;
+        /// When an accepted path-space proposal is mapped back to primary samples: eager (at once, with the current path's round trip; exact up to f32 rounding) or lazy (only before the next primary-sample move, the paper's; docs/fused.md, Session 22).
+        pub conversion: Conversion = Conversion::Eager;
         flatten {
             /// Path depth (a finite max_depth, as MMLT).
             pub depth: DepthParams = DepthParams::default();
@@ -154,6 +156,7 @@ impl Fused {
                 .path_space_probability
                 .unwrap_or(PILOT_PATH_PROBABILITY),
             drop_jacobian: false,
+            conversion: self.conversion,
         };
         m.check()?;
         Ok(m)
@@ -310,6 +313,11 @@ impl IntegratorSettings for Fused {
         observer: &dyn Observer,
     ) -> Result<Rendered, RenderError> {
         IntegratorSettings::validate(self).map_err(RenderError::Invalid)?;
+        if run.checkpoint.is_some() && self.conversion == Conversion::Lazy {
+            return Err(RenderError::Invalid(
+                "conversion=lazy cannot be checkpointed (a state reached by path-space moves has no primary sample yet): use conversion=eager".into(),
+            ));
+        }
         let mutation = self.fused_mutation().map_err(RenderError::Invalid)?;
         let (family, result, adaptation) = self.run_chains(scene, mutation, run, stop, observer)?;
         let mut out =
@@ -347,6 +355,9 @@ pub fn statistics(
                 failures.insert(c.name.clone(), json!(c.proposed));
             }
             &mut path
+        } else if c.name == CONVERSION_FAILURE {
+            failures.insert(c.name.clone(), json!(c.proposed));
+            &mut pss
         } else if c.name == "technique change" {
             &mut tech
         } else {
@@ -408,6 +419,9 @@ pub fn statistics(
         "inversions": counters.inversions.load(Ordering::Relaxed),
         "rejected_before_conversion": counters.rejected_before_conversion.load(Ordering::Relaxed),
         "round_trip_failures": failures,
+        "conversion": mutation.conversion.name(),
+        "deferred_conversions": counters.deferred_conversions.load(Ordering::Relaxed),
+        "deferred_conversion_failures": counters.deferred_conversion_failures.load(Ordering::Relaxed),
         "conversion_seconds": conversion * 1e-9,
         "conversion_share_of_proposals": if propose > 0.0 { conversion / propose } else { f64::NAN },
     })
