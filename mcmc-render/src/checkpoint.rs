@@ -190,16 +190,8 @@ fn film_of(size: (u32, u32), filter: Arc<Filter>, acc: Accumulators) -> Result<F
     Film::from_accumulators([w, h, 0, 0, w, h], filter, acc.0, acc.1)
 }
 
-/// Start value of [`fnv1a`].
-pub(crate) const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
-
-/// FNV-1a of `bytes`, continuing from `h`.
-pub(crate) fn fnv1a(bytes: &[u8], mut h: u64) -> u64 {
-    for &b in bytes {
-        h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
-    }
-    h
-}
+// The checksum every checkpoint format of the workspace uses (mcmc-core's).
+pub(crate) use mcmc_core::checkpoint::{FNV_OFFSET, fnv1a};
 
 /// FNV-1a over the described inputs (each part with its length, so that
 /// parts cannot run into each other).
