@@ -15,8 +15,10 @@ use mcmc_render::color::Rgb;
 use mcmc_render::fused_space::inverse_path::{InverseFailure, RoundTripFailure, round_trip};
 use mcmc_render::fused_space::technique::log_target;
 use mcmc_render::fused_space::{Conversion, FusedFamily, FusedMutation, FusedState};
+use mcmc_render::integrators::RunSettings;
 use mcmc_render::integrators::bdpt::{Bdpt, MisHeuristic};
 use mcmc_render::integrators::path_vertex::VertexKind;
+use mcmc_render::integrators::registry::{self, Configured};
 use mcmc_render::markov::{ChainSettings, Normalization};
 use mcmc_render::observer::NoObserver;
 use mcmc_render::pss::{MmltDepth, bootstrap_point};
@@ -578,50 +580,66 @@ fn auto_exactness(conversion: Conversion) {
     );
 }
 
+/// `fused` through the registry with the small settings of the registry
+/// tests below (depth 4, 2000 bootstrap samples, 64 chains, 8 mutations
+/// per pixel) and `extra`.
+fn configure_fused(extra: &[(&str, &str)]) -> Box<dyn Configured> {
+    let settings: Vec<(String, String)> = [
+        ("max_depth", "4"),
+        ("bootstrap", "2000"),
+        ("chains", "64"),
+        ("mutations_per_pixel", "8"),
+    ]
+    .iter()
+    .chain(extra)
+    .map(|(k, v)| (k.to_string(), v.to_string()))
+    .collect();
+    registry::configure(None, Some("fused"), &settings).expect("fused configures")
+}
+
+/// A render of `integ` on `threads` threads with `seed`: the image's bits
+/// and the sidecar's `"fused"` statistics.
+fn render_fused(
+    scene: &Scene,
+    integ: &dyn Configured,
+    threads: usize,
+    seed: u64,
+) -> (Vec<u32>, serde_json::Value) {
+    let run = RunSettings {
+        seed,
+        ..RunSettings::default()
+    };
+    let stop = AtomicBool::new(false);
+    let out = with_threads(threads, || integ.render(scene, &run, &stop, &NoObserver))
+        .expect("fused renders");
+    let bits = (out.image.iter())
+        .flat_map(|p| [p.r.to_bits(), p.g.to_bits(), p.b.to_bits()])
+        .collect();
+    (bits, out.statistics["fused"].clone())
+}
+
 /// `path_space_probability=auto` through the registry: the pilot's choice
 /// and the image are bit-identical for 1 and 2 threads, the choice is made
 /// (not the fallback) within its bounds, and it is reported.
 #[test]
 fn auto_is_bit_identical_across_thread_counts_and_reported() {
     use mcmc_render::integrators::fused::AUTO_BOUNDS;
-    use mcmc_render::integrators::{RunSettings, registry};
     let scene = repo_scene("cornell-glossy-glass.xml", 12);
-    let integ = registry::configure(
-        None,
-        Some("fused"),
-        &[
-            ("max_depth".into(), "4".into()),
-            ("bootstrap".into(), "2000".into()),
-            ("chains".into(), "64".into()),
-            ("mutations_per_pixel".into(), "8".into()),
-            ("path_space_probability".into(), "auto".into()),
-            ("adaptation_mutations_per_pixel".into(), "64".into()),
-        ],
-    )
-    .expect("fused configures");
-    let stop = AtomicBool::new(false);
+    let integ = configure_fused(&[
+        ("path_space_probability", "auto"),
+        ("adaptation_mutations_per_pixel", "64"),
+    ]);
     let render = |threads: usize, seed: u64| {
-        let run = RunSettings {
-            seed,
-            ..RunSettings::default()
+        let (bits, stats) = render_fused(&scene, &*integ, threads, seed);
+        let per_depth = |v: &serde_json::Value| -> Vec<f64> {
+            v.as_array()
+                .expect("per-depth statistics")
+                .iter()
+                .map(|d| d["path_space_probability"].as_f64().expect("a probability"))
+                .collect()
         };
-        let out = with_threads(threads, || integ.render(&scene, &run, &stop, &NoObserver))
-            .expect("fused renders");
-        let bits: Vec<u32> = (out.image.iter())
-            .flat_map(|p| [p.r.to_bits(), p.g.to_bits(), p.b.to_bits()])
-            .collect();
-        let choice: Vec<f64> = out.statistics["fused"]["adaptation"]["per_depth"]
-            .as_array()
-            .expect("the pilot is reported")
-            .iter()
-            .map(|d| d["path_space_probability"].as_f64().expect("a probability"))
-            .collect();
-        let used: Vec<f64> = out.statistics["fused"]["per_depth"]
-            .as_array()
-            .expect("per-depth statistics")
-            .iter()
-            .map(|d| d["path_space_probability"].as_f64().expect("a probability"))
-            .collect();
+        let choice = per_depth(&stats["adaptation"]["per_depth"]);
+        let used = per_depth(&stats["per_depth"]);
         (bits, choice, used)
     };
     let (one, choice, used) = render(1, 42);
@@ -651,34 +669,10 @@ fn auto_is_bit_identical_across_thread_counts_and_reported() {
 #[test]
 fn lazy_conversion_is_deterministic_reported_and_not_checkpointed() {
     use mcmc_render::checkpoint::Checkpoint;
-    use mcmc_render::integrators::{RunSettings, registry};
     let scene = repo_scene("cornell-glossy-glass.xml", 12);
-    let integ = registry::configure(
-        None,
-        Some("fused"),
-        &[
-            ("max_depth".into(), "4".into()),
-            ("bootstrap".into(), "2000".into()),
-            ("chains".into(), "64".into()),
-            ("mutations_per_pixel".into(), "8".into()),
-            ("path_space_probability".into(), "0.5".into()),
-            ("conversion".into(), "lazy".into()),
-        ],
-    )
-    .expect("fused configures");
+    let integ = configure_fused(&[("path_space_probability", "0.5"), ("conversion", "lazy")]);
     let stop = AtomicBool::new(false);
-    let render = |threads: usize, seed: u64| {
-        let run = RunSettings {
-            seed,
-            ..RunSettings::default()
-        };
-        let out = with_threads(threads, || integ.render(&scene, &run, &stop, &NoObserver))
-            .expect("fused renders");
-        let bits: Vec<u32> = (out.image.iter())
-            .flat_map(|p| [p.r.to_bits(), p.g.to_bits(), p.b.to_bits()])
-            .collect();
-        (bits, out.statistics["fused"].clone())
-    };
+    let render = |threads: usize, seed: u64| render_fused(&scene, &*integ, threads, seed);
     let (one, stats) = render(1, 42);
     let count = |k: &str| stats[k].as_u64().expect(k);
     eprintln!(
@@ -745,8 +739,6 @@ fn fused_is_bit_identical_across_thread_counts() {
 /// (refused before session 19's inverses at infinity).
 #[test]
 fn fused_runs_from_the_registry_with_its_statistics() {
-    use mcmc_render::integrators::RunSettings;
-    use mcmc_render::integrators::registry;
     let scene = repo_scene("cornell-box.xml", 8);
     let integ = registry::configure(
         None,
