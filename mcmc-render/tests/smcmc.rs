@@ -1588,11 +1588,11 @@ fn stationary_large_acceptance<S: TileShift>(
                     (u_stat(&tile), u_stat(&own))
                 })
                 .collect();
-            let mean = |f: &dyn Fn(&(Option<f64>, Option<f64>)) -> Option<f64>| {
-                let v: Vec<f64> = per_tile_figures.iter().filter_map(f).collect();
-                v.iter().sum::<f64>() / v.len().max(1) as f64
-            };
-            (mean(&|p| p.0), mean(&|p| p.1))
+            let mean = |v: Vec<f64>| v.iter().sum::<f64>() / v.len().max(1) as f64;
+            (
+                mean(per_tile_figures.iter().filter_map(|p| p.0).collect()),
+                mean(per_tile_figures.iter().filter_map(|p| p.1).collect()),
+            )
         })
         .collect();
     per_batch.into_iter().unzip()
