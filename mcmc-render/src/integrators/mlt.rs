@@ -209,7 +209,9 @@ impl IntegratorSettings for Mlt {
         }
         check_direct_depth(Self::NAME, self.direct_samples, self.depth.max_depth)?;
         if self.unconnectable_pass && self.specular_pass().is_none() {
-            return Err("unconnectable_pass needs the specular-chain pass (specular_samples ≥ 0)".into());
+            return Err(
+                "unconnectable_pass needs the specular-chain pass (specular_samples ≥ 0)".into(),
+            );
         }
         self.sizes()?;
         self.mutations().check()
