@@ -142,6 +142,7 @@ fn replicate(scene: &Scene, seed: u64, direct: bool) -> Replicate {
     let specular = SpecularChains {
         min_depth: mlt.min_segments() as u32,
         max_depth: 5,
+        through_diffuse: false,
     };
     let mut pass_images = vec![
         run_per_pixel(

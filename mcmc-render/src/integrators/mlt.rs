@@ -31,7 +31,10 @@
 //!   Dirac vertices only) are path traced
 //!   ([`crate::path_space::specular_pass`]) and the chains leave them out:
 //!   no bidirectional move keeps a vertex of such a path, so chains
-//!   resampled onto a rare bright one never left it.
+//!   resampled onto a rare bright one never left it. With
+//!   `unconnectable_pass` it takes every path no connection can make,
+//!   `L S+ (D S+)* E` too (session 23: their heavy-tailed start-up weights
+//!   made `mlt` read low on the RELT scenes).
 //! - **Snapshots** (previews, `convergence` checkpoints): the passes run
 //!   first and show none; every snapshot of the chains has the passes'
 //!   images added ([`WithPasses`]), so each is a whole estimate.
@@ -89,6 +92,8 @@ crate::settings! {
         pub direct_samples: i64 = -1, check check_pass_samples;
         /// Samples per pixel of the specular-chain pass (path tracing of the paths L S* E, emitters seen directly or through mirrors and glass, which the chains then leave out: no bidirectional move keeps a vertex of them); -1: off, the chains do them (not in Mitsuba).
         pub specular_samples: i64 = 16, check check_pass_samples;
+        /// The specular-chain pass also path traces the other unconnectable paths, `L S+ (D S+)* E` (seen and lit only through mirrors and glass: no edge joins two non-Dirac vertices, so only a camera walk that hits the emitter draws them), and the chains leave them out; needs specular_samples ≥ 0 (docs/path-space.md, Session 23).
+        pub unconnectable_pass: bool = false;
         /// With a time budget, the specular-chain pass runs for this share of it (at least specular_samples spp), so that its noise falls with the budget like the chains'; 0: specular_samples spp alone (the only rule without a time budget).
         pub specular_time_share: f64 = 0.05, check time_share;
         /// Smallest film offset of the lens perturbation (pixels; -1 with lens_perturbation_max = -1: Mitsuba's 0.1).
@@ -203,6 +208,11 @@ impl IntegratorSettings for Mlt {
             return Err("mlt needs max_depth ≥ 1 or -1 (unbounded)".into());
         }
         check_direct_depth(Self::NAME, self.direct_samples, self.depth.max_depth)?;
+        if self.unconnectable_pass && self.specular_pass().is_none() {
+            return Err(
+                "unconnectable_pass needs the specular-chain pass (specular_samples ≥ 0)".into(),
+            );
+        }
         self.sizes()?;
         self.mutations().check()
     }
@@ -245,6 +255,7 @@ impl IntegratorSettings for Mlt {
             let pass = SpecularChains {
                 min_depth: self.min_segments() as u32,
                 max_depth: self.max_segments().map_or(u32::MAX, |m| m as u32),
+                through_diffuse: self.unconnectable_pass,
             };
             specular_chains_pass(
                 scene,
@@ -369,6 +380,9 @@ pub fn render_mlt(
         .timed(clock.clone());
     if settings.specular_pass().is_some() {
         family = family.without_specular_chains();
+        if settings.unconnectable_pass {
+            family = family.without_unconnectable();
+        }
     }
     let mut chain = settings.chain.chain_settings(settings.mutations(), run);
     if settings.bdpt_startup {

@@ -376,6 +376,20 @@ impl<'s> PathFamily<'s> {
         PathFamily {
             target: PathTarget {
                 without_specular_chains: true,
+                ..self.target
+            },
+            ..self
+        }
+    }
+
+    /// The family with every unconnectable path left out of its target
+    /// ([`PathTarget::without_unconnectable`]; `mlt`'s specular-chain pass
+    /// with `unconnectable_pass` renders them).
+    pub fn without_unconnectable(self) -> Self {
+        PathFamily {
+            target: PathTarget {
+                without_unconnectable: true,
+                ..self.target
             },
             ..self
         }

@@ -28,14 +28,20 @@ use crate::scene::Scene;
 /// trapped by total internal reflection in a sphere never leaves it.
 pub const UNBOUNDED_CHAIN: u32 = 256;
 
-/// Path tracing of the emitters seen through chains of Dirac vertices,
-/// paths of `min_depth ..= max_depth` segments (see the module docs).
+/// Path tracing of the emitters seen through chains of Dirac vertices
+/// (with `through_diffuse`, of every unconnectable path), paths of
+/// `min_depth ..= max_depth` segments (see the module docs).
 #[derive(Clone, Copy, Debug)]
 pub struct SpecularChains {
     /// Shortest path counted, in segments (1: emitters seen directly).
     pub min_depth: u32,
     /// Longest path counted, in segments.
     pub max_depth: u32,
+    /// Trace through diffuse and glossy vertices too and count every
+    /// unconnectable path ([`super::state::Path::is_unconnectable`]:
+    /// `L S+ (D S+)* E` besides `L S* E`), for `mlt`'s
+    /// `unconnectable_pass`; false: Dirac vertices only.
+    pub through_diffuse: bool,
 }
 
 impl SpecularChains {
@@ -49,18 +55,24 @@ impl SpecularChains {
     ) -> Rgb {
         let mut l = Rgb::BLACK;
         let mut beta = Rgb::WHITE;
-        // Emission after a camera ray or a Dirac lobe is weighted 1.
+        // Emission after a camera ray or a Dirac lobe is weighted 1: only
+        // this pass counts these paths.
         let from = ScatterOrigin::CAMERA;
+        // Whether the last vertex (the camera at first) scattered through a
+        // Dirac lobe: an emitter hit after one that did not would end an
+        // edge a connection can make (the emitter seen directly excepted).
+        let mut last_dirac = false;
         for depth in 1..=self.max_depth.min(UNBOUNDED_CHAIN) {
+            let counted = depth >= self.min_depth && (depth == 1 || last_dirac);
             let Some(its) = scene.intersect(&ray) else {
                 // The environment seen through the chain (or directly).
-                if depth >= self.min_depth {
+                if counted {
                     l += environment_hit(scene, beta, ray.d, &from, false);
                 }
                 break;
             };
             let sp = its.sp;
-            if depth >= self.min_depth {
+            if counted {
                 l += emitter_hit(scene, beta, &sp, -ray.d, &from, false);
             }
             if depth == self.max_depth {
@@ -77,9 +89,15 @@ impl SpecularChains {
             ) else {
                 break;
             };
-            if !bs.is_delta || !(bs.pdf > 0.0) || bs.weight.is_black() {
+            if !(bs.pdf > 0.0) || bs.weight.is_black() {
                 break;
             }
+            // Two non-Dirac vertices in a row: a connectible edge, so no
+            // longer path of this prefix is left to the pass.
+            if !bs.is_delta && (!self.through_diffuse || !last_dirac) {
+                break;
+            }
+            last_dirac = bs.is_delta;
             beta *= bs.weight;
             ray = sp.spawn_ray(frame.to_world(bs.wi));
         }

@@ -345,6 +345,19 @@ impl<'s> Path<'s> {
         k >= 1 && self.vertices[1..k].iter().all(|v| v.delta)
     }
 
+    /// True for a path that no technique but the camera walk that hits
+    /// the emitter can draw: no edge joins two vertices that do not
+    /// scatter through a Dirac lobe (the emitter point and the camera count
+    /// as such vertices), so no connection can make it. These are the
+    /// specular chains ([`Path::is_specular_chain`], the emitter seen
+    /// directly included) and the paths `L S+ (D S+)* E`, seen and lit
+    /// only through mirrors and glass.
+    pub fn is_unconnectable(&self) -> bool {
+        let k = self.segments();
+        let dirac = |i: usize| i > 0 && i < k && self.vertices[i].delta;
+        self.is_specular_chain() || (k >= 2 && (0..k).all(|i| dirac(i) || dirac(i + 1)))
+    }
+
     /// The payload the Markov-chain driver films: one splat of `f(x)` at
     /// the raster position, depth `k`.
     pub fn sample(&self) -> PathSample {
@@ -690,12 +703,18 @@ pub struct PathTarget {
     /// `I = 0` there), which `mlt`'s specular-chain pass path traces
     /// instead ([`super::specular_pass`]).
     pub without_specular_chains: bool,
+    /// Leave out every unconnectable path ([`Path::is_unconnectable`], a
+    /// superset of the specular chains), which the specular-chain pass
+    /// then traces through diffuse vertices too.
+    pub without_unconnectable: bool,
 }
 
 impl PathTarget {
-    /// `ln I(x)` as [`Path::log_density`], `−∞` on a left-out specular chain.
+    /// `ln I(x)` as [`Path::log_density`], `−∞` on a left-out path.
     pub fn log_density(&self, path: &Path<'_>) -> f64 {
-        if self.without_specular_chains && path.is_specular_chain() {
+        if (self.without_specular_chains && path.is_specular_chain())
+            || (self.without_unconnectable && path.is_unconnectable())
+        {
             f64::NEG_INFINITY
         } else {
             path.log_density()
