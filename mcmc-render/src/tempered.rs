@@ -130,6 +130,8 @@ impl RegularizationSchedule for Regularization {
 #[derive(Clone, Debug)]
 pub struct TemperedBsdfs {
     levels: Vec<Vec<Bsdf>>,
+    /// Per scene BSDF: every level's copy equals level 0's.
+    same: Vec<bool>,
     temperatures: Vec<f64>,
     floor: f64,
     stand_in: f64,
@@ -154,7 +156,7 @@ impl TemperedBsdfs {
             !temperatures.is_empty() && temperatures.len() <= MAX_LEVELS,
             "a ladder has 1 to {MAX_LEVELS} levels"
         );
-        let levels = temperatures
+        let levels: Vec<Vec<Bsdf>> = temperatures
             .iter()
             .map(|&t| {
                 let f = if t > 1.0 { floor.max(stand_in) } else { floor };
@@ -166,8 +168,12 @@ impl TemperedBsdfs {
                     .collect()
             })
             .collect();
+        let same = (0..scene.bsdfs.len())
+            .map(|i| levels.iter().all(|level| level[i] == levels[0][i]))
+            .collect();
         TemperedBsdfs {
             levels,
+            same,
             temperatures: temperatures.to_vec(),
             floor,
             stand_in,
@@ -198,6 +204,10 @@ impl ConnectionBsdfs for TemperedBsdfs {
     #[inline(always)]
     fn bsdf_at<'a>(&'a self, scene: &'a Scene, level: usize, sp: &SurfacePoint) -> BsdfAt<'a> {
         scene.bsdf_at_in(&self.levels[level], sp)
+    }
+    #[inline(always)]
+    fn same_at_every_level(&self, scene: &Scene, sp: &SurfacePoint) -> bool {
+        self.same[scene.bsdf_index(sp)]
     }
 }
 
@@ -237,12 +247,17 @@ fn level_record(level: usize, pi: f64) -> Splat {
 /// contribution); `None` when it holds no record for `level` (a one-level
 /// payload: then its splats' luminance is the density).
 pub fn level_density(payload: &PathSample, level: usize) -> Option<f64> {
-    payload
-        .splats
-        .iter()
-        .filter(|s| s.class == LEVEL_CLASS)
-        .nth(level)
-        .map(|s| f64::from(s.l.r) + f64::from(s.l.g))
+    level_records(payload).nth(level).map(record_density)
+}
+
+/// The level records of a payload, level 0 first.
+fn level_records(payload: &PathSample) -> impl Iterator<Item = &Splat> {
+    payload.splats.iter().filter(|s| s.class == LEVEL_CLASS)
+}
+
+/// The density a level record holds (its two `f32` halves).
+fn record_density(record: &Splat) -> f64 {
+    f64::from(record.l.r) + f64::from(record.l.g)
 }
 
 /// `ln π` of a density (0 → −∞, NaN or infinite → NaN).
@@ -277,8 +292,11 @@ pub fn chain_mis_factors(
     b_hat: &[f64],
 ) -> [f64; PATH_CLASSES] {
     let mut factors = [0.0; PATH_CLASSES];
-    let total: f64 = (0..b_hat.len())
-        .map(|k| level_density(payload, k).unwrap_or(f64::NAN) / b_hat[k])
+    // One pass over the records (not one `level_density` scan per level).
+    let mut records = level_records(payload);
+    let total: f64 = b_hat
+        .iter()
+        .map(|b| records.next().map_or(f64::NAN, record_density) / b)
         .sum();
     factors[usize::from(IMAGE_CLASS)] = 1.0 / (b_hat[member] * total);
     factors

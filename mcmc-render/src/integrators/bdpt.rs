@@ -408,7 +408,18 @@ pub fn connect_in<B: ConnectionBsdfs>(
     if t == 0 || t > camera.len() || s > light.len() || (s == 1 && t == 1) {
         return;
     }
-    let levels = out.len();
+    // The levels differ only in the BSDFs at the two connected vertices
+    // `x^L_s` (s ≥ 2) and `x^C_t` (t ≥ 2); with s = 1 or t = 1 that end is
+    // a sampled endpoint, and with s = 0 nothing is connected (the emitted
+    // radiance and the emitter's densities in the MIS weight are the
+    // scene's). When no connected vertex changes with the level (e.g.
+    // both diffuse), every level's value and MIS weight are level 0's
+    // bits: evaluate one level and copy it.
+    let same = s == 0
+        || ((s < 2 || light[s - 1].is_same_at_every_level(scene, bsdfs))
+            && (t < 2 || camera[t - 1].is_same_at_every_level(scene, bsdfs)));
+    let all = out.len();
+    let levels = if same { 1 } else { all };
     let mut raster = camera[0].raster;
     let mut sampled: Option<Vertex> = None;
     // Per level: the unweighted contribution (black where it carries none).
@@ -516,7 +527,7 @@ pub fn connect_in<B: ConnectionBsdfs>(
             *lk *= g;
         }
     }
-    for (k, (o, &lk)) in out.iter_mut().zip(l.iter()).enumerate() {
+    for (k, (o, &lk)) in out[..levels].iter_mut().zip(l.iter()).enumerate() {
         if lk.is_black() {
             continue;
         }
@@ -540,6 +551,10 @@ pub fn connect_in<B: ConnectionBsdfs>(
             t,
             sampled,
         });
+    }
+    if levels < all {
+        let first = out[0];
+        out[1..].fill(first);
     }
 }
 

@@ -28,6 +28,11 @@ pub trait ConnectionBsdfs: Sync {
     fn levels(&self) -> usize;
     /// The BSDF of level `level` at `sp`.
     fn bsdf_at<'a>(&'a self, scene: &'a Scene, level: usize, sp: &SurfacePoint) -> BsdfAt<'a>;
+    /// True when every level's BSDF at `sp` is level 0's (e.g. a diffuse
+    /// surface, which tempering leaves alone): a connection through such
+    /// vertices has the same value and MIS weight at every level, so it
+    /// is evaluated once.
+    fn same_at_every_level(&self, scene: &Scene, sp: &SurfacePoint) -> bool;
 }
 
 /// The scene's own BSDFs: one level.
@@ -42,6 +47,10 @@ impl ConnectionBsdfs for SceneBsdfs {
     #[inline(always)]
     fn bsdf_at<'a>(&'a self, scene: &'a Scene, _level: usize, sp: &SurfacePoint) -> BsdfAt<'a> {
         scene.bsdf_at(sp)
+    }
+    #[inline(always)]
+    fn same_at_every_level(&self, _scene: &Scene, _sp: &SurfacePoint) -> bool {
+        true
     }
 }
 
@@ -217,6 +226,14 @@ impl Vertex {
             VertexKind::Camera | VertexKind::Light | VertexKind::Infinite => true,
             VertexKind::Surface => !bsdfs.bsdf_at(scene, level, &self.sp).is_delta(),
         }
+    }
+
+    /// True when every level of `bsdfs` gives this vertex the same
+    /// scattering (endpoints always; surfaces whose BSDF no level changes):
+    /// its values and densities in a connection are then level 0's.
+    #[inline(always)]
+    pub fn is_same_at_every_level<B: ConnectionBsdfs>(&self, scene: &Scene, bsdfs: &B) -> bool {
+        self.kind != VertexKind::Surface || bsdfs.same_at_every_level(scene, &self.sp)
     }
 
     /// True when the vertex lies on an emitter.

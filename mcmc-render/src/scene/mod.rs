@@ -509,12 +509,18 @@ impl Scene {
         self.bsdf_at_in(&self.bsdfs, sp)
     }
 
+    /// The index into [`Scene::bsdfs`] of the BSDF at a surface point.
+    #[inline(always)]
+    pub fn bsdf_index(&self, sp: &SurfacePoint) -> usize {
+        self.shapes[sp.shape as usize].bsdf as usize
+    }
+
     /// [`Scene::bsdf_at`] with `bsdfs` (indexed like [`Scene::bsdfs`],
     /// e.g. roughened copies of them) in place of the scene's BSDFs; the
     /// textures and wrappers are the scene's.
     #[inline(always)]
     pub fn bsdf_at_in<'a>(&self, bsdfs: &'a [Bsdf], sp: &SurfacePoint) -> BsdfAt<'a> {
-        let i = self.shapes[sp.shape as usize].bsdf as usize;
+        let i = self.bsdf_index(sp);
         let bsdf = &bsdfs[i];
         let model = match self.textures.get(i) {
             Some(t) if !t.is_empty() => t.apply(bsdf, sp.uv),
