@@ -41,15 +41,8 @@
 
 mod common;
 
-use common::{masked_mean, pt_of, render_image, repo_scene};
-use mcmc_render::integrators::RunSettings;
-use mcmc_render::integrators::mlt::Mlt;
-use mcmc_render::integrators::registry::IntegratorSettings;
-use mcmc_render::observer::NoObserver;
-use mcmc_render::scene::Scene;
-use statrs::distribution::{ContinuousCDF, StudentsT};
-use std::sync::OnceLock;
-use std::sync::atomic::AtomicBool;
+use common::box_agreement::{assert_box_agreement, mlt_box_reps, pt_box_reps, rect_mask};
+use common::repo_scene;
 
 const RES: u32 = 64;
 /// Replicates of each estimator.
@@ -57,96 +50,25 @@ const K: u64 = 8;
 /// Relative bound on the box mean.
 const BOUND: f64 = 0.20;
 
-fn scene() -> &'static Scene {
-    static SCENE: OnceLock<Scene> = OnceLock::new();
-    SCENE.get_or_init(|| {
-        let s = repo_scene("cornell-glossy-glass.xml", RES);
-        assert_eq!(s.integrator.max_depth, 8, "the scene's own depth");
-        s
-    })
-}
-
-/// The glass sphere's bounding box on the 64×64 film (x 32..50, y 40..59;
-/// the sphere projects to x 33–48, y 42–57).
-fn sphere_box() -> Vec<bool> {
-    (0..RES * RES)
-        .map(|i| {
-            let (x, y) = (i % RES, i / RES);
-            (32..50).contains(&x) && (40..59).contains(&y)
-        })
-        .collect()
-}
-
-/// PT box means: `K` × 256 spp.
-fn pt_reps() -> &'static [[f64; 3]] {
-    static PT: OnceLock<Vec<[f64; 3]>> = OnceLock::new();
-    PT.get_or_init(|| {
-        let mask = sphere_box();
-        (0..K)
-            .map(|s| {
-                masked_mean(
-                    &render_image(scene(), &pt_of(scene()), 256, 500 + s),
-                    Some(&mask),
-                )
-            })
-            .collect()
-    })
-}
-
-/// `mlt` box means as the CLI runs it (seeds 0..K; default bootstrap of
-/// 100 000 candidates and 1000 chains), 16 mutations per pixel, with the
-/// specular-chain pass at `specular_samples` spp (−1: off).
-fn mlt_reps(specular_samples: i64) -> Vec<[f64; 3]> {
-    let mask = sphere_box();
-    let stop = AtomicBool::new(false);
-    (0..K)
-        .map(|seed| {
-            let mut mlt = Mlt::default();
-            mlt.depth.max_depth = 8;
-            mlt.specular_samples = specular_samples;
-            mlt.chain.mutations_per_pixel = Some(16);
-            let run = RunSettings {
-                seed,
-                ..RunSettings::default()
-            };
-            let out = mlt
-                .render(scene(), &run, &stop, &NoObserver)
-                .expect("mlt runs");
-            masked_mean(&out.image, Some(&mask))
-        })
-        .collect()
-}
-
-/// Channels outside `t σ` or the bound, and whether `t σ` resolves the
-/// bound on every channel.
-fn check(test: &[[f64; 3]]) -> (Vec<usize>, bool, common::MeanAgreement) {
-    let a = common::MeanAgreement::new(pt_reps(), test);
-    let t = StudentsT::new(0.0, 1.0, (K - 1) as f64)
-        .expect("t distribution")
-        .inverse_cdf(0.9995);
-    (a.failures(t, BOUND), a.resolves(t, BOUND), a)
-}
-
 #[test]
 fn mlt_agrees_with_pt_over_the_glass_sphere_at_depth_8() {
-    let with = mlt_reps(16);
-    let (bad, resolves, a) = check(&with);
-    eprintln!("with the pass: rel {:?}\n  {a:?}", a.rel());
-    assert!(bad.is_empty(), "mlt disagrees with PT: {a:?}");
-    assert!(resolves, "noise too large for {BOUND}: {a:?}");
-
-    // Control: scaled by 1 + bound, it must fail.
-    let scaled: Vec<[f64; 3]> = with.iter().map(|m| m.map(|v| v * (1.0 + BOUND))).collect();
-    let (bad, resolves, a) = check(&scaled);
-    assert!(!bad.is_empty() || !resolves, "a 20% bias passed: {a:?}");
-
-    // Control: without the pass (the chains on L S* E paths, as before
-    // the fix) it must fail.
-    let without = mlt_reps(-1);
-    let (bad, resolves, a) = check(&without);
-    eprintln!("without the pass: rel {:?}\n  {a:?}", a.rel());
-    assert!(
-        !bad.is_empty() || !resolves,
-        "without the pass mlt passed: {a:?}"
-    );
+    let scene = repo_scene("cornell-glossy-glass.xml", RES);
+    assert_eq!(scene.integrator.max_depth, 8, "the scene's own depth");
+    // The glass sphere's bounding box on the 64×64 film (the sphere
+    // projects to x 33–48, y 42–57).
+    let mask = rect_mask(RES, 32..50, 40..59);
+    let pt = pt_box_reps(&scene, &mask, K, 256, 500);
+    // `mlt` as the CLI runs it (default bootstrap of 100 000 candidates and
+    // 1000 chains), 16 mutations per pixel, with the specular-chain pass
+    // at `specular_samples` spp (−1: off).
+    let mlt = |specular_samples: i64| {
+        mlt_box_reps(&scene, &mask, K, |m| {
+            m.depth.max_depth = 8;
+            m.specular_samples = specular_samples;
+            m.chain.mutations_per_pixel = Some(16);
+        })
+    };
+    // Control: without the pass (the chains on L S* E paths, as before the
+    // fix) it must fail.
+    assert_box_agreement(&pt, &mlt(16), ("without the pass", &mlt(-1)), BOUND);
 }

@@ -37,15 +37,8 @@
 
 mod common;
 
-use common::{masked_mean, pt_of, render_image, repo_scene};
-use mcmc_render::integrators::RunSettings;
-use mcmc_render::integrators::mlt::Mlt;
-use mcmc_render::integrators::registry::IntegratorSettings;
-use mcmc_render::observer::NoObserver;
-use mcmc_render::scene::Scene;
-use statrs::distribution::{ContinuousCDF, StudentsT};
-use std::sync::OnceLock;
-use std::sync::atomic::AtomicBool;
+use common::box_agreement::{assert_box_agreement, mlt_box_reps, pt_box_reps, rect_mask};
+use common::repo_scene;
 
 const RES: u32 = 32;
 /// Replicates of each estimator.
@@ -53,96 +46,30 @@ const K: u64 = 20;
 /// Relative bound on the box mean.
 const BOUND: f64 = 0.20;
 
-fn scene() -> &'static Scene {
-    static SCENE: OnceLock<Scene> = OnceLock::new();
-    SCENE.get_or_init(|| {
-        let s = repo_scene("relt-glass-cube.xml", RES);
-        assert_eq!(s.integrator.max_depth, 8, "the scene's own depth");
-        s
-    })
-}
-
-/// The floor under the glass cube on the 32×32 film.
-fn floor_box() -> Vec<bool> {
-    (0..RES * RES)
-        .map(|i| {
-            let (x, y) = (i % RES, i / RES);
-            (10..24).contains(&x) && (25..30).contains(&y)
-        })
-        .collect()
-}
-
-/// PT box means: `K` × 1024 spp.
-fn pt_reps() -> &'static [[f64; 3]] {
-    static PT: OnceLock<Vec<[f64; 3]>> = OnceLock::new();
-    PT.get_or_init(|| {
-        let mask = floor_box();
-        (0..K)
-            .map(|s| {
-                masked_mean(
-                    &render_image(scene(), &pt_of(scene()), 1024, 700 + s),
-                    Some(&mask),
-                )
-            })
-            .collect()
-    })
-}
-
-/// `mlt` box means as the CLI runs it (seeds 0..K; default start-up and
-/// mixture), 1024 mutations per pixel, a 1024-spp specular-chain pass,
-/// with or without `unconnectable_pass`.
-fn mlt_reps(unconnectable_pass: bool) -> Vec<[f64; 3]> {
-    let mask = floor_box();
-    let stop = AtomicBool::new(false);
-    (0..K)
-        .map(|seed| {
-            let mut mlt = Mlt::default();
-            mlt.depth.max_depth = 8;
-            mlt.specular_samples = 1024;
-            mlt.unconnectable_pass = unconnectable_pass;
-            mlt.chain.mutations_per_pixel = Some(1024);
-            let run = RunSettings {
-                seed,
-                ..RunSettings::default()
-            };
-            let out = mlt
-                .render(scene(), &run, &stop, &NoObserver)
-                .expect("mlt runs");
-            masked_mean(&out.image, Some(&mask))
-        })
-        .collect()
-}
-
-/// Channels outside `t σ` or the bound, and whether `t σ` resolves the
-/// bound on every channel.
-fn check(test: &[[f64; 3]]) -> (Vec<usize>, bool, common::MeanAgreement) {
-    let a = common::MeanAgreement::new(pt_reps(), test);
-    let t = StudentsT::new(0.0, 1.0, (K - 1) as f64)
-        .expect("t distribution")
-        .inverse_cdf(0.9995);
-    (a.failures(t, BOUND), a.resolves(t, BOUND), a)
-}
-
 #[test]
 #[ignore = "≈ 50 s; docs/path-space.md, Session 23"]
 fn mlt_with_the_unconnectable_pass_agrees_with_pt_under_the_glass_cube() {
-    let with = mlt_reps(true);
-    let (bad, resolves, a) = check(&with);
-    eprintln!("with the pass: rel {:?}\n  {a:?}", a.rel());
-    assert!(bad.is_empty(), "mlt disagrees with PT: {a:?}");
-    assert!(resolves, "noise too large for {BOUND}: {a:?}");
-
-    // Control: scaled by 1 + bound, it must fail.
-    let scaled: Vec<[f64; 3]> = with.iter().map(|m| m.map(|v| v * (1.0 + BOUND))).collect();
-    let (bad, resolves, a) = check(&scaled);
-    assert!(!bad.is_empty() || !resolves, "a 20% bias passed: {a:?}");
-
+    let scene = repo_scene("relt-glass-cube.xml", RES);
+    assert_eq!(scene.integrator.max_depth, 8, "the scene's own depth");
+    // The floor under the glass cube and its lit rim on the 32×32 film.
+    let mask = rect_mask(RES, 10..24, 25..30);
+    let pt = pt_box_reps(&scene, &mask, K, 1024, 700);
+    // `mlt` as the CLI runs it (default start-up and mixture), 1024
+    // mutations per pixel, a 1024-spp specular-chain pass, with or without
+    // `unconnectable_pass`.
+    let mlt = |unconnectable_pass: bool| {
+        mlt_box_reps(&scene, &mask, K, |m| {
+            m.depth.max_depth = 8;
+            m.specular_samples = 1024;
+            m.unconnectable_pass = unconnectable_pass;
+            m.chain.mutations_per_pixel = Some(1024);
+        })
+    };
     // Control: the ordinary pass (the chains on L S+ D S+ E, as before).
-    let without = mlt_reps(false);
-    let (bad, resolves, a) = check(&without);
-    eprintln!("without: rel {:?}\n  {a:?}", a.rel());
-    assert!(
-        !bad.is_empty() || !resolves,
-        "without the unconnectable pass mlt passed: {a:?}"
+    assert_box_agreement(
+        &pt,
+        &mlt(true),
+        ("without the unconnectable pass", &mlt(false)),
+        BOUND,
     );
 }

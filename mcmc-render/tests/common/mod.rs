@@ -533,6 +533,7 @@ pub fn point_light_on_a_plane() -> (Scene, f64) {
     (scene, expected)
 }
 
+pub mod box_agreement;
 pub mod tempered;
 
 /// Image means of `k` renders of a pixel-driven integrator (seeds
