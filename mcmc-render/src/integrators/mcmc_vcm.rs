@@ -367,7 +367,8 @@ impl CameraSet {
         self.tile_of.clear();
         for (t, tile) in self.tiles.iter().enumerate() {
             self.first.push(self.tile_of.len() as u32);
-            self.tile_of.extend(std::iter::repeat_n(t as u32, tile.len()));
+            self.tile_of
+                .extend(std::iter::repeat_n(t as u32, tile.len()));
         }
     }
 
@@ -2011,9 +2012,10 @@ impl McmcVcm {
     }
 
     /// The camera pass of iteration `iteration` (from 0) into `out`: one
-    /// stratified camera subpath per pixel, in tiles (the samples numbered in tile order),
-    /// with the path-tracing techniques weighted for light-subpath density
-    /// scale `light_scale`, and the merge grid of radius `radius`.
+    /// stratified camera subpath per pixel, in tiles (the samples numbered
+    /// in tile order), with the path-tracing techniques weighted for
+    /// light-subpath density scale `light_scale`, and the merge grid of
+    /// radius `radius`.
     pub fn camera_pass(
         &self,
         scene: &Scene,
@@ -2039,14 +2041,25 @@ impl McmcVcm {
         // Each tile traces into its own buffers, kept from the last
         // iteration (no allocation once they have grown, and no join copy).
         let cameras = &mut out.cameras;
-        cameras.tiles.resize_with(tiles.len(), TileSubpaths::default);
+        cameras
+            .tiles
+            .resize_with(tiles.len(), TileSubpaths::default);
         let results: Vec<(f64, Tally)> = cameras
             .tiles
             .par_iter_mut()
             .zip(&tiles)
             .enumerate()
             .map(|(t, (buffers, &tile))| {
-                self.camera_tile(scene, &f, unscaled.as_ref(), tile, seed, iteration, t, buffers)
+                self.camera_tile(
+                    scene,
+                    &f,
+                    unscaled.as_ref(),
+                    tile,
+                    seed,
+                    iteration,
+                    t,
+                    buffers,
+                )
             })
             .collect();
         cameras.index();
