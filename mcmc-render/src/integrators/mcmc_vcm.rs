@@ -274,23 +274,80 @@ pub struct LightContribution {
     pub finite: bool,
 }
 
-/// The camera subpaths of one iteration, every vertex kept.
+/// The camera subpaths of one tile, every vertex kept. Its buffers are
+/// kept from one iteration to the next (cleared, not freed): a fresh
+/// tile's growth cost ≈ 1000 page faults an iteration (docs/vcm.md,
+/// "Session 24").
 #[derive(Debug, Default)]
-pub struct CameraSet {
+struct TileSubpaths {
     vertices: Vec<Vertex>,
     mis: Vec<PartialMis>,
     /// Subpath `k` holds `vertices[starts[k]..starts[k + 1]]`.
     starts: Vec<u32>,
+    /// Raster position of each camera sample.
+    rasters: Vec<Vec2>,
+    /// Path-tracing estimate of each camera sample.
+    estimates: Vec<Rgb>,
+}
+
+impl TileSubpaths {
+    /// Number of camera subpaths.
+    fn len(&self) -> usize {
+        self.starts.len().saturating_sub(1)
+    }
+
+    /// Subpath `k`: its vertices and their MIS quantities.
+    fn subpath(&self, k: usize) -> (&[Vertex], &[PartialMis]) {
+        let r = self.starts[k] as usize..self.starts[k + 1] as usize;
+        (&self.vertices[r.clone()], &self.mis[r])
+    }
+
+    /// Clears it for a tile of `pixels` camera samples (the per-sample
+    /// buffers at their exact size: a tile's size never changes).
+    fn clear(&mut self, pixels: usize) {
+        self.vertices.clear();
+        self.mis.clear();
+        self.rasters.clear();
+        self.rasters.reserve_exact(pixels);
+        self.estimates.clear();
+        self.estimates.reserve_exact(pixels);
+        self.starts.clear();
+        self.starts.reserve_exact(pixels + 1);
+        self.starts.push(0);
+    }
+
+    /// Appends a subpath with its raster position and estimate.
+    fn push(&mut self, z: &[Vertex], mis: &[PartialMis], raster: Vec2, estimate: Rgb) {
+        self.vertices.extend_from_slice(z);
+        self.mis.extend_from_slice(mis);
+        self.starts.push(self.vertices.len() as u32);
+        self.rasters.push(raster);
+        self.estimates.push(estimate);
+    }
+}
+
+/// The camera subpaths of one iteration, every vertex kept, in the tiles
+/// that traced them (not joined into one list: no copy, and each tile's
+/// buffers serve the next iteration).
+#[derive(Debug, Default)]
+pub struct CameraSet {
+    /// The tiles in tile order: camera sample `k` is subpath
+    /// `k − first[t]` of tile `t = tile_of[k]`.
+    tiles: Vec<TileSubpaths>,
+    first: Vec<u32>,
+    tile_of: Vec<u32>,
     /// (subpath, vertex index) of every connectible camera vertex, in the
     /// order of the grid's indices.
     merge_points: Vec<(u32, u32)>,
+    /// Their positions, the grid's input (kept for the next iteration).
+    points: Vec<glam::Vec3>,
     grid: HashGrid,
 }
 
 impl CameraSet {
     /// Number of camera subpaths.
     pub fn len(&self) -> usize {
-        self.starts.len().saturating_sub(1)
+        self.tile_of.len()
     }
 
     /// True when it holds no subpath.
@@ -300,49 +357,42 @@ impl CameraSet {
 
     /// Subpath `k`: its vertices and their MIS quantities.
     pub fn subpath(&self, k: usize) -> (&[Vertex], &[PartialMis]) {
-        let r = self.starts[k] as usize..self.starts[k + 1] as usize;
-        (&self.vertices[r.clone()], &self.mis[r])
+        let t = self.tile_of[k] as usize;
+        self.tiles[t].subpath(k - self.first[t] as usize)
     }
 
-    /// Clears it for a new iteration.
-    fn clear(&mut self) {
-        self.vertices.clear();
-        self.mis.clear();
-        self.starts.clear();
-        self.starts.push(0);
-        self.merge_points.clear();
-    }
-
-    /// Appends a subpath.
-    fn push(&mut self, z: &[Vertex], mis: &[PartialMis]) {
-        self.vertices.extend_from_slice(z);
-        self.mis.extend_from_slice(mis);
-        self.starts.push(self.vertices.len() as u32);
+    /// Indexes the tiles' subpaths after they were traced.
+    fn index(&mut self) {
+        self.first.clear();
+        self.tile_of.clear();
+        for (t, tile) in self.tiles.iter().enumerate() {
+            self.first.push(self.tile_of.len() as u32);
+            self.tile_of
+                .extend(std::iter::repeat_n(t as u32, tile.len()));
+        }
     }
 
     /// Builds the merge grid over the connectible surface vertices (those
     /// `vcm` merges at), for radius `radius`.
     fn build_grid(&mut self, scene: &Scene, radius: f32) {
-        let mut merge_points = std::mem::take(&mut self.merge_points);
-        merge_points.clear();
-        for k in 0..self.len() {
-            let (z, _) = self.subpath(k);
+        self.merge_points.clear();
+        self.points.clear();
+        let subpaths = self
+            .tiles
+            .iter()
+            .flat_map(|tile| (0..tile.len()).map(|k| tile.subpath(k).0));
+        for (k, z) in subpaths.enumerate() {
             for (j, v) in z.iter().enumerate().skip(1) {
                 if v.kind != VertexKind::Surface {
                     break;
                 }
                 if v.is_connectible(scene) {
-                    merge_points.push((k as u32, j as u32));
+                    self.merge_points.push((k as u32, j as u32));
+                    self.points.push(v.p());
                 }
             }
         }
-        self.merge_points = merge_points;
-        let points: Vec<glam::Vec3> = self
-            .merge_points
-            .iter()
-            .map(|&(k, j)| self.subpath(k as usize).0[j as usize].p())
-            .collect();
-        self.grid.build(points.into_iter(), radius);
+        self.grid.build(self.points.iter().copied(), radius);
     }
 }
 
@@ -1962,9 +2012,10 @@ impl McmcVcm {
     }
 
     /// The camera pass of iteration `iteration` (from 0) into `out`: one
-    /// stratified camera subpath per pixel, in tiles, joined in tile order,
-    /// with the path-tracing techniques weighted for light-subpath density
-    /// scale `light_scale`, and the merge grid of radius `radius`.
+    /// stratified camera subpath per pixel, in tiles (the samples numbered
+    /// in tile order), with the path-tracing techniques weighted for
+    /// light-subpath density scale `light_scale`, and the merge grid of
+    /// radius `radius`.
     pub fn camera_pass(
         &self,
         scene: &Scene,
@@ -1987,34 +2038,40 @@ impl McmcVcm {
                 })
             })
             .collect();
-        let results: Vec<_> = tiles
-            .par_iter()
+        // Each tile traces into its own buffers, kept from the last
+        // iteration (no allocation once they have grown, and no join copy).
+        let cameras = &mut out.cameras;
+        cameras
+            .tiles
+            .resize_with(tiles.len(), TileSubpaths::default);
+        let results: Vec<(f64, Tally)> = cameras
+            .tiles
+            .par_iter_mut()
+            .zip(&tiles)
             .enumerate()
-            .map(|(t, &tile)| {
-                self.camera_tile(scene, &f, unscaled.as_ref(), tile, seed, iteration, t)
+            .map(|(t, (buffers, &tile))| {
+                self.camera_tile(
+                    scene,
+                    &f,
+                    unscaled.as_ref(),
+                    tile,
+                    seed,
+                    iteration,
+                    t,
+                    buffers,
+                )
             })
             .collect();
-        out.cameras.clear();
+        cameras.index();
         out.rasters.clear();
         out.estimates.clear();
         out.transfer = 0.0;
         out.tally = Tally::default();
-        // Exact sizes, and each tile freed once copied: the peak is the
-        // joined subpaths (or last iteration's, whose buffers are reused)
-        // plus the tiles (see `memory_bytes`).
-        let vertices = results.iter().map(|r| r.0.vertices.len()).sum();
-        out.cameras.vertices.reserve_exact(vertices);
-        out.cameras.mis.reserve_exact(vertices);
-        out.cameras.starts.reserve_exact(pixels + 1);
         out.rasters.reserve_exact(pixels);
         out.estimates.reserve_exact(pixels);
-        for (set, rasters, estimates, transfer, tally) in results {
-            for k in 0..set.len() {
-                let (z, mis) = set.subpath(k);
-                out.cameras.push(z, mis);
-            }
-            out.rasters.extend_from_slice(&rasters);
-            out.estimates.extend_from_slice(&estimates);
+        for (tile, (transfer, tally)) in out.cameras.tiles.iter().zip(results) {
+            out.rasters.extend_from_slice(&tile.rasters);
+            out.estimates.extend_from_slice(&tile.estimates);
             out.transfer += transfer;
             out.tally.add(&tally);
         }
@@ -2023,10 +2080,11 @@ impl McmcVcm {
         }
     }
 
-    /// One tile of camera subpaths: the subpaths, their raster positions
-    /// and path-tracing estimates, their transfer (Σ `lum` of the
-    /// estimates with the `unscaled` weights minus with `f`'s; 0 without
-    /// `unscaled`) and the technique tally.
+    /// One tile of camera subpaths into `out` (cleared first): the
+    /// subpaths, their raster positions and path-tracing estimates; it
+    /// returns their transfer (Σ `lum` of the estimates with the
+    /// `unscaled` weights minus with `f`'s; 0 without `unscaled`) and the
+    /// technique tally.
     #[allow(clippy::too_many_arguments)]
     fn camera_tile(
         &self,
@@ -2037,11 +2095,9 @@ impl McmcVcm {
         seed: u64,
         iteration: u64,
         tile: usize,
-    ) -> (CameraSet, Vec<Vec2>, Vec<Rgb>, f64, Tally) {
-        let mut set = CameraSet::default();
-        set.clear();
-        let mut rasters = Vec::new();
-        let mut estimates = Vec::new();
+        out: &mut TileSubpaths,
+    ) -> (f64, Tally) {
+        out.clear(((x1 - x0) * (y1 - y0)) as usize);
         let mut transfer = 0.0;
         let mut tally = Tally::default();
         let mut src = unit_source(seed, 2 * iteration, tile as u64);
@@ -2073,19 +2129,10 @@ impl McmcVcm {
                 if unscaled.is_some() {
                     transfer += f64::from(l_unscaled.luminance()) - f64::from(l.luminance());
                 }
-                set.push(&z[..n], &mis[..n]);
-                rasters.push(raster);
-                estimates.push(l);
+                out.push(&z[..n], &mis[..n], raster, l);
             }
         }
-        // The tiles wait for the join together: without the slack of their
-        // growth they hold the pass once (see `memory_bytes`).
-        set.vertices.shrink_to_fit();
-        set.mis.shrink_to_fit();
-        set.starts.shrink_to_fit();
-        rasters.shrink_to_fit();
-        estimates.shrink_to_fit();
-        (set, rasters, estimates, transfer, tally)
+        (transfer, tally)
     }
 
     /// The chain pair `p` for one iteration: restart from `pool` (seen
@@ -2554,10 +2601,11 @@ pub struct MemoryEstimate {
     /// The chain pairs: two images each (24 B a pixel) and [`BYTES_PER_UNIT`].
     pub units: u128,
     /// One iteration's camera subpaths: every vertex with its MIS
-    /// quantities twice (the tiles and the joined copy, both at their
-    /// exact sizes), the merge grid over them (48 B a vertex with its
-    /// construction), and per pixel its raster position, estimate and
-    /// start index (twice).
+    /// quantities twice (the tiles' buffers, kept across iterations, grow
+    /// by doubling and are not shrunk: at most twice what they hold), the
+    /// merge grid over them (48 B a vertex with its construction and its
+    /// point list), and per pixel its raster position and estimate
+    /// (twice: the tile's and the pass's), start index and tile index.
     pub cameras: u128,
     /// The restart candidates (the blocks and the joined pool, 2 ×
     /// 56 B each) and the restart pool's cumulative luminances and
