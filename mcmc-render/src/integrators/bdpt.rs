@@ -423,9 +423,7 @@ pub fn connect_in<B: ConnectionBsdfs>(
     heuristic: MisHeuristic,
     out: &mut [Option<Connection>],
 ) {
-    connect_in_among(
-        scene, bsdfs, camera, light, s, t, source, heuristic, 1, out,
-    );
+    connect_in_among(scene, bsdfs, camera, light, s, t, source, heuristic, 1, out);
 }
 
 /// [`connect_in`] with the MIS weight renormalised over the techniques with
