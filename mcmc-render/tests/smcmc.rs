@@ -348,6 +348,13 @@ fn smcmc_is_bit_identical_across_thread_counts() {
         &[("mutations_per_pixel", "6")][..],
         // The global start-up's chains and the tiles they start.
         &[("mutations_per_pixel", "3"), ("init", "global")][..],
+        // The BDPT shift (one MIS weight per connection since session 24)
+        // with the thesis's small step.
+        &[
+            ("mutations_per_pixel", "3"),
+            ("shift", "bdpt"),
+            ("small_step", "hachisuka"),
+        ][..],
     ] {
         let one = bits(1, sets);
         assert!(one == bits(2, sets), "1 vs 2 threads differ with {sets:?}");
