@@ -401,6 +401,13 @@ pub enum SmallStepKind {
     /// Hachisuka & Jensen's adaptive power step (`mcmc-core`'s
     /// [`AdaptiveTorusStep`], θ₀ = 0.5, target acceptance 0.234).
     Adaptive,
+    /// The fixed power step of the stratified-MCMC thesis (spec seed003
+    /// §4.2, Alg. 1): `|Δ| = ξ^(1/θ + 1)`, sign ±1 with probability ½;
+    /// θ = 1 (`|Δ| = ξ²`, mean 1/3) in all its SMCMC experiments.
+    Hachisuka {
+        /// The thesis's θ (> 0).
+        theta: f64,
+    },
 }
 
 /// The PSS mutation: a small step, and a large step with some probability.
@@ -447,6 +454,11 @@ impl Mutation {
                 Box::new(TorusStep::new(SmallStep::Gaussian { sigma })?)
             }
             SmallStepKind::Adaptive => Box::new(AdaptiveTorusStep::standard()),
+            // mcmc-core's power step is `|Δ| = v^(1/θ')`: the thesis's
+            // exponent 1/θ + 1 is θ' = θ/(θ + 1).
+            SmallStepKind::Hachisuka { theta } => Box::new(TorusStep::new(SmallStep::Power {
+                theta: theta / (theta + 1.0),
+            })?),
         };
         Mixture::new(vec![
             (1.0 - p, small),
@@ -549,13 +561,15 @@ crate::choice! {
         Gaussian = "gaussian",
         /// Hachisuka & Jensen's adaptive power step.
         Adaptive = "adaptive",
+        /// The stratified-MCMC thesis's fixed power step (`hachisuka_theta`).
+        Hachisuka = "hachisuka",
     }
 }
 
 crate::settings! {
     /// The PSS mutation's parameters, as integrators expose them.
     pub struct MutationParams {
-        /// Small-step law: kelemen (Kelemen et al. 2002), gaussian (pbrt-v4) or adaptive.
+        /// Small-step law: kelemen (Kelemen et al. 2002), gaussian (pbrt-v4), adaptive, or hachisuka (the SMCMC thesis's |Δ| = ξ^(1/θ+1)).
         pub small_step: SmallStepLaw = SmallStepLaw::Kelemen;
         /// Kelemen's smallest step.
         pub s1: f64 = 1.0 / 1024.0, check check::positive;
@@ -563,6 +577,8 @@ crate::settings! {
         pub s2: f64 = 1.0 / 64.0, check check::positive;
         /// Standard deviation of the Gaussian small step.
         pub sigma: f64 = 0.01, check check::positive;
+        /// θ of the hachisuka small step (the thesis's 1: |Δ| = ξ²).
+        pub hachisuka_theta: f64 = 1.0, check check::positive;
         /// Probability of a large (independent) step.
         pub large_step_probability: f64 = 0.3, check check::probability;
     }
@@ -586,6 +602,9 @@ impl MutationParams {
             },
             SmallStepLaw::Gaussian => SmallStepKind::Gaussian { sigma: self.sigma },
             SmallStepLaw::Adaptive => SmallStepKind::Adaptive,
+            SmallStepLaw::Hachisuka => SmallStepKind::Hachisuka {
+                theta: self.hachisuka_theta,
+            },
         };
         let mutation = Mutation {
             small,

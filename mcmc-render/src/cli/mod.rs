@@ -59,7 +59,7 @@ pub struct ParamFlags {
     /// Set an integrator parameter (repeatable); `mcmc-render integrators` lists them.
     #[arg(long = "set", value_name = "NAME=VALUE")]
     set: Vec<String>,
-    /// MLT small step: kelemen, gaussian or adaptive (`small_step`).
+    /// MLT small step: kelemen, gaussian, adaptive or hachisuka (`small_step`).
     #[arg(long, value_name = "LAW")]
     small_step: Option<String>,
     /// Kelemen's smallest step (`s1`).

@@ -370,8 +370,26 @@ pub fn connect(
     source: &mut dyn RandomSource,
     heuristic: MisHeuristic,
 ) -> Option<Connection> {
+    connect_among(scene, camera, light, s, t, source, heuristic, 1)
+}
+
+/// [`connect`] with the MIS weight renormalised over the techniques with at
+/// least `min_camera` camera vertices ([`mis_weight_among`]; `None` when
+/// `t < min_camera`): stratified MCMC's BDPT shifts use `min_camera = 2`
+/// and so compute the one weight they need, not the full one as well.
+#[allow(clippy::too_many_arguments)]
+pub fn connect_among(
+    scene: &Scene,
+    camera: &[Vertex],
+    light: &[Vertex],
+    s: usize,
+    t: usize,
+    source: &mut dyn RandomSource,
+    heuristic: MisHeuristic,
+    min_camera: usize,
+) -> Option<Connection> {
     let mut out = [None];
-    connect_in(
+    connect_in_among(
         scene,
         &SceneBsdfs,
         camera,
@@ -380,6 +398,7 @@ pub fn connect(
         t,
         source,
         heuristic,
+        min_camera,
         &mut out,
     );
     out[0]
@@ -404,8 +423,27 @@ pub fn connect_in<B: ConnectionBsdfs>(
     heuristic: MisHeuristic,
     out: &mut [Option<Connection>],
 ) {
+    connect_in_among(scene, bsdfs, camera, light, s, t, source, heuristic, 1, out);
+}
+
+/// [`connect_in`] with the MIS weight renormalised over the techniques with
+/// at least `min_camera` camera vertices (nothing when `t < min_camera`).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn connect_in_among<B: ConnectionBsdfs>(
+    scene: &Scene,
+    bsdfs: &B,
+    camera: &[Vertex],
+    light: &[Vertex],
+    s: usize,
+    t: usize,
+    source: &mut dyn RandomSource,
+    heuristic: MisHeuristic,
+    min_camera: usize,
+    out: &mut [Option<Connection>],
+) {
     out.fill(None);
-    if t == 0 || t > camera.len() || s > light.len() || (s == 1 && t == 1) {
+    if t == 0 || t < min_camera || t > camera.len() || s > light.len() || (s == 1 && t == 1) {
         return;
     }
     // The levels differ only in the BSDFs at the two connected vertices
@@ -531,7 +569,7 @@ pub fn connect_in<B: ConnectionBsdfs>(
         if lk.is_black() {
             continue;
         }
-        let weight = mis_weight_in(
+        let weight = mis_weight_among(
             scene,
             bsdfs,
             k,
@@ -541,6 +579,7 @@ pub fn connect_in<B: ConnectionBsdfs>(
             t,
             sampled.as_ref(),
             heuristic,
+            min_camera,
         );
         *o = Some(Connection {
             l: lk * weight,

@@ -22,10 +22,8 @@
 use super::{Placement, TileShift};
 use crate::color::Rgb;
 use crate::integrators::bdpt::{
-    Bdpt, SubpathBuffers, connect, generate_camera_subpath, generate_light_subpath,
-    mis_weight_among,
+    Bdpt, SubpathBuffers, connect_among, generate_camera_subpath, generate_light_subpath,
 };
-use crate::integrators::path_vertex::SceneBsdfs;
 use crate::pss::PssSource;
 use crate::sampling::{RandomSource, Stream};
 use crate::scene::Scene;
@@ -75,7 +73,10 @@ impl BdptShift {
 
     /// Technique `(s, t)` on the subpaths in `buffers` with its MIS weight
     /// renormalised over the techniques with `t ≥ 2` (black when it carries
-    /// nothing).
+    /// nothing). The weight is computed once, directly over `t ≥ 2`
+    /// (session 24: before, the full BDPT weight was computed, divided out
+    /// and replaced by this one: the same value, one weight computation
+    /// more).
     pub(super) fn renormalised(
         &self,
         scene: &Scene,
@@ -84,7 +85,7 @@ impl BdptShift {
         t: usize,
         source: &mut PssSource<'_>,
     ) -> Rgb {
-        let Some(c) = connect(
+        connect_among(
             scene,
             &buffers.camera,
             &buffers.light,
@@ -92,25 +93,9 @@ impl BdptShift {
             t,
             source,
             self.bdpt.heuristic,
-        ) else {
-            return Rgb::BLACK;
-        };
-        if c.weight <= 0.0 {
-            return Rgb::BLACK;
-        }
-        let w = mis_weight_among(
-            scene,
-            &SceneBsdfs,
-            0,
-            &buffers.camera,
-            &buffers.light,
-            s,
-            t,
-            c.sampled.as_ref(),
-            self.bdpt.heuristic,
             2,
-        );
-        c.l * (w / c.weight)
+        )
+        .map_or(Rgb::BLACK, |c| c.l)
     }
 
     /// The raster position of `point` placed by `place` and the
