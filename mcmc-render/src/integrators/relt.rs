@@ -315,7 +315,7 @@ impl<'a> ReltFamily<'a> {
             // image's b_4 (the others scale by the bootstrap's or by
             // the chain of ratios): elsewhere they would be wasted.
             l0_search_rate: match settings.chain.normalization {
-                Normalization::Running => settings.l0_search_rate,
+                Normalization::Running | Normalization::Filmed => settings.l0_search_rate,
                 _ => 0.0,
             },
             deadline: Deadline::NEVER,
@@ -518,6 +518,17 @@ impl<'a> ChainFamily for ReltFamily<'a> {
     }
     fn member_log_density(&self, member: usize, payload: &PathSample) -> Option<f64> {
         let v = class_values(&payload.splats, self.scalar);
+        Some(log_of(self.targets[member].replica.density(&v)))
+    }
+    /// The full and indirect replicas' targets hold `L0`, which the
+    /// specific replica alone films: their filmed part is `q_k − d_k[0]·L0`.
+    fn filmed_log_density(&self, member: usize, payload: &PathSample) -> Option<f64> {
+        let d = self.targets[member].replica.weights?;
+        if self.specific.is_none() || Some(member) == self.specific || d[0] == 0.0 {
+            return None;
+        }
+        let mut v = class_values(&payload.splats, self.scalar);
+        v[0] = 0.0;
         Some(log_of(self.targets[member].replica.density(&v)))
     }
     fn class_weights(

@@ -9,7 +9,7 @@
 //! exact; the sums of acceptance probabilities may differ from a single
 //! process in the last bits).
 
-use super::estimator::{DepthAcceptance, RatioSum, TransitionCounts};
+use super::estimator::{DepthAcceptance, FilmedSums, RatioSum, TransitionCounts};
 use super::work::Task;
 use super::{ChainFamily, ExchangePair, ExchangeSummary};
 use crate::cluster::{Cluster, Parcel};
@@ -28,6 +28,8 @@ pub(crate) struct TaskSums<'a> {
     pub running: Cow<'a, [RunningNormalization]>,
     pub mutations: Cow<'a, [u64]>,
     pub ratios: Cow<'a, [RatioSum]>,
+    /// Not sent ([`super::Normalization::Filmed`] refuses a cluster).
+    pub filmed: Cow<'a, [FilmedSums]>,
     pub counts: Cow<'a, TransitionCounts>,
 }
 
@@ -40,6 +42,7 @@ impl<'a> TaskSums<'a> {
             running: Cow::Borrowed(&t.running),
             mutations: Cow::Borrowed(&t.mutations),
             ratios: Cow::Borrowed(&t.ratios),
+            filmed: Cow::Borrowed(&t.filmed),
             counts: Cow::Borrowed(&t.counts),
         }
     }
@@ -177,6 +180,7 @@ impl<'a> TaskSums<'a> {
             running: Cow::Owned(running),
             mutations: Cow::Owned(mutations),
             ratios: Cow::Owned(ratios),
+            filmed: Cow::Owned(Vec::new()),
             counts: Cow::Owned(TransitionCounts {
                 per_depth,
                 first_nonfinite,
@@ -330,6 +334,7 @@ mod tests {
                 },
                 RatioSum::default(),
             ]),
+            filmed: Cow::Owned(Vec::new()),
             counts: Cow::Owned(TransitionCounts {
                 per_depth: vec![DepthAcceptance {
                     proposed: 4,

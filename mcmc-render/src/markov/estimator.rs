@@ -43,6 +43,10 @@ pub struct FamilyResult {
     pub bootstrap_b: (f64, f64),
     /// Running `⟨b_d⟩` (bootstrap and large steps) and its standard error.
     pub running_b: (f64, f64),
+    /// With [`Normalization::Filmed`], for a member that films part of its
+    /// target: `b̃_d` (the uniform draws' mean of the filmed part) and the
+    /// chains' mean share `E_{p_d}[q̃_d/q_d]`, each with its standard error.
+    pub filmed: Option<((f64, f64), (f64, f64))>,
 }
 
 impl FamilyResult {
@@ -97,6 +101,44 @@ pub(crate) struct MemberTotals<'a> {
     /// Per member `d`, one [`RatioSum`] of `q_{d+1}/q_d` per task that ran
     /// member `d`'s chains.
     pub ratios: Vec<Vec<RatioSum>>,
+    /// Per member, one [`FilmedSums`] per task that ran its chains
+    /// (empty unless [`Normalization::Filmed`]).
+    pub filmed: Vec<Vec<FilmedSums>>,
+}
+
+/// What [`Normalization::Filmed`] needs of one member in one task: the
+/// uniform draws' `q̃_d/p₀` and its chain states' `q̃_d/q_d`.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct FilmedSums {
+    /// `b̃_d` over the replica sets' independent draws.
+    pub b: RunningNormalization,
+    /// `q̃_d/q_d` over the member's states (expected values).
+    pub share: RatioSum,
+}
+
+impl FilmedSums {
+    /// Adds an independent draw of ln weight `ln q̃ − ln p₀`.
+    pub fn add_draw(&mut self, log_w: f64) {
+        self.b.add(log_w);
+    }
+
+    /// Adds a chain state of weight `weight` and log share `ln q̃ − ln q`.
+    pub fn add_state(&mut self, weight: f64, log_share: f64) {
+        self.share.add(weight, log_share);
+    }
+}
+
+/// `b̃_d / E[q̃_d/q_d]` with the errors of both in quadrature (the share's
+/// from the spread between tasks, as [`chained_ratio`]), or `None` when
+/// the member has no filmed part or nothing was gathered.
+fn filmed_scale(tasks: &[FilmedSums]) -> Option<((f64, f64), (f64, f64))> {
+    let mut b = RunningNormalization::new();
+    tasks.iter().for_each(|t| b.merge(&t.b));
+    let shares: Vec<RatioSum> = tasks.iter().map(|t| t.share).collect();
+    if b.count() == 0 || shares.iter().all(|s| s.weight <= 0.0) {
+        return None;
+    }
+    Some(((b.b(), b.standard_error()), chained_ratio(&shares)))
 }
 
 /// Expected-value sums of `q_{d+1}(x)/q_d(x)` over member `d`'s states.
@@ -153,6 +195,7 @@ impl MemberTotals<'_> {
             mis,
             normalization,
             ratios,
+            filmed,
         } = self;
         // The chain b_d = b_{d−1} · E_{p_{d−1}}[q_d / q_{d−1}] from b_0's
         // running estimate (Kitaoka et al. Eq. 10), relative errors in
@@ -171,13 +214,21 @@ impl MemberTotals<'_> {
             .enumerate()
             .map(|(d, film)| {
                 let running_b = (running[d].b(), running[d].standard_error());
+                let filmed = match normalization {
+                    Normalization::Filmed => filmed.get(d).and_then(|t| filmed_scale(t)),
+                    _ => None,
+                };
                 let (scale, scale_standard_error) = if mis {
                     (1.0, 0.0)
                 } else {
-                    match normalization {
-                        Normalization::Bootstrap => bootstrap_b[d],
-                        Normalization::Running => running_b,
-                        Normalization::Ratios => chained[d],
+                    match (normalization, filmed) {
+                        (Normalization::Bootstrap, _) => bootstrap_b[d],
+                        // `filmed` is `None` under every other normalisation.
+                        (Normalization::Running, _) | (Normalization::Filmed, None) => running_b,
+                        (Normalization::Filmed, Some(((b, b_se), (r, r_se)))) => {
+                            (b / r, b / r * (b_se / b).hypot(r_se / r))
+                        }
+                        (Normalization::Ratios, _) => chained[d],
                     }
                 };
                 FamilyResult {
@@ -189,6 +240,7 @@ impl MemberTotals<'_> {
                     image_weight: image_weights[d],
                     bootstrap_b: bootstrap_b[d],
                     running_b,
+                    filmed,
                 }
             })
             .collect()
