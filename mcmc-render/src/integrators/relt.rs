@@ -117,7 +117,7 @@ crate::settings! {
         pub annealing_sweeps: usize = 1;
         /// Uniform draws screened for L0 paths to start the specific replica (0: no search, neither at start-up nor during the run; docs/relt.md).
         pub l0_search: usize = 4_000_000;
-        /// Further search draws per chain mutation, made while the chains run and merged into the specific replica's b_4 (0: start-up search only; normalization=running only; docs/relt.md session 16).
+        /// Further search draws per chain mutation, made while the chains run and merged into the specific replica's b_4 (0: start-up search only; normalization=running or filmed only; docs/relt.md session 16).
         pub l0_search_rate: f64 = 0.0, check check::non_negative;
         flatten {
             /// Path depth.

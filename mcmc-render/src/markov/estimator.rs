@@ -223,11 +223,15 @@ impl MemberTotals<'_> {
                 } else {
                     match (normalization, filmed) {
                         (Normalization::Bootstrap, _) => bootstrap_b[d],
-                        // `filmed` is `None` under every other normalisation.
-                        (Normalization::Running, _) | (Normalization::Filmed, None) => running_b,
-                        (Normalization::Filmed, Some(((b, b_se), (r, r_se)))) => {
+                        (Normalization::Filmed, Some(((b, b_se), (r, r_se)))) if r > 0.0 => {
                             (b / r, b / r * (b_se / b).hypot(r_se / r))
                         }
+                        // `filmed` is `None` under every other normalisation
+                        // and for a member that films all of its target;
+                        // chains that never stood on their filmed part
+                        // (share 0) filmed none of it, and b̃/0 would make
+                        // the rest of their film infinite.
+                        (Normalization::Running | Normalization::Filmed, _) => running_b,
                         (Normalization::Ratios, _) => chained[d],
                     }
                 };

@@ -139,7 +139,10 @@ crate::choice! {
         /// scaled by `b̃_d / E_{p_d}[q̃_d/q_d]`: the uniform draws' mean of
         /// the filmed part `q̃_d` over its chains' mean share of it, so a
         /// chain that under-visits the unfilmed part (a mode it rarely
-        /// reaches) does not inflate its image (docs/relt.md, session 23).
+        /// reaches) does not inflate its image (docs/relt.md, sessions
+        /// 23–24). The draws are those of a replica set's independent
+        /// proposals: without an exchange move (no replica sets) and for
+        /// a member that films all of its target it is `running`.
         Filmed = "filmed",
     }
 }
@@ -892,15 +895,6 @@ pub fn run<F: ChainFamily>(
         running: boot_running,
         invalid,
     } = start_up(family, count, seed)?;
-    if settings.normalization == Normalization::Filmed
-        && (family.exchange_move().is_none()
-            || settings.checkpoint.is_some()
-            || crate::cluster::current().is_some())
-    {
-        return Err(MltError::Setting(
-            "normalization=filmed needs replica sets with an exchange move, and no checkpoint or cluster (its sums are not saved or sent)".into(),
-        ));
-    }
     if settings.normalization == Normalization::Ratios && !shared {
         return Err(MltError::Setting(
             "normalization=ratios needs a ladder whose members share one evaluation (relt); use running or bootstrap".into(),
