@@ -124,8 +124,13 @@ crate::settings! {
             pub depth: DepthParams = DepthParams::default();
             /// The driver (`kelemen_mis` does not apply; `depth_allocation`
             /// only without exchanges; `normalization=ratios` is the
-            /// paper's Eq. 10 chain, see docs/relt.md).
-            pub chain: ChainParams = ChainParams::default();
+            /// paper's Eq. 10 chain; the default `filmed` scales the full
+            /// and indirect replicas, whose `L0` their chains rarely
+            /// reach, by their filmed part: docs/relt.md, session 24).
+            pub chain: ChainParams = ChainParams {
+                normalization: Normalization::Filmed,
+                ..ChainParams::default()
+            };
         }
     }
 }
