@@ -417,3 +417,51 @@ pub(crate) fn observe<F: ChainFamily>(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A target over two regions of the reference measure: `A` (measure
+    /// 0.1, pure `L0`: `q = 2`, `q̃ = 0`, nothing filmed) and `B` (measure
+    /// 0.9, `q = q̃ = 1`, a film of `h/q = 1` per visit). So `b = 1.1`,
+    /// `b̃ = 0.9`, the image `∫_B h = 0.9`, and at equilibrium the chains
+    /// spend `0.2/1.1` of their time on `A`.
+    #[test]
+    fn the_filmed_scale_ignores_the_time_chains_spend_on_unfilmed_states() {
+        let draws = |f: &mut FilmedSums, running: &mut RunningNormalization| {
+            // Ten draws in proportion to the regions' measures: one in A.
+            f.add_draw(f64::NEG_INFINITY);
+            running.add(2f64.ln());
+            for _ in 0..9 {
+                f.add_draw(0.0);
+                running.add(0.0);
+            }
+        };
+        for time_on_a in [0.0, 0.05, 0.2 / 1.1, 0.5] {
+            // Two tasks (the share's standard error needs two), each with
+            // 1000 chain states, `time_on_a` of them on A.
+            let mut tasks = vec![FilmedSums::default(); 2];
+            let mut running = RunningNormalization::new();
+            for t in &mut tasks {
+                draws(t, &mut running);
+                t.add_state(1000.0 * time_on_a, f64::NEG_INFINITY);
+                t.add_state(1000.0 * (1.0 - time_on_a), 0.0);
+            }
+            let film = 1.0 - time_on_a;
+            let ((b, _), (share, share_se)) = filmed_scale(&tasks).expect("sums gathered");
+            assert!((b - 0.9).abs() < 1e-12 && (share - film).abs() < 1e-12);
+            assert_eq!(share_se, 0.0);
+            // The filmed image is 0.9 whatever the chains' time on A.
+            assert!((b / share * film - 0.9).abs() < 1e-12, "{time_on_a}");
+            // Control: the running scale is right only at equilibrium.
+            let running_image = running.b() * film;
+            assert!((running.b() - 1.1).abs() < 1e-12);
+            if time_on_a == 0.2 / 1.1 {
+                assert!((running_image - 0.9).abs() < 1e-12);
+            } else {
+                assert!((running_image - 0.9).abs() > 0.04, "{time_on_a}");
+            }
+        }
+    }
+}
