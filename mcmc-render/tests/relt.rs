@@ -404,9 +404,10 @@ fn filmed_rescales_only_the_full_and_indirect_replicas_of_the_same_chains() {
         r.layers[k].1.iter().flat_map(|p| [p.r, p.g, p.b]).collect()
     };
     for k in [0, 3] {
-        let same = layer(&filmed, k).iter().map(|x| x.to_bits()).eq(layer(&running, k)
+        let same = layer(&filmed, k)
             .iter()
-            .map(|x| x.to_bits()));
+            .map(|x| x.to_bits())
+            .eq(layer(&running, k).iter().map(|x| x.to_bits()));
         assert!(same, "layer {k}");
     }
     for k in [1, 2] {
@@ -420,7 +421,10 @@ fn filmed_rescales_only_the_full_and_indirect_replicas_of_the_same_chains() {
         let mut lit = 0;
         for (x, y) in layer(&filmed, k).iter().zip(layer(&running, k)) {
             let expected = f64::from(y) * ratio;
-            assert!((f64::from(*x) - expected).abs() <= 1e-6 * expected.abs(), "replica {k}");
+            assert!(
+                (f64::from(*x) - expected).abs() <= 1e-6 * expected.abs(),
+                "replica {k}"
+            );
             lit += usize::from(y > 0.0);
         }
         assert!(lit > 0, "replica {k} filmed nothing");
