@@ -489,18 +489,26 @@ fn the_ratio_chain_agrees_with_the_running_normalisation() {
 
 #[test]
 fn ratios_need_members_that_share_an_evaluation() {
+    // And so does `filmed` (relt's default), which reads the filmed part
+    // off the same payload: pssmlt refuses both with one line.
+    use mcmc_render::markov::Normalization;
     let scene = repo_scene("cornell-box.xml", 8);
-    let mut settings = mcmc_render::integrators::pssmlt::Pssmlt::default();
-    settings.chain.normalization = mcmc_render::markov::Normalization::Ratios;
-    settings.chain.bootstrap = 100;
-    settings.chain.chains = 4;
-    settings.chain.mutations_per_pixel = Some(1);
-    let stop = AtomicBool::new(false);
-    let e = match settings.render(&scene, &RunSettings::default(), &stop, &NoObserver) {
-        Err(e) => e.to_string(),
-        Ok(_) => panic!("pssmlt ran with normalization=ratios"),
-    };
-    assert!(e.contains("normalization=ratios"), "{e}");
+    for (normalization, name) in [
+        (Normalization::Ratios, "normalization=ratios"),
+        (Normalization::Filmed, "normalization=filmed"),
+    ] {
+        let mut settings = mcmc_render::integrators::pssmlt::Pssmlt::default();
+        settings.chain.normalization = normalization;
+        settings.chain.bootstrap = 100;
+        settings.chain.chains = 4;
+        settings.chain.mutations_per_pixel = Some(1);
+        let stop = AtomicBool::new(false);
+        let e = match settings.render(&scene, &RunSettings::default(), &stop, &NoObserver) {
+            Err(e) => e.to_string(),
+            Ok(_) => panic!("pssmlt ran with {name}"),
+        };
+        assert!(e.contains(name) && !e.contains('\n'), "{e}");
+    }
 }
 
 #[test]

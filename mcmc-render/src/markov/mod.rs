@@ -895,10 +895,18 @@ pub fn run<F: ChainFamily>(
         running: boot_running,
         invalid,
     } = start_up(family, count, seed)?;
-    if settings.normalization == Normalization::Ratios && !shared {
-        return Err(MltError::Setting(
-            "normalization=ratios needs a ladder whose members share one evaluation (relt); use running or bootstrap".into(),
-        ));
+    // Both read the other members' densities off a member's payload.
+    let ladder_only = match settings.normalization {
+        Normalization::Ratios => Some("ratios"),
+        Normalization::Filmed => Some("filmed"),
+        Normalization::Running | Normalization::Bootstrap => None,
+    };
+    if let Some(name) = ladder_only
+        && !shared
+    {
+        return Err(MltError::Setting(format!(
+            "normalization={name} needs a ladder whose members share one evaluation (relt); use running or bootstrap"
+        )));
     }
     let mut bootstrap_b: Vec<(f64, f64)> =
         boots.iter().map(|b| (b.b(), b.standard_error())).collect();
