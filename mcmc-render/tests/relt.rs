@@ -386,6 +386,56 @@ fn the_continued_search_pools_its_draws_into_b4_and_rescales_only_the_specific_r
 }
 
 #[test]
+fn filmed_rescales_only_the_full_and_indirect_replicas_of_the_same_chains() {
+    // relt's default `filmed` against `running`, same seed: the same
+    // chains and draws, so the uniform and specific layers are the same
+    // bits and the full and indirect ones differ by their scales' ratio,
+    // `b_filmed / filmed_share` over `b_running` (docs/relt.md, session 24).
+    let scene = repo_scene_tilted("cornell-glossy-glass.xml", 16, 5);
+    let filmed = small(&scene, 5, small_settings());
+    assert_eq!(
+        Relt::default().chain.normalization,
+        mcmc_render::markov::Normalization::Filmed
+    );
+    let mut settings = small_settings();
+    settings.chain.normalization = mcmc_render::markov::Normalization::Running;
+    let running = small(&scene, 5, settings);
+    let layer = |r: &Rendered, k: usize| -> Vec<f32> {
+        r.layers[k].1.iter().flat_map(|p| [p.r, p.g, p.b]).collect()
+    };
+    for k in [0, 3] {
+        let same = layer(&filmed, k)
+            .iter()
+            .map(|x| x.to_bits())
+            .eq(layer(&running, k).iter().map(|x| x.to_bits()));
+        assert!(same, "layer {k}");
+    }
+    for k in [1, 2] {
+        let f = &filmed.statistics["families"][k];
+        let get = |name: &str| f[name].as_f64().unwrap_or(f64::NAN);
+        let (b, share, scale) = (get("b_filmed"), get("filmed_share"), get("scale"));
+        assert!(share > 0.0 && share <= 1.0, "replica {k}: share {share}");
+        assert!((scale - b / share).abs() <= 1e-12 * scale, "replica {k}");
+        let ratio = scale / get("b_running");
+        assert!(ratio != 1.0, "replica {k}: the scales are equal");
+        let mut lit = 0;
+        for (x, y) in layer(&filmed, k).iter().zip(layer(&running, k)) {
+            let expected = f64::from(y) * ratio;
+            assert!(
+                (f64::from(*x) - expected).abs() <= 1e-6 * expected.abs(),
+                "replica {k}"
+            );
+            lit += usize::from(y > 0.0);
+        }
+        assert!(lit > 0, "replica {k} filmed nothing");
+    }
+    // The uniform and specific replicas film all of their targets.
+    for k in [0, 3] {
+        assert!(filmed.statistics["families"][k].get("b_filmed").is_none());
+    }
+}
+
+#[test]
 fn a_replica_the_bootstrap_never_reached_is_dropped() {
     // Direct light only (max_depth 2): no L5 and, without speculars, no
     // L0, so the specific replica's b̂ is 0.
@@ -439,18 +489,26 @@ fn the_ratio_chain_agrees_with_the_running_normalisation() {
 
 #[test]
 fn ratios_need_members_that_share_an_evaluation() {
+    // And so does `filmed` (relt's default), which reads the filmed part
+    // off the same payload: pssmlt refuses both with one line.
+    use mcmc_render::markov::Normalization;
     let scene = repo_scene("cornell-box.xml", 8);
-    let mut settings = mcmc_render::integrators::pssmlt::Pssmlt::default();
-    settings.chain.normalization = mcmc_render::markov::Normalization::Ratios;
-    settings.chain.bootstrap = 100;
-    settings.chain.chains = 4;
-    settings.chain.mutations_per_pixel = Some(1);
-    let stop = AtomicBool::new(false);
-    let e = match settings.render(&scene, &RunSettings::default(), &stop, &NoObserver) {
-        Err(e) => e.to_string(),
-        Ok(_) => panic!("pssmlt ran with normalization=ratios"),
-    };
-    assert!(e.contains("normalization=ratios"), "{e}");
+    for (normalization, name) in [
+        (Normalization::Ratios, "normalization=ratios"),
+        (Normalization::Filmed, "normalization=filmed"),
+    ] {
+        let mut settings = mcmc_render::integrators::pssmlt::Pssmlt::default();
+        settings.chain.normalization = normalization;
+        settings.chain.bootstrap = 100;
+        settings.chain.chains = 4;
+        settings.chain.mutations_per_pixel = Some(1);
+        let stop = AtomicBool::new(false);
+        let e = match settings.render(&scene, &RunSettings::default(), &stop, &NoObserver) {
+            Err(e) => e.to_string(),
+            Ok(_) => panic!("pssmlt ran with {name}"),
+        };
+        assert!(e.contains(name) && !e.contains('\n'), "{e}");
+    }
 }
 
 #[test]

@@ -86,7 +86,7 @@ pub struct ParamFlags {
     /// Kelemen's MIS combination of large steps (`kelemen_mis=true`).
     #[arg(long)]
     kelemen_mis: bool,
-    /// Image normalisation: running or bootstrap (`normalization`).
+    /// Image normalisation: running, bootstrap, ratios or filmed (`normalization`).
     #[arg(long, value_name = "KIND")]
     normalization: Option<String>,
     /// Path sampler under PSSMLT: pt or bdpt (`base`).

@@ -117,15 +117,20 @@ crate::settings! {
         pub annealing_sweeps: usize = 1;
         /// Uniform draws screened for L0 paths to start the specific replica (0: no search, neither at start-up nor during the run; docs/relt.md).
         pub l0_search: usize = 4_000_000;
-        /// Further search draws per chain mutation, made while the chains run and merged into the specific replica's b_4 (0: start-up search only; normalization=running only; docs/relt.md session 16).
+        /// Further search draws per chain mutation, made while the chains run and merged into the specific replica's b_4 (0: start-up search only; normalization=running or filmed only; docs/relt.md session 16).
         pub l0_search_rate: f64 = 0.0, check check::non_negative;
         flatten {
             /// Path depth.
             pub depth: DepthParams = DepthParams::default();
             /// The driver (`kelemen_mis` does not apply; `depth_allocation`
             /// only without exchanges; `normalization=ratios` is the
-            /// paper's Eq. 10 chain, see docs/relt.md).
-            pub chain: ChainParams = ChainParams::default();
+            /// paper's Eq. 10 chain; the default `filmed` scales the full
+            /// and indirect replicas, whose `L0` their chains rarely
+            /// reach, by their filmed part: docs/relt.md, session 24).
+            pub chain: ChainParams = ChainParams {
+                normalization: Normalization::Filmed,
+                ..ChainParams::default()
+            };
         }
     }
 }
@@ -315,7 +320,7 @@ impl<'a> ReltFamily<'a> {
             // image's b_4 (the others scale by the bootstrap's or by
             // the chain of ratios): elsewhere they would be wasted.
             l0_search_rate: match settings.chain.normalization {
-                Normalization::Running => settings.l0_search_rate,
+                Normalization::Running | Normalization::Filmed => settings.l0_search_rate,
                 _ => 0.0,
             },
             deadline: Deadline::NEVER,
@@ -518,6 +523,17 @@ impl<'a> ChainFamily for ReltFamily<'a> {
     }
     fn member_log_density(&self, member: usize, payload: &PathSample) -> Option<f64> {
         let v = class_values(&payload.splats, self.scalar);
+        Some(log_of(self.targets[member].replica.density(&v)))
+    }
+    /// The full and indirect replicas' targets hold `L0`, which the
+    /// specific replica alone films: their filmed part is `q_k − d_k[0]·L0`.
+    fn filmed_log_density(&self, member: usize, payload: &PathSample) -> Option<f64> {
+        let d = self.targets[member].replica.weights?;
+        if self.specific.is_none() || Some(member) == self.specific || d[0] == 0.0 {
+            return None;
+        }
+        let mut v = class_values(&payload.splats, self.scalar);
+        v[0] = 0.0;
         Some(log_of(self.targets[member].replica.density(&v)))
     }
     fn class_weights(

@@ -79,8 +79,8 @@ pub struct SetRecord {
 }
 
 /// One task as saved: what it adds to the image (its films, running
-/// normalisations, mutation counts, ratio sums, per-depth counts, as the
-/// distributed reduction sends them) and its chains in order (of a task
+/// normalisations, mutation counts, ratio sums, per-depth counts,
+/// `normalization=filmed`'s sums, as the distributed reduction sends them) and its chains in order (of a task
 /// of replica sets: every set's levels, set after set).
 #[derive(Clone, Debug)]
 pub struct TaskRecord {
@@ -453,6 +453,10 @@ pub(crate) fn restore_task<F: ChainFamily>(
     task.running = sums.running.into_owned();
     task.mutations = sums.mutations.into_owned();
     task.ratios = sums.ratios.into_owned();
+    if sums.filmed.len() != task.filmed.len() {
+        return Err("a task's filmed sums do not fit the run's normalisation".into());
+    }
+    task.filmed = sums.filmed.into_owned();
     task.counts = sums.counts.into_owned();
     task.recount_searches();
     Ok(())

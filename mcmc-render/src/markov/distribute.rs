@@ -1,15 +1,15 @@
 //! The Markov-chain driver on a cluster ([`crate::cluster`]): every rank
 //! builds the same tasks (same start-up, same chain streams), runs the
 //! tasks [`crate::cluster::owns`] deals it, and sends each task's sums —
-//! films, running normalisations, mutations, ratio sums, per-depth counts
-//! — to rank 0, which adds them in task order exactly as one process does.
+//! films, running normalisations, mutations, ratio sums, per-depth counts,
+//! `normalization=filmed`'s sums — to rank 0, which adds them in task order exactly as one process does.
 //! The image and the pooled normalisation `b` are therefore bit-identical
 //! for any number of ranks. Chain and exchange statistics travel as JSON,
 //! one report per rank, and are merged in rank order (their counters are
 //! exact; the sums of acceptance probabilities may differ from a single
 //! process in the last bits).
 
-use super::estimator::{DepthAcceptance, RatioSum, TransitionCounts};
+use super::estimator::{DepthAcceptance, FilmedSums, RatioSum, TransitionCounts};
 use super::work::Task;
 use super::{ChainFamily, ExchangePair, ExchangeSummary};
 use crate::cluster::{Cluster, Parcel};
@@ -28,6 +28,8 @@ pub(crate) struct TaskSums<'a> {
     pub running: Cow<'a, [RunningNormalization]>,
     pub mutations: Cow<'a, [u64]>,
     pub ratios: Cow<'a, [RatioSum]>,
+    /// [`super::Normalization::Filmed`]'s sums (empty under the others).
+    pub filmed: Cow<'a, [FilmedSums]>,
     pub counts: Cow<'a, TransitionCounts>,
 }
 
@@ -40,15 +42,19 @@ impl<'a> TaskSums<'a> {
             running: Cow::Borrowed(&t.running),
             mutations: Cow::Borrowed(&t.mutations),
             ratios: Cow::Borrowed(&t.ratios),
+            filmed: Cow::Borrowed(&t.filmed),
             counts: Cow::Borrowed(&t.counts),
         }
     }
 
     /// The parcel of task `unit` (counts: the member count, members,
     /// mutations, running counts, per-depth pairs, the NaN coordinates'
-    /// length + 1 or 0, the sample-count image's length and width;
-    /// numbers: the running logs, the ratio sums, the NaN coordinates, the
-    /// sample counts).
+    /// length + 1 or 0, the sample-count image's length and width, then,
+    /// under `normalization=filmed` only, the member count again and the
+    /// filmed draws' counts; numbers: the running logs, the ratio sums,
+    /// the NaN coordinates, the sample counts, then the filmed draws' logs
+    /// and share sums). Without filmed sums a parcel has the words it had
+    /// before they existed, so earlier checkpoints stay readable.
     pub(crate) fn parcel(&self, unit: usize) -> Parcel {
         let n = self.members.len();
         let mut counts = vec![n as u64];
@@ -79,6 +85,14 @@ impl<'a> TaskSums<'a> {
             u64::from(self.counts.width),
         ]);
         numbers.extend(self.counts.samples.iter().map(|&v| f64::from(v)));
+        if !self.filmed.is_empty() {
+            counts.push(self.filmed.len() as u64);
+            for f in self.filmed.iter() {
+                let (count, log_sum, log_sum_sq) = f.b.parts();
+                counts.push(count);
+                numbers.extend([log_sum, log_sum_sq, f.share.weight, f.share.sum]);
+            }
+        }
         Parcel {
             unit,
             films: self.films.to_vec(),
@@ -144,6 +158,14 @@ impl<'a> TaskSums<'a> {
                 "{samples_len} sample counts do not make rows of {width}"
             ));
         }
+        // Filmed sums are the parcel's last counts, when there are any.
+        let counts_of_filmed = match count() {
+            Err(_) => Vec::new(),
+            Ok(k) if k == n as u64 => (0..n)
+                .map(|_| counter(count()?))
+                .collect::<Result<Vec<u64>, String>>()?,
+            Ok(k) => return Err(format!("a task of {n} members has filmed sums of {k}")),
+        };
         if c.next().is_some() {
             return Err("a task's sums have trailing words".into());
         }
@@ -168,6 +190,18 @@ impl<'a> TaskSums<'a> {
         let samples = (0..samples_len)
             .map(|_| number().map(|v| v as f32))
             .collect::<Result<_, _>>()?;
+        let filmed = counts_of_filmed
+            .iter()
+            .map(|&k| {
+                Ok(FilmedSums {
+                    b: RunningNormalization::from_parts((k, number()?, number()?)),
+                    share: RatioSum {
+                        weight: number()?,
+                        sum: number()?,
+                    },
+                })
+            })
+            .collect::<Result<_, String>>()?;
         if x.next().is_some() {
             return Err("a task's sums have trailing numbers".into());
         }
@@ -177,6 +211,7 @@ impl<'a> TaskSums<'a> {
             running: Cow::Owned(running),
             mutations: Cow::Owned(mutations),
             ratios: Cow::Owned(ratios),
+            filmed: Cow::Owned(filmed),
             counts: Cow::Owned(TransitionCounts {
                 per_depth,
                 first_nonfinite,
@@ -330,6 +365,7 @@ mod tests {
                 },
                 RatioSum::default(),
             ]),
+            filmed: Cow::Owned(Vec::new()),
             counts: Cow::Owned(TransitionCounts {
                 per_depth: vec![DepthAcceptance {
                     proposed: 4,
@@ -340,7 +376,11 @@ mod tests {
                 width: 3,
             }),
         };
+        // Without filmed sums the parcel ends as before they existed (the
+        // sample image's width is its last count).
+        assert_eq!(sums.parcel(9).counts.last(), Some(&3));
         let back = TaskSums::from_parcel(sums.parcel(9));
+        assert!(back.filmed.is_empty());
         assert_eq!(&*back.members, &[2, 3]);
         assert_eq!(&*back.mutations, &[7, 0]);
         let bits = |r: &RunningNormalization| {
@@ -368,6 +408,22 @@ mod tests {
             back.films[0].as_ref().unwrap().accumulators().0,
             film.accumulators().0
         );
+        let mut filmed = FilmedSums::default();
+        filmed.add_draw(-0.75);
+        filmed.add_draw(f64::NEG_INFINITY);
+        filmed.add_state(0.25, -0.5);
+        let with_filmed = TaskSums {
+            filmed: Cow::Owned(vec![FilmedSums::default(), filmed.clone()]),
+            ..sums
+        };
+        let back = TaskSums::from_parcel(with_filmed.parcel(9));
+        assert_eq!(back.filmed.len(), 2);
+        assert_eq!(bits(&back.filmed[1].b), bits(&filmed.b));
+        assert_eq!(bits(&back.filmed[0].b), bits(&RunningNormalization::new()));
+        let share = |f: &FilmedSums| (f.share.weight.to_bits(), f.share.sum.to_bits());
+        assert_eq!(share(&back.filmed[1]), share(&filmed));
+        assert_eq!(bits(&back.running[0]), bits(&running));
+        assert_eq!(back.counts.samples, vec![0.75, 0.0, 1e-30]);
     }
 
     #[test]

@@ -43,6 +43,10 @@ pub struct FamilyResult {
     pub bootstrap_b: (f64, f64),
     /// Running `⟨b_d⟩` (bootstrap and large steps) and its standard error.
     pub running_b: (f64, f64),
+    /// With [`Normalization::Filmed`], for a member that films part of its
+    /// target: `b̃_d` (the uniform draws' mean of the filmed part) and the
+    /// chains' mean share `E_{p_d}[q̃_d/q_d]`, each with its standard error.
+    pub filmed: Option<((f64, f64), (f64, f64))>,
 }
 
 impl FamilyResult {
@@ -97,6 +101,44 @@ pub(crate) struct MemberTotals<'a> {
     /// Per member `d`, one [`RatioSum`] of `q_{d+1}/q_d` per task that ran
     /// member `d`'s chains.
     pub ratios: Vec<Vec<RatioSum>>,
+    /// Per member, one [`FilmedSums`] per task that ran its chains
+    /// (empty unless [`Normalization::Filmed`]).
+    pub filmed: Vec<Vec<FilmedSums>>,
+}
+
+/// What [`Normalization::Filmed`] needs of one member in one task: the
+/// uniform draws' `q̃_d/p₀` and its chain states' `q̃_d/q_d`.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct FilmedSums {
+    /// `b̃_d` over the replica sets' independent draws.
+    pub b: RunningNormalization,
+    /// `q̃_d/q_d` over the member's states (expected values).
+    pub share: RatioSum,
+}
+
+impl FilmedSums {
+    /// Adds an independent draw of ln weight `ln q̃ − ln p₀`.
+    pub fn add_draw(&mut self, log_w: f64) {
+        self.b.add(log_w);
+    }
+
+    /// Adds a chain state of weight `weight` and log share `ln q̃ − ln q`.
+    pub fn add_state(&mut self, weight: f64, log_share: f64) {
+        self.share.add(weight, log_share);
+    }
+}
+
+/// `b̃_d / E[q̃_d/q_d]` with the errors of both in quadrature (the share's
+/// from the spread between tasks, as [`chained_ratio`]), or `None` when
+/// the member has no filmed part or nothing was gathered.
+fn filmed_scale(tasks: &[FilmedSums]) -> Option<((f64, f64), (f64, f64))> {
+    let mut b = RunningNormalization::new();
+    tasks.iter().for_each(|t| b.merge(&t.b));
+    let shares: Vec<RatioSum> = tasks.iter().map(|t| t.share).collect();
+    if b.count() == 0 || shares.iter().all(|s| s.weight <= 0.0) {
+        return None;
+    }
+    Some(((b.b(), b.standard_error()), chained_ratio(&shares)))
 }
 
 /// Expected-value sums of `q_{d+1}(x)/q_d(x)` over member `d`'s states.
@@ -153,6 +195,7 @@ impl MemberTotals<'_> {
             mis,
             normalization,
             ratios,
+            filmed,
         } = self;
         // The chain b_d = b_{d−1} · E_{p_{d−1}}[q_d / q_{d−1}] from b_0's
         // running estimate (Kitaoka et al. Eq. 10), relative errors in
@@ -171,13 +214,25 @@ impl MemberTotals<'_> {
             .enumerate()
             .map(|(d, film)| {
                 let running_b = (running[d].b(), running[d].standard_error());
+                let filmed = match normalization {
+                    Normalization::Filmed => filmed.get(d).and_then(|t| filmed_scale(t)),
+                    _ => None,
+                };
                 let (scale, scale_standard_error) = if mis {
                     (1.0, 0.0)
                 } else {
-                    match normalization {
-                        Normalization::Bootstrap => bootstrap_b[d],
-                        Normalization::Running => running_b,
-                        Normalization::Ratios => chained[d],
+                    match (normalization, filmed) {
+                        (Normalization::Bootstrap, _) => bootstrap_b[d],
+                        (Normalization::Filmed, Some(((b, b_se), (r, r_se)))) if r > 0.0 => {
+                            (b / r, b / r * (b_se / b).hypot(r_se / r))
+                        }
+                        // `filmed` is `None` under every other normalisation
+                        // and for a member that films all of its target;
+                        // chains that never stood on their filmed part
+                        // (share 0) filmed none of it, and b̃/0 would make
+                        // the rest of their film infinite.
+                        (Normalization::Running | Normalization::Filmed, _) => running_b,
+                        (Normalization::Ratios, _) => chained[d],
                     }
                 };
                 FamilyResult {
@@ -189,6 +244,7 @@ impl MemberTotals<'_> {
                     image_weight: image_weights[d],
                     bootstrap_b: bootstrap_b[d],
                     running_b,
+                    filmed,
                 }
             })
             .collect()
@@ -358,6 +414,54 @@ pub(crate) fn observe<F: ChainFamily>(
             && let Some(ln_next) = family.member_log_density(next, &y.payload)
         {
             sink.ratio.add(t.alpha, ln_next - y.log_density);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A target over two regions of the reference measure: `A` (measure
+    /// 0.1, pure `L0`: `q = 2`, `q̃ = 0`, nothing filmed) and `B` (measure
+    /// 0.9, `q = q̃ = 1`, a film of `h/q = 1` per visit). So `b = 1.1`,
+    /// `b̃ = 0.9`, the image `∫_B h = 0.9`, and at equilibrium the chains
+    /// spend `0.2/1.1` of their time on `A`.
+    #[test]
+    fn the_filmed_scale_ignores_the_time_chains_spend_on_unfilmed_states() {
+        let draws = |f: &mut FilmedSums, running: &mut RunningNormalization| {
+            // Ten draws in proportion to the regions' measures: one in A.
+            f.add_draw(f64::NEG_INFINITY);
+            running.add(2f64.ln());
+            for _ in 0..9 {
+                f.add_draw(0.0);
+                running.add(0.0);
+            }
+        };
+        for time_on_a in [0.0, 0.05, 0.2 / 1.1, 0.5] {
+            // Two tasks (the share's standard error needs two), each with
+            // 1000 chain states, `time_on_a` of them on A.
+            let mut tasks = vec![FilmedSums::default(); 2];
+            let mut running = RunningNormalization::new();
+            for t in &mut tasks {
+                draws(t, &mut running);
+                t.add_state(1000.0 * time_on_a, f64::NEG_INFINITY);
+                t.add_state(1000.0 * (1.0 - time_on_a), 0.0);
+            }
+            let film = 1.0 - time_on_a;
+            let ((b, _), (share, share_se)) = filmed_scale(&tasks).expect("sums gathered");
+            assert!((b - 0.9).abs() < 1e-12 && (share - film).abs() < 1e-12);
+            assert_eq!(share_se, 0.0);
+            // The filmed image is 0.9 whatever the chains' time on A.
+            assert!((b / share * film - 0.9).abs() < 1e-12, "{time_on_a}");
+            // Control: the running scale is right only at equilibrium.
+            let running_image = running.b() * film;
+            assert!((running.b() - 1.1).abs() < 1e-12);
+            if time_on_a == 0.2 / 1.1 {
+                assert!((running_image - 0.9).abs() < 1e-12);
+            } else {
+                assert!((running_image - 0.9).abs() > 0.04, "{time_on_a}");
+            }
         }
     }
 }

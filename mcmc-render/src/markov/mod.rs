@@ -133,6 +133,17 @@ crate::choice! {
         /// over member `d − 1`'s chain states (Kitaoka et al. Eq. 10),
         /// with standard errors from the spread between tasks.
         Ratios = "ratios",
+        /// As `running`, but a member whose film holds only part of its
+        /// target ([`ChainFamily::filmed_log_density`]: RELT's full and
+        /// indirect replicas, whose `L0` the specific replica films) is
+        /// scaled by `b̃_d / E_{p_d}[q̃_d/q_d]`: the uniform draws' mean of
+        /// the filmed part `q̃_d` over its chains' mean share of it, so a
+        /// chain that under-visits the unfilmed part (a mode it rarely
+        /// reaches) does not inflate its image (docs/relt.md, sessions
+        /// 23–24). The draws are those of a replica set's independent
+        /// proposals: without an exchange move (no replica sets) and for
+        /// a member that films all of its target it is `running`.
+        Filmed = "filmed",
     }
 }
 
@@ -149,7 +160,7 @@ crate::settings! {
         pub chains: usize = 1000, check crate::settings::check::count;
         /// Mutations per pixel (auto: 100, or until the time budget is spent).
         pub mutations_per_pixel: Option<u64> = None, check crate::settings::check::auto_or_at_least_one;
-        /// Image normalisation: running (bootstrap and every large step; lower variance), bootstrap (pbrt-v4's b*) or ratios (ladders of shared evaluations: relt).
+        /// Image normalisation: running (bootstrap and every large step; lower variance), bootstrap (pbrt-v4's b*), ratios (ladders of shared evaluations: relt) or filmed (running over the filmed part of each target, divided by the chains' share of it: relt).
         pub normalization: Normalization = Normalization::Running;
         /// Kelemen's MIS combination of large steps.
         pub kelemen_mis: bool = false;
@@ -269,6 +280,14 @@ pub trait ChainFamily: Sync {
     /// normalisation. `None` (the default): each member evaluates its own
     /// target.
     fn member_log_density(&self, _member: usize, _payload: &PathSample) -> Option<f64> {
+        None
+    }
+    /// `ln q̃_member(x)`: the part of `q_member` over what the member's
+    /// film holds, for a member that films less than its target (RELT's
+    /// full and indirect replicas hold `L0`, which the specific replica
+    /// alone films); used by [`Normalization::Filmed`]. `None` (the
+    /// default): the member films all of its target.
+    fn filmed_log_density(&self, _member: usize, _payload: &PathSample) -> Option<f64> {
         None
     }
     /// Per-class splat factors of member `member` for a state with payload
@@ -876,10 +895,18 @@ pub fn run<F: ChainFamily>(
         running: boot_running,
         invalid,
     } = start_up(family, count, seed)?;
-    if settings.normalization == Normalization::Ratios && !shared {
-        return Err(MltError::Setting(
-            "normalization=ratios needs a ladder whose members share one evaluation (relt); use running or bootstrap".into(),
-        ));
+    // Both read the other members' densities off a member's payload.
+    let ladder_only = match settings.normalization {
+        Normalization::Ratios => Some("ratios"),
+        Normalization::Filmed => Some("filmed"),
+        Normalization::Running | Normalization::Bootstrap => None,
+    };
+    if let Some(name) = ladder_only
+        && !shared
+    {
+        return Err(MltError::Setting(format!(
+            "normalization={name} needs a ladder whose members share one evaluation (relt); use running or bootstrap"
+        )));
     }
     let mut bootstrap_b: Vec<(f64, f64)> =
         boots.iter().map(|b| (b.b(), b.standard_error())).collect();
@@ -1044,6 +1071,9 @@ pub fn run<F: ChainFamily>(
     let all_tasks = tasks.len();
     for (t, task) in tasks.iter_mut().enumerate() {
         task.plan_searches(family, seed, (t as u64, all_tasks as u64));
+        if settings.normalization == Normalization::Filmed {
+            task.filmed = vec![estimator::FilmedSums::default(); task.members.len()];
+        }
     }
     let task_ids: Vec<usize> = (0..tasks.len()).filter(|&t| owned(t)).collect();
     if cluster.is_some() {
@@ -1090,10 +1120,14 @@ pub fn run<F: ChainFamily>(
             mis: settings.mis_large_steps,
             normalization: settings.normalization,
             ratios: vec![Vec::new(); members],
+            filmed: vec![Vec::new(); members],
         };
         for t in tasks {
             for (i, &m) in t.members.iter().enumerate() {
                 totals.ratios[m].push(t.ratios[i]);
+                if let Some(f) = t.filmed.get(i) {
+                    totals.filmed[m].push(f.clone());
+                }
                 if let Some(film) = &t.films[i] {
                     totals.films[m].add_film(film);
                 }

@@ -57,19 +57,30 @@ pub fn rendered(
             "acceptance": c.acceptance_rate(),
         })).collect::<Vec<_>>(),
         "acceptance_per_depth": result.per_depth,
-        "families": result.families.iter().enumerate().map(|(d, f)| json!({
-            "depth": if members_are_depths { d + 1 } else { 0 },
-            "chains": f.chains,
-            "mutations": f.mutations,
-            "acceptance": result.member_stats[d].as_ref().map(|s| s.acceptance_rate()),
-            "image_share": image_shares[d],
-            "b_bootstrap": f.bootstrap_b.0,
-            "b_bootstrap_standard_error": f.bootstrap_b.1,
-            "b_running": f.running_b.0,
-            "b_running_standard_error": f.running_b.1,
-            "scale": f.scale,
-            "scale_standard_error": f.scale_standard_error,
-        })).collect::<Vec<_>>(),
+        "families": result.families.iter().enumerate().map(|(d, f)| {
+            let mut family = json!({
+                "depth": if members_are_depths { d + 1 } else { 0 },
+                "chains": f.chains,
+                "mutations": f.mutations,
+                "acceptance": result.member_stats[d].as_ref().map(|s| s.acceptance_rate()),
+                "image_share": image_shares[d],
+                "b_bootstrap": f.bootstrap_b.0,
+                "b_bootstrap_standard_error": f.bootstrap_b.1,
+                "b_running": f.running_b.0,
+                "b_running_standard_error": f.running_b.1,
+                "scale": f.scale,
+                "scale_standard_error": f.scale_standard_error,
+            });
+            // normalization=filmed: the filmed part's b̃ and the chains'
+            // share of it (the running scale's excess is b·share/b̃ − 1).
+            if let Some(((b, b_se), (share, share_se))) = f.filmed {
+                family["b_filmed"] = json!(b);
+                family["b_filmed_standard_error"] = json!(b_se);
+                family["filmed_share"] = json!(share);
+                family["filmed_share_standard_error"] = json!(share_se);
+            }
+            family
+        }).collect::<Vec<_>>(),
         "nonfinite_contributions": cs.invalid_density,
         "nonfinite_bootstrap_candidates": result.bootstrap_invalid,
     });

@@ -3,7 +3,9 @@
 //! exchange move), each with its films, normalisation estimates and
 //! counters, run in rounds.
 
-use super::estimator::{DepthAcceptance, MemberSink, RatioSum, TransitionCounts, Weights, observe};
+use super::estimator::{
+    DepthAcceptance, FilmedSums, MemberSink, RatioSum, TransitionCounts, Weights, observe,
+};
 use super::{ChainFamily, ContinuedSearch, ExchangeSummary};
 use crate::film::Film;
 use crate::observer::Observer;
@@ -122,6 +124,9 @@ pub(crate) struct Task<'f, F: ChainFamily> {
     pub mutations: Vec<u64>,
     /// `q_{d+1}/q_d` sums over each member's states.
     pub ratios: Vec<RatioSum>,
+    /// Per member, the sums of [`super::Normalization::Filmed`] (empty
+    /// unless it is chosen; replica sets only).
+    pub filmed: Vec<FilmedSums>,
     /// Per-depth acceptance and the first NaN/inf proposal.
     pub counts: TransitionCounts,
     /// The chains or replica sets.
@@ -177,6 +182,7 @@ impl<'f, F: ChainFamily> Task<'f, F> {
             running: vec![RunningNormalization::new(); n],
             mutations: vec![0; n],
             ratios: vec![RatioSum::default(); n],
+            filmed: Vec::new(),
             counts: TransitionCounts::new(probe.width, probe.height),
             units,
             searches: vec![None; n],
@@ -242,6 +248,7 @@ impl<'f, F: ChainFamily> Task<'f, F> {
             running,
             mutations,
             ratios,
+            filmed,
             counts,
             units,
             searches,
@@ -294,6 +301,9 @@ impl<'f, F: ChainFamily> Task<'f, F> {
                             };
                             observe(family, t, &weights[members[level]], &mut sink, counts);
                             share_independent_draw(family, members, level, t, running);
+                            if !filmed.is_empty() {
+                                observe_filmed(family, members, level, t, filmed);
+                            }
                         };
                     let mut done = 0;
                     for _ in 0..n {
@@ -390,6 +400,40 @@ fn share_independent_draw<F: ChainFamily>(
             && let Some(ln_q) = family.member_log_density(members[slot], &y.payload)
         {
             r.add(ln_q - reference);
+        }
+    }
+}
+
+/// The sums of [`super::Normalization::Filmed`] for one transition of
+/// level `level`: its states' shares `q̃/q` (expected-value weights) for
+/// that level, and an independent proposal's `q̃/p₀` for every level
+/// (a draw from the reference measure for all of them).
+fn observe_filmed<F: ChainFamily>(
+    family: &F,
+    members: &[usize],
+    level: usize,
+    t: &Transition<'_, F::State, PathSample>,
+    filmed: &mut [FilmedSums],
+) {
+    let member = members[level];
+    let mut state = |weight: f64, log_density: f64, payload: &PathSample| {
+        if weight > 0.0
+            && log_density > f64::NEG_INFINITY
+            && let Some(ln_filmed) = family.filmed_log_density(member, payload)
+        {
+            filmed[level].add_state(weight, ln_filmed - log_density);
+        }
+    };
+    state(1.0 - t.alpha, t.current.log_density, &t.current.payload);
+    if let Some(y) = t.proposal {
+        state(t.alpha, y.log_density, &y.payload);
+        if family.is_independent(t.component) {
+            let reference = family.reference_log_density(&y.state);
+            for (slot, f) in filmed.iter_mut().enumerate() {
+                if let Some(ln_filmed) = family.filmed_log_density(members[slot], &y.payload) {
+                    f.add_draw(ln_filmed - reference);
+                }
+            }
         }
     }
 }
