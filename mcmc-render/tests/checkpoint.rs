@@ -291,22 +291,29 @@ fn check_per_pixel_resume(
         .unwrap();
     std::fs::remove_file(&path).unwrap();
     assert!(!resumed.interrupted, "{name}");
+    assert_eq!(resumed.statistics["checkpoint"][resumed_from], at, "{name}");
+    assert_resumed_as_whole(name, [&resumed, &whole, &control], keys);
+    (kept, integ)
+}
+
+/// Asserts that `resumed` ended with `whole`'s image and `keys` of its
+/// statistics bit for bit, and that `control` did not end with its image.
+fn assert_resumed_as_whole(name: &str, [resumed, whole, control]: [&Rendered; 3], keys: &[&str]) {
     assert!(
         bits(&resumed.image) == bits(&whole.image),
         "{name}: resumed image differs"
     );
-    for key in keys {
+    for &key in keys {
         assert_eq!(
-            resumed.statistics[*key], whole.statistics[*key],
+            resumed.statistics.get(key),
+            whole.statistics.get(key),
             "{name}: {key}"
         );
     }
-    assert_eq!(resumed.statistics["checkpoint"][resumed_from], at, "{name}");
     assert!(
         bits(&control.image) != bits(&whole.image),
         "{name}: control agreed"
     );
-    (kept, integ)
 }
 
 /// `erpt` checkpointed after every pass (session 18): a render stopped
@@ -689,11 +696,7 @@ fn check_markov_resume(
     let _ = std::fs::remove_file(&path);
     let control = chains_render(scene, job, &path, Some(restarted), &go, &NoObserver);
     std::fs::remove_file(&path).unwrap();
-    assert!(
-        bits(&resumed.image) == bits(&whole.image),
-        "{name}: resumed image differs"
-    );
-    for key in [
+    let keys = [
         "mutations",
         "acceptance",
         "b_running",
@@ -702,17 +705,8 @@ fn check_markov_resume(
         "exchange",
         "searches",
         "annealing",
-    ] {
-        assert_eq!(
-            resumed.statistics.get(key),
-            whole.statistics.get(key),
-            "{name}: {key}"
-        );
-    }
-    assert!(
-        bits(&control.image) != bits(&whole.image),
-        "{name}: control agreed"
-    );
+    ];
+    assert_resumed_as_whole(name, [&resumed, &whole, &control], &keys);
     (resumed, whole)
 }
 

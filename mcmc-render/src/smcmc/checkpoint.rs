@@ -21,7 +21,6 @@ use crate::checkpoint::{FNV_OFFSET, MAX_COUNT, fnv1a};
 use crate::color::Rgb;
 use crate::markov::checkpoint::{checked_body, read_bytes, stats_from_words, stats_words};
 use mcmc_core::space::TorusPoint;
-use mcmc_core::stats::ChainStatistics;
 use std::path::Path;
 
 /// First bytes of an `smcmc` checkpoint (format version 1).
