@@ -241,8 +241,7 @@ mod tests {
 
     /// An empty scratch directory for the test `name`.
     fn scratch(name: &str) -> std::path::PathBuf {
-        let dir =
-            std::env::temp_dir().join(format!("mcmc-output-{name}-{}", std::process::id()));
+        let dir = std::env::temp_dir().join(format!("mcmc-output-{name}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         dir

@@ -629,7 +629,11 @@ fn stopped_chains_render(
     let stop = AtomicBool::new(false);
     let observer = StopAfter::new(&stop, after);
     let first = chains_render(scene, job, path, None, &stop, &observer);
-    assert!(first.interrupted, "{}: the first run was not stopped", job.0);
+    assert!(
+        first.interrupted,
+        "{}: the first run was not stopped",
+        job.0
+    );
     first
 }
 
@@ -1402,7 +1406,10 @@ fn a_stopped_adaptive_tempered_render_resumed_from_its_checkpoint_ends_bit_ident
 #[test]
 fn a_stopped_staged_tempered_render_resumed_from_its_checkpoints_ends_bit_identical() {
     let scene = repo_scene("cornell-box.xml", 24);
-    let staged = [("regularization", "geometric"), ("regularization_stages", "2")];
+    let staged = [
+        ("regularization", "geometric"),
+        ("regularization_stages", "2"),
+    ];
     let sets = tempered_sets("even_odd", &staged);
     let job = ("tempered-pssmlt", &sets[..]);
     let path = fresh_checkpoint_path("staged");
