@@ -27,19 +27,43 @@ pub(crate) fn fnv1a_words(words: &[u64], h: u64) -> u64 {
     words.iter().fold(h, |h, w| fnv1a(&w.to_le_bytes(), h))
 }
 
-/// Writes `bytes` to `path` through a temporary file renamed over it.
-pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), String> {
-    use std::io::Write;
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = std::path::PathBuf::from(tmp);
-    let write = || -> std::io::Result<()> {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
+/// Writes `path` through `write`, which receives the path of a temporary
+/// file in the target's directory: renamed over the target only once
+/// `write` succeeded, removed if it failed. A failed write (disk full, an
+/// encoder's error, Ctrl-C) leaves whatever was at `path` (an earlier
+/// render, the previous checkpoint) untouched. Every output and checkpoint
+/// of the workspace is written through it.
+pub fn write_atomically(
+    path: &Path,
+    write: impl FnOnce(&Path) -> Result<(), String>,
+) -> Result<(), String> {
+    let fail = |e: &dyn std::fmt::Display| format!("cannot write {}: {e}", path.display());
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
     };
-    write().map_err(|e| format!("cannot write {}: {e}", path.display()))
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".mcmc-render-");
+    // Temporary files are private (0600) by default; an output gets the
+    // usual mode (0666 less the umask), as `File::create` would give it.
+    #[cfg(unix)]
+    builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+    let tmp = builder.tempfile_in(dir).map_err(|e| fail(&e))?;
+    write(tmp.path())?;
+    tmp.persist(path).map_err(|e| fail(&e.error))?;
+    Ok(())
+}
+
+/// Writes `bytes` to `path` atomically ([`write_atomically`]), synced to
+/// the disk before the rename.
+pub fn write_bytes(path: &Path, bytes: &[u8]) -> Result<(), String> {
+    use std::io::Write;
+    write_atomically(path, |tmp| {
+        let mut f = std::fs::File::create(tmp).map_err(|e| e.to_string())?;
+        f.write_all(bytes)
+            .and_then(|()| f.sync_all())
+            .map_err(|e| format!("cannot write {}: {e}", path.display()))
+    })
 }
 
 /// The file at `path`, or `None` when there is none. A path that is not a
@@ -192,10 +216,10 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let p = dir.join("c.bin");
         assert_eq!(read_optional(&p).unwrap(), None);
-        write_atomically(&p, b"one").unwrap();
-        write_atomically(&p, b"second").unwrap();
+        write_bytes(&p, b"one").unwrap();
+        write_bytes(&p, b"second").unwrap();
         assert_eq!(read_optional(&p).unwrap().unwrap(), b"second");
-        assert!(!dir.join("c.bin.tmp").exists());
+        assert_eq!(file_names(&dir), ["c.bin"], "a temporary file is left");
         // Not regular files: refused before they are opened (a FIFO
         // blocked the read, `/dev/zero` never ended).
         let fifo = dir.join("fifo");
@@ -204,6 +228,55 @@ mod tests {
         for p in [fifo.as_path(), dir.as_path(), Path::new("/dev/zero")] {
             let e = read_optional(p).unwrap_err();
             assert!(e.contains("not a regular file"), "{e}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The names of the files in `dir`.
+    fn file_names(dir: &Path) -> Vec<std::ffi::OsString> {
+        (std::fs::read_dir(dir).unwrap())
+            .map(|e| e.unwrap().file_name())
+            .collect()
+    }
+
+    /// An empty scratch directory for the test `name`.
+    fn scratch(name: &str) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join(format!("mcmc-output-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    #[test]
+    fn a_failed_write_leaves_the_earlier_file_and_no_temporary() {
+        let dir = scratch("failed");
+        let path = dir.join("render.exr");
+        write_bytes(&path, b"good render").unwrap();
+        let e = write_atomically(&path, |tmp| {
+            std::fs::write(tmp, b"half a rend").unwrap();
+            Err("disk full".into())
+        });
+        assert_eq!(e.unwrap_err(), "disk full");
+        assert_eq!(std::fs::read(&path).unwrap(), b"good render");
+        assert_eq!(file_names(&dir), ["render.exr"]);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_write_replaces_the_file_with_the_usual_mode() {
+        let dir = scratch("replace");
+        let path = dir.join("out.json");
+        write_bytes(&path, b"old").unwrap();
+        write_bytes(&path, b"new").unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), b"new");
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            // As `File::create` would make it (0666 less the umask).
+            let plain = dir.join("plain");
+            std::fs::write(&plain, b"x").unwrap();
+            let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+            assert_eq!(mode(&path), mode(&plain));
         }
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -12,7 +12,7 @@
 //! threads changes nothing in the result. [`crate::fit::sample_nuts_resumable`]
 //! is a NUTS fit on it; `docs/user-guide-hmc.md` has a recipe.
 
-use crate::checkpoint::write_atomically;
+use crate::checkpoint::write_bytes;
 use crate::checkpoint::{chains_fingerprint, decode_chains, encode_chains, read_optional};
 use crate::error::{CoreError, Result};
 use crate::rng::ChainRng;
@@ -231,7 +231,7 @@ pub fn run_resumable<C: ResumableChain>(
     }
     let resumed_from = iterations_done(&states);
     let save = |states: &[C]| {
-        write_atomically(path, &encode_chains(fingerprint, &save_all(states)))
+        write_bytes(path, &encode_chains(fingerprint, &save_all(states)))
             .map_err(CoreError::Checkpoint)
     };
     let block = checkpointing.block.max(1);

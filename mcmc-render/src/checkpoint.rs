@@ -239,7 +239,7 @@ pub fn save(path: &Path, fingerprint: u64, progress: &Progress) -> Result<(), St
     }
     let checksum = fnv1a(&out, FNV_OFFSET);
     out.extend_from_slice(&checksum.to_le_bytes());
-    crate::output::write_bytes(path, &out)
+    mcmc_core::checkpoint::write_bytes(path, &out)
 }
 
 /// Bytes of the accumulators of a `size` image: 4 + 3 `f32` per pixel.

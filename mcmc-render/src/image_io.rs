@@ -2,7 +2,7 @@
 //! preview (the `png` crate).
 
 use crate::color::Rgb;
-use crate::output::write_atomically;
+use mcmc_core::checkpoint::write_atomically;
 use std::path::Path;
 
 /// Writes a linear-RGB EXR (32-bit float channels), atomically.

@@ -58,7 +58,6 @@ pub mod light;
 pub mod manifold;
 pub mod markov;
 pub mod observer;
-pub mod output;
 pub mod path_classes;
 pub mod path_space;
 pub mod pss;

@@ -45,7 +45,7 @@ pub fn write_pss(path: &Path, dump: &PssDump) -> Result<(), String> {
     for c in &dump.coords {
         text.push_str(&format!("{c:?}\n"));
     }
-    crate::output::write_bytes(path, text.as_bytes())
+    mcmc_core::checkpoint::write_bytes(path, text.as_bytes())
 }
 
 /// Reads a file written by [`write_pss`]. A file without a `# sampler`

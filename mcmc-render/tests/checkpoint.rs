@@ -68,6 +68,17 @@ struct StopAfter<'a> {
     seen: AtomicU32,
 }
 
+impl<'a> StopAfter<'a> {
+    /// Sets `stop` at the `after`-th snapshot.
+    fn new(stop: &'a AtomicBool, after: u32) -> Self {
+        StopAfter {
+            stop,
+            after,
+            seen: AtomicU32::new(0),
+        }
+    }
+}
+
 impl Observer for StopAfter<'_> {
     fn snapshot(&self, _image: &dyn Fn() -> Vec<Rgb>, _samples: u64) {
         if self.seen.fetch_add(1, Ordering::SeqCst) + 1 == self.after {
@@ -76,11 +87,16 @@ impl Observer for StopAfter<'_> {
     }
 }
 
-/// A checkpoint file's path in the temporary directory, unique to this
-/// test process and `tag`, with any stale file of an earlier run removed.
+/// A checkpoint file's path in the temporary directory, named for `tag`,
+/// with any stale file of an earlier run removed. Unique to this call:
+/// the tests run in parallel in one process, and two of them once shared
+/// a path (the same integrator, both `check_markov_resume`), so one read
+/// the other's finished file as its own ("not two whole rounds").
 fn fresh_checkpoint_path(tag: &str) -> std::path::PathBuf {
+    static CALLS: AtomicU32 = AtomicU32::new(0);
+    let call = CALLS.fetch_add(1, Ordering::Relaxed);
     let path = std::env::temp_dir().join(format!(
-        "mcmc-render-checkpoint-{tag}-{}.ckpt",
+        "mcmc-render-checkpoint-{tag}-{}-{call}.ckpt",
         std::process::id()
     ));
     let _ = std::fs::remove_file(&path);
@@ -118,11 +134,7 @@ fn stopped_after_two_passes(
         chains: None,
     };
     let stop = AtomicBool::new(false);
-    let observer = StopAfter {
-        stop: &stop,
-        after: 2,
-        seen: AtomicU32::new(0),
-    };
+    let observer = StopAfter::new(&stop, 2);
     let first = render_checkpointed(scene, integ, &settings(), Some(&fresh), &stop, &observer);
     (fresh, first)
 }
@@ -243,10 +255,7 @@ fn check_per_pixel_resume(
     (resumed_from, at): (&str, u64),
 ) -> (Progress, Box<dyn registry::Configured>) {
     let size = (scene.film.width, scene.film.height);
-    let sets: Vec<(String, String)> = (sets.iter())
-        .map(|(k, v)| (k.to_string(), v.to_string()))
-        .collect();
-    let integ = registry::configure(None, Some(name), &sets).expect(name);
+    let integ = configured((name, sets));
     let path = fresh_checkpoint_path(name);
     let run = |resume: Option<Progress>| RunSettings {
         spp: Some(spp),
@@ -260,11 +269,7 @@ fn check_per_pixel_resume(
         ..RunSettings::default()
     };
     let stop = AtomicBool::new(false);
-    let observer = StopAfter {
-        stop: &stop,
-        after,
-        seen: AtomicU32::new(0),
-    };
+    let observer = StopAfter::new(&stop, after);
     let first = integ.render(scene, &run(None), &stop, &observer).unwrap();
     assert!(first.interrupted, "{name}: the first run was not stopped");
     let saved = || load(&path, 42, size).unwrap().expect("a checkpoint");
@@ -286,22 +291,29 @@ fn check_per_pixel_resume(
         .unwrap();
     std::fs::remove_file(&path).unwrap();
     assert!(!resumed.interrupted, "{name}");
+    assert_eq!(resumed.statistics["checkpoint"][resumed_from], at, "{name}");
+    assert_resumed_as_whole(name, [&resumed, &whole, &control], keys);
+    (kept, integ)
+}
+
+/// Asserts that `resumed` ended with `whole`'s image and `keys` of its
+/// statistics bit for bit, and that `control` did not end with its image.
+fn assert_resumed_as_whole(name: &str, [resumed, whole, control]: [&Rendered; 3], keys: &[&str]) {
     assert!(
         bits(&resumed.image) == bits(&whole.image),
         "{name}: resumed image differs"
     );
-    for key in keys {
+    for &key in keys {
         assert_eq!(
-            resumed.statistics[*key], whole.statistics[*key],
+            resumed.statistics.get(key),
+            whole.statistics.get(key),
             "{name}: {key}"
         );
     }
-    assert_eq!(resumed.statistics["checkpoint"][resumed_from], at, "{name}");
     assert!(
         bits(&control.image) != bits(&whole.image),
         "{name}: control agreed"
     );
-    (kept, integ)
 }
 
 /// `erpt` checkpointed after every pass (session 18): a render stopped
@@ -573,19 +585,25 @@ fn chains_render(
     try_chains_render(scene, (name, sets), path, progress, stop, observer).expect(name)
 }
 
-/// [`chains_render`], its error as the command line prints it.
+/// `name` configured with `sets` (as the command line's `--set`).
+fn configured((name, sets): (&str, &[(&str, &str)])) -> Box<dyn registry::Configured> {
+    let sets: Vec<(String, String)> = (sets.iter())
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
+    registry::configure(None, Some(name), &sets).expect(name)
+}
+
+/// [`chains_render`], its error as the command line prints it (also
+/// `smcmc`'s render: its checkpoints are whole iterations, and it
+/// snapshots after each).
 fn try_chains_render(
     scene: &Scene,
-    (name, sets): (&str, &[(&str, &str)]),
+    job: (&str, &[(&str, &str)]),
     path: &std::path::Path,
     progress: Option<ChainProgress>,
     stop: &AtomicBool,
     observer: &dyn Observer,
 ) -> Result<Rendered, String> {
-    let sets: Vec<(String, String)> = (sets.iter())
-        .map(|(k, v)| (k.to_string(), v.to_string()))
-        .collect();
-    let integ = registry::configure(None, Some(name), &sets).expect(name);
     let run = RunSettings {
         seed: 5,
         snapshot_every: std::time::Duration::ZERO,
@@ -597,9 +615,52 @@ fn try_chains_render(
         }),
         ..RunSettings::default()
     };
-    integ
-        .render(scene, &run, stop, observer)
-        .map_err(|e| e.to_string())
+    (configured(job).render(scene, &run, stop, observer)).map_err(|e| e.to_string())
+}
+
+/// `job` on `scene` checkpointed at `path` and stopped at its `after`-th
+/// snapshot, i.e. after `after` rounds (the stopped render).
+fn stopped_chains_render(
+    scene: &Scene,
+    job: (&str, &[(&str, &str)]),
+    path: &std::path::Path,
+    after: u32,
+) -> Rendered {
+    let stop = AtomicBool::new(false);
+    let observer = StopAfter::new(&stop, after);
+    let first = chains_render(scene, job, path, None, &stop, &observer);
+    assert!(
+        first.interrupted,
+        "{}: the first run was not stopped",
+        job.0
+    );
+    first
+}
+
+/// The Markov-chain checkpoint at `path` read for `scene`'s image with
+/// `fingerprint` (`chains_render`'s is 7).
+fn load_for(
+    scene: &Scene,
+    path: &std::path::Path,
+    fingerprint: u64,
+) -> Result<Option<ChainProgress>, String> {
+    let (w, h) = (scene.film.width, scene.film.height);
+    let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
+    load_chains(path, fingerprint, (w, h), &filter)
+}
+
+/// The chains a [`chains_render`] of `scene` saved at `path`.
+fn saved_chains(scene: &Scene, path: &std::path::Path) -> ChainProgress {
+    load_for(scene, path, 7).unwrap().expect("a checkpoint")
+}
+
+/// `progress` with every chain's stream put back to its start (chain `c`'s
+/// to stream `c` of `seed`), all else kept: a control's checkpoint.
+fn streams_put_back(progress: &mut ChainProgress, seed: u64) {
+    let chains = progress.tasks.iter_mut().flat_map(|t| &mut t.chains);
+    for (c, chain) in chains.enumerate() {
+        chain.rng = mcmc_core::rng::rng_words(&mcmc_core::rng::stream_rng(seed, c as u64));
+    }
 }
 
 /// `name` with `sets` on `scene`, stopped after two whole rounds (of
@@ -614,36 +675,16 @@ fn check_markov_resume(
     round: u64,
     total: u64,
 ) -> (Rendered, Rendered) {
-    let (w, h) = (scene.film.width, scene.film.height);
-    let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
     let path = fresh_checkpoint_path(name);
-    let load = || {
-        load_chains(&path, 7, (w, h), &filter)
-            .unwrap()
-            .expect("a checkpoint")
-    };
+    let load = || saved_chains(scene, &path);
     let job = (name, sets);
     // Stopped after two whole rounds.
-    let stop = AtomicBool::new(false);
-    let observer = StopAfter {
-        stop: &stop,
-        after: 2,
-        seen: AtomicU32::new(0),
-    };
-    let first = chains_render(scene, job, &path, None, &stop, &observer);
-    assert!(first.interrupted, "{name}: the first run was not stopped");
+    stopped_chains_render(scene, job, &path, 2);
     let saved = load();
     assert_eq!(saved.mutations(), 2 * round, "{name}: not two whole rounds");
     // The control's copy: every chain's stream back at its start.
     let mut restarted = load();
-    for (c, chain) in restarted
-        .tasks
-        .iter_mut()
-        .flat_map(|t| &mut t.chains)
-        .enumerate()
-    {
-        chain.rng = mcmc_core::rng::rng_words(&mcmc_core::rng::stream_rng(5, c as u64));
-    }
+    streams_put_back(&mut restarted, 5);
     let go = AtomicBool::new(false);
     let resumed = chains_render(scene, job, &path, Some(saved), &go, &NoObserver);
     assert!(!resumed.interrupted, "{name}");
@@ -659,11 +700,7 @@ fn check_markov_resume(
     let _ = std::fs::remove_file(&path);
     let control = chains_render(scene, job, &path, Some(restarted), &go, &NoObserver);
     std::fs::remove_file(&path).unwrap();
-    assert!(
-        bits(&resumed.image) == bits(&whole.image),
-        "{name}: resumed image differs"
-    );
-    for key in [
+    let keys = [
         "mutations",
         "acceptance",
         "b_running",
@@ -672,17 +709,8 @@ fn check_markov_resume(
         "exchange",
         "searches",
         "annealing",
-    ] {
-        assert_eq!(
-            resumed.statistics.get(key),
-            whole.statistics.get(key),
-            "{name}: {key}"
-        );
-    }
-    assert!(
-        bits(&control.image) != bits(&whole.image),
-        "{name}: control agreed"
-    );
+    ];
+    assert_resumed_as_whole(name, [&resumed, &whole, &control], &keys);
     (resumed, whole)
 }
 
@@ -734,19 +762,9 @@ fn a_stopped_adaptive_markov_render_resumed_from_its_checkpoint_ends_bit_identic
 /// one chain's small-step words cut to three, it is refused with one line.
 fn check_small_steps_are_saved(scene: &Scene, job: (&str, &[(&str, &str)])) {
     let name = job.0;
-    let (w, h) = (scene.film.width, scene.film.height);
-    let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
     let path = fresh_checkpoint_path(&format!("adaptive-{name}"));
-    let stop = AtomicBool::new(false);
-    let observer = StopAfter {
-        stop: &stop,
-        after: 2,
-        seen: AtomicU32::new(0),
-    };
-    chains_render(scene, job, &path, None, &stop, &observer);
-    let saved = load_chains(&path, 7, (w, h), &filter)
-        .unwrap()
-        .expect("a checkpoint");
+    stopped_chains_render(scene, job, &path, 2);
+    let saved = saved_chains(scene, &path);
     let mut fresh_steps = saved.clone();
     for chain in fresh_steps.tasks.iter_mut().flat_map(|t| &mut t.chains) {
         // θ, proposals, acceptances, frozen: the small step's words.
@@ -771,6 +789,21 @@ fn check_small_steps_are_saved(scene: &Scene, job: (&str, &[(&str, &str)])) {
     );
 }
 
+/// The replica-set renders' settings here (on a 24×24 box): 24 mutations
+/// per pixel over 16 chains, i.e. 4 replica sets of 4 levels, with the
+/// exchange move `exchange` and `more`.
+fn tempered_sets<'a>(exchange: &'a str, more: &[(&'a str, &'a str)]) -> Vec<(&'a str, &'a str)> {
+    let sets = [
+        ("bootstrap", "1000"),
+        ("chains", "16"),
+        ("mutations_per_pixel", "24"),
+        ("max_depth", "5"),
+        ("levels", "4"),
+        ("exchange", exchange),
+    ];
+    sets.into_iter().chain(more.iter().copied()).collect()
+}
+
 #[test]
 fn a_stopped_tempered_render_resumed_from_its_checkpoint_ends_bit_identical() {
     let scene = repo_scene("cornell-box.xml", 24);
@@ -782,14 +815,7 @@ fn a_stopped_tempered_render_resumed_from_its_checkpoint_ends_bit_identical() {
         ("tempered-pssmlt", "is_permutation"),
         ("tempered-mmlt", "even_odd"),
     ] {
-        let sets = [
-            ("bootstrap", "1000"),
-            ("chains", "16"),
-            ("mutations_per_pixel", "24"),
-            ("max_depth", "5"),
-            ("levels", "4"),
-            ("exchange", exchange),
-        ];
+        let sets = tempered_sets(exchange, &[]);
         check_markov_resume(&scene, (name, &sets), 4 * 256, 24 * 24 * 24);
     }
 }
@@ -858,21 +884,11 @@ fn a_stopped_path_space_render_resumed_from_its_checkpoint_ends_bit_identical() 
 #[test]
 fn a_forged_or_foreign_path_space_checkpoint_is_refused_with_one_line() {
     let scene = repo_scene("cornell-box.xml", 16);
-    let (w, h) = (scene.film.width, scene.film.height);
-    let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
     let path = fresh_checkpoint_path("mlt-forged");
     let after_one = |name: &str| {
         let _ = std::fs::remove_file(&path);
-        let stop = AtomicBool::new(false);
-        let observer = StopAfter {
-            stop: &stop,
-            after: 1,
-            seen: AtomicU32::new(0),
-        };
-        chains_render(&scene, (name, &MLT), &path, None, &stop, &observer);
-        load_chains(&path, 7, (w, h), &filter)
-            .unwrap()
-            .expect("a checkpoint")
+        stopped_chains_render(&scene, (name, &MLT), &path, 1);
+        saved_chains(&scene, &path)
     };
     let saved = after_one("mlt");
     let go = AtomicBool::new(false);
@@ -918,13 +934,9 @@ fn relt_render(
     sets: &[(&str, &str)],
     run: &RunSettings,
 ) -> Result<Rendered, String> {
-    let sets: Vec<(String, String)> = (sets.iter())
-        .map(|(k, v)| (k.to_string(), v.to_string()))
-        .collect();
-    let integ = registry::configure(None, Some("relt"), &sets).expect("relt");
-    integ
-        .render(scene, run, &AtomicBool::new(false), &NoObserver)
-        .map_err(|e| e.to_string())
+    let go = AtomicBool::new(false);
+    let integ = configured(("relt", sets));
+    (integ.render(scene, run, &go, &NoObserver)).map_err(|e| e.to_string())
 }
 
 #[test]
@@ -966,24 +978,14 @@ fn a_checkpointed_relt_start_up_is_not_cut_by_the_time_budget() {
 #[test]
 fn a_damaged_foreign_or_misfitting_markov_checkpoint_is_refused_with_one_line() {
     let scene = repo_scene_tilted("cornell-glossy-glass.xml", 16, 5);
-    let (w, h) = (scene.film.width, scene.film.height);
-    let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
     let path = fresh_checkpoint_path("relt-damaged");
     // A checkpoint after one round.
-    let stop = AtomicBool::new(false);
-    let observer = StopAfter {
-        stop: &stop,
-        after: 1,
-        seen: AtomicU32::new(0),
-    };
-    chains_render(&scene, ("relt", &RELT), &path, None, &stop, &observer);
+    stopped_chains_render(&scene, ("relt", &RELT), &path, 1);
     let good = std::fs::read(&path).unwrap();
-    let progress = load_chains(&path, 7, (w, h), &filter)
-        .unwrap()
-        .expect("a checkpoint");
+    let progress = saved_chains(&scene, &path);
     let refused = |bytes: &[u8], fingerprint: u64, why: &str| {
         std::fs::write(&path, bytes).unwrap();
-        let e = load_chains(&path, fingerprint, (w, h), &filter).unwrap_err();
+        let e = load_for(&scene, &path, fingerprint).unwrap_err();
         assert!(e.contains(why) && !e.contains('\n'), "{why}: {e}");
     };
     // One bit flipped in the middle (in a film or a chain), the last word
@@ -999,12 +1001,12 @@ fn a_damaged_foreign_or_misfitting_markov_checkpoint_is_refused_with_one_line() 
     // Not a regular file: refused before it is read (`/dev/zero` never
     // ends), with one line.
     for special in [std::path::Path::new("/dev/zero"), &std::env::temp_dir()] {
-        let e = load_chains(special, 7, (w, h), &filter).unwrap_err();
+        let e = load_for(&scene, special, 7).unwrap_err();
         assert!(e.contains("not a regular file") && !e.contains('\n'), "{e}");
     }
     // Control: the file itself loads.
     std::fs::write(&path, &good).unwrap();
-    assert!(load_chains(&path, 7, (w, h), &filter).unwrap().is_some());
+    assert!(load_for(&scene, &path, 7).unwrap().is_some());
     // A checkpoint of 4 replica sets given to a run of 5: one line.
     let mut five = RELT;
     five[1] = ("chains", "20");
@@ -1072,19 +1074,9 @@ fn a_stopped_fused_render_resumed_from_its_checkpoint_ends_bit_identical() {
             .collect()
     };
     assert_eq!(tallies(&resumed), tallies(&whole));
-    let (w, h) = (scene.film.width, scene.film.height);
-    let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
     let path = fresh_checkpoint_path("fused-kernels");
-    let stop = AtomicBool::new(false);
-    let observer = StopAfter {
-        stop: &stop,
-        after: 2,
-        seen: AtomicU32::new(0),
-    };
-    chains_render(&scene, ("fused", &FUSED), &path, None, &stop, &observer);
-    let mut fresh_kernels = load_chains(&path, 7, (w, h), &filter)
-        .unwrap()
-        .expect("a checkpoint");
+    stopped_chains_render(&scene, ("fused", &FUSED), &path, 2);
+    let mut fresh_kernels = saved_chains(&scene, &path);
     let mut checked = 0;
     for chain in fresh_kernels.tasks.iter_mut().flat_map(|t| &mut t.chains) {
         // p_pss, p_tc, round trip (0: not checked), scratch (0: none),
@@ -1118,19 +1110,9 @@ fn a_stopped_fused_render_resumed_from_its_checkpoint_ends_bit_identical() {
 #[test]
 fn a_forged_fused_checkpoint_is_refused_with_one_line() {
     let scene = repo_scene("cornell-box.xml", 16);
-    let (w, h) = (scene.film.width, scene.film.height);
-    let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
     let path = fresh_checkpoint_path("fused-forged");
-    let stop = AtomicBool::new(false);
-    let observer = StopAfter {
-        stop: &stop,
-        after: 1,
-        seen: AtomicU32::new(0),
-    };
-    chains_render(&scene, ("fused", &FUSED), &path, None, &stop, &observer);
-    let saved = load_chains(&path, 7, (w, h), &filter)
-        .unwrap()
-        .expect("a checkpoint");
+    stopped_chains_render(&scene, ("fused", &FUSED), &path, 1);
+    let saved = saved_chains(&scene, &path);
     let go = AtomicBool::new(false);
     let resume = |progress: ChainProgress| {
         try_chains_render(
@@ -1186,24 +1168,7 @@ fn smcmc_render(
     stop: &AtomicBool,
     observer: &dyn Observer,
 ) -> Result<Rendered, String> {
-    let sets: Vec<(String, String)> = (SMCMC.iter())
-        .map(|(k, v)| (k.to_string(), v.to_string()))
-        .collect();
-    let integ = registry::configure(None, Some("smcmc"), &sets).expect("smcmc");
-    let run = RunSettings {
-        seed: 5,
-        snapshot_every: std::time::Duration::ZERO,
-        checkpoint: Some(Checkpoint {
-            path: path.to_path_buf(),
-            fingerprint: 7,
-            resume: None,
-            chains: None,
-        }),
-        ..RunSettings::default()
-    };
-    integ
-        .render(scene, &run, stop, observer)
-        .map_err(|e| e.to_string())
+    try_chains_render(scene, ("smcmc", &SMCMC), path, None, stop, observer)
 }
 
 /// Sets `stop` after `after` tile steps (`progress` calls), in the
@@ -1268,11 +1233,7 @@ fn a_stopped_smcmc_render_resumed_from_its_checkpoint_ends_bit_identical() {
     let scene = repo_scene("cornell-box.xml", 12);
     let path = fresh_checkpoint_path("smcmc");
     let stop = AtomicBool::new(false);
-    let at_three = StopAfter {
-        stop: &stop,
-        after: 3,
-        seen: AtomicU32::new(0),
-    };
+    let at_three = StopAfter::new(&stop, 3);
     let first = smcmc_render(&scene, &path, &stop, &at_three).unwrap();
     assert!(first.interrupted);
     let (header, saved) = smcmc_tiles(&scene, &path);
@@ -1349,11 +1310,7 @@ fn a_damaged_or_forged_smcmc_checkpoint_is_refused_with_one_line() {
     let size = (scene.film.width, scene.film.height);
     let path = fresh_checkpoint_path("smcmc-forged");
     let stop = AtomicBool::new(false);
-    let at_two = StopAfter {
-        stop: &stop,
-        after: 2,
-        seen: AtomicU32::new(0),
-    };
+    let at_two = StopAfter::new(&stop, 2);
     smcmc_render(&scene, &path, &stop, &at_two).unwrap();
     let good = std::fs::read(&path).unwrap();
     let (header, tiles) = smcmc_tiles(&scene, &path);
@@ -1430,15 +1387,7 @@ fn a_stopped_adaptive_tempered_render_resumed_from_its_checkpoint_ends_bit_ident
         ("tempered-pssmlt", "even_odd"),
         ("tempered-mmlt", "is_permutation"),
     ] {
-        let sets = [
-            ("bootstrap", "1000"),
-            ("chains", "16"),
-            ("mutations_per_pixel", "24"),
-            ("max_depth", "5"),
-            ("levels", "4"),
-            ("exchange", exchange),
-            ("small_step", "adaptive"),
-        ];
+        let sets = tempered_sets(exchange, &[("small_step", "adaptive")]);
         check_markov_resume(&scene, (name, &sets), 4 * 256, 24 * 24 * 24);
         check_small_steps_are_saved(&scene, (name, &sets));
     }
@@ -1457,40 +1406,21 @@ fn a_stopped_adaptive_tempered_render_resumed_from_its_checkpoint_ends_bit_ident
 #[test]
 fn a_stopped_staged_tempered_render_resumed_from_its_checkpoints_ends_bit_identical() {
     let scene = repo_scene("cornell-box.xml", 24);
-    let (w, h) = (scene.film.width, scene.film.height);
-    let filter = Arc::new(mcmc_render::film::Filter::new(scene.film.filter, w, h));
-    let sets = [
-        ("bootstrap", "1000"),
-        ("chains", "16"),
-        ("mutations_per_pixel", "24"),
-        ("max_depth", "5"),
-        ("levels", "4"),
-        ("exchange", "even_odd"),
+    let staged = [
         ("regularization", "geometric"),
         ("regularization_stages", "2"),
     ];
+    let sets = tempered_sets("even_odd", &staged);
     let job = ("tempered-pssmlt", &sets[..]);
     let path = fresh_checkpoint_path("staged");
     let stage1 = std::path::PathBuf::from(format!("{}.stage1", path.display()));
     let clear = || [&path, &stage1].map(|p| std::fs::remove_file(p).is_ok());
     clear();
-    let stop = AtomicBool::new(false);
-    let observer = StopAfter {
-        stop: &stop,
-        after: 5 + 2,
-        seen: AtomicU32::new(0),
-    };
-    let first = chains_render(&scene, job, &path, None, &stop, &observer);
-    assert!(first.interrupted);
+    stopped_chains_render(&scene, job, &path, 5 + 2);
     // The stage-1 file is tied to its stage: refused as stage 0's.
-    let e = load_chains(&stage1, 7, (w, h), &filter).unwrap_err();
+    let e = load_for(&scene, &stage1, 7).unwrap_err();
     assert!(e.contains("another render") && !e.contains('\n'), "{e}");
-    let load = |p: &std::path::Path, fp| {
-        mcmc_render::markov::checkpoint::load(p, fp, (w, h), &filter)
-            .unwrap()
-            .expect("a checkpoint")
-    };
-    let stage0 = load(&path, 7);
+    let stage0 = saved_chains(&scene, &path);
     assert_eq!(stage0.mutations(), 24 * 24 * 8, "stage 0 finished");
     // Stage 1's file, read as the run reads it.
     let fresh = Checkpoint {
@@ -1505,12 +1435,7 @@ fn a_stopped_staged_tempered_render_resumed_from_its_checkpoints_ends_bit_identi
     let saved = Arc::unwrap_or_clone(stage1_checkpoint.chains.expect("stage 1's file"));
     assert_eq!(saved.mutations(), 2 * 4 * 256, "stage 1: two rounds");
     let mut restarted = saved.clone();
-    for (c, chain) in (restarted.tasks.iter_mut())
-        .flat_map(|t| &mut t.chains)
-        .enumerate()
-    {
-        chain.rng = mcmc_core::rng::rng_words(&mcmc_core::rng::stream_rng(9, c as u64));
-    }
+    streams_put_back(&mut restarted, 9);
     let go = AtomicBool::new(false);
     let resumed = chains_render(&scene, job, &path, Some(stage0.clone()), &go, &NoObserver);
     let ck = &resumed.statistics["checkpoint"];

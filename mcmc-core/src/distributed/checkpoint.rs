@@ -8,7 +8,7 @@
 
 use super::DistributedError;
 use super::comm::{Traffic, all_gather_u64, broadcast_bytes};
-use crate::checkpoint::{read_optional, write_atomically};
+use crate::checkpoint::{read_optional, write_bytes};
 use crate::rng::ChainRng;
 use mpi::topology::{Communicator, SimpleCommunicator};
 use std::path::Path;
@@ -81,7 +81,7 @@ pub(crate) fn write_on_rank_0(
     path: &Path,
     bytes: Option<Vec<u8>>,
 ) -> Result<(), DistributedError> {
-    let written = bytes.map_or(Ok(()), |b| write_atomically(path, &b));
+    let written = bytes.map_or(Ok(()), |b| write_bytes(path, &b));
     let failed = all_gather_u64(comm, traffic, written.is_err() as u64);
     match written {
         Err(e) => Err(DistributedError::Checkpoint(e)),

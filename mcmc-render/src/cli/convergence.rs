@@ -543,7 +543,7 @@ pub fn write_csv(path: &Path, records: &[Record]) -> Result<(), String> {
         }
         text.push('\n');
     }
-    crate::output::write_bytes(path, text.as_bytes())
+    mcmc_core::checkpoint::write_bytes(path, text.as_bytes())
 }
 
 /// Reads records written by [`write_csv`] (for re-plotting a study).
@@ -822,7 +822,7 @@ pub fn write_plot(
 }
 
 fn write_rgb8_png(path: &Path, w: u32, h: u32, rgb: &[u8]) -> Result<(), String> {
-    crate::output::write_atomically(path, |tmp| {
+    mcmc_core::checkpoint::write_atomically(path, |tmp| {
         let file = std::fs::File::create(tmp)
             .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
         let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w, h);

@@ -375,7 +375,7 @@ fn render_job(job: &Job<'_>) -> Result<(), String> {
     let json_path = job.out.with_extension("json");
     let text =
         serde_json::to_string_pretty(&sidecar(job, &rendered, dump)).map_err(|e| e.to_string())?;
-    crate::output::write_bytes(&json_path, (text + "\n").as_bytes())?;
+    mcmc_core::checkpoint::write_bytes(&json_path, (text + "\n").as_bytes())?;
     if !job.quiet {
         err!("{} -> {}", rendered.summary, job.out.display());
     }

@@ -47,25 +47,80 @@ const MAGIC_V3: &[u8; 8] = b"mcmcMC03";
 /// First bytes of a file of format version 2 (no checksum), refused.
 const MAGIC_V2: &[u8; 8] = b"mcmcMC02";
 
-/// One chain as saved.
+/// One chain as saved: by the Markov-chain driver (`S`: its state's
+/// words, as the family encodes them, [`ChainFamily::state_words`]; `P`:
+/// its path sample) and by `smcmc` (a tile's point and its values in the
+/// tile, [`crate::smcmc::checkpoint::TileRecord`]).
 #[derive(Clone, Debug)]
-pub struct ChainRecord {
-    /// Its current state, as the family encodes it
-    /// ([`ChainFamily::state_words`]).
-    pub state: Vec<u64>,
+pub struct ChainRecord<S = Vec<u64>, P = PathSample> {
+    /// Its current state.
+    pub state: S,
     /// `ln π` of the current state.
     pub log_density: f64,
     /// The current state's payload.
-    pub payload: PathSample,
+    pub payload: P,
     /// The chain's random stream ([`mcmc_core::rng::rng_words`]).
     pub rng: [u64; 4],
-    /// Its statistics (the component names are the kernel's).
+    /// Its statistics (the component names are the kernel's; not saved).
     pub stats: ChainStatistics,
     /// Its kernel's own state ([`mcmc_core::kernel::Kernel::state_words`]:
     /// the adaptive small step's adaptation; empty for kernels without
     /// state). In a replica set, the kernel of the level the chain is at
     /// (since session 21: the levels' kernels stay at their levels).
     pub kernel: Vec<u64>,
+}
+
+impl<S, P: Clone> ChainRecord<S, P> {
+    /// The record of a chain at `current` (its state saved as `state`)
+    /// with the stream `rng`, statistics `stats` and kernel `kernel`.
+    pub(crate) fn new<T, K: Kernel<T, P> + ?Sized>(
+        state: S,
+        current: &Sample<T, P>,
+        (rng, stats): (&ChainRng, &ChainStatistics),
+        kernel: &K,
+    ) -> Self {
+        let mut kernel_words = Vec::new();
+        kernel.state_words(&mut kernel_words);
+        ChainRecord {
+            state,
+            log_density: current.log_density,
+            payload: current.payload.clone(),
+            rng: rng_words(rng),
+            stats: stats.clone(),
+            kernel: kernel_words,
+        }
+    }
+
+    /// Puts the saved stream and statistics into `parts` (a chain built
+    /// afresh from the same inputs, whose kernel's component names they
+    /// keep). `who` names the chain in the error ("a chain's").
+    pub(crate) fn restore<T>(&self, parts: &mut ChainState<T, P>, who: &str) -> Result<(), String> {
+        if parts.stats.components.len() != self.stats.components.len() {
+            return Err(format!("{who} kernel has other components"));
+        }
+        parts.rng = rng_from_words(self.rng).ok_or_else(|| format!("{who} stream is all zero"))?;
+        let mut stats = self.stats.clone();
+        for (k, old) in stats.components.iter_mut().zip(&parts.stats.components) {
+            k.name.clone_from(&old.name);
+        }
+        parts.stats = stats;
+        Ok(())
+    }
+
+    /// Puts the saved kernel state back with `restore` (a fresh kernel's
+    /// [`Kernel::restore_words`]; a kernel without state takes no words).
+    /// `who` names the chain in the error.
+    pub(crate) fn restore_kernel(
+        &self,
+        restore: impl FnOnce(&mut &[u64]) -> bool,
+        who: &str,
+    ) -> Result<(), String> {
+        let mut words = &self.kernel[..];
+        match restore(&mut words) && words.is_empty() {
+            true => Ok(()),
+            false => Err(format!("{who} kernel state does not decode")),
+        }
+    }
 }
 
 /// One replica set as saved, besides its levels' chains.
@@ -152,7 +207,7 @@ pub fn save(path: &Path, fingerprint: u64, progress: &ChainProgress) -> Result<(
     out.extend(progress.to_bytes());
     let checksum = fnv1a(&out, FNV_OFFSET);
     out.extend_from_slice(&checksum.to_le_bytes());
-    crate::output::write_bytes(path, &out)
+    mcmc_core::checkpoint::write_bytes(path, &out)
 }
 
 /// The progress saved at `path` for the inputs `fingerprint` and an image
@@ -279,27 +334,6 @@ pub fn progress_from_bytes(
     Ok(progress)
 }
 
-/// The record of a chain: its current sample, stream, statistics and
-/// kernel state.
-fn chain_record<F: ChainFamily>(
-    family: &F,
-    current: &Sample<F::State, PathSample>,
-    rng: &ChainRng,
-    stats: &ChainStatistics,
-    kernel: Vec<u64>,
-) -> ChainRecord {
-    let mut state = Vec::new();
-    family.state_words(&current.state, &mut state);
-    ChainRecord {
-        state,
-        log_density: current.log_density,
-        payload: current.payload.clone(),
-        rng: rng_words(rng),
-        stats: stats.clone(),
-        kernel,
-    }
-}
-
 /// The record of a local task (`id`: its index among all tasks).
 pub(crate) fn record_of_task<F: ChainFamily>(
     family: &F,
@@ -310,9 +344,9 @@ pub(crate) fn record_of_task<F: ChainFamily>(
         Units::Chains(chains) => {
             let records = chains.iter().map(|slot| {
                 let c = &slot.chain;
-                let mut kernel = Vec::new();
-                c.algorithm().kernel().state_words(&mut kernel);
-                chain_record(family, c.current(), c.rng(), c.stats(), kernel)
+                let state = state_words(family, &c.current().state);
+                let kernel = c.algorithm().kernel();
+                ChainRecord::new(state, c.current(), (c.rng(), c.stats()), kernel)
             });
             (records.collect(), Vec::new())
         }
@@ -328,9 +362,9 @@ pub(crate) fn record_of_task<F: ChainFamily>(
                 // with the chain at that level: kernels stay at their
                 // levels while the states are exchanged.
                 chains.extend(progress.chains.iter().enumerate().map(|(level, c)| {
-                    let mut kernel = Vec::new();
-                    slot.set.algorithm(level).kernel().state_words(&mut kernel);
-                    chain_record(family, &c.current, &c.rng, &c.stats, kernel)
+                    let state = state_words(family, &c.current.state);
+                    let kernel = slot.set.algorithm(level).kernel();
+                    ChainRecord::new(state, &c.current, (&c.rng, &c.stats), kernel)
                 }));
                 sets.push(SetRecord {
                     sweeps: slot.sweeps,
@@ -347,6 +381,13 @@ pub(crate) fn record_of_task<F: ChainFamily>(
     }
 }
 
+/// `state` as `family` encodes it.
+fn state_words<F: ChainFamily>(family: &F, state: &F::State) -> Vec<u64> {
+    let mut words = Vec::new();
+    family.state_words(state, &mut words);
+    words
+}
+
 /// Puts `saved` back into the chain `parts` (built afresh from the same
 /// inputs, whose kernel's component names it keeps).
 fn restore_chain<F: ChainFamily>(
@@ -359,33 +400,15 @@ fn restore_chain<F: ChainFamily>(
         .state_from_words(&mut words)
         .filter(|_| words.is_empty())
         .ok_or("a chain's state does not decode")?;
-    if parts.stats.components.len() != saved.stats.components.len() {
-        return Err("a chain's kernel has other components".into());
-    }
+    saved.restore(parts, CHAIN)?;
     parts.current.state = state;
     parts.current.log_density = saved.log_density;
     parts.current.payload = saved.payload.clone();
-    parts.rng = rng_from_words(saved.rng).ok_or("a chain's stream is all zero")?;
-    let mut stats = saved.stats.clone();
-    for (k, old) in stats.components.iter_mut().zip(&parts.stats.components) {
-        k.name.clone_from(&old.name);
-    }
-    parts.stats = stats;
     Ok(())
 }
 
-/// Puts `saved`'s kernel state back with `restore` (a fresh kernel's
-/// [`Kernel::restore_words`]; a kernel without state takes no words).
-fn restore_kernel(
-    restore: impl FnOnce(&mut &[u64]) -> bool,
-    saved: &ChainRecord,
-) -> Result<(), String> {
-    let mut words = &saved.kernel[..];
-    match restore(&mut words) && words.is_empty() {
-        true => Ok(()),
-        false => Err("a chain's kernel state does not decode".into()),
-    }
-}
+/// How a restore's errors name a chain of the Markov-chain driver.
+const CHAIN: &str = "a chain's";
 
 /// Puts `record` back into `task` (built afresh by the driver from the
 /// same inputs): its sums, and every chain's state, stream and
@@ -416,10 +439,8 @@ pub(crate) fn restore_task<F: ChainFamily>(
             }
             for (slot, saved) in chains.iter_mut().zip(&record.chains) {
                 restore_chain(family, slot.chain.parts_mut(), saved)?;
-                restore_kernel(
-                    |w| slot.chain.algorithm_mut().kernel_mut().restore_words(w),
-                    saved,
-                )?;
+                let kernel = slot.chain.algorithm_mut().kernel_mut();
+                saved.restore_kernel(|w| kernel.restore_words(w), CHAIN)?;
                 slot.remaining = slot.remaining.map(|r| r.saturating_sub(saved.stats.steps));
             }
         }
@@ -437,10 +458,8 @@ pub(crate) fn restore_task<F: ChainFamily>(
                     (slot.set.progress()).ok_or("the run's exchange move cannot be restored")?;
                 for (level, (parts, saved)) in progress.chains.iter_mut().zip(saved).enumerate() {
                     restore_chain(family, parts, saved)?;
-                    restore_kernel(
-                        |w| slot.set.algorithm_mut(level).kernel_mut().restore_words(w),
-                        saved,
-                    )?;
+                    let kernel = slot.set.algorithm_mut(level).kernel_mut();
+                    saved.restore_kernel(|w| kernel.restore_words(w), CHAIN)?;
                 }
                 progress.words.clone_from(&set.words);
                 slot.set.restore(progress).map_err(|e| e.to_string())?;

@@ -21,7 +21,6 @@ use crate::checkpoint::{FNV_OFFSET, MAX_COUNT, fnv1a};
 use crate::color::Rgb;
 use crate::markov::checkpoint::{checked_body, read_bytes, stats_from_words, stats_words};
 use mcmc_core::space::TorusPoint;
-use mcmc_core::stats::ChainStatistics;
 use std::path::Path;
 
 /// First bytes of an `smcmc` checkpoint (format version 1).
@@ -83,23 +82,8 @@ impl Header {
     }
 }
 
-/// A tile's chain as saved.
-#[derive(Clone, Debug)]
-pub struct ChainRecord {
-    /// The current state.
-    pub state: TorusPoint,
-    /// `ln π̃` of the current state.
-    pub log_density: f64,
-    /// Its values in the tile.
-    pub payload: TileValues,
-    /// The chain's stream ([`mcmc_core::rng::rng_words`]).
-    pub rng: [u64; 4],
-    /// Its statistics (component names empty).
-    pub stats: ChainStatistics,
-    /// Its kernel's own words (the adaptive small step's; empty for the
-    /// others).
-    pub kernel: Vec<u64>,
-}
+/// A tile's chain as saved (its statistics' component names empty).
+pub type ChainRecord = crate::markov::checkpoint::ChainRecord<TorusPoint, TileValues>;
 
 /// One tile as saved.
 #[derive(Clone, Debug)]
@@ -288,7 +272,7 @@ pub fn save(path: &Path, fingerprint: u64, header: &Header, tiles: &[u64]) -> Re
     }
     let checksum = fnv1a(&out, FNV_OFFSET);
     out.extend_from_slice(&checksum.to_le_bytes());
-    crate::output::write_bytes(path, &out)
+    mcmc_core::checkpoint::write_bytes(path, &out)
 }
 
 /// The header and tile words saved at `path` for the inputs

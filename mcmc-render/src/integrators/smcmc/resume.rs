@@ -14,7 +14,6 @@ use crate::film::Filter;
 use crate::smcmc::TileShift;
 use crate::smcmc::checkpoint::{self as file, ChainRecord, Header, TileRecord};
 use mcmc_core::kernel::Kernel;
-use mcmc_core::rng::{rng_from_words, rng_words};
 use mcmc_core::sample::Sample;
 use mcmc_core::target::Target;
 use std::ops::Range;
@@ -54,16 +53,8 @@ fn record_of(tile: &Tile) -> TileRecord {
         steps: tile.steps,
         sums: tile.sums.clone(),
         chain: tile.chain.as_ref().map(|c| {
-            let mut kernel = Vec::new();
-            c.algorithm().kernel().state_words(&mut kernel);
-            ChainRecord {
-                state: c.state().clone(),
-                log_density: c.current().log_density,
-                payload: c.current().payload,
-                rng: rng_words(c.rng()),
-                stats: c.stats().clone(),
-                kernel,
-            }
+            let kernel = c.algorithm().kernel();
+            ChainRecord::new(c.state().clone(), c.current(), (c.rng(), c.stats()), kernel)
         }),
     }
 }
@@ -278,31 +269,15 @@ impl<S: TileShift> Sampler<'_, S> {
             ));
         }
         let current = Sample {
-            state: c.state,
+            state: c.state.clone(),
             log_density: c.log_density,
             payload: c.payload,
         };
         let mut chain = self.start_chain(&tile, current);
-        let parts = chain.parts_mut();
-        if parts.stats.components.len() != c.stats.components.len() {
-            return Err(format!("tile {s}'s chain has other kernel components"));
-        }
-        parts.rng =
-            rng_from_words(c.rng).ok_or_else(|| format!("tile {s}'s stream is all zero"))?;
-        let mut stats = c.stats;
-        for (k, old) in stats.components.iter_mut().zip(&parts.stats.components) {
-            k.name.clone_from(&old.name);
-        }
-        parts.stats = stats;
-        let mut kernel = &c.kernel[..];
-        if !(chain
-            .algorithm_mut()
-            .kernel_mut()
-            .restore_words(&mut kernel)
-            && kernel.is_empty())
-        {
-            return Err(format!("tile {s}'s kernel state does not decode"));
-        }
+        let who = format!("tile {s}'s");
+        c.restore(chain.parts_mut(), &who)?;
+        let kernel = chain.algorithm_mut().kernel_mut();
+        c.restore_kernel(|w| kernel.restore_words(w), &who)?;
         tile.chain = Some(chain);
         Ok(tile)
     }
