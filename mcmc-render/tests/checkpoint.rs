@@ -1102,6 +1102,102 @@ fn a_stopped_fused_render_resumed_from_its_checkpoint_ends_bit_identical() {
     );
 }
 
+/// `fused` with `conversion=lazy` (session 25): a chain whose state was
+/// reached by path-space moves and not yet mapped back is saved as its
+/// path (its point is stale), and its kernel saves the conversion a
+/// primary-sample move last made of such a state (its path, its outcome
+/// and the point it gave) and the deferred-conversion counts. Stopped
+/// after two of four rounds and resumed: image, statistics and the
+/// `fused` block's counts as the uninterrupted run's. The checkpoint must
+/// hold unconverted states and kept conversions (else it tests nothing).
+/// Controls: every chain's stream put back to its start
+/// (`check_markov_resume`), and every kernel's kept conversion dropped
+/// (what resuming without those words would do: the next primary-sample
+/// move converts again with new fresh uniforms) — each must differ; an
+/// unconverted state whose `ln π` is not its path's is refused with one
+/// line.
+#[test]
+fn a_stopped_lazy_fused_render_resumed_from_its_checkpoint_ends_bit_identical() {
+    let scene = repo_scene("cornell-box.xml", 16);
+    let mut sets = FUSED.to_vec();
+    sets.push(("conversion", "lazy"));
+    let (resumed, whole) = check_markov_resume(&scene, ("fused", &sets), 4 * 256, 16 * 16 * 16);
+    for key in [
+        "proposals",
+        "inversions",
+        "deferred_conversions",
+        "deferred_conversion_failures",
+        "acceptance_path_space",
+        "round_trip_failures",
+    ] {
+        assert_eq!(
+            resumed.statistics["fused"][key], whole.statistics["fused"][key],
+            "fused lazy: {key}"
+        );
+    }
+    assert!(whole.statistics["fused"]["deferred_conversions"].as_u64() > Some(0));
+    let path = fresh_checkpoint_path("fused-lazy-kernels");
+    stopped_chains_render(&scene, ("fused", &sets), &path, 2);
+    let mut dropped = saved_chains(&scene, &path);
+    // A forged unconverted state (its `ln π` not its path's) is refused.
+    let mut forged = dropped.clone();
+    let state = (forged.tasks.iter_mut().flat_map(|t| &mut t.chains))
+        .map(|c| &mut c.state)
+        .find(|s| s[0] == u64::MAX - 1)
+        .expect("an unconverted state");
+    *state.last_mut().unwrap() ^= 1 << 40;
+    let go = AtomicBool::new(false);
+    let e = try_chains_render(
+        &scene,
+        ("fused", &sets),
+        &path,
+        Some(forged),
+        &go,
+        &NoObserver,
+    )
+    .map(|_| ())
+    .unwrap_err();
+    assert!(
+        e.contains("a chain's state does not decode") && !e.contains('\n'),
+        "{e}"
+    );
+    let (mut unconverted, mut kept) = (0, 0);
+    for chain in dropped.tasks.iter_mut().flat_map(|t| &mut t.chains) {
+        unconverted += u32::from(chain.state[0] == u64::MAX - 1);
+        // p_pss, p_tc, round trip, scratch, 11 counts, no small-step
+        // words, then lazy conversion's: 2 counts and the kept
+        // conversion's outcome (0: none), its path and point.
+        assert!(chain.kernel.len() >= 18);
+        if chain.kernel[17] != 0 {
+            kept += 1;
+            chain.kernel.truncate(18);
+            chain.kernel[17] = 0;
+        }
+    }
+    eprintln!(
+        "fused lazy: {unconverted} unconverted states and {kept} kept conversions of {} chains saved; {} deferred conversions in the run",
+        dropped.tasks.iter().map(|t| t.chains.len()).sum::<usize>(),
+        whole.statistics["fused"]["deferred_conversions"]
+    );
+    assert!(
+        unconverted > 0 && kept > 0,
+        "{unconverted} unconverted states, {kept} kept conversions"
+    );
+    let control = chains_render(
+        &scene,
+        ("fused", &sets),
+        &path,
+        Some(dropped),
+        &go,
+        &NoObserver,
+    );
+    std::fs::remove_file(&path).unwrap();
+    assert!(
+        bits(&control.image) != bits(&whole.image),
+        "fused lazy: the kept conversions' control agreed"
+    );
+}
+
 /// A `fused` checkpoint whose states or kernels are not the run's is
 /// refused with one line before a chain steps: a state whose stored `ln π`
 /// its re-trace does not reproduce, one traced for a depth the family

@@ -64,8 +64,8 @@
 //! cover everything. What remains is `f32` rounding between `y` and its
 //! re-trace.
 
-use super::inverse_path::{RoundTripFailure, log_luminance, round_trip, trace};
-use super::technique::{log_target, log_technique_density, splat};
+use super::inverse_path::{RoundTripFailure, round_trip, trace};
+use super::technique::{log_target, log_technique_density};
 use super::{Conversion, FusedMutation, FusedState};
 use crate::integrators::path_vertex::VertexKind;
 use crate::path_space::Path;
@@ -145,7 +145,7 @@ struct LocalCounts {
     pss_jump: u64,
     path_proposals: u64,
     path_jump: u64,
-    /// Not in [`LocalCounts::words`]: lazy conversion is not checkpointed.
+    /// Lazy conversion only (in its kernel's words, not in [`LocalCounts::words`]).
     deferred_conversions: u64,
     deferred_conversion_failures: u64,
 }
@@ -335,32 +335,6 @@ fn image_jump(scene: &Scene, a: &PathSample, b: &PathSample) -> f64 {
         }
         _ => 0.0,
     }
-}
-
-/// Lazy conversion: writes the evaluated path `y` of technique `s` of
-/// `depth` into `proposal` as an unconverted state (its point stale, its splat
-/// and `ln π` MMLT's, computed on the path as a trace would give them
-/// up to `f32` rounding).
-fn write_unconverted<'s>(
-    depth: &MmltDepth,
-    y: &Path<'s>,
-    s: usize,
-    proposal: &mut Sample<FusedState<'s>, PathSample>,
-) {
-    let out = &mut proposal.state;
-    out.path.clone_from(y);
-    out.depth = Some(depth.depth);
-    out.technique = Some((s, depth.depth + 1 - s));
-    out.point_stale = true;
-    out.sample.splats.clear();
-    out.sample.depth = depth.depth as u32;
-    out.log_density = f64::NEG_INFINITY;
-    if let Some(splat) = splat(depth, y, s) {
-        out.log_density = log_luminance(splat.l);
-        out.sample.splats.push(splat);
-    }
-    proposal.log_density = out.log_density;
-    proposal.payload.clone_from(&out.sample);
 }
 
 /// Whether two paths hold the same vertices (positions, emitters, kinds;
@@ -691,7 +665,9 @@ impl<'s> FusedKernel<'s> {
         if self.lazy {
             // Lazy conversion: the accepted path is the proposal, mapped
             // back only before a primary-sample move needs its point.
-            write_unconverted(&depth, y, s, proposal);
+            proposal.state.set_unconverted(&depth, y, s);
+            proposal.log_density = proposal.state.log_density;
+            proposal.payload.clone_from(&proposal.state.sample);
             self.prop_stage1 = Some((s, log_p_y, log_pi_y));
             return Proposal {
                 log_q_ratio: log_pi_x - log_pi_y,
@@ -811,6 +787,62 @@ impl<'s> FusedKernel<'s> {
         Ok(self.lifted.take())
     }
 
+    /// Lazy conversion's part of the kernel's words (after the mixtures'):
+    /// its two counts, then the conversion a primary-sample move last
+    /// made of an unconverted state (drawn once per state and reused
+    /// while the state stays): 0 none, 1 failed, 2 succeeded; for 1 and 2
+    /// the path it was made from ([`Path::to_words`]), for 2 the point it
+    /// gave ([`TorusPoint::to_words`]), which the next primary-sample
+    /// move from that state starts from. A failed conversion's point is
+    /// never read (the next round trip writes all of it).
+    fn lazy_words(&self, out: &mut Vec<u64>) {
+        out.extend([
+            self.local.deferred_conversions,
+            self.local.deferred_conversion_failures,
+        ]);
+        match (&self.lifted_from, &self.lifted) {
+            (Some((path, ok)), Some(lifted)) => {
+                out.push(if *ok { 2 } else { 1 });
+                path.to_words(out);
+                if *ok {
+                    lifted.point.to_words(out);
+                }
+            }
+            _ => out.push(0),
+        }
+    }
+
+    /// Reads what [`FusedKernel::lazy_words`] wrote; `false` when the
+    /// words are not that (counts beyond a run's, a path that does not
+    /// decode in the scene).
+    fn restore_lazy_words(&mut self, input: &mut &[u64]) -> bool {
+        let Some((&[conversions, failures, outcome], mut words)) = input.split_first_chunk::<3>()
+        else {
+            return false;
+        };
+        if conversions > crate::checkpoint::MAX_COUNT || failures > conversions || outcome > 2 {
+            return false;
+        }
+        self.local.deferred_conversions = conversions;
+        self.local.deferred_conversion_failures = failures;
+        if outcome > 0 {
+            let Some(path) = Path::from_words(self.scene, &mut words) else {
+                return false;
+            };
+            let point = match outcome {
+                2 => match TorusPoint::from_words(&mut words) {
+                    Some(point) => point,
+                    None => return false,
+                },
+                _ => TorusPoint::fresh(mcmc_core::rng::stream_rng(0, 0)),
+            };
+            self.lifted = Some(FusedState::untraced(self.scene, point));
+            self.lifted_from = Some((path, outcome == 2));
+        }
+        *input = words;
+        true
+    }
+
     /// Component index of [`CONVERSION_FAILURE`].
     fn conversion_failure(&self) -> usize {
         self.failure(PATH_FAILURES.len())
@@ -919,6 +951,9 @@ impl<'s> Kernel<FusedState<'s>, PathSample> for FusedKernel<'s> {
         out.extend(self.local.words());
         self.pss.state_words(out);
         self.path.state_words(out);
+        if self.lazy {
+            self.lazy_words(out);
+        }
     }
 
     fn restore_words(&mut self, input: &mut &[u64]) -> bool {
@@ -954,7 +989,9 @@ impl<'s> Kernel<FusedState<'s>, PathSample> for FusedKernel<'s> {
         }
         self.local = LocalCounts::from_words(counts);
         *input = rest;
-        self.pss.restore_words(input) && self.path.restore_words(input)
+        self.pss.restore_words(input)
+            && self.path.restore_words(input)
+            && (!self.lazy || self.restore_lazy_words(input))
     }
 
     fn component_names(&self) -> Vec<String> {

@@ -80,6 +80,24 @@ impl<'s> FusedState<'s> {
         }
     }
 
+    /// Makes this state the evaluated path `y` of technique `s` of
+    /// `depth`, not mapped back (lazy conversion): its point stale, its
+    /// splat and `ln π` MMLT's computed on the path
+    /// ([`technique::splat`], a trace's up to `f32` rounding).
+    pub fn set_unconverted(&mut self, depth: &MmltDepth, y: &Path<'s>, s: usize) {
+        self.path.clone_from(y);
+        self.depth = Some(depth.depth);
+        self.technique = Some((s, depth.depth + 1 - s));
+        self.point_stale = true;
+        self.sample.splats.clear();
+        self.sample.depth = depth.depth as u32;
+        self.log_density = f64::NEG_INFINITY;
+        if let Some(splat) = technique::splat(depth, y, s) {
+            self.log_density = inverse_path::log_luminance(splat.l);
+            self.sample.splats.push(splat);
+        }
+    }
+
     /// The state at `point` traced with `depth`'s sampler, its path
     /// evaluated (densities and contribution).
     pub fn traced(scene: &'s Scene, depth: &MmltDepth, point: TorusPoint) -> Self {
@@ -295,18 +313,33 @@ impl<'s> ChainFamily for FusedFamily<'s> {
         // A stale point (lazy conversion) is not the state's.
         (!state.point_stale).then(|| state.point.materialize())
     }
-    fn checkpointable(&self, mutation: &FusedMutation) -> bool {
-        // A state is its point (the cached path is re-traced from it) and
-        // a kernel's own state (the current path's round-trip outcome, its
-        // scratch, its counts, the adaptive small step) is in its words.
-        // Under lazy conversion a state's point can be stale (its path is
-        // the state): not saved.
-        mutation.conversion == Conversion::Eager
+    fn checkpointable(&self, _mutation: &FusedMutation) -> bool {
+        // A state is its point (the cached path is re-traced from it), or
+        // under lazy conversion, while its point is stale, its path; a
+        // kernel's own state (the current path's round-trip outcome, its
+        // scratch, its counts, the adaptive small step, a lazy state's
+        // conversion) is in its words.
+        true
     }
-    /// The depth the cache was traced for ([`UNTRACED`] if none), the
-    /// point ([`TorusPoint::to_words`]), and for a traced state its
-    /// `ln π` (which the re-trace on resume must reproduce).
+    /// A converted state: the depth the cache was traced for
+    /// ([`UNTRACED`] if none), the point ([`TorusPoint::to_words`]), and
+    /// for a traced state its `ln π` (which the re-trace on resume must
+    /// reproduce). An unconverted one (lazy conversion, its point stale):
+    /// [`UNCONVERTED`], the depth, the technique's `s`, the path
+    /// ([`Path::to_words`], every field bit for bit) and its `ln π`; the
+    /// stale point is not saved (nothing reads it: a primary-sample move
+    /// converts the path first).
     fn state_words(&self, state: &FusedState<'s>, out: &mut Vec<u64>) {
+        if state.point_stale {
+            let depth = state.depth.expect("an unconverted state is evaluated");
+            let (s, _) = state
+                .technique
+                .expect("an unconverted state has a technique");
+            out.extend([UNCONVERTED, depth as u64, s as u64]);
+            state.path.to_words(out);
+            out.push(state.log_density.to_bits());
+            return;
+        }
         out.push(state.depth.map_or(UNTRACED, |d| d as u64));
         state.point.to_words(out);
         if state.depth.is_some() {
@@ -318,10 +351,16 @@ impl<'s> ChainFamily for FusedFamily<'s> {
     /// sampler (a trace is a function of the point), refused unless the
     /// depth is one of the family's, the re-trace reads no coordinate
     /// the point lacks (or had not brought up to date) and reproduces
-    /// `ln π` bit for bit — so a forged or foreign state is refused
-    /// before a mutation reads it.
+    /// `ln π` bit for bit; an unconverted one evaluated from its path,
+    /// refused unless the path decodes ([`Path::from_words`]: the scene's,
+    /// its own evaluation reproducing it), has the depth's length, and
+    /// its splat reproduces `ln π` bit for bit — so a forged or foreign
+    /// state is refused before a mutation reads it.
     fn state_from_words(&self, input: &mut &[u64]) -> Option<FusedState<'s>> {
         let (&depth, rest) = input.split_first()?;
+        if depth == UNCONVERTED {
+            return self.unconverted_from_words(input);
+        }
         let mut words = rest;
         let point = TorusPoint::from_words(&mut words)?;
         if depth == UNTRACED {
@@ -329,10 +368,7 @@ impl<'s> ChainFamily for FusedFamily<'s> {
             return Some(FusedState::untraced(self.scene, point));
         }
         let (&log_density, rest) = words.split_first()?;
-        let target = self
-            .targets
-            .iter()
-            .find(|t| t.depth.depth as u64 == depth)?;
+        let target = self.target_of_depth(depth)?;
         let mut before = Vec::new();
         point.to_words(&mut before);
         let mut state = FusedState::untraced(self.scene, point);
@@ -347,5 +383,40 @@ impl<'s> ChainFamily for FusedFamily<'s> {
     }
 }
 
+impl<'s> FusedFamily<'s> {
+    /// The target of path depth `depth`, if the family has it.
+    fn target_of_depth(&self, depth: u64) -> Option<&FusedTarget<'s>> {
+        self.targets.iter().find(|t| t.depth.depth as u64 == depth)
+    }
+
+    /// An unconverted state as [`ChainFamily::state_words`] wrote it
+    /// (from its [`UNCONVERTED`] word on).
+    fn unconverted_from_words(&self, input: &mut &[u64]) -> Option<FusedState<'s>> {
+        let [_, depth, s] = *input.first_chunk::<3>()?;
+        let mut words = &input[3..];
+        let target = self.target_of_depth(depth)?;
+        let depth = &target.depth;
+        let s = usize::try_from(s).ok().filter(|&s| s <= depth.depth)?;
+        let path = Path::from_words(self.scene, &mut words)?;
+        let (&log_density, rest) = words.split_first()?;
+        if path.segments() != depth.depth {
+            return None;
+        }
+        // The point is never read while the state is unconverted.
+        let stale = TorusPoint::fresh(mcmc_core::rng::stream_rng(0, 0));
+        let mut state = FusedState::untraced(self.scene, stale);
+        state.set_unconverted(depth, &path, s);
+        if state.log_density.to_bits() != log_density {
+            return None;
+        }
+        *input = rest;
+        Some(state)
+    }
+}
+
 /// [`FusedFamily`]'s first state word for a state whose path is not traced.
 const UNTRACED: u64 = u64::MAX;
+
+/// [`FusedFamily`]'s first state word for an unconverted state (lazy
+/// conversion): its path follows, not its point.
+const UNCONVERTED: u64 = u64::MAX - 1;

@@ -313,11 +313,6 @@ impl IntegratorSettings for Fused {
         observer: &dyn Observer,
     ) -> Result<Rendered, RenderError> {
         IntegratorSettings::validate(self).map_err(RenderError::Invalid)?;
-        if run.checkpoint.is_some() && self.conversion == Conversion::Lazy {
-            return Err(RenderError::Invalid(
-                "conversion=lazy cannot be checkpointed (a state reached by path-space moves has no primary sample yet): use conversion=eager".into(),
-            ));
-        }
         let mutation = self.fused_mutation().map_err(RenderError::Invalid)?;
         let (family, result, adaptation) = self.run_chains(scene, mutation, run, stop, observer)?;
         let mut out =
