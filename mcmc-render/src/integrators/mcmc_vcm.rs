@@ -19,7 +19,8 @@
 //!    contribution chain's, and the iteration's light side carries the
 //!    pool's weight (below).
 //! 3. **Chains.** `units` independent pairs, each running its share of
-//!    the `N` light subpaths of the iteration, alternating the two chains
+//!    the iteration's `light_subpaths · N` light subpaths (default one
+//!    per pixel, as the thesis runs, §6.4), alternating the two chains
 //!    (Fig. 6.10). Each step: a camera subpath chosen uniformly for the
 //!    connections; one Metropolis–Hastings step of `mcmc-core`
 //!    ([`MetropolisHastings`] with Hachisuka & Jensen's adaptive small step
@@ -1347,6 +1348,8 @@ pub struct McmcVcm {
     pub candidates: usize,
     /// Chain pairs.
     pub units: usize,
+    /// Light subpaths (chain steps over all pairs) per iteration per pixel.
+    pub light_subpaths: f64,
     /// Over which light subpaths `b_vis`, `b_con` are averaged.
     pub normalisation: NormalisationScope,
     /// Scale the light-subpath techniques' MIS densities by the chains'
@@ -1994,11 +1997,23 @@ impl McmcVcm {
         self.con_estimate == ConEstimate::Transfer && light_scale != 1.0
     }
 
+    /// Light subpaths per iteration over all units for `pixels` camera
+    /// subpaths ([`light_paths`]).
+    fn light_paths(&self, pixels: usize) -> usize {
+        light_paths(self.light_subpaths, pixels)
+    }
+
+    /// Light subpaths (steps) of unit `p` per iteration: its share of
+    /// [`Self::light_paths`].
+    fn unit_steps(&self, pixels: usize, p: usize) -> usize {
+        share(self.light_paths(pixels), self.units, p)
+    }
+
     /// `(n_con, n_vis)`: steps of each chain per iteration over all units.
     fn steps_per_kind(&self, pixels: usize) -> (u64, u64) {
         let (mut n_con, mut n_vis) = (0, 0);
         for p in 0..self.units {
-            let steps = (pixels * (p + 1) / self.units - pixels * p / self.units) as u64;
+            let steps = self.unit_steps(pixels, p) as u64;
             match self.chains {
                 LightChains::Both => {
                     n_con += steps.div_ceil(2);
@@ -2167,9 +2182,11 @@ impl McmcVcm {
         let kinds = self.kinds();
         let weighted = self.weighs_restarts();
         let mut rng = stream_rng(seed, STREAM_STEPS ^ (iteration << 24) ^ p as u64);
-        let steps = pixels * (p + 1) / self.units - pixels * p / self.units;
+        let steps = self.unit_steps(pixels, p);
         if self.chains == LightChains::Independent {
-            // Independent light subpaths, weight one each: VCM's estimator.
+            // Independent light subpaths, weight N/L each for L light
+            // subpaths of N pixels (one with L = N): VCM's estimator.
+            let weight = (pixels as f64 / self.light_paths(pixels) as f64) as f32;
             let mut c = LightContribution::default();
             for s in 0..steps {
                 if s % STOP_CHECK == 0 && abort() {
@@ -2184,7 +2201,13 @@ impl McmcVcm {
                     continue;
                 }
                 unit.norm.add(c.luminance, c.luminance);
-                deposit(&mut unit.camera, &mut unit.splats, &mut unit.tally, &c, 1.0);
+                deposit(
+                    &mut unit.camera,
+                    &mut unit.splats,
+                    &mut unit.tally,
+                    &c,
+                    weight,
+                );
             }
             return;
         }
@@ -2544,6 +2567,32 @@ fn check_acceptance(v: &f64) -> Result<(), String> {
     }
 }
 
+/// Light subpaths per iteration for `pixels` camera subpaths and
+/// `light_subpaths` per pixel: the product, rounded, at least one.
+fn light_paths(light_subpaths: f64, pixels: usize) -> usize {
+    ((light_subpaths * pixels as f64).round() as usize).max(1)
+}
+
+/// Unit `p`'s share when `n` items are dealt in order over `units` units
+/// (the shares differ by at most one and sum to `n`).
+fn share(n: usize, units: usize, p: usize) -> usize {
+    n * (p + 1) / units - n * p / units
+}
+
+/// [`McmcVcmSettings::light_subpaths`]: finite, positive and at most
+/// [`MAX_LIGHT_SUBPATHS`] (a bound that keeps the step count of an
+/// iteration far from overflowing).
+fn check_light_subpaths(v: &f64) -> Result<(), String> {
+    if *v > 0.0 && *v <= MAX_LIGHT_SUBPATHS {
+        Ok(())
+    } else {
+        Err(format!("must lie in (0, {MAX_LIGHT_SUBPATHS}]"))
+    }
+}
+
+/// The largest [`McmcVcmSettings::light_subpaths`].
+const MAX_LIGHT_SUBPATHS: f64 = 1024.0;
+
 crate::settings! {
     /// MCMC over VCM's light subpaths, as the registry fills it.
     pub struct McmcVcmSettings {
@@ -2557,6 +2606,8 @@ crate::settings! {
         pub candidates: usize = 10_000, check crate::settings::check::count;
         /// Chain pairs, each running its share of an iteration's light subpaths.
         pub units: usize = 8, check crate::settings::check::count;
+        /// Light subpaths per iteration per pixel: the chains' steps of an iteration over all pairs are this times the pixels (1: as many as camera subpaths, VCM's N).
+        pub light_subpaths: f64 = 1.0, check check_light_subpaths;
         /// Normalisations b_vis, b_con: running means over the render (render, Eq. 6.4) or the iteration's restart candidates (iteration).
         pub normalisation: NormalisationScope = NormalisationScope::Render;
         /// Scale the light-subpath techniques' densities in the MIS weights by the chains' mixture density (the visibility chain's exact p/b_vis).
@@ -2664,6 +2715,7 @@ impl McmcVcmSettings {
             target_acceptance: self.target_acceptance,
             candidates: self.candidates,
             units: self.units,
+            light_subpaths: self.light_subpaths,
             normalisation: self.normalisation,
             vis_pdf: self.vis_pdf,
             con_estimate: self.con_estimate,
