@@ -345,7 +345,10 @@ fn smcmc_is_bit_identical_across_thread_counts() {
             .collect::<Vec<u32>>()
     };
     for sets in [
+        // The default small step (adaptive since session 25: each tile's
+        // kernel carries its own adaptation state) and Kelemen's fixed one.
         &[("mutations_per_pixel", "6")][..],
+        &[("mutations_per_pixel", "6"), ("small_step", "kelemen")][..],
         // The global start-up's chains and the tiles they start.
         &[("mutations_per_pixel", "3"), ("init", "global")][..],
         // The BDPT shift (one MIS weight per connection since session 24)
