@@ -237,9 +237,30 @@ pub fn save(path: &Path, fingerprint: u64, progress: &Progress) -> Result<(), St
             out.extend_from_slice(&x.to_bits().to_le_bytes());
         }
     }
+    write_sealed(path, out)
+}
+
+/// Appends the FNV-1a checksum of `out` (every checkpoint format of the
+/// workspace ends with one) and writes it to `path` atomically.
+pub(crate) fn write_sealed(path: &Path, mut out: Vec<u8>) -> Result<(), String> {
     let checksum = fnv1a(&out, FNV_OFFSET);
     out.extend_from_slice(&checksum.to_le_bytes());
     mcmc_core::checkpoint::write_bytes(path, &out)
+}
+
+/// `body` (a suffix of the checkpoint `bytes`) without the checksum that
+/// ends it, once the checksum (FNV-1a of all of `bytes` before its last
+/// 8) is checked; the error says why in words a message completes:
+/// `truncated`, or `damaged` when a flipped bit, a cut or a file written
+/// over changed the bytes.
+pub(crate) fn strip_checksum<'a>(bytes: &[u8], body: &'a [u8]) -> Result<&'a [u8], &'static str> {
+    let Some((body, checksum)) = body.split_last_chunk::<8>() else {
+        return Err("truncated");
+    };
+    if fnv1a(&bytes[..bytes.len() - 8], FNV_OFFSET) != u64::from_le_bytes(*checksum) {
+        return Err("damaged (its checksum does not match its contents)");
+    }
+    Ok(body)
 }
 
 /// Bytes of the accumulators of a `size` image: 4 + 3 `f32` per pixel.
@@ -329,12 +350,7 @@ pub fn progress_from_bytes(
         (None, Some(body)) => (body, 9, MAX_EXTRA_WORDS_V2),
         (None, None) => return Err(bad("not a checkpoint of mcmc-render's per-pixel driver")),
     };
-    let Some((body, checksum)) = body.split_last_chunk::<8>() else {
-        return Err(bad("truncated"));
-    };
-    if fnv1a(&bytes[..bytes.len() - 8], FNV_OFFSET) != u64::from_le_bytes(*checksum) {
-        return Err(bad("damaged (its checksum does not match its contents)"));
-    }
+    let body = strip_checksum(bytes, body).map_err(bad)?;
     let word = |i: usize| {
         body.get(8 * i..8 * i + 8)
             .map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")))

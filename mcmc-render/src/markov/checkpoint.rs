@@ -21,7 +21,7 @@
 use super::ChainFamily;
 use super::distribute::TaskSums;
 use super::work::{Task, Units};
-use crate::checkpoint::{FNV_OFFSET, fnv1a};
+use crate::checkpoint::{strip_checksum, write_sealed};
 use crate::cluster::Parcel;
 use crate::color::Rgb;
 use crate::film::Filter;
@@ -205,9 +205,7 @@ pub fn save(path: &Path, fingerprint: u64, progress: &ChainProgress) -> Result<(
     let mut out = MAGIC.to_vec();
     out.extend_from_slice(&fingerprint.to_le_bytes());
     out.extend(progress.to_bytes());
-    let checksum = fnv1a(&out, FNV_OFFSET);
-    out.extend_from_slice(&checksum.to_le_bytes());
-    mcmc_core::checkpoint::write_bytes(path, &out)
+    write_sealed(path, out)
 }
 
 /// The progress saved at `path` for the inputs `fingerprint` and an image
@@ -261,12 +259,7 @@ pub(crate) fn checked_body<'a>(
     fingerprint: u64,
 ) -> Result<&'a [u8], String> {
     let bad = |why: &str| format!("checkpoint {}: {why}", path.display());
-    let Some((body, checksum)) = body.split_last_chunk::<8>() else {
-        return Err(bad("truncated"));
-    };
-    if fnv1a(&bytes[..bytes.len() - 8], FNV_OFFSET) != u64::from_le_bytes(*checksum) {
-        return Err(bad("damaged (its checksum does not match its contents)"));
-    }
+    let body = strip_checksum(bytes, body).map_err(bad)?;
     let Some((fp, body)) = body.split_first_chunk::<8>() else {
         return Err(bad("truncated"));
     };

@@ -17,7 +17,7 @@
 //! statistics only. Only rank 0 reads and writes the file.
 
 use super::{MAX_TILE_PIXELS, TileSums, TileValues};
-use crate::checkpoint::{FNV_OFFSET, MAX_COUNT, fnv1a};
+use crate::checkpoint::{MAX_COUNT, write_sealed};
 use crate::color::Rgb;
 use crate::markov::checkpoint::{checked_body, read_bytes, stats_from_words, stats_words};
 use mcmc_core::space::TorusPoint;
@@ -270,9 +270,7 @@ pub fn save(path: &Path, fingerprint: u64, header: &Header, tiles: &[u64]) -> Re
     {
         out.extend_from_slice(&w.to_le_bytes());
     }
-    let checksum = fnv1a(&out, FNV_OFFSET);
-    out.extend_from_slice(&checksum.to_le_bytes());
-    mcmc_core::checkpoint::write_bytes(path, &out)
+    write_sealed(path, out)
 }
 
 /// The header and tile words saved at `path` for the inputs
