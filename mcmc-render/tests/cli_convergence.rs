@@ -173,6 +173,19 @@ fn convergence_writes_final_images_and_error_maps() {
                 .unwrap();
         let rel = json["rel_mse"].as_f64().unwrap();
         assert!(json["samples"].as_u64().unwrap() > 0, "{json}");
+        // What ran: the variant's own setting (`plarge`, an alias) and
+        // the study's flags.
+        let (registered, plarge) = match stem {
+            "pt" => ("pt", None),
+            _ => ("mmlt", Some(0.5)),
+        };
+        assert_eq!(json["registered"], registered, "{json}");
+        assert_eq!(json["seed"], 0, "{json}");
+        if let Some(p) = plarge {
+            assert_eq!(json["settings"]["large_step_probability"], p, "{json}");
+            assert_eq!(json["settings"]["bootstrap"], 1000, "{json}");
+            assert_eq!(json["settings"]["chains"], 16, "{json}");
+        }
         let out = run_ok(
             &["compare", "ref.exr", &format!("final/{stem}.exr"), "--json"],
             &dir,

@@ -425,7 +425,16 @@ pub fn run(
             .map_err(|e| e.to_string())?;
         rec.offer(r.samples, &|| r.image.clone(), true);
         if let Some(dir) = images {
-            write_final(dir, name, scene, reference, noise.as_ref(), &r)?;
+            write_final(
+                dir,
+                name,
+                &**integrator,
+                seed,
+                scene,
+                reference,
+                noise.as_ref(),
+                &r,
+            )?;
         }
         let (_, records) = rec.state.into_inner().unwrap_or_else(|p| p.into_inner());
         all.extend(records);
@@ -438,16 +447,21 @@ pub fn run(
 }
 
 /// Writes integrator `name`'s final image `r` into `dir` (created if
-/// needed): `NAME.exr`, `NAME.json` (seconds, samples, relMSE, RMSE, the
-/// corrected errors when `noise` is given, the integrator's statistics),
+/// needed): `NAME.exr`, `NAME.json` (what ran — the registered integrator,
+/// every setting as `render`'s sidecar records them, the seed — then
+/// seconds, samples, relMSE, RMSE, the corrected errors when `noise` is
+/// given, the integrator's statistics),
 /// `NAME.relerr.exr` (per-pixel
 /// `(t − r)² / (r² + 0.01)` on luminance, the terms relMSE averages) and
 /// `NAME.relerr.png` (the same on a log scale, black at 1e-4 through red
 /// and yellow to white at 10, equal for every integrator). Characters of
 /// `name` other than letters, digits, `-` and `.` become `_`.
+#[allow(clippy::too_many_arguments)] // (each is one thing the files record)
 pub fn write_final(
     dir: &Path,
     name: &str,
+    ran: &dyn Configured,
+    seed: u64,
     scene: &Scene,
     reference: &[Rgb],
     noise: Option<&ReferenceNoise>,
@@ -496,6 +510,9 @@ pub fn write_final(
     };
     let json = serde_json::json!({
         "integrator": name,
+        "registered": ran.name(),
+        "settings": ran.settings_json(),
+        "seed": seed,
         "seconds": r.seconds,
         "samples": r.samples,
         "rel_mse": c.rel_mse,
