@@ -265,7 +265,8 @@ fn modifier(m: &str, name: &str) -> Result<Vec<(String, String)>, String> {
         value.ok_or_else(|| format!("modifier `{m}` of `{name}` needs a value ({what})"))
     };
     Ok(match key {
-        "running" | "bootstrap" => vec![pair("normalization", key)],
+        // (`bootstrap=N` is the parameter: the candidates' count.)
+        "running" | "bootstrap" if value.is_none() => vec![pair("normalization", key)],
         "mis" => vec![pair("kelemen_mis", "true")],
         "kelemen" => vec![
             pair("small_step", "kelemen"),
@@ -304,7 +305,9 @@ fn modifier(m: &str, name: &str) -> Result<Vec<(String, String)>, String> {
 /// `running`, `bootstrap` (normalisation), `mis` (Kelemen's MIS of large
 /// steps), `kelemen` (s1 = 1/1024, s2 = 1/64), `gaussian` (sigma 0.01),
 /// `sigma=S` (Gaussian), `plarge=P`, `candidates=N` (bootstrap candidates),
-/// `alloc=G` (chains per depth `∝ b_d^G`). The scene's `<integrator>` and
+/// `alloc=G` (chains per depth `∝ b_d^G`); a short form with a value whose
+/// parameters `BASE` lacks sets `BASE`'s own parameter of its name if it
+/// has one (`mcmc-vcm+candidates=N`). The scene's `<integrator>` and
 /// `assignments` (where the integrator has the parameter) come first.
 pub fn variant(
     name: &str,
@@ -320,11 +323,23 @@ pub fn variant(
     } else {
         head
     };
-    for m in parts {
-        own.extend(modifier(m, name)?);
-    }
     let defaults = (registry::find(base)?.new)();
     let known: Vec<&str> = defaults.params().iter().map(|p| p.name).collect();
+    for m in parts {
+        // A short form whose parameters the integrator lacks gives way to
+        // its own parameter of that name (`mcmc-vcm+candidates=N` sets its
+        // restart candidates, not a bootstrap it does not have).
+        let short = modifier(m, name)?;
+        match m.split_once('=') {
+            Some((k, v))
+                if known.contains(&k)
+                    && short.iter().any(|(p, _)| !known.contains(&p.as_str())) =>
+            {
+                own.push((k.into(), v.into()))
+            }
+            _ => own.extend(short),
+        }
+    }
     let mut all: Vec<(String, String)> = assignments
         .iter()
         .filter(|(k, _)| known.contains(&k.as_str()))
@@ -853,6 +868,7 @@ fn write_rgb8_png(path: &Path, w: u32, h: u32, rgb: &[u8]) -> Result<(), String>
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::integrators::mcmc_vcm::McmcVcmSettings;
     use crate::integrators::mmlt::Mmlt;
     use crate::integrators::pssmlt::{MltBase, Pssmlt};
     use crate::markov::Normalization;
@@ -902,6 +918,18 @@ mod tests {
             (b.base, b.chain.normalization),
             (MltBase::Bdpt, Normalization::Bootstrap)
         );
+        // With a value, `bootstrap` is the parameter, not the short form.
+        let n: Pssmlt = settings(variant("pssmlt+bootstrap=5000", &s, &[]).unwrap().as_ref());
+        assert_eq!(n.chain.bootstrap, 5000);
+        assert_eq!(n.chain.normalization, Pssmlt::default().chain.normalization);
+        // `candidates=N` is the bootstrap's short form only where there is
+        // a bootstrap: `mcmc-vcm` has its own `candidates`.
+        let v: McmcVcmSettings = settings(
+            variant("mcmc-vcm+candidates=2000", &s, &[])
+                .unwrap()
+                .as_ref(),
+        );
+        assert_eq!(v.candidates, 2000);
         // Command-line assignments reach only the integrators that have them.
         let flags = [("sigma".to_string(), "0.03".to_string())];
         let p: Pssmlt = settings(variant("pssmlt", &s, &flags).unwrap().as_ref());
