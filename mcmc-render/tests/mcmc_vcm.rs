@@ -203,7 +203,7 @@ fn light_subpaths_set_the_chain_steps_of_an_iteration() {
     let scene = cornell_16();
     for (light_subpaths, per_iteration) in [(1.0, 256), (2.5, 640)] {
         let mut s = settings(scene, LightChains::Both);
-        s.light_subpaths = light_subpaths;
+        s.vcm.light_subpaths = light_subpaths;
         let out = run(scene, &s, 2, 11);
         let steps = |c: &str| out.statistics["chains"][c]["steps"].as_u64().expect(c);
         assert_eq!(
@@ -231,7 +231,7 @@ fn light_subpaths_set_the_chain_steps_of_an_iteration() {
 #[ignore]
 fn more_light_subpaths_per_iteration_agree_with_vcm() {
     let mut s = settings(cornell(), LightChains::Both);
-    s.light_subpaths = 2.0;
+    s.vcm.light_subpaths = 2.0;
     let out = reps(cornell(), &s, MCMC_ITERATIONS / 2, 400);
     check("mcmc-vcm light_subpaths=2", cornell_vcm(), &out);
     assert_one_percent_bias_detected(cornell_vcm(), &out);

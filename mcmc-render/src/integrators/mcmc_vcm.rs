@@ -497,7 +497,9 @@ pub fn light_contribution(
                     break;
                 }
                 if z[j].is_connectible(scene) {
-                    connections_at(scene, f, &s.store, z, mis, j, max_depth, &mut l, &mut tally);
+                    connections_at(
+                        scene, f, &s.store, z, mis, j, max_depth, 1.0, &mut l, &mut tally,
+                    );
                 }
             }
             if !l.is_black() {
@@ -1348,8 +1350,6 @@ pub struct McmcVcm {
     pub candidates: usize,
     /// Chain pairs.
     pub units: usize,
-    /// Light subpaths (chain steps over all pairs) per iteration per pixel.
-    pub light_subpaths: f64,
     /// Over which light subpaths `b_vis`, `b_con` are averaged.
     pub normalisation: NormalisationScope,
     /// Scale the light-subpath techniques' MIS densities by the chains'
@@ -1998,9 +1998,9 @@ impl McmcVcm {
     }
 
     /// Light subpaths per iteration over all units for `pixels` camera
-    /// subpaths ([`light_paths`]).
+    /// subpaths ([`Vcm::light_paths`]).
     fn light_paths(&self, pixels: usize) -> usize {
-        light_paths(self.light_subpaths, pixels)
+        self.vcm.light_paths(pixels)
     }
 
     /// Light subpaths (steps) of unit `p` per iteration: its share of
@@ -2567,31 +2567,11 @@ fn check_acceptance(v: &f64) -> Result<(), String> {
     }
 }
 
-/// Light subpaths per iteration for `pixels` camera subpaths and
-/// `light_subpaths` per pixel: the product, rounded, at least one.
-fn light_paths(light_subpaths: f64, pixels: usize) -> usize {
-    ((light_subpaths * pixels as f64).round() as usize).max(1)
-}
-
 /// Unit `p`'s share when `n` items are dealt in order over `units` units
 /// (the shares differ by at most one and sum to `n`).
 fn share(n: usize, units: usize, p: usize) -> usize {
     n * (p + 1) / units - n * p / units
 }
-
-/// [`McmcVcmSettings::light_subpaths`]: finite, positive and at most
-/// [`MAX_LIGHT_SUBPATHS`] (a bound that keeps the step count of an
-/// iteration far from overflowing).
-fn check_light_subpaths(v: &f64) -> Result<(), String> {
-    if *v > 0.0 && *v <= MAX_LIGHT_SUBPATHS {
-        Ok(())
-    } else {
-        Err(format!("must lie in (0, {MAX_LIGHT_SUBPATHS}]"))
-    }
-}
-
-/// The largest [`McmcVcmSettings::light_subpaths`].
-const MAX_LIGHT_SUBPATHS: f64 = 1024.0;
 
 crate::settings! {
     /// MCMC over VCM's light subpaths, as the registry fills it.
@@ -2606,8 +2586,6 @@ crate::settings! {
         pub candidates: usize = 10_000, check crate::settings::check::count;
         /// Chain pairs, each running its share of an iteration's light subpaths.
         pub units: usize = 8, check crate::settings::check::count;
-        /// Light subpaths per iteration per pixel: the chains' steps of an iteration over all pairs are this times the pixels (1: as many as camera subpaths, VCM's N).
-        pub light_subpaths: f64 = 1.0, check check_light_subpaths;
         /// Normalisations b_vis, b_con: running means over the render (render, Eq. 6.4) or the iteration's restart candidates (iteration).
         pub normalisation: NormalisationScope = NormalisationScope::Render;
         /// Scale the light-subpath techniques' densities in the MIS weights by the chains' mixture density (the visibility chain's exact p/b_vis).
@@ -2617,7 +2595,7 @@ crate::settings! {
         /// Chain restarts: weighted (each iteration's light side weighted by its restart pool's mean luminance, the contribution chain's proper weight; the visibility chain from another candidate) or resampled (the thesis's importance resampling alone, biased for a finite pool). With normalisation = iteration the restarts are resampled.
         pub restart: Restart = Restart::Weighted;
         flatten {
-            /// VCM: mode, radius, reduction (alpha: 1 here, a fixed radius as the thesis runs), heuristic, depth.
+            /// VCM: mode, radius, reduction (alpha: 1 here, a fixed radius as the thesis runs), heuristic, light subpaths per pixel (here the chains' steps of an iteration over all pairs), depth.
             pub vcm: VcmSettings = VcmSettings {
                 alpha: 1.0,
                 ..VcmSettings::default()
@@ -2715,7 +2693,6 @@ impl McmcVcmSettings {
             target_acceptance: self.target_acceptance,
             candidates: self.candidates,
             units: self.units,
-            light_subpaths: self.light_subpaths,
             normalisation: self.normalisation,
             vis_pdf: self.vis_pdf,
             con_estimate: self.con_estimate,

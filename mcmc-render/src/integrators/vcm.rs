@@ -453,7 +453,9 @@ pub fn connection(
 }
 
 /// Connections of every light vertex in `light` (one subpath's) to camera
-/// vertex `z[j]` (connectible) within the depth limit, added to `l`.
+/// vertex `z[j]` (connectible) within the depth limit, each times
+/// `weight` (one over the light subpaths this camera subpath connects
+/// to), added to `l`.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn connections_at(
     scene: &Scene,
@@ -463,12 +465,13 @@ pub(crate) fn connections_at(
     mis: &[PartialMis],
     j: usize,
     max_depth: usize,
+    weight: f32,
     l: &mut Rgb,
     tally: &mut Tally,
 ) {
     for y in light {
         if y.depth as usize + j < max_depth {
-            let c = connection(scene, f, y, z, mis, j);
+            let c = connection(scene, f, y, z, mis, j) * weight;
             if !c.is_black() && tally.take(Technique::Connection, c) {
                 *l += c;
             }
@@ -686,8 +689,11 @@ thread_local! {
 /// What the camera pass of one iteration reads.
 struct IterationData<'a> {
     factors: MisFactors,
-    /// `1 / (π r² N)`.
+    /// `1 / (π r² L)` for `L` light subpaths.
     merge_norm: f32,
+    /// Camera subpaths `N` (pixels) and light subpaths `L` of the iteration.
+    pixels: usize,
+    light_paths: usize,
     vertices: &'a [LightVertex],
     /// End of each light subpath's vertices in `vertices`.
     ends: &'a [u32],
@@ -709,9 +715,31 @@ pub struct Vcm {
     pub radius: f32,
     /// Radius reduction exponent (1: fixed radius).
     pub alpha: f32,
+    /// Light subpaths per iteration per pixel ([`VcmSettings::light_subpaths`]).
+    pub light_subpaths: f64,
 }
 
 impl Vcm {
+    /// Light subpaths `L` per iteration for `pixels` camera subpaths:
+    /// `light_subpaths × pixels`, rounded, at least one.
+    pub fn light_paths(&self, pixels: usize) -> usize {
+        ((self.light_subpaths * pixels as f64).round() as usize).max(1)
+    }
+
+    /// The factors of an iteration of radius `radius` with `pixels` camera
+    /// and `light_paths` light subpaths: the light-subpath techniques'
+    /// densities `k = L/N` times those of one light subpath per camera
+    /// subpath (each light subpath is light-traced, stored for merging and
+    /// connected once, so every light-subpath technique has `L/N` samples
+    /// per camera subpath).
+    fn factors(&self, radius: f32, pixels: usize, light_paths: usize) -> MisFactors {
+        let f = MisFactors::new(self.mode, self.heuristic, radius, pixels as f64);
+        if light_paths == pixels {
+            f
+        } else {
+            f.with_light_density_scale((light_paths as f64 / pixels as f64) as f32)
+        }
+    }
     /// Merge radius of iteration `i` (from 0), as SmallVCM: `r / (i+1)^{(1−α)/2}`.
     pub fn radius_at(&self, i: u64) -> f32 {
         let r = f64::from(self.radius) / ((i + 1) as f64).powf(0.5 * (1.0 - f64::from(self.alpha)));
@@ -784,12 +812,21 @@ impl Vcm {
             &mut buffers.camera_mis,
         );
         let (z, mis) = (&buffers.paths.camera[..n], &buffers.camera_mis[..]);
-        let start = if path == 0 {
-            0
-        } else {
-            it.ends[path - 1] as usize
+        let light = |i: usize| {
+            let start = if i == 0 { 0 } else { it.ends[i - 1] as usize };
+            &it.vertices[start..it.ends[i] as usize]
         };
-        let light = &it.vertices[start..it.ends[path] as usize];
+        // Camera subpath `path` connects to light subpaths `path`,
+        // `path + N`, … below `L` (with `L ≥ N`: every light subpath
+        // connects once), or to `path mod L` (`L < N`), each connection
+        // weighted one over their count.
+        let (first, stride) = if it.light_paths >= it.pixels {
+            (path, it.pixels)
+        } else {
+            (path % it.light_paths, usize::MAX)
+        };
+        let paired = (first..it.light_paths).step_by(stride);
+        let weight = 1.0 / paired.len() as f32;
         let ppm = self.mode == VcmMode::Ppm;
         let mut l = Rgb::BLACK;
         // Every camera vertex before this one scattered specularly.
@@ -801,7 +838,12 @@ impl Vcm {
             }
             if zj.is_connectible(scene) {
                 if self.mode.connects() {
-                    connections_at(scene, f, light, z, mis, j, max_depth, &mut l, tally);
+                    for i in paired.clone() {
+                        let light = light(i);
+                        connections_at(
+                            scene, f, light, z, mis, j, max_depth, weight, &mut l, tally,
+                        );
+                    }
                 }
                 if self.mode.merges() && (!ppm || specular) {
                     let c = self.merge(scene, it, z, &mis[j], j);
@@ -967,7 +1009,11 @@ impl Vcm {
             })
             .collect();
         let mut vertices: Vec<LightVertex> = Vec::new();
-        let mut ends: Vec<u32> = Vec::with_capacity(pixels);
+        // L light subpaths per iteration; a light-tracing splat (normalised
+        // for one light subpath per pixel) counts N/L.
+        let light_paths = self.light_paths(pixels);
+        let light_trace_weight = (pixels as f64 / light_paths as f64) as f32;
+        let mut ends: Vec<u32> = Vec::with_capacity(light_paths);
         let mut grid = HashGrid::default();
         let mut tally = Tally::default();
         let mut interrupted = false;
@@ -993,7 +1039,7 @@ impl Vcm {
                 break;
             }
             let radius = self.radius_at(iterations);
-            let factors = MisFactors::new(self.mode, self.heuristic, radius, pixels as f64);
+            let factors = self.factors(radius, pixels, light_paths);
             let aborted = AtomicBool::new(false);
             let check_abort = || {
                 if stop.load(Ordering::Relaxed) || out_of_time() {
@@ -1002,7 +1048,7 @@ impl Vcm {
                 aborted.load(Ordering::Relaxed)
             };
 
-            // Light pass: unit u traces subpaths [u·N/U, (u+1)·N/U).
+            // Light pass: unit u traces subpaths [u·L/U, (u+1)·L/U).
             units.par_iter_mut().enumerate().for_each(
                 |(u, (splats, store, unit_ends, unit_tally))| {
                     splats.clear();
@@ -1010,7 +1056,7 @@ impl Vcm {
                     unit_ends.clear();
                     *unit_tally = Tally::default();
                     let mut src = unit_source(run.seed, 2 * iterations, u as u64);
-                    let range = pixels * u / LIGHT_UNITS..pixels * (u + 1) / LIGHT_UNITS;
+                    let range = light_paths * u / LIGHT_UNITS..light_paths * (u + 1) / LIGHT_UNITS;
                     BUFFERS.with_borrow_mut(|b| {
                         for (k, _) in range.enumerate() {
                             if k % STOP_CHECK == 0 && check_abort() {
@@ -1024,6 +1070,7 @@ impl Vcm {
                                 &mut b.light_mis,
                                 store,
                                 |t, raster, l| {
+                                    let l = l * light_trace_weight;
                                     if unit_tally.take(t, l) {
                                         splats.splat(raster, l);
                                     }
@@ -1053,7 +1100,9 @@ impl Vcm {
             }
             let data = IterationData {
                 factors,
-                merge_norm: 1.0 / (PI * radius * radius * pixels as f32),
+                merge_norm: 1.0 / (PI * radius * radius * light_paths as f32),
+                pixels,
+                light_paths,
                 vertices: &vertices,
                 ends: &ends,
                 grid: &grid,
@@ -1188,6 +1237,7 @@ impl Vcm {
             "radius_initial": self.radius,
             "radius_final": last_radius,
             "alpha": self.alpha,
+            "light_subpaths_per_iteration": self.light_paths(pixels),
             "light_vertices_per_iteration": if iterations > 0 { tally.light_vertices as f64 / iterations as f64 } else { 0.0 },
             "energy_shares": shares,
             "nonfinite_samples": tally.nonfinite,
@@ -1306,6 +1356,20 @@ fn check_alpha(v: &f64) -> Result<(), String> {
     }
 }
 
+/// [`VcmSettings::light_subpaths`]: finite, positive and at most
+/// [`MAX_LIGHT_SUBPATHS`] (a bound that keeps an iteration's light
+/// subpaths far from overflowing its counts).
+fn check_light_subpaths(v: &f64) -> Result<(), String> {
+    if *v > 0.0 && *v <= MAX_LIGHT_SUBPATHS {
+        Ok(())
+    } else {
+        Err(format!("must lie in (0, {MAX_LIGHT_SUBPATHS}]"))
+    }
+}
+
+/// The largest [`VcmSettings::light_subpaths`].
+const MAX_LIGHT_SUBPATHS: f64 = 1024.0;
+
 crate::settings! {
     /// Vertex connection and merging settings, as the registry fills them.
     pub struct VcmSettings {
@@ -1319,6 +1383,8 @@ crate::settings! {
         pub alpha: f64 = 0.75, check check_alpha;
         /// MIS heuristic over the techniques: power (β = 2) or balance.
         pub heuristic: MisHeuristic = MisHeuristic::Power;
+        /// Light subpaths per iteration per pixel (1: as many as camera subpaths, SmallVCM's N); each is light-traced, stored for merging and connected once.
+        pub light_subpaths: f64 = 1.0, check check_light_subpaths;
         flatten {
             /// Path depth.
             pub depth: DepthParams = DepthParams::default();
@@ -1340,6 +1406,7 @@ impl VcmSettings {
             heuristic: self.heuristic,
             radius: radius as f32,
             alpha: self.alpha as f32,
+            light_subpaths: self.light_subpaths,
         }
     }
 }
