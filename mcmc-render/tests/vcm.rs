@@ -150,19 +150,21 @@ fn vcm_agrees_with_bdpt_on_the_cornell_box() {
     check("vcm", cornell_bdpt(), reps);
 }
 
+/// The control of an agreement: `test`'s estimates biased by +1% must
+/// fail the same 4σ-and-1% check against `reference`.
+fn assert_one_percent_bias_detected(what: &str, reference: &[[f64; 3]], test: &[[f64; 3]]) {
+    let biased: Vec<[f64; 3]> = test.iter().map(|m| m.map(|v| v * 1.01)).collect();
+    let a = MeanAgreement::new(reference, &biased);
+    assert!(
+        !a.failures(4.0, 0.01).is_empty(),
+        "{what}: 1% bias not detected: {a:?}"
+    );
+}
+
 /// The control: the same VCM estimates biased by +1% must fail.
 #[test]
 fn a_one_percent_bias_is_detected() {
-    let biased: Vec<[f64; 3]> = cornell_vcm()
-        .0
-        .iter()
-        .map(|m| m.map(|v| v * 1.01))
-        .collect();
-    let a = MeanAgreement::new(cornell_bdpt(), &biased);
-    assert!(
-        !a.failures(4.0, 0.01).is_empty(),
-        "1% bias not detected: {a:?}"
-    );
+    assert_one_percent_bias_detected("vcm", cornell_bdpt(), &cornell_vcm().0);
 }
 
 #[test]
@@ -213,22 +215,14 @@ fn bpt_mode_reproduces_bdpt_on_the_glossy_glass_box() {
 /// at 32 read −0.1 to −0.24%).
 #[test]
 fn more_or_fewer_light_subpaths_agree_with_bdpt() {
-    for (light_subpaths, iterations, seed0) in [(4.0, ITERATIONS, 700), (0.5, ITERATIONS, 800)] {
+    for (light_subpaths, seed0) in [(4.0, 700), (0.5, 800)] {
         let mut s = settings(cornell(), VcmMode::Vcm);
         s.light_subpaths = light_subpaths;
-        let (reps, merge) = vcm_reps_of(cornell(), &s, seed0, REPS, iterations);
+        let (reps, merge) = vcm_reps(cornell(), &s, seed0);
         assert!(merge > 0.01, "merge share {merge}");
-        check(
-            &format!("vcm light_subpaths={light_subpaths}"),
-            cornell_bdpt(),
-            &reps,
-        );
-        let biased: Vec<[f64; 3]> = reps.iter().map(|m| m.map(|v| v * 1.01)).collect();
-        let a = MeanAgreement::new(cornell_bdpt(), &biased);
-        assert!(
-            !a.failures(4.0, 0.01).is_empty(),
-            "light_subpaths={light_subpaths}: 1% bias not detected: {a:?}"
-        );
+        let what = format!("vcm light_subpaths={light_subpaths}");
+        check(&what, cornell_bdpt(), &reps);
+        assert_one_percent_bias_detected(&what, cornell_bdpt(), &reps);
     }
 }
 

@@ -1997,16 +1997,10 @@ impl McmcVcm {
         self.con_estimate == ConEstimate::Transfer && light_scale != 1.0
     }
 
-    /// Light subpaths per iteration over all units for `pixels` camera
-    /// subpaths ([`Vcm::light_paths`]).
-    fn light_paths(&self, pixels: usize) -> usize {
-        self.vcm.light_paths(pixels)
-    }
-
     /// Light subpaths (steps) of unit `p` per iteration: its share of
-    /// [`Self::light_paths`].
+    /// [`Vcm::light_paths`].
     fn unit_steps(&self, pixels: usize, p: usize) -> usize {
-        share(self.light_paths(pixels), self.units, p)
+        share(self.vcm.light_paths(pixels), self.units, p)
     }
 
     /// `(n_con, n_vis)`: steps of each chain per iteration over all units.
@@ -2186,7 +2180,7 @@ impl McmcVcm {
         if self.chains == LightChains::Independent {
             // Independent light subpaths, weight N/L each for L light
             // subpaths of N pixels (one with L = N): VCM's estimator.
-            let weight = (pixels as f64 / self.light_paths(pixels) as f64) as f32;
+            let weight = (pixels as f64 / self.vcm.light_paths(pixels) as f64) as f32;
             let mut c = LightContribution::default();
             for s in 0..steps {
                 if s % STOP_CHECK == 0 && abort() {

@@ -729,9 +729,11 @@ impl Vcm {
     /// The factors of an iteration of radius `radius` with `pixels` camera
     /// and `light_paths` light subpaths: the light-subpath techniques'
     /// densities `k = L/N` times those of one light subpath per camera
-    /// subpath (each light subpath is light-traced, stored for merging and
-    /// connected once, so every light-subpath technique has `L/N` samples
-    /// per camera subpath).
+    /// subpath (each light subpath is light-traced and stored for merging,
+    /// and with `L ≥ N` connected once, so every light-subpath technique has
+    /// `L/N` samples per camera subpath; with `L < N` a connection has one,
+    /// and the weights, still a partition of unity, are not the
+    /// heuristic's for it).
     fn factors(&self, radius: f32, pixels: usize, light_paths: usize) -> MisFactors {
         let f = MisFactors::new(self.mode, self.heuristic, radius, pixels as f64);
         if light_paths == pixels {
@@ -740,6 +742,7 @@ impl Vcm {
             f.with_light_density_scale((light_paths as f64 / pixels as f64) as f32)
         }
     }
+
     /// Merge radius of iteration `i` (from 0), as SmallVCM: `r / (i+1)^{(1−α)/2}`.
     pub fn radius_at(&self, i: u64) -> f32 {
         let r = f64::from(self.radius) / ((i + 1) as f64).powf(0.5 * (1.0 - f64::from(self.alpha)));
@@ -1383,7 +1386,7 @@ crate::settings! {
         pub alpha: f64 = 0.75, check check_alpha;
         /// MIS heuristic over the techniques: power (β = 2) or balance.
         pub heuristic: MisHeuristic = MisHeuristic::Power;
-        /// Light subpaths per iteration per pixel (1: as many as camera subpaths, SmallVCM's N); each is light-traced, stored for merging and connected once.
+        /// Light subpaths per iteration per pixel (1: as many as camera subpaths, SmallVCM's N); each is light-traced and stored for merging; camera subpath p connects to light subpaths p, p+N, … (at least 1), or to p mod L (below 1).
         pub light_subpaths: f64 = 1.0, check check_light_subpaths;
         flatten {
             /// Path depth.
