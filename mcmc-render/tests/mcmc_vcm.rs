@@ -197,7 +197,8 @@ fn a_one_percent_bias_is_detected() {
 /// `light_subpaths` sets an iteration's chain steps (and exchange
 /// attempts) over all pairs: `light_subpaths × pixels`, rounded — 256
 /// with the default and 640 with 2.5 on 16×16 — and a value outside
-/// (0, 1024] is one line of error, not a run.
+/// (0, 1024] is one line of error, not a run. With independent light
+/// subpaths the MIS scale is `vcm`'s `k = L/N`.
 #[test]
 fn light_subpaths_set_the_chain_steps_of_an_iteration() {
     let scene = cornell_16();
@@ -211,6 +212,15 @@ fn light_subpaths_set_the_chain_steps_of_an_iteration() {
             2 * per_iteration
         );
         assert_eq!(out.statistics["exchange_attempts"], 2 * per_iteration);
+        // Independent light subpaths are `vcm`'s estimator, MIS scale
+        // k = L/N included (it was 1 whatever L until session 28).
+        let mut s = settings(scene, LightChains::Independent);
+        s.vcm.light_subpaths = light_subpaths;
+        let out = run(scene, &s, 2, 11);
+        assert_eq!(
+            out.statistics["light_density_scale"],
+            per_iteration as f64 / 256.0
+        );
     }
     for bad in ["0", "-1", "nan", "inf", "1025"] {
         let set = [("light_subpaths".to_string(), bad.to_string())];

@@ -1522,7 +1522,13 @@ impl McmcVcm {
         let mut weights = RestartWeights::default();
         let mut norm = Normalisation::default();
         let mut totals = Totals::default();
-        let mut light_scale = 1.0f32;
+        // Independent light subpaths are VCM's estimator: with L light
+        // subpaths of N camera subpaths its MIS scale is `vcm`'s k = L/N
+        // (the chains' k comes from the pilot below).
+        let mut light_scale = match self.chains {
+            LightChains::Independent => self.vcm.light_density_scale(pixels),
+            _ => 1.0f32,
+        };
         let mut pilot_done = false;
         let mut iterations = 0u64;
         let mut interrupted = false;
@@ -1994,7 +2000,9 @@ impl McmcVcm {
     /// Whether `b_con` is estimated by `transfer` with a scale `k ≠ 1`
     /// (with `k = 1` it is `direct`).
     fn transfers(&self, light_scale: f32) -> bool {
-        self.con_estimate == ConEstimate::Transfer && light_scale != 1.0
+        self.con_estimate == ConEstimate::Transfer
+            && light_scale != 1.0
+            && self.chains != LightChains::Independent
     }
 
     /// Light subpaths (steps) of unit `p` per iteration: its share of

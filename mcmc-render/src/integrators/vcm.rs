@@ -700,6 +700,12 @@ struct IterationData<'a> {
     grid: &'a HashGrid,
 }
 
+/// `k = L/N`: the light-subpath techniques' densities with `light_paths`
+/// light subpaths per `pixels` camera subpaths, relative to one each.
+fn light_density_scale(pixels: usize, light_paths: usize) -> f32 {
+    (light_paths as f64 / pixels as f64) as f32
+}
+
 /// The vertex connection and merging integrator.
 #[derive(Clone, Copy, Debug)]
 pub struct Vcm {
@@ -739,8 +745,15 @@ impl Vcm {
         if light_paths == pixels {
             f
         } else {
-            f.with_light_density_scale((light_paths as f64 / pixels as f64) as f32)
+            f.with_light_density_scale(light_density_scale(pixels, light_paths))
         }
+    }
+
+    /// The MIS scale `k = L/N` of the light-subpath techniques' densities
+    /// with [`Self::light_paths`] light subpaths per `pixels` camera
+    /// subpaths (1 at the default one light subpath per pixel).
+    pub fn light_density_scale(&self, pixels: usize) -> f32 {
+        light_density_scale(pixels, self.light_paths(pixels))
     }
 
     /// Merge radius of iteration `i` (from 0), as SmallVCM: `r / (i+1)^{(1−α)/2}`.
