@@ -865,7 +865,11 @@ fn the_guided_shift_is_the_guided_tracer_at_the_shifted_pixel() {
     let scene = cornell();
     let tree = guided_tree();
     let tracer = guided_settings(true).tracer();
-    let shift = GuidedShift { tracer, tree };
+    let shift = GuidedShift {
+        tracer,
+        tree,
+        sink: None,
+    };
     let direct = PssTarget {
         scene,
         sampler: GuidedPss::frozen(tracer, tree),
@@ -874,6 +878,7 @@ fn the_guided_shift_is_the_guided_tracer_at_the_shifted_pixel() {
     let plain = GuidedShift {
         tracer,
         tree: &untrained,
+        sink: None,
     };
     let (mut lit, mut neighbour_differs, mut guided_differs) = (0, 0, 0);
     for i in 0..400u64 {
@@ -930,6 +935,7 @@ fn the_guided_shift_matches_a_direct_sample_at_the_shifted_pixel() {
     let shift = GuidedShift {
         tracer: guided_settings(true).tracer(),
         tree: guided_tree(),
+        sink: None,
     };
     let mut short = shift;
     short.tracer.max_depth = DEPTH - 1;
@@ -971,6 +977,7 @@ fn an_exchange_reuses_the_shared_pixels_bit_for_bit() {
         let guided = GuidedShift {
             tracer: guided_settings(true).tracer(),
             tree: guided_tree(),
+            sink: None,
         };
         assert_reuse_is_exact(scene, &guided, shape);
     }
@@ -1138,10 +1145,90 @@ fn the_guided_directions_carry_the_balance_heuristic_of_tree_and_bsdf() {
     assert!(zc.abs() > 4.0, "control passed: {mc} (z {zc})");
 }
 
+/// The guided shift trained online (Alg. 10): 100 mutations per pixel are
+/// a training iteration of 32 (which records every traced path into the
+/// tree) and a last one of 68 (which does not); one seed gives the same
+/// image and tree on 1 and 2 threads (the records are exact sums, so their
+/// order does not matter), and a checkpoint is refused with one line.
+#[test]
+fn the_online_guided_shift_trains_between_iterations_bit_identically() {
+    let scene = repo_scene("cornell-box.xml", 12);
+    let sets = [
+        ("mutations_per_pixel", "100"),
+        ("shift", "guided"),
+        ("guide_training", "online"),
+    ];
+    let run = |threads: usize| with_threads(threads, || smcmc(&scene, &sets, 5));
+    let one = run(1);
+    let phases = one.statistics["guiding"]["iterations"]
+        .as_array()
+        .expect("iterations");
+    let field = |i: usize, key: &str| phases[i][key].as_u64().expect(key);
+    assert_eq!(phases.len(), 2);
+    assert_eq!(
+        (
+            field(0, "mutations_per_pixel"),
+            field(1, "mutations_per_pixel")
+        ),
+        (32, 68)
+    );
+    assert!(
+        field(0, "records") > 0,
+        "the training iteration recorded nothing"
+    );
+    assert_eq!(field(1, "records"), 0, "the last iteration recorded");
+    // The trained tree is larger than the untrained one it started from.
+    assert!(field(1, "tree_memory_bytes") > field(0, "tree_memory_bytes"));
+    let two = run(2);
+    let guiding = |r: &Rendered| {
+        let g = &r.statistics["guiding"];
+        let records: Vec<&serde_json::Value> =
+            (0..2).map(|i| &g["iterations"][i]["records"]).collect();
+        (
+            g["tree"].clone(),
+            records.into_iter().cloned().collect::<Vec<_>>(),
+        )
+    };
+    assert_eq!(guiding(&one), guiding(&two));
+    let bits = |r: &Rendered| {
+        r.image
+            .iter()
+            .flat_map(|c| [c.r.to_bits(), c.g.to_bits(), c.b.to_bits()])
+            .collect::<Vec<u32>>()
+    };
+    assert!(bits(&one) == bits(&two), "1 vs 2 threads differ");
+
+    let integrator = registry::configure(
+        None,
+        Some("smcmc"),
+        &sets.map(|(k, v)| (k.to_string(), v.to_string())),
+    )
+    .expect("configures");
+    let dir = std::env::temp_dir().join("smcmc_online_guided_checkpoint");
+    let checkpointed = RunSettings {
+        checkpoint: Some(mcmc_render::checkpoint::Checkpoint {
+            path: dir.join("run.ckpt"),
+            fingerprint: 1,
+            resume: None,
+            chains: None,
+        }),
+        ..Default::default()
+    };
+    let e = integrator
+        .render(&scene, &checkpointed, &AtomicBool::new(false), &NoObserver)
+        .expect_err("a checkpointed online run is refused")
+        .to_string();
+    assert!(
+        e.contains("guide_training=online") && !e.contains('\n'),
+        "{e}"
+    );
+}
+
 /// SMCMC with the guided shift against PT on the tilted box (Gaussian
 /// filter), image means as `smcmc_agrees_with_pt_on_the_cornell_box` (its
 /// tolerance derivation), with the ×1.01 control. `SMCMC_RUNS`,
-/// `SMCMC_ITERATIONS` and `SMCMC_NEE` (0/1) set the budget and the tracer:
+/// `SMCMC_ITERATIONS`, `SMCMC_NEE` (0/1) and `SMCMC_GUIDE_TRAINING`
+/// (pretrained or online) set the budget, the tracer and the training:
 /// `cargo test -p mcmc-render --test smcmc guided_shift_agrees -- --ignored --nocapture`.
 #[test]
 #[ignore]
@@ -1153,10 +1240,12 @@ fn smcmc_with_the_guided_shift_agrees_with_pt_on_the_cornell_box() {
         "false"
     };
     let iterations = iterations.to_string();
+    let training = std::env::var("SMCMC_GUIDE_TRAINING").unwrap_or_else(|_| "pretrained".into());
     let sets = [
         ("mutations_per_pixel", iterations.as_str()),
         ("shift", "guided"),
         ("guide_nee", nee),
+        ("guide_training", training.as_str()),
     ];
     let reps: Vec<[f64; 3]> = (0..runs)
         .map(|k| {
@@ -1167,7 +1256,7 @@ fn smcmc_with_the_guided_shift_agrees_with_pt_on_the_cornell_box() {
         .collect();
     let a = MeanAgreement::new(pt_reference(), &reps);
     eprintln!(
-        "smcmc guided (nee {nee}), {runs} x {iterations}: rel {:?}\n  {a:?}",
+        "smcmc guided (nee {nee}, {training}), {runs} x {iterations}: rel {:?}\n  {a:?}",
         a.rel()
     );
     assert!(a.failures(4.0, 0.01).is_empty(), "disagrees with PT: {a:?}");

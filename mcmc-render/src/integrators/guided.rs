@@ -74,15 +74,15 @@ use crate::color::Rgb;
 use crate::deadline::Deadline;
 use crate::film::{Film, Filter};
 use crate::geometry::Ray;
-use crate::guiding::{LeafId, Mixture, RecordBuffer, SdTree};
+use crate::guiding::{ExactRecords, LeafId, Mixture, RecordBuffer, SdTree};
 use crate::observer::Observer;
 use crate::render::{image_tiles, unit_source};
 use crate::sampling::RandomSource;
 use crate::scene::Scene;
 use glam::Vec3;
 use rayon::prelude::*;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 /// Camera samples per training pass at most (record memory: about 16
@@ -501,6 +501,15 @@ struct IterationStats {
 }
 
 impl GuidedSettings {
+    /// The scene's tree before any training (over the scene's box).
+    pub fn untrained_tree(&self, scene: &Scene) -> SdTree {
+        let bounds = scene
+            .geometry
+            .bounds()
+            .unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
+        SdTree::new(bounds, self.initial_depth)
+    }
+
     /// The per-iteration tracer these settings describe.
     pub fn tracer(&self) -> GuidedPathTracer {
         GuidedPathTracer {
@@ -546,11 +555,7 @@ impl GuidedSettings {
         let (width, height) = (scene.film.width, scene.film.height);
         let pixels = u64::from(width) * u64::from(height);
         let filter = Arc::new(Filter::new(scene.film.filter, width, height));
-        let bounds = scene
-            .geometry
-            .bounds()
-            .unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
-        let mut tree = SdTree::new(bounds, self.initial_depth);
+        let mut tree = self.untrained_tree(scene);
         let tracer = self.tracer();
         let budget_spp = run.samples_per_pixel(scene.sample_count).map(u64::from);
         let deadline = Deadline::new(start, run.time_budget);
@@ -826,4 +831,69 @@ fn all_tile_records<'a>(
     }
     tiles.sort_by_key(|t| t.0);
     tiles.into_iter().map(|t| t.1).collect()
+}
+
+/// Records of paths that MCMC chains trace with the guided tracer
+/// (`mcmc-pg` online, `smcmc`'s guided shift online): per-thread slots,
+/// each with the tracer's path buffer and exact fixed-point sums per
+/// building quadtree leaf ([`ExactRecords`]), whose integer totals do not
+/// depend on which thread recorded what, or in which order, so one seed
+/// trains the same tree on any thread count. A thread locks only its own
+/// slot (its index in the pool), so the locks are uncontended.
+#[derive(Default)]
+pub struct RecordSink {
+    slots: Vec<Mutex<RecordSlot>>,
+}
+
+/// One thread's records: the tracer's path buffer and the exact sums.
+#[derive(Default)]
+struct RecordSlot {
+    training: Training,
+    exact: ExactRecords,
+}
+
+impl RecordSink {
+    /// One slot per thread of the current pool, plus one for callers
+    /// outside it.
+    pub fn new() -> Self {
+        let n = rayon::current_num_threads() + 1;
+        RecordSink {
+            slots: (0..n).map(|_| Mutex::default()).collect(),
+        }
+    }
+
+    /// Runs `trace` with the calling thread's path buffer and adds the
+    /// records it made to the thread's exact sums over `tree`'s building
+    /// leaves; returns what `trace` returns.
+    pub fn record<T>(&self, tree: &SdTree, trace: impl FnOnce(&mut Training) -> T) -> T {
+        let last = self.slots.len() - 1;
+        let i = rayon::current_thread_index().map_or(last, |i| i.min(last));
+        let mut slot = self.slots[i].lock().unwrap_or_else(|e| e.into_inner());
+        let RecordSlot { training, exact } = &mut *slot;
+        let out = trace(training);
+        tree.accumulate(&mut training.records, exact);
+        out
+    }
+
+    /// The exact sums of every slot, for [`SdTree::merge_exact`].
+    pub fn into_parts(self) -> Vec<ExactRecords> {
+        self.slots
+            .into_iter()
+            .map(|m| m.into_inner().unwrap_or_else(|e| e.into_inner()).exact)
+            .collect()
+    }
+}
+
+/// Every rank's record sums, on every rank (bit-exact). Collective.
+pub fn all_exact_records(parts: Vec<ExactRecords>) -> Vec<ExactRecords> {
+    let mut words = Vec::new();
+    parts.iter().for_each(|p| p.to_words(&mut words));
+    let all = crate::cluster::all_gather_words(words);
+    let mut input = &all[..];
+    let mut out = Vec::new();
+    while !input.is_empty() {
+        // Every rank runs the same binary: a short message is a bug.
+        out.push(ExactRecords::from_words(&mut input).expect("a rank's record sums"));
+    }
+    out
 }

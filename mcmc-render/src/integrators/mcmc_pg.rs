@@ -88,7 +88,10 @@
 //! Coordinates 0–1 the raster position (2–3 the lens of a thin-lens
 //! camera), then 8 per scattering vertex as [`super::guided`] documents.
 
-use super::guided::{GuidedPathTracer, GuidedSettings, Training, agreed_iteration, next_iteration};
+use super::guided::{
+    GuidedPathTracer, GuidedSettings, RecordSink, agreed_iteration, all_exact_records,
+    next_iteration,
+};
 use super::registry::IntegratorSettings;
 use super::{RenderError, Rendered, RunSettings};
 use crate::checkpoint::Checkpoint;
@@ -102,11 +105,9 @@ use crate::pss::{
 use crate::pss_dump::DumpSampler;
 use crate::sampling::RandomSource;
 use crate::scene::Scene;
-use glam::Vec3;
 use mcmc_core::rng::splitmix64;
 use serde_json::{Value, json};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 /// Numbers the guided tracer reads per scattering vertex.
@@ -119,7 +120,7 @@ crate::choice! {
     pub enum TrainingMode {
         /// Guided path tracing first, then MCMC with the frozen tree (Alg. 8).
         Pretrained = "pretrained",
-        /// Refined between MCMC iterations from the chains' paths (Alg. 9).
+        /// Refined between MCMC iterations from the chains' paths (Alg. 9; `smcmc`'s guided shift: Alg. 10).
         Online = "online",
     }
 }
@@ -148,45 +149,6 @@ fn check_share(v: &f64) -> Result<(), String> {
         Ok(())
     } else {
         Err("must lie in (0, 1)".into())
-    }
-}
-
-/// Per-thread record slots of the online variant: a thread locks only its
-/// own slot (its index in the pool), so the locks are uncontended.
-#[derive(Default)]
-struct RecordSink {
-    slots: Vec<Mutex<Slot>>,
-}
-
-/// One thread's records: the tracer's path buffer and the exact sums.
-#[derive(Default)]
-struct Slot {
-    training: Training,
-    exact: ExactRecords,
-}
-
-impl RecordSink {
-    /// One slot per thread of the current pool, plus one for callers
-    /// outside it.
-    fn new() -> Self {
-        let n = rayon::current_num_threads() + 1;
-        RecordSink {
-            slots: (0..n).map(|_| Mutex::default()).collect(),
-        }
-    }
-
-    /// The calling thread's slot.
-    fn slot(&self) -> MutexGuard<'_, Slot> {
-        let last = self.slots.len() - 1;
-        let i = rayon::current_thread_index().map_or(last, |i| i.min(last));
-        self.slots[i].lock().unwrap_or_else(|e| e.into_inner())
-    }
-
-    /// The exact sums of every slot.
-    fn into_parts(self) -> impl Iterator<Item = ExactRecords> {
-        self.slots
-            .into_iter()
-            .map(|m| m.into_inner().unwrap_or_else(|e| e.into_inner()).exact)
     }
 }
 
@@ -227,15 +189,10 @@ impl PssPathSampler for GuidedPss<'_> {
         };
         let l = match self.sink {
             None => self.tracer.li(scene, ray, source, self.tree, None),
-            Some(sink) => {
-                let mut slot = sink.slot();
-                let Slot { training, exact } = &mut *slot;
-                let l = self
-                    .tracer
-                    .li(scene, ray, source, self.tree, Some(&mut *training));
-                self.tree.accumulate(&mut training.records, exact);
-                l
-            }
+            Some(sink) => sink.record(self.tree, |training| {
+                self.tracer
+                    .li(scene, ray, source, self.tree, Some(training))
+            }),
         };
         out.push(Splat { p, l, class: 0 });
         ((source.consumed(0) - 2 - lens_numbers) / NUMBERS_PER_VERTEX) as u32
@@ -286,15 +243,6 @@ fn acceptances(result: &MltResult) -> (f64, f64) {
 }
 
 impl McmcPg {
-    /// The scene's tree, untrained.
-    fn new_tree(&self, scene: &Scene) -> SdTree {
-        let bounds = scene
-            .geometry
-            .bounds()
-            .unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
-        SdTree::new(bounds, self.guiding.initial_depth)
-    }
-
     /// PSSMLT over `sampler` with `mutations_per_pixel` and a time budget
     /// ending at `deadline`.
     fn chains(
@@ -415,7 +363,7 @@ impl McmcPg {
         let deadline = Deadline::new(start, run.time_budget);
         let budget = self.chain.mutations_per_pixel(run);
         let tracer = self.guiding.tracer();
-        let mut tree = self.new_tree(scene);
+        let mut tree = self.guiding.untrained_tree(scene);
         let mut phases: Vec<PhaseStats> = Vec::new();
         let mut previous: Option<MltResult> = None;
         let mut training_seconds = 0.0;
@@ -459,8 +407,7 @@ impl McmcPg {
             let seconds = iteration_start.elapsed().as_secs_f64();
             let (small, large) = acceptances(&result);
             let interrupted = result.interrupted && !last;
-            let parts: Vec<ExactRecords> =
-                sink.map(|s| s.into_parts().collect()).unwrap_or_default();
+            let parts: Vec<ExactRecords> = sink.map(RecordSink::into_parts).unwrap_or_default();
             // On a cluster this rank's chains recorded only its share:
             // every rank merges every rank's (exact sums: any order).
             let parts = match crate::cluster::current() {
@@ -582,18 +529,4 @@ impl IntegratorSettings for McmcPg {
         );
         Ok(rendered)
     }
-}
-
-/// Every rank's record sums, on every rank (bit-exact). Collective.
-fn all_exact_records(parts: Vec<ExactRecords>) -> Vec<ExactRecords> {
-    let mut words = Vec::new();
-    parts.iter().for_each(|p| p.to_words(&mut words));
-    let all = crate::cluster::all_gather_words(words);
-    let mut input = &all[..];
-    let mut out = Vec::new();
-    while !input.is_empty() {
-        // Every rank runs the same binary: a short message is a bug.
-        out.push(ExactRecords::from_words(&mut input).expect("a rank's record sums"));
-    }
-    out
 }

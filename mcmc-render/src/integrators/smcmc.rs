@@ -62,9 +62,12 @@ use super::{DepthParams, RenderError, Rendered, RunSettings};
 use crate::cluster::Parcel;
 use crate::deadline::Deadline;
 use crate::film::Filter;
+use crate::guiding::ExactRecords;
 use crate::integrators::bdpt::{Bdpt, MisHeuristic};
-use crate::integrators::guided::GuidedSettings;
-use crate::integrators::mcmc_pg::ProgressOnly;
+use crate::integrators::guided::{
+    GuidedSettings, RecordSink, agreed_iteration, all_exact_records, next_iteration,
+};
+use crate::integrators::mcmc_pg::{ProgressOnly, TrainingMode};
 use crate::integrators::mmlt::MAX_DEPTH as MMLT_MAX_DEPTH;
 use crate::integrators::pt::PathTracer;
 use crate::markov::CHECKPOINT_EVERY;
@@ -198,6 +201,8 @@ crate::settings! {
         pub guide_share: f64 = 0.125, check check_guide_share;
         /// Guided shift: next-event estimation in the guided tracer (the thesis's has none).
         pub guide_nee: bool = false;
+        /// Guided shift: pretrained (guided path tracing trains the SD-tree, then the tiles run with it frozen) or online (Alg. 10: iterations of doubling length from 32 train it from the tiles' own paths; the last makes the image).
+        pub guide_training: TrainingMode = TrainingMode::Pretrained;
         /// Iterations, each one mutation of every tile (auto: 100, or until the time budget is spent).
         pub mutations_per_pixel: Option<u64> = None, check check::auto_or_at_least_one;
         flatten {
@@ -251,7 +256,14 @@ impl IntegratorSettings for Smcmc {
             return self.run(scene, &shift, &mutation, run, stop, observer);
         }
         if self.shift == SmcmcShift::Guided {
-            return self.render_guided(scene, &mutation, run, stop, observer);
+            return match self.guide_training {
+                TrainingMode::Pretrained => {
+                    self.render_guided(scene, &mutation, run, stop, observer)
+                }
+                TrainingMode::Online => {
+                    self.render_guided_online(scene, &mutation, run, stop, observer)
+                }
+            };
         }
         let bdpt = BdptShift { bdpt };
         match self.shift {
@@ -314,6 +326,12 @@ impl AddAssign for ExchangeCounts {
 
 /// Stream offset of the tiles' seeds.
 const TILE_STREAM: u64 = 1 << 44;
+/// Stream offset from which the online guided iterations' seeds are
+/// derived (apart from the tiles' own).
+const GUIDE_ONLINE_STREAM: u64 = 1 << 46;
+/// Mutations per pixel of the first online guided iteration (Alg. 10's
+/// `samplesPerIt = 32`); each next one is twice as long.
+const GUIDE_ONLINE_FIRST: u64 = 32;
 
 /// The seed of tile `s`'s streams in a run of `seed`.
 fn tile_seed(seed: u64, s: usize) -> u64 {
@@ -948,11 +966,7 @@ impl Smcmc {
         observer: &dyn Observer,
     ) -> Result<Rendered, RenderError> {
         let start = Instant::now();
-        let guiding = GuidedSettings {
-            nee: self.guide_nee,
-            depth: self.depth.clone(),
-            ..GuidedSettings::default()
-        };
+        let guiding = self.guiding();
         // The training is not saved: a resumed run trains the tree again,
         // which gives the same tree only on a sample budget.
         if run.checkpoint.is_some() && self.iterations(run).is_none() {
@@ -990,6 +1004,7 @@ impl Smcmc {
         let shift = GuidedShift {
             tracer: guiding.tracer(),
             tree: &tree,
+            sink: None,
         };
         let mut rendered = self.run(scene, &shift, mutation, &chains_run, stop, observer)?;
         let stat = |key: &str| trained.statistics.get(key).cloned().unwrap_or(Value::Null);
@@ -1012,6 +1027,132 @@ impl Smcmc {
             tree.size().bytes as f64 / 1e6
         );
         Ok(rendered)
+    }
+
+    /// The guided tracer's settings of the guided shift.
+    fn guiding(&self) -> GuidedSettings {
+        GuidedSettings {
+            nee: self.guide_nee,
+            depth: self.depth.clone(),
+            ..GuidedSettings::default()
+        }
+    }
+
+    /// The guided shift trained online (Alg. 10, spec §11.4): iterations of
+    /// doubling length from [`GUIDE_ONLINE_FIRST`] mutations per pixel (on
+    /// the `guided` integrator's schedule, [`next_iteration`]), each a whole
+    /// SMCMC run (its own start-up and seeds) over the current tree whose
+    /// every traced path records into the tree's building half; the tree is
+    /// updated between iterations and the last iteration (which does not
+    /// record) makes the image. Module docs of [`crate::smcmc::guided_shift`]
+    /// say why this is valid.
+    fn render_guided_online(
+        &self,
+        scene: &Scene,
+        mutation: &Mutation,
+        run: &RunSettings,
+        stop: &AtomicBool,
+        observer: &dyn Observer,
+    ) -> Result<Rendered, RenderError> {
+        if run.checkpoint.is_some() {
+            return Err(RenderError::Invalid(
+                "--checkpoint: smcmc's guided shift with guide_training=online is not checkpointed (its training iterations are not saved); use guide_training=pretrained".into(),
+            ));
+        }
+        let cluster = crate::cluster::current().is_some();
+        if cluster && self.init == SmcmcInit::Global {
+            return Err(RenderError::Invalid(
+                "smcmc: guide_training=online with init=global does not run on a cluster (every rank makes the global start-up, so its paths would train the tree once per rank); use init=naive".into(),
+            ));
+        }
+        let start = Instant::now();
+        let deadline = Deadline::new(start, run.time_budget);
+        let guiding = self.guiding();
+        let tracer = guiding.tracer();
+        let mut tree = guiding.untrained_tree(scene);
+        let budget = self.iterations(run);
+        let mut phases: Vec<Value> = Vec::new();
+        let mut previous: Option<Rendered> = None;
+        let mut last_seconds = None;
+        let (mut done, mut nominal) = (0u64, GUIDE_ONLINE_FIRST);
+        for k in 1u32.. {
+            let (mpp, last) = next_iteration(budget, done, nominal, deadline, last_seconds);
+            let (mpp, last) = agreed_iteration(mpp, last);
+            let iteration_start = Instant::now();
+            let sink = (!last).then(RecordSink::new);
+            let shift = GuidedShift {
+                tracer,
+                tree: &tree,
+                sink: sink.as_ref(),
+            };
+            let settings = Smcmc {
+                mutations_per_pixel: mpp,
+                ..self.clone()
+            };
+            let iteration_run = RunSettings {
+                seed: splitmix64(run.seed ^ splitmix64(GUIDE_ONLINE_STREAM + u64::from(k))),
+                time_budget: deadline
+                    .time_left()
+                    .map(|left| left.max(std::time::Duration::from_millis(1))),
+                ..run.clone()
+            };
+            let progress = ProgressOnly(observer);
+            let shown: &dyn Observer = if last { observer } else { &progress };
+            let rendered = settings.run(scene, &shift, mutation, &iteration_run, stop, shown)?;
+            let seconds = iteration_start.elapsed().as_secs_f64();
+            let parts = sink.map(RecordSink::into_parts).unwrap_or_default();
+            // On a cluster this rank's tiles recorded only its share.
+            let parts = if cluster && !last {
+                all_exact_records(parts)
+            } else {
+                parts
+            };
+            let acceptance = &rendered.statistics["acceptance_per_shift"]["guided"];
+            phases.push(json!({
+                "iteration": k,
+                "mutations_per_pixel": rendered.statistics["iterations"],
+                "seconds": seconds,
+                "acceptance_large": acceptance["large"],
+                "acceptance_small": acceptance["small"],
+                "records": parts.iter().map(ExactRecords::len).sum::<u64>(),
+                "tree_memory_bytes": tree.size().bytes,
+            }));
+            let interrupted = rendered.interrupted && !last;
+            if last || interrupted {
+                // A stopped iteration is the result if it holds at least
+                // as many mutations as the one before.
+                let keep = previous
+                    .take()
+                    .filter(|p| !last && p.samples > rendered.samples);
+                let mut rendered = keep.unwrap_or(rendered);
+                rendered.statistics.insert(
+                    "guiding".into(),
+                    json!({
+                        "nee": self.guide_nee,
+                        "training": "online",
+                        "iterations": phases,
+                        "tree_memory_bytes": tree.size().bytes,
+                        "tree": tree.size(),
+                    }),
+                );
+                rendered.seconds = start.elapsed().as_secs_f64();
+                rendered.interrupted |= interrupted;
+                rendered.summary = format!(
+                    "{}; SD-tree trained online in {} iterations ({:.1} MB)",
+                    rendered.summary,
+                    k - 1,
+                    tree.size().bytes as f64 / 1e6
+                );
+                return Ok(rendered);
+            }
+            tree.merge_exact(parts);
+            tree.end_iteration(k, guiding.spatial_threshold, guiding.quadtree_threshold);
+            previous = Some(rendered);
+            last_seconds = Some(seconds);
+            done += mpp.unwrap_or(0);
+            nominal = nominal.saturating_mul(2);
+        }
+        unreachable!("the schedule ends")
     }
 
     fn run<S: TileShift>(

@@ -14,15 +14,21 @@
 //! (`tests/smcmc.rs` checks it bit for bit against `mcmc-pg`'s primary-sample
 //! sampler, and the tile sums against random replay's in mean).
 //!
-//! **Training.** The thesis's Alg. 10 trains the trees from the tile
-//! chains' own proposals between iterations of doubling length. Here the
-//! tree is trained first by guided path tracing (the pre-trained variant
-//! of MCMC-PG, Alg. 8: a share of the budget, `guide_share`) and then
-//! frozen, so each tile keeps one target for the whole run. Alg. 10's
-//! changing target would need the tiles restarted (or their start-up bias
-//! accepted) at every tree update, and its records follow the chains, not
-//! the guided sampler (spec §14.15).
-//!
+//! **Training** (`guide_training`). `pretrained` (the default): the tree
+//! is trained first by guided path tracing (the pre-trained variant of
+//! MCMC-PG, Alg. 8: a share of the budget, `guide_share`) and then
+//! frozen, so each tile keeps one target for the whole run. `online`
+//! (Alg. 10): iterations of doubling length, each of which starts the
+//! tiles anew over the current tree's sampling half while every path the
+//! shift traces records into its building half ([`GuidedShift::sink`]);
+//! the tree is updated between iterations and only the last iteration's
+//! image is kept (`integrators::smcmc`). Each iteration is then an
+//! ordinary SMCMC run with one fixed target: the tree changes only between
+//! iterations, and states are not carried over (the thesis keeps them,
+//! which brings a start-up bias no normalisation removes). The records
+//! follow the chains, not the guided sampler, so bright regions are
+//! over-recorded (spec §14.15): a cost in efficiency, not in correctness.
+
 //! Coordinate layout: as [`super::random_replay`] (one stream; 0 and 1 the
 //! offset, the lens, then 8 numbers per scattering vertex as
 //! `integrators::guided` documents).
@@ -31,24 +37,33 @@ use super::random_replay::ReplayTracer;
 use crate::color::Rgb;
 use crate::geometry::Ray;
 use crate::guiding::SdTree;
-use crate::integrators::guided::GuidedPathTracer;
+use crate::integrators::guided::{GuidedPathTracer, RecordSink};
 use crate::pss::PssSource;
 use crate::scene::Scene;
 
-/// Random replay over the guided path tracer with a frozen tree (its
-/// [`super::TileShift`] is random replay's, [`ReplayTracer`]).
-#[derive(Clone, Copy, Debug)]
+/// Random replay over the guided path tracer with a tree whose sampling
+/// half stays fixed while it is used (its [`super::TileShift`] is random
+/// replay's, [`ReplayTracer`]).
+#[derive(Clone, Copy)]
 pub struct GuidedShift<'t> {
     /// The guided tracer replayed at every pixel.
     pub tracer: GuidedPathTracer,
-    /// Its tree (only the sampling half is read).
+    /// Its tree (the sampling half is read; records go to the building half).
     pub tree: &'t SdTree,
+    /// Online training: every traced path records here.
+    pub sink: Option<&'t RecordSink>,
 }
 
 impl ReplayTracer for GuidedShift<'_> {
     const NAME: &'static str = "guided";
 
     fn li(&self, scene: &Scene, ray: Ray, source: &mut PssSource<'_>) -> Rgb {
-        self.tracer.li(scene, ray, source, self.tree, None)
+        match self.sink {
+            None => self.tracer.li(scene, ray, source, self.tree, None),
+            Some(sink) => sink.record(self.tree, |training| {
+                self.tracer
+                    .li(scene, ray, source, self.tree, Some(training))
+            }),
+        }
     }
 }
