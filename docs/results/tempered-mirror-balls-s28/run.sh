@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # run.sh VARIANT SEED: one tempered-pssmlt render of mirror-balls (session 28 bias split)
 set -e
-M=/work/main; v=$1; s=$2
+M=.; v=$1; s=$2   # from the repo root
 case $v in
   off) SET="--set regularization=off";;
   constant) SET="--set regularization=constant";;
