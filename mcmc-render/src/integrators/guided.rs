@@ -875,17 +875,25 @@ impl RecordSink {
         out
     }
 
-    /// The exact sums of every slot, for [`SdTree::merge_exact`].
+    /// The exact sums of every slot, for [`SdTree::merge_exact`]; on a
+    /// cluster, every rank's (each rank's chains recorded only its share;
+    /// exact sums merge in any order). Collective on a cluster: every rank
+    /// calls it for the same iterations.
     pub fn into_parts(self) -> Vec<ExactRecords> {
-        self.slots
+        let parts: Vec<ExactRecords> = self
+            .slots
             .into_iter()
             .map(|m| m.into_inner().unwrap_or_else(|e| e.into_inner()).exact)
-            .collect()
+            .collect();
+        match crate::cluster::current() {
+            Some(_) => all_exact_records(parts),
+            None => parts,
+        }
     }
 }
 
 /// Every rank's record sums, on every rank (bit-exact). Collective.
-pub fn all_exact_records(parts: Vec<ExactRecords>) -> Vec<ExactRecords> {
+fn all_exact_records(parts: Vec<ExactRecords>) -> Vec<ExactRecords> {
     let mut words = Vec::new();
     parts.iter().for_each(|p| p.to_words(&mut words));
     let all = crate::cluster::all_gather_words(words);

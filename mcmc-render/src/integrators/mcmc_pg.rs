@@ -89,8 +89,7 @@
 //! camera), then 8 per scattering vertex as [`super::guided`] documents.
 
 use super::guided::{
-    GuidedPathTracer, GuidedSettings, RecordSink, agreed_iteration, all_exact_records,
-    next_iteration,
+    GuidedPathTracer, GuidedSettings, RecordSink, agreed_iteration, next_iteration,
 };
 use super::registry::IntegratorSettings;
 use super::{RenderError, Rendered, RunSettings};
@@ -407,13 +406,9 @@ impl McmcPg {
             let seconds = iteration_start.elapsed().as_secs_f64();
             let (small, large) = acceptances(&result);
             let interrupted = result.interrupted && !last;
+            // Every rank's records (the sink exists in the same iterations
+            // on every rank: `agreed_iteration`).
             let parts: Vec<ExactRecords> = sink.map(RecordSink::into_parts).unwrap_or_default();
-            // On a cluster this rank's chains recorded only its share:
-            // every rank merges every rank's (exact sums: any order).
-            let parts = match crate::cluster::current() {
-                Some(_) if !last => all_exact_records(parts),
-                _ => parts,
-            };
             phases.push(PhaseStats {
                 iteration: k,
                 mutations_per_pixel: result.mutations_per_pixel,

@@ -64,9 +64,7 @@ use crate::deadline::Deadline;
 use crate::film::Filter;
 use crate::guiding::ExactRecords;
 use crate::integrators::bdpt::{Bdpt, MisHeuristic};
-use crate::integrators::guided::{
-    GuidedSettings, RecordSink, agreed_iteration, all_exact_records, next_iteration,
-};
+use crate::integrators::guided::{GuidedSettings, RecordSink, agreed_iteration, next_iteration};
 use crate::integrators::mcmc_pg::{ProgressOnly, TrainingMode};
 use crate::integrators::mmlt::MAX_DEPTH as MMLT_MAX_DEPTH;
 use crate::integrators::pt::PathTracer;
@@ -1100,13 +1098,9 @@ impl Smcmc {
             let shown: &dyn Observer = if last { observer } else { &progress };
             let rendered = settings.run(scene, &shift, mutation, &iteration_run, stop, shown)?;
             let seconds = iteration_start.elapsed().as_secs_f64();
+            // Every rank's records (the sink exists in the same iterations
+            // on every rank: `agreed_iteration`).
             let parts = sink.map(RecordSink::into_parts).unwrap_or_default();
-            // On a cluster this rank's tiles recorded only its share.
-            let parts = if cluster && !last {
-                all_exact_records(parts)
-            } else {
-                parts
-            };
             let acceptance = &rendered.statistics["acceptance_per_shift"]["guided"];
             phases.push(json!({
                 "iteration": k,
