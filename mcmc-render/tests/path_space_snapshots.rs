@@ -142,7 +142,8 @@ fn replicate(scene: &Scene, seed: u64, direct: bool) -> Replicate {
     let specular = SpecularChains {
         min_depth: mlt.min_segments() as u32,
         max_depth: 5,
-        through_diffuse: false,
+        // The default since session 29 on this scene (glass: Dirac lobes).
+        through_diffuse: mlt.unconnectable_in(scene),
     };
     let mut pass_images = vec![
         run_per_pixel(

@@ -32,9 +32,11 @@
 //!   ([`crate::path_space::specular_pass`]) and the chains leave them out:
 //!   no bidirectional move keeps a vertex of such a path, so chains
 //!   resampled onto a rare bright one never left it. With
-//!   `unconnectable_pass` it takes every path no connection can make,
+//!   `unconnectable_pass` (the default since session 29, on scenes with
+//!   Dirac lobes) it takes every path no connection can make,
 //!   `L S+ (D S+)* E` too (session 23: their heavy-tailed start-up weights
-//!   made `mlt` read low on the RELT scenes).
+//!   made `mlt` read low on the RELT scenes), and then a fifth of a time
+//!   budget.
 //! - **Snapshots** (previews, `convergence` checkpoints): the passes run
 //!   first and show none; every snapshot of the chains has the passes'
 //!   images added ([`WithPasses`]), so each is a whole estimate.
@@ -92,10 +94,10 @@ crate::settings! {
         pub direct_samples: i64 = -1, check check_pass_samples;
         /// Samples per pixel of the specular-chain pass (path tracing of the paths L S* E, emitters seen directly or through mirrors and glass, which the chains then leave out: no bidirectional move keeps a vertex of them); -1: off, the chains do them (not in Mitsuba).
         pub specular_samples: i64 = 16, check check_pass_samples;
-        /// The specular-chain pass also path traces the other unconnectable paths, `L S+ (D S+)* E` (seen and lit only through mirrors and glass: no edge joins two non-Dirac vertices, so only a camera walk that hits the emitter draws them), and the chains leave them out; needs specular_samples ≥ 0 (docs/path-space.md, Session 23).
-        pub unconnectable_pass: bool = false;
-        /// With a time budget, the specular-chain pass runs for this share of it (at least specular_samples spp), so that its noise falls with the budget like the chains'; 0: specular_samples spp alone (the only rule without a time budget).
-        pub specular_time_share: f64 = 0.05, check time_share;
+        /// The specular-chain pass (when it runs) also path traces the other unconnectable paths, `L S+ (D S+)* E` (seen and lit only through mirrors and glass: no edge joins two non-Dirac vertices, so only a camera walk that hits the emitter draws them), and the chains leave them out. On by default since session 29 (docs/path-space.md, Sessions 23, 28 and 29); a scene without Dirac lobes has no such paths and renders as with false.
+        pub unconnectable_pass: bool = true;
+        /// With a time budget, the specular-chain pass runs for this share of it (at least specular_samples spp), so that its noise falls with the budget like the chains'; 0: specular_samples spp alone (the only rule without a time budget); -1 (default): 0.2 when the pass takes the unconnectable paths of a scene with Dirac lobes, else 0.05.
+        pub specular_time_share: f64 = -1.0, check time_share;
         /// Smallest film offset of the lens perturbation (pixels; -1 with lens_perturbation_max = -1: Mitsuba's 0.1).
         pub lens_perturbation_min: f64 = -1.0;
         /// Largest film offset of the lens perturbation (pixels; -1: Mitsuba's √(0.05 · pixels / π)).
@@ -179,6 +181,34 @@ impl Mlt {
         pass_samples(self.direct_samples)
     }
 
+    /// Whether the specular-chain pass takes the unconnectable paths
+    /// `L S+ (D S+)* E` of `scene` (and the chains leave them out): with
+    /// `unconnectable_pass`, when the pass runs and the scene has Dirac
+    /// lobes. Without Dirac lobes the class is the emitters seen directly,
+    /// which the plain pass takes, so its walks through diffuse vertices
+    /// would only cost time.
+    pub fn unconnectable_in(&self, scene: &Scene) -> bool {
+        self.unconnectable_pass && self.specular_pass().is_some() && scene.has_dirac_lobes()
+    }
+
+    /// The specular-chain pass's share of a time budget on `scene`:
+    /// `specular_time_share`, or with -1, 0.2 when the pass takes the
+    /// unconnectable paths ([`Mlt::unconnectable_in`]) and 0.05 otherwise.
+    /// Why 0.2: the pass's noise in the class falls only with its own
+    /// time, which must grow with the class's share of the light. At 60 s
+    /// on the RELT scenes 0.2 beat 0.05 by 3.7× and 3.2× (at 0.05 the
+    /// water box was 1.8× worse than with no such pass); see
+    /// docs/path-space.md, Sessions 28 and 29, for the other scenes.
+    /// Without those paths the pass renders only the emitters seen
+    /// through Dirac chains, for which 0.05 was chosen (session 12).
+    pub fn specular_share_in(&self, scene: &Scene) -> f64 {
+        match self.specular_time_share {
+            s if s >= 0.0 => s,
+            _ if self.unconnectable_in(scene) => 0.2,
+            _ => 0.05,
+        }
+    }
+
     /// Samples per pixel of the specular-chain pass, if it runs.
     pub fn specular_pass(&self) -> Option<u32> {
         pass_samples(self.specular_samples)
@@ -190,12 +220,12 @@ impl Mlt {
     }
 }
 
-/// `specular_time_share`: in `[0, 1)`.
+/// `specular_time_share`: in `[0, 1)`, or -1 (the scene decides).
 fn time_share(v: &f64) -> Result<(), String> {
-    if (0.0..1.0).contains(v) {
+    if (0.0..1.0).contains(v) || *v == -1.0 {
         Ok(())
     } else {
-        Err("must be in [0, 1)".into())
+        Err("must be in [0, 1), or -1 (0.2 with unconnectable paths, else 0.05)".into())
     }
 }
 
@@ -208,11 +238,6 @@ impl IntegratorSettings for Mlt {
             return Err("mlt needs max_depth ≥ 1 or -1 (unbounded)".into());
         }
         check_direct_depth(Self::NAME, self.direct_samples, self.depth.max_depth)?;
-        if self.unconnectable_pass && self.specular_pass().is_none() {
-            return Err(
-                "unconnectable_pass needs the specular-chain pass (specular_samples ≥ 0)".into(),
-            );
-        }
         self.sizes()?;
         self.mutations().check()
     }
@@ -255,7 +280,7 @@ impl IntegratorSettings for Mlt {
             let pass = SpecularChains {
                 min_depth: self.min_segments() as u32,
                 max_depth: self.max_segments().map_or(u32::MAX, |m| m as u32),
-                through_diffuse: self.unconnectable_pass,
+                through_diffuse: self.unconnectable_in(scene),
             };
             specular_chains_pass(
                 scene,
@@ -265,7 +290,7 @@ impl IntegratorSettings for Mlt {
                 if checkpointed {
                     0.0
                 } else {
-                    self.specular_time_share
+                    self.specular_share_in(scene)
                 },
                 stop,
                 &quiet,
@@ -313,6 +338,11 @@ impl IntegratorSettings for Mlt {
                 spp,
                 start,
             );
+            // What the defaults resolved to on this scene.
+            if let Some(stats) = out.statistics.get_mut("specular_pass") {
+                stats["unconnectable"] = self.unconnectable_in(scene).into();
+                stats["time_share"] = self.specular_share_in(scene).into();
+            }
         }
         if let Some((spp, pass)) = direct {
             add_pass(&mut out, &pass, "direct_pass", "direct pass", spp, start);
@@ -380,7 +410,7 @@ pub fn render_mlt(
         .timed(clock.clone());
     if settings.specular_pass().is_some() {
         family = family.without_specular_chains();
-        if settings.unconnectable_pass {
+        if settings.unconnectable_in(scene) {
             family = family.without_unconnectable();
         }
     }

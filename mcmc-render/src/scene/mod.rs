@@ -509,6 +509,14 @@ impl Scene {
         self.bsdf_at_in(&self.bsdfs, sp)
     }
 
+    /// True when some surface can scatter through a Dirac lobe: a smooth
+    /// conductor or dielectric, a smooth `plastic`'s coating, or a `mask`'s
+    /// pass-through. Without one, every path of two or more segments has an
+    /// edge between two non-Dirac vertices, so a connection can make it.
+    pub fn has_dirac_lobes(&self) -> bool {
+        self.has_masks || self.bsdfs.iter().any(Bsdf::has_delta_lobe)
+    }
+
     /// The index into [`Scene::bsdfs`] of the BSDF at a surface point.
     #[inline(always)]
     pub fn bsdf_index(&self, sp: &SurfacePoint) -> usize {
