@@ -58,11 +58,13 @@ fn mlt_agrees_with_pt_over_the_glass_sphere_at_depth_8() {
     // projects to x 33–48, y 42–57).
     let mask = rect_mask(RES, 32..50, 40..59);
     let pt = pt_box_reps(&scene, &mask, K, 256, 500);
-    // `mlt` as the CLI runs it (default bootstrap of 100 000 candidates and
-    // 1000 chains), 16 mutations per pixel, with the specular-chain pass
+    // `mlt` as the CLI runs it (1000 chains), with the bootstrap of
+    // 100 000 candidates this test was sized with (the default before
+    // session 29), 16 mutations per pixel, with the specular-chain pass
     // at `specular_samples` spp (−1: off).
     let mlt = |specular_samples: i64| {
         mlt_box_reps(&scene, &mask, K, |m| {
+            m.chain.bootstrap = 100_000;
             m.depth.max_depth = 8;
             m.specular_samples = specular_samples;
             m.chain.mutations_per_pixel = Some(16);

@@ -65,6 +65,8 @@ fn mlt_with_the_unconnectable_pass_agrees_with_pt_under_the_glass_cube() {
     let mlt = |unconnectable_pass: bool| {
         mlt_box_reps(&scene, &mask, K, |m| {
             m.depth.max_depth = 8;
+            // The start-up it was sized with (the default before session 29).
+            m.chain.bootstrap = 100_000;
             m.specular_samples = 1024;
             m.unconnectable_pass = unconnectable_pass;
             m.chain.mutations_per_pixel = Some(1024);
@@ -79,8 +81,9 @@ fn mlt_with_the_unconnectable_pass_agrees_with_pt_under_the_glass_cube() {
     );
 }
 
-/// `mlt` configured as the command line does, with `sets`, rendered once
-/// at `seed` (and a time budget of `seconds`, if given).
+/// `mlt` configured as the command line does (the scene's `<integrator>`
+/// element, e.g. its `max_depth`, then `sets`), rendered once at `seed`
+/// (and a time budget of `seconds`, if given).
 fn mlt_cli(
     scene: &Scene,
     sets: &[(&str, &str)],
@@ -91,7 +94,8 @@ fn mlt_cli(
         .iter()
         .map(|(a, b)| (a.to_string(), b.to_string()))
         .collect();
-    let integ = registry::configure(None, Some("mlt"), &sets).expect("mlt configures");
+    let integ = registry::configure(scene.integrator_element.as_ref(), Some("mlt"), &sets)
+        .expect("mlt configures");
     let run = RunSettings {
         seed,
         time_budget: seconds.map(std::time::Duration::from_secs_f64),

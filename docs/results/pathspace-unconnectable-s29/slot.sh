@@ -9,7 +9,8 @@ case $S in
   cornell-glossy-glass) SPP=2048;;
   interior-window) SPP=2048;;
   mirror-balls|ring|caustic-sds) SPP=8192;;
-  smallvcm-box|cornell-plastic|cornell-thindielectric|door-ajar-real) SPP=4096;;
+  smallvcm-box|cornell-plastic|cornell-thindielectric|door-ajar-real|door-ajar) SPP=4096;;
+  cornell-box) SPP=1024;;
   *) echo "unknown scene $S"; exit 2;;
 esac
 read W H < <(python3 -c "import json;d=json.load(open('$M/scenes/reference/$S.json'));print(d['width'],d['height'])")
@@ -19,5 +20,5 @@ echo "$S $I start $(date -u +%T) $(uptime)" >> slot.log
 flock /work/measure.lock /usr/bin/time -f "%U user %S sys %e wall" -a -o slot.log nice -n -15 $MR convergence $M/scenes/$S.xml -D width=$W -D height=$H \
   --reference $M/scenes/reference/$S.exr "${VAR[@]}" \
   --integrators "$I" --time 60 --checkpoints 4 --threads 2 --seed $SEED \
-  --images img$SUF-$S --out pathspace-$S-s29$SUF.csv
+  --images ${TAG:-img}$SUF-$S --out ${TAG:-pathspace}-$S-s29$SUF.csv
 echo "$S end $(date -u +%T) $(uptime)" >> slot.log

@@ -15,7 +15,7 @@
 //! (`mlt`'s defaults since session 20; `mept`'s mixture, its agreement
 //! tests and its caustic-sds figures are the ones without them) and the
 //! BDPT start-up (`bdpt_startup` = true, `bootstrap` = 200 000 draws)
-//! instead of 100 000 one-technique candidates. `--integrator mlt --set
+//! instead of `mlt`'s 2 000 000 one-technique candidates. `--integrator mlt --set
 //! manifold_perturbation=1 --set independent_mutation=0.3 --set
 //! lens_perturbation=0 --set caustic_perturbation=0 --set
 //! multi_chain_perturbation=0 --set bdpt_startup=true --set bootstrap=200000

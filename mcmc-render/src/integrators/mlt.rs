@@ -12,7 +12,7 @@
 //!   `suitability` (Mitsuba's renormalisation over the mutations a path
 //!   admits) is set.
 //! - **Start-up and normalisation**: `bootstrap` candidates (Mitsuba's
-//!   `luminanceSamples`, 100 000), each one sample of a BDPT technique with
+//!   `luminanceSamples`; 2 000 000 here, 100 000 in Mitsuba), each one sample of a BDPT technique with
 //!   its one-sample-MIS weight ([`crate::path_space::family`]), give `b`
 //!   and the chains' start states. Veach's mutations are all local, so by
 //!   default the running normalisation equals the bootstrap's (its
@@ -119,8 +119,11 @@ crate::settings! {
         flatten {
             /// Path depth (rr_depth applies to the direct pass only: path-space walks have exact lengths).
             pub depth: DepthParams = DepthParams::default();
-            /// The driver (bootstrap = Mitsuba's luminanceSamples).
-            pub chain: ChainParams = ChainParams::default();
+            /// The driver (bootstrap = Mitsuba's luminanceSamples, 100 000 there; 2 000 000 here since session 29: `b`'s standard error was 5–22% on the interiors from 100 000, and 20× the candidates, about a second, cut interior-window's error at 60 s 5–7×; docs/path-space.md, Session 29).
+            pub chain: ChainParams = ChainParams {
+                bootstrap: 2_000_000,
+                ..ChainParams::default()
+            };
         }
     }
 }
