@@ -147,11 +147,7 @@ fn the_unconnectable_pass_is_the_default_where_the_scene_has_dirac_lobes() {
     // Without Dirac lobes the default is the old `mlt` to the bit.
     let bits = |sets: &[(&str, &str)]| -> Vec<u32> {
         let sets: Vec<(&str, &str)> = SMALL.iter().chain(sets).copied().collect();
-        let out = mlt_cli(&cornell, &sets, 5, None);
-        out.image
-            .iter()
-            .flat_map(|p| [p.r.to_bits(), p.g.to_bits(), p.b.to_bits()])
-            .collect()
+        common::registry_image_bits("mlt", &sets, &cornell, 5)
     };
     let default = bits(&[]);
     assert!(default == bits(&[("unconnectable_pass", "false")]));

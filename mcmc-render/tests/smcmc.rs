@@ -1399,8 +1399,8 @@ fn smcmc_with_the_guided_shift_agrees_with_pt_on_the_glossy_glass_box() {
 /// `the_mmlt_shifts_match_a_direct_sample_on_the_glossy_glass_box` at
 /// `SMCMC_STATE_SCALE=16` gives uMMLT z +1.7 on blue (σ 0.47%), which
 /// excludes −1% at 3.9σ; so the chains or the tile estimator, or a heavy
-/// tail that 400 replicates under-sample (docs/smcmc.md, Session 29). cMMLT's spread was 25–27%
-/// per replicate (16 replicates: 14 within −8% … +3% of PT's mean, two at
+/// tail that 400 replicates under-sample (docs/smcmc.md, Session 29).
+/// cMMLT's spread was 25–27% per replicate (16 replicates: 14 within −8% … +3% of PT's mean, two at
 /// +40% and +93%): the technique pmf ∝ (s+1)³ gives the caustic's only
 /// technique (s = 0) probability 1/100 at L = 4, so a replicate either
 /// misses it (dark) or finds it with weight 100. At that spread 1% needs

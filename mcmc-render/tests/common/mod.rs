@@ -141,7 +141,6 @@ pub fn render_image(scene: &Scene, integ: &dyn Integrator, spp: u32, seed: u64) 
     r.image()
 }
 
-/// Per-channel image mean.
 /// The bits of the image integrator `name` of the registry renders of
 /// `scene` with the settings `sets` and seed `seed` (for bit-identity
 /// tests).
@@ -170,6 +169,7 @@ pub fn registry_image_bits(
         .collect()
 }
 
+/// Per-channel image mean.
 pub fn image_mean(img: &[Rgb]) -> [f64; 3] {
     masked_mean(img, None)
 }
