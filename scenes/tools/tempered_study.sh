@@ -1,5 +1,5 @@
 #!/bin/sh
-# Issue #15's equal-time study: on the Ring and Mirror-balls scenes (in the
+# Issue #15's equal-time study: on the Ring, Mirror-balls and Glass-knot scenes (in the
 # spirit of the thesis's, seed 000 §5.5), tempered replica exchange
 # (PSSMLT and MMLT variants, and tempered-PSSMLT with a decaying
 # regularisation in stages) against PSSMLT over BDPT, MMLT, MEPT and PT,
@@ -24,7 +24,7 @@ TAG=$([ "$SEED" = 7 ] || echo "-s$SEED")
 LOG="$OUT/tempered-study.log"
 mkdir -p "$OUT"
 LIST=${LIST:-pt,pssmlt-bdpt,mmlt,mept,tempered-pssmlt,tempered-mmlt,tempered-pssmlt+regularization=power+rho0=0.02+gamma=0.5+regularization_stages=5}
-for s in ${SCENES:-ring mirror-balls}; do
+for s in ${SCENES:-ring mirror-balls glass-knot}; do
   echo "$s seed $SEED $SECS s [$LIST] start $(date -u +%T) load: $(uptime | sed 's/.*load average: //')" >> "$LOG"
   nice -n 5 "$BIN" convergence "scenes/$s.xml" --reference "scenes/reference/$s.exr" \
     --integrators "$LIST" --time "$SECS" --checkpoints 8 --seed "$SEED" \
