@@ -18,3 +18,7 @@ for SEED in 1 2; do
     --out docs/results/tempered-glass-knot-s30/glass-knot-s30-seed$SEED.csv --images docs/results/tempered-glass-knot-s30/img-s$SEED > docs/results/tempered-glass-knot-s30/log-s$SEED.txt 2>&1
   echo "seed $SEED end $(date -u +%T) load: $(cat /proc/loadavg)" >> docs/results/tempered-glass-knot-s30/load.txt
 done
+# Seed 3 (run afterwards, the three integrators of the goal only):
+#   flock /work/measure.lock nice -n -15 "$BIN" convergence scenes/glass-knot.xml [the flags above] \
+#     --integrators tempered-pssmlt,pssmlt-bdpt,mept --seed 3 \
+#     --out docs/results/tempered-glass-knot-s30/glass-knot-s30-seed3.csv --images docs/results/tempered-glass-knot-s30/img-s3
