@@ -62,22 +62,32 @@ pub struct RoughPlastic {
     /// R_int: mean internal reflectance of the coating.
     internal_reflectance: f32,
     /// T(μ_i), μ_i = i / 63: shared by every material with the same
-    /// distribution, roughness and index (see [`transmittance_table`]), so
+    /// distribution, roughness and index (see [`coating_tables`]), so
     /// that the model stays a small `Copy` value (`Bsdf` is made per hit
     /// for textured materials).
     external_transmittance: &'static [f32; TRANSMITTANCE_RES],
 }
 
-/// The transmittance table of a coating, computed once per distinct
-/// (distribution, roughness, index) and kept for the process's life: the
-/// tables are few (one per rough-plastic material in a scene) and 256
-/// bytes each, and a `'static` reference keeps [`RoughPlastic`] `Copy`.
-fn transmittance_table(distribution: &Microfacet, eta: f32) -> &'static [f32; TRANSMITTANCE_RES] {
+/// What a coating's tables hold: T(μ_i) and R_int.
+struct CoatingTables {
+    transmittance: [f32; TRANSMITTANCE_RES],
+    internal_reflectance: f32,
+}
+
+/// The tables of a coating, computed once per distinct (distribution,
+/// roughness, index) and kept for the process's life: the tables are few
+/// (one per rough-plastic material in a scene, and one per level of a
+/// tempered ladder) and 260 bytes each, and a `'static` reference keeps
+/// [`RoughPlastic`] `Copy`. They cost ≈ 1.1 million sampler calls (0.3 s
+/// on one core), so the rows are computed in parallel; each row depends
+/// on its μ alone and R_int is summed in order, so the values do not
+/// depend on the thread count.
+fn coating_tables(distribution: &Microfacet, eta: f32) -> &'static CoatingTables {
+    use rayon::prelude::*;
     use std::collections::HashMap;
     use std::sync::{Mutex, OnceLock};
     type Key = (bool, u32, u32, u32);
-    static TABLES: OnceLock<Mutex<HashMap<Key, &'static [f32; TRANSMITTANCE_RES]>>> =
-        OnceLock::new();
+    static TABLES: OnceLock<Mutex<HashMap<Key, &'static CoatingTables>>> = OnceLock::new();
     let (au, av) = distribution.alpha();
     let key = (
         distribution.kind() == MicrofacetKind::Beckmann,
@@ -89,14 +99,27 @@ fn transmittance_table(distribution: &Microfacet, eta: f32) -> &'static [f32; TR
     if let Some(t) = tables.lock().unwrap_or_else(|e| e.into_inner()).get(&key) {
         return t;
     }
-    // Computed outside the lock (about a million sampler calls).
+    // Computed outside the lock.
     let mu = |i: usize| (i as f32 / (TRANSMITTANCE_RES - 1) as f32).max(1e-6);
-    let table: [f32; TRANSMITTANCE_RES] =
-        std::array::from_fn(|i| coating_transmittance(distribution, mu(i), eta));
+    let rows: Vec<(f32, f64)> = (0..TRANSMITTANCE_RES)
+        .into_par_iter()
+        .map(|i| {
+            (
+                coating_transmittance(distribution, mu(i), eta),
+                coating_reflectance(distribution, mu(i), 1.0 / eta) as f64 * mu(i) as f64,
+            )
+        })
+        .collect();
+    let internal_reflectance =
+        2.0 * rows.iter().map(|r| r.1).sum::<f64>() / TRANSMITTANCE_RES as f64;
+    let computed = CoatingTables {
+        transmittance: std::array::from_fn(|i| rows[i].0),
+        internal_reflectance: internal_reflectance as f32,
+    };
     let mut guard = tables.lock().unwrap_or_else(|e| e.into_inner());
     guard
         .entry(key)
-        .or_insert_with(|| Box::leak(Box::new(table)))
+        .or_insert_with(|| Box::leak(Box::new(computed)))
 }
 
 impl RoughPlastic {
@@ -108,7 +131,8 @@ impl RoughPlastic {
 
     /// A rough plastic of roughness `alpha` (isotropic; clamped like every
     /// microfacet roughness), relative index `eta` (int/ext, positive, not 1).
-    /// Precomputes the transmittance tables (about 1.1M sampler calls).
+    /// Precomputes the coating's tables (about 1.1M sampler calls, once
+    /// per distinct coating: [`coating_tables`]).
     pub fn new(
         kind: MicrofacetKind,
         alpha: f32,
@@ -123,13 +147,7 @@ impl RoughPlastic {
             channel_mean(diffuse_reflectance),
             channel_mean(specular_reflectance),
         );
-        let mu = |i: usize| (i as f32 / (TRANSMITTANCE_RES - 1) as f32).max(1e-6);
-        let external_transmittance = transmittance_table(&distribution, eta);
-        let internal_reflectance = 2.0
-            * (0..TRANSMITTANCE_RES)
-                .map(|i| coating_reflectance(&distribution, mu(i), 1.0 / eta) as f64 * mu(i) as f64)
-                .sum::<f64>()
-            / TRANSMITTANCE_RES as f64;
+        let tables = coating_tables(&distribution, eta);
         RoughPlastic {
             distribution,
             sample_visible,
@@ -139,8 +157,8 @@ impl RoughPlastic {
             nonlinear,
             // An all-black material (d = s = 0) would give 0/0.
             specular_sampling_weight: if d + s > 0.0 { s / (d + s) } else { 0.5 },
-            internal_reflectance: internal_reflectance as f32,
-            external_transmittance,
+            internal_reflectance: tables.internal_reflectance,
+            external_transmittance: &tables.transmittance,
         }
     }
 
