@@ -253,6 +253,50 @@ fn ctrl_c_stops_pssmlt_and_writes_a_normalised_partial_render() {
     );
 }
 
+/// Ctrl-C during the Markov driver's start-up (a bootstrap of 20 million
+/// candidates, ≈ 20 s on two cores) ends it at the end of the round in
+/// flight; the chains then stop at once and the run writes its outputs.
+#[test]
+fn ctrl_c_ends_the_start_up_of_a_markov_render() {
+    let dir = scratch("sigint-start-up");
+    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/cornell-box.xml");
+    std::fs::copy(scene, dir.join("s.xml")).expect("the Cornell box copies");
+    let candidates = 20_000_000u64;
+    let (status, stderr) = interrupt(
+        &[
+            "render",
+            "s.xml",
+            "-D",
+            "width=32",
+            "-D",
+            "height=24",
+            "--integrator",
+            "pssmlt",
+            "--bootstrap",
+            &candidates.to_string(),
+            "--threads",
+            "2",
+            "--out",
+            "i.exr",
+            "--quiet",
+        ],
+        &dir,
+        Duration::from_millis(2500),
+    );
+    assert_partial_outputs(&dir, status, &stderr);
+    let j = json(&dir.join("i.json"));
+    let drawn = j["bootstrap_candidates"]
+        .as_u64()
+        .expect("bootstrap_candidates");
+    // Rounds of 4096 (`STARTUP_ROUND` in `markov/startup.rs`).
+    assert!(
+        drawn < candidates && drawn.is_multiple_of(4096),
+        "{drawn} of {candidates}"
+    );
+    let (_, _, img) = exr(&dir.join("i.exr"));
+    assert!(img.iter().all(|p| p.is_finite()));
+}
+
 #[test]
 fn ctrl_c_ends_a_convergence_study_with_what_it_has() {
     let dir = scratch("sigint-convergence");
@@ -301,10 +345,11 @@ fn a_second_ctrl_c_exits_at_once_without_writing() {
     let dir = scratch("sigint-twice");
     let cornell = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/scenes/cornell-box.xml");
     // A bootstrap of 4 M Cornell-box paths takes seconds (≈ 2.6 µs of CPU
-    // per candidate measured here; still > 1 s on 2 idle fast cores) and
-    // does not poll the stop flag: the first Ctrl-C (after 0.5 s, once the
-    // handler is installed) only marks the stop, the second must end the
-    // process during the bootstrap.
+    // per candidate measured here; still > 1 s on 2 idle fast cores) and,
+    // in a checkpointed run (whose resume must redo the same start-up), is
+    // not cut by Ctrl-C: the first Ctrl-C (after 0.5 s, once the handler
+    // is installed) only marks the stop, the second must end the process
+    // during the bootstrap.
     let start = std::time::Instant::now();
     let (status, stderr) = interrupt_at(
         &[
@@ -316,6 +361,8 @@ fn a_second_ctrl_c_exits_at_once_without_writing() {
             "pssmlt",
             "--bootstrap",
             "4000000",
+            "--checkpoint",
+            "i.ckpt",
             "--threads",
             "2",
             "--out",

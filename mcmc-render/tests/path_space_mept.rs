@@ -22,7 +22,7 @@ use mcmc_core::runner::with_threads;
 use mcmc_render::integrators::RunSettings;
 use mcmc_render::integrators::mept::Mept;
 use mcmc_render::integrators::registry;
-use mcmc_render::markov::{ChainSettings, Normalization};
+use mcmc_render::markov::{ChainSettings, Normalization, StartupCut};
 use mcmc_render::observer::NoObserver;
 use mcmc_render::path_space::{PathFamily, PathMutations};
 use mcmc_render::scene::Scene;
@@ -321,7 +321,7 @@ fn the_bdpt_startup_estimates_the_bootstraps_b() {
     let draws = 60_000u64;
     let family = PathFamily::new(scene, Some(max)).with_bdpt_startup(draws);
     assert!(family.has_bdpt_startup());
-    let search = family.search(0, 5).expect("a search");
+    let search = family.search(0, 5, &StartupCut::NEVER).expect("a search");
     assert!(search.replaces_bootstrap);
     assert_eq!(search.draws, draws);
     // The search's b: mean and standard error over all draws (zeros too).

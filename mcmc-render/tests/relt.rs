@@ -14,7 +14,7 @@ use mcmc_render::integrators::bdpt::{Bdpt, MisHeuristic};
 use mcmc_render::integrators::registry::IntegratorSettings;
 use mcmc_render::integrators::relt::{Relt, ReltExchange, ReltFamily, ReltMisClasses};
 use mcmc_render::integrators::{Rendered, RunSettings};
-use mcmc_render::markov::ChainFamily;
+use mcmc_render::markov::{ChainFamily, StartupCut};
 use mcmc_render::observer::NoObserver;
 use mcmc_render::path_classes::{ClassScalar, ClassifiedBdpt, PathClass, class_values};
 use mcmc_render::pss::{PATH_CLASSES, PathSample, PssPathSampler, PssSource, Splat};
@@ -569,7 +569,7 @@ fn the_l0_search_estimates_b4_without_bias() {
     let fam = family(&scene, &settings);
     let specific = 3;
     let search = fam
-        .search(specific, 5)
+        .search(specific, 5, &StartupCut::NEVER)
         .expect("the specific replica searches");
     assert_eq!(search.draws, 100_000);
     let stride = 10.0;
@@ -655,7 +655,7 @@ fn the_l0_search_starts_the_specific_replica_on_l0_paths() {
     let fam = family(&scene, &settings);
     let specific = 3;
     let search = fam
-        .search(specific, 7)
+        .search(specific, 7, &StartupCut::NEVER)
         .expect("the specific replica searches");
     let l0_of = |x: &TorusPoint| {
         let e = fam.target(specific).evaluate(x);

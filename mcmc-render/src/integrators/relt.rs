@@ -31,11 +31,10 @@
 
 use super::registry::IntegratorSettings;
 use super::{DepthParams, RenderError, Rendered, RunSettings};
-use crate::deadline::Deadline;
 use crate::integrators::bdpt::{Bdpt, MisHeuristic};
 use crate::markov::{
     self, Annealing, ChainFamily, ChainParams, ContinuedSearch, MltError, MltResult, Normalization,
-    Search,
+    Search, StartupCut,
 };
 use crate::observer::Observer;
 use crate::path_classes::{ClassScalar, ClassifiedBdpt, class_values};
@@ -52,7 +51,6 @@ use mcmc_core::target::{Evaluation, Target};
 use rayon::prelude::*;
 use serde_json::json;
 use std::sync::atomic::AtomicBool;
-use std::time::Instant;
 
 crate::choice! {
     /// The exchange move between replicas.
@@ -267,8 +265,6 @@ pub struct ReltFamily<'a> {
     l0_search: u64,
     /// Search draws per chain mutation made while the chains run.
     l0_search_rate: f64,
-    /// The run's deadline, at which the search stops.
-    deadline: Deadline,
 }
 
 /// First start-up candidate index of the specific replica's search (the
@@ -279,7 +275,7 @@ const SEARCH_OFFSET: u64 = 1 << 39;
 /// (every `stride`-th): they estimate the `δ·L5` part of `b_4`.
 const SEARCH_FULL_DRAWS: u64 = 10_000;
 
-/// Draws of the search between two looks at the deadline (in parallel
+/// Draws of the search between two looks at the start-up's cut (in parallel
 /// within a block; the blocks in order, so the draws kept are a prefix).
 const SEARCH_BLOCK: u64 = 1 << 14;
 
@@ -323,15 +319,7 @@ impl<'a> ReltFamily<'a> {
                 Normalization::Running | Normalization::Filmed => settings.l0_search_rate,
                 _ => 0.0,
             },
-            deadline: Deadline::NEVER,
         }
-    }
-
-    /// The family whose start-up search stops at `deadline` (the run's
-    /// time budget; the annealing's sweeps stop at it in the driver).
-    pub fn until(mut self, deadline: Deadline) -> Self {
-        self.deadline = deadline;
-        self
     }
 
     /// The specific replica's search for `L0` paths: `l0_search` uniform
@@ -345,14 +333,14 @@ impl<'a> ReltFamily<'a> {
     /// all draws is an unbiased estimate of `b_4 = ∫ q_4`, and the
     /// weighted draws are an importance sample of `q_4` to start from.
     ///
-    /// At the deadline (on a cluster: any rank's) the search stops after
+    /// At the start-up's `cut` (the run's deadline or Ctrl-C; on a
+    /// cluster: any rank's) the search stops after
     /// its current block of [`SEARCH_BLOCK`] draws; `draws` is then the
     /// number made. A cut that ends inside a stride of `m < stride` draws
     /// gives that stride's subsampled draw the weight `m · q_4` in place of
     /// `stride · q_4`, so the mean over the draws made stays unbiased.
-    /// Without a deadline the draws and weights are exactly those of the
-    /// whole search.
-    fn search_specific(&self, member: usize, seed: u64) -> Search {
+    /// Uncut, the draws and weights are exactly those of the whole search.
+    fn search_specific(&self, member: usize, seed: u64, cut: &StartupCut) -> Search {
         let stride = self.search_stride();
         let planned = self.l0_search.div_ceil(stride) * stride;
         let draw = |j: u64| {
@@ -363,15 +351,14 @@ impl<'a> ReltFamily<'a> {
         let mut kept: Vec<(u64, f64, bool)> = Vec::new();
         let mut draws = 0;
         // Every rank of a cluster searches: they agree before each block
-        // whether any has passed the deadline (collective), so all keep
-        // the same draws.
-        while draws < planned && !crate::cluster::any_rank(self.deadline.passed()) {
+        // whether the cut is due (collective), so all keep the same draws.
+        while draws < planned && !cut.due() {
             let end = (draws + SEARCH_BLOCK).min(planned);
             kept.par_extend((draws..end).into_par_iter().filter_map(draw));
             draws = end;
         }
         // The last stride's length among the draws made (`stride` unless
-        // the deadline cut it).
+        // the cut ended it).
         let last = draws - (draws.max(1) - 1) / stride * stride;
         let weighted = kept
             .into_iter()
@@ -490,9 +477,9 @@ impl<'a> ChainFamily for ReltFamily<'a> {
     fn annealing(&self) -> Option<Annealing> {
         self.annealing
     }
-    fn search(&self, member: usize, seed: u64) -> Option<Search> {
+    fn search(&self, member: usize, seed: u64, cut: &StartupCut) -> Option<Search> {
         (Some(member) == self.specific && self.l0_search > 0)
-            .then(|| self.search_specific(member, seed))
+            .then(|| self.search_specific(member, seed, cut))
     }
     fn continued_search(&self, member: usize) -> Option<ContinuedSearch> {
         (Some(member) == self.specific && self.l0_search > 0 && self.l0_search_rate > 0.0).then(
@@ -621,18 +608,13 @@ impl IntegratorSettings for Relt {
             heuristic: MisHeuristic::Power,
         };
         let settings = self.chain.chain_settings((), run);
-        // The start-up's search stops at the budget (not with a checkpoint:
-        // `markov::startup_deadline`); the driver's own
-        // deadline (from its start, a moment later) stops the annealing
-        // and the chains.
-        let deadline = markov::startup_deadline(
-            Deadline::new(Instant::now(), run.time_budget),
-            run.checkpoint.is_some(),
-        );
+        // The driver stops the start-up's search at the budget (not with a
+        // checkpoint: `markov::StartupCut`), then the annealing and the
+        // chains.
         let mut replicas = self.replicas();
         let mut dropped = Vec::new();
         let result = loop {
-            let family = ReltFamily::new(scene, bdpt, &replicas, self).until(deadline);
+            let family = ReltFamily::new(scene, bdpt, &replicas, self);
             match markov::run(scene, &family, &settings, stop, observer) {
                 // A replica no bootstrap path reached cannot start: drop
                 // it (spec seed002 §5) and run the others.

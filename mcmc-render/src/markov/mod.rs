@@ -79,9 +79,11 @@ use mcmc_core::startup::{Bootstrap, RunningNormalization};
 use mcmc_core::stats::ChainStatistics;
 use mcmc_core::target::Target;
 use serde::Serialize;
+pub(crate) use startup::STARTUP_ROUND;
+pub use startup::StartupCut;
 use startup::{
     RESAMPLE_STREAM, allocate_chains, candidate_log_weights, index_bootstrap,
-    shared_candidate_log_weights,
+    shared_candidate_log_weights, shares_evaluation,
 };
 use std::ops::Range;
 use std::sync::Arc;
@@ -353,7 +355,11 @@ pub trait ChainFamily: Sync {
     /// replace them: [`Search::replaces_bootstrap`]); the black-scene check
     /// and the reported `bootstrap_b` include them. `None` (the default):
     /// no search.
-    fn search(&self, _member: usize, _seed: u64) -> Option<Search> {
+    ///
+    /// A search that can be long stops at the start-up's `cut` (its
+    /// [`StartupCut::due`] is collective: every rank asks it alike) once
+    /// a draw carries weight, and reports the draws it made.
+    fn search(&self, _member: usize, _seed: u64, _cut: &StartupCut) -> Option<Search> {
         None
     }
     /// A member's search continued while the chains run, if any: after
@@ -696,6 +702,9 @@ pub struct MltResult {
     pub per_depth: Vec<DepthAcceptance>,
     /// Bootstrap candidates with a NaN/inf contribution.
     pub bootstrap_invalid: usize,
+    /// Bootstrap candidates drawn per member: the setting, or fewer when
+    /// the time budget or Ctrl-C cut the start-up.
+    pub bootstrap_candidates: usize,
     /// The coordinates of the first NaN/inf proposal, if any.
     pub first_nonfinite: Option<Vec<f64>>,
     /// Seconds spent in the bootstrap.
@@ -750,65 +759,88 @@ struct Startup {
     boots: Vec<Bootstrap<usize, ()>>,
     running: Vec<RunningNormalization>,
     invalid: usize,
+    /// Candidates drawn per member (the setting unless cut).
+    drawn: usize,
 }
 
-/// Bootstraps every member with `count` candidates each; candidate `j`
-/// belongs to member `j / count`. A family whose members share one
+/// Bootstraps every member with `count` candidates each (member `d`'s
+/// are indices `d·count..`), fewer if the `cut` comes first
+/// ([`startup::draw_in_rounds`]). A family whose members share one
 /// evaluation ([`ChainFamily::member_log_density`]) instead weighs the
-/// same `count` candidates for every member, each traced once.
-fn start_up<F: ChainFamily>(family: &F, count: usize, seed: u64) -> Result<Startup, MltError> {
+/// same candidates for every member of a replica group, each traced once.
+fn start_up<F: ChainFamily>(
+    family: &F,
+    count: usize,
+    seed: u64,
+    cut: &StartupCut,
+) -> Result<Startup, MltError> {
     let members = family.members();
-    let groups = if family.exchange_move().is_some() {
+    let exchange = family.exchange_move().is_some();
+    let groups: Vec<Range<usize>> = if exchange {
         family.replica_groups()
     } else {
         std::iter::once(0..members).collect()
     };
-    let shared: Option<Vec<(usize, Vec<Vec<f64>>)>> = groups
+    // Group `g`'s candidates are those its first member would get
+    // unshared (indices `g.start·count ..`).
+    let shared = groups
         .iter()
-        .map(|g| {
-            // Group `g`'s candidates are those its first member would get
-            // unshared (indices `g.start·count ..`).
-            let offset = g.start * count;
-            shared_candidate_log_weights(family, g.clone(), count, seed, offset)
-                .map(|w| (offset, w))
+        .all(|g| shares_evaluation(family, g, seed, g.start * count));
+    // A cut start-up must still be able to start the run (the checks
+    // after it): light in some member and, with an exchange move, in
+    // every member of a group that needs it.
+    let lit = |log_w: &[Vec<f64>]| {
+        let positive: Vec<bool> = log_w
+            .iter()
+            .map(|row| row.iter().any(|w| w.is_finite()))
+            .collect();
+        positive.contains(&true)
+            && (!exchange
+                || groups.iter().all(|g| {
+                    !(groups.len() == 1 || positive[g.start]) || g.clone().all(|m| positive[m])
+                }))
+    };
+    let weights = if shared {
+        startup::draw_in_rounds(members, count, cut, lit, |range, log_w| {
+            for g in &groups {
+                let group = (g.clone(), g.start * count);
+                shared_candidate_log_weights(family, group, range.clone(), seed, log_w);
+            }
         })
-        .collect();
-    if let Some(per_group) = shared {
-        let mut boots: Vec<Bootstrap<usize, ()>> = Vec::with_capacity(members);
-        let mut running = Vec::with_capacity(members);
-        let mut invalid = 0;
-        for (offset, log_w) in &per_group {
+    } else {
+        candidate_log_weights(family, count, seed, cut, lit)
+    };
+    let mut boots: Vec<Bootstrap<usize, ()>> = Vec::with_capacity(members);
+    let mut invalid = 0;
+    if shared {
+        for g in &groups {
             let first = boots.len();
-            for w in log_w {
-                boots.push(index_bootstrap(w, *offset)?);
-                let mut r = RunningNormalization::new();
-                w.iter().for_each(|&lw| r.add(lw));
-                running.push(r);
+            for d in g.clone() {
+                boots.push(index_bootstrap(&weights.log_w[d], g.start * count)?);
             }
             // A NaN path is invalid for every member of its group: count it once.
             invalid += boots[first].invalid_candidates();
         }
-        return Ok(Startup {
-            shared: true,
-            boots,
-            running,
-            invalid,
-        });
+    } else {
+        for (d, w) in weights.log_w.iter().enumerate() {
+            boots.push(index_bootstrap(w, d * count)?);
+        }
+        invalid = boots.iter().map(|b| b.invalid_candidates()).sum();
     }
-    let log_w = candidate_log_weights(family, count, seed);
-    let boots: Vec<Bootstrap<usize, ()>> = (0..members)
-        .map(|d| index_bootstrap(&log_w[d * count..(d + 1) * count], d * count))
-        .collect::<Result<_, _>>()?;
-    let mut running = vec![RunningNormalization::new(); members];
-    for (j, &lw) in log_w.iter().enumerate() {
-        running[j / count].add(lw);
-    }
-    let invalid = boots.iter().map(|b| b.invalid_candidates()).sum();
+    let running = weights.log_w[..boots.len()]
+        .iter()
+        .map(|w| {
+            let mut r = RunningNormalization::new();
+            w.iter().for_each(|&lw| r.add(lw));
+            r
+        })
+        .collect();
     Ok(Startup {
-        shared: false,
+        shared,
         boots,
         running,
         invalid,
+        drawn: weights.drawn,
     })
 }
 
@@ -826,7 +858,9 @@ pub fn bootstrap<F: ChainFamily>(
             "the bootstrap needs at least one candidate".into(),
         ));
     }
-    let log_w = candidate_log_weights(family, count, seed);
+    let log_w = candidate_log_weights(family, count, seed, &StartupCut::NEVER, |_| false)
+        .log_w
+        .concat();
     Ok((index_bootstrap(&log_w, 0)?, log_w))
 }
 
@@ -889,12 +923,16 @@ pub fn run<F: ChainFamily>(
     // Start-up bias elimination, per member.
     let seed = settings.seed;
     let count = settings.bootstrap;
+    // The start-up stops at the deadline or on Ctrl-C (not when
+    // checkpointed) once it can start the chains, which then stop too.
+    let cut = StartupCut::new(deadline, stop, settings.checkpoint.is_some());
     let Startup {
         shared,
         boots,
         running: boot_running,
         invalid,
-    } = start_up(family, count, seed)?;
+        drawn,
+    } = start_up(family, count, seed, &cut)?;
     // Both read the other members' densities off a member's payload.
     let ladder_only = match settings.normalization {
         Normalization::Ratios => Some("ratios"),
@@ -952,7 +990,7 @@ pub fn run<F: ChainFamily>(
     // before the check for a black scene.
     let mut boot_running = boot_running;
     let member_searches: Vec<Option<Search>> =
-        (0..members).map(|d| family.search(d, seed)).collect();
+        (0..members).map(|d| family.search(d, seed, &cut)).collect();
     for (d, search) in member_searches.iter().enumerate() {
         if let Some(search) = search {
             if search.replaces_bootstrap {
@@ -966,7 +1004,7 @@ pub fn run<F: ChainFamily>(
     let b_star: f64 = bootstrap_b.iter().map(|b| b.0).sum();
     if b_star == 0.0 || !b_star.is_finite() {
         return Err(MltError::BlackScene {
-            candidates: count * members,
+            candidates: drawn * members,
             invalid,
         });
     }
@@ -1287,6 +1325,7 @@ pub fn run<F: ChainFamily>(
         }),
         searches,
         bootstrap_invalid: invalid,
+        bootstrap_candidates: drawn,
         first_nonfinite,
         bootstrap_seconds,
         seconds: start.elapsed().as_secs_f64(),

@@ -40,6 +40,7 @@ pub fn rendered(
     let mutations_per_second = rate(result.mutations, result.seconds - result.bootstrap_seconds);
     let statistics = json!({
         "bootstrap_seconds": result.bootstrap_seconds,
+        "bootstrap_candidates": result.bootstrap_candidates,
         "mutations": result.mutations,
         "mutations_per_second": mutations_per_second,
         "mutations_per_pixel": result.mutations_per_pixel,

@@ -3,49 +3,157 @@
 //! and the allocation of chains to members.
 
 use super::{ChainFamily, MltError};
-use crate::cluster::evaluate_split;
+use crate::cluster::{any_rank, evaluate_split};
+use crate::deadline::Deadline;
 use mcmc_core::rng::stream_rng;
 use mcmc_core::startup::Bootstrap;
 use mcmc_core::target::Target;
 use std::ops::Range;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// When the start-up's draws (the bootstrap, a family's own search) stop
+/// short of their number: at the run's deadline or on Ctrl-C. A run that
+/// writes a checkpoint is never cut — its resume makes the start-up
+/// again, and its `b̂` and starts must be the saved run's (as
+/// [`super::startup_deadline`] says for the annealing and searches).
+#[derive(Clone, Copy, Debug)]
+pub struct StartupCut<'a> {
+    deadline: Deadline,
+    stop: Option<&'a AtomicBool>,
+}
+
+impl<'a> StartupCut<'a> {
+    /// No cut: the start-up makes all its draws.
+    pub const NEVER: StartupCut<'static> = StartupCut {
+        deadline: Deadline::NEVER,
+        stop: None,
+    };
+
+    /// The cut at `deadline` or when `stop` is set, or none for a
+    /// `checkpointed` run.
+    pub fn new(deadline: Deadline, stop: &'a AtomicBool, checkpointed: bool) -> Self {
+        match checkpointed {
+            true => StartupCut {
+                deadline: Deadline::NEVER,
+                stop: None,
+            },
+            false => StartupCut {
+                deadline,
+                stop: Some(stop),
+            },
+        }
+    }
+
+    /// Whether the draws stop now. On a cluster every rank draws the
+    /// same numbers and they agree whether any rank has passed its
+    /// deadline or been stopped (collective: every rank asks at the same
+    /// round), so all keep the same draws.
+    pub fn due(&self) -> bool {
+        let stopped = self.stop.is_some_and(|s| s.load(Ordering::Relaxed));
+        any_rank(self.deadline.passed() || stopped)
+    }
+}
+
+/// Candidates drawn per member between two looks at the [`StartupCut`]:
+/// small enough that a cut lands within a few milliseconds of work on
+/// the repo's scenes (≈ 1 µs per candidate and core), large enough that
+/// the rounds cost nothing next to the draws.
+pub(crate) const STARTUP_ROUND: usize = 4096;
+
+/// The start-up's importance weights `ln I − ln p₀`, per member, of the
+/// candidates drawn (the same number for every member).
+pub(crate) struct CandidateWeights {
+    /// Per member, its candidates' weights in index order.
+    pub log_w: Vec<Vec<f64>>,
+    /// Candidates drawn per member (`count` unless the start-up was cut).
+    pub drawn: usize,
+}
+
+/// Draws the start-up's candidates in rounds of [`STARTUP_ROUND`] per
+/// member, `round(lo..hi)` appending candidates `lo..hi` of every member
+/// to its row, until `count` are drawn or the `cut` is due after a round
+/// in which the candidates are `lit` (a run cut earlier could not start).
+/// Uncut, the weights are those of one draw of all `count`: each depends
+/// on its index alone.
+pub(crate) fn draw_in_rounds(
+    members: usize,
+    count: usize,
+    cut: &StartupCut,
+    lit: impl Fn(&[Vec<f64>]) -> bool,
+    mut round: impl FnMut(Range<usize>, &mut [Vec<f64>]),
+) -> CandidateWeights {
+    let mut log_w = vec![Vec::new(); members];
+    let mut drawn = 0;
+    while drawn < count {
+        let end = (drawn + STARTUP_ROUND).min(count);
+        round(drawn..end, &mut log_w);
+        drawn = end;
+        // `due` first: it is collective, every rank asks it each round.
+        if drawn < count && cut.due() && lit(&log_w) {
+            break;
+        }
+    }
+    CandidateWeights { log_w, drawn }
+}
 
 /// Stream offset of the resampling of chain starts (apart from the chains'
 /// own streams and [`super::CANDIDATE_STREAM`]).
 pub(crate) const RESAMPLE_STREAM: u64 = 1 << 41;
 
-/// `ln I(x_j) − ln p₀(x_j)` of the `count` candidates of every member,
-/// evaluated in parallel (on a cluster, split over the ranks) and
-/// collected in order; candidate `j` belongs to member `j / count`.
+/// `ln I(x_j) − ln p₀(x_j)` of the `count` candidates of every member
+/// (member `d`'s are indices `d·count..`), evaluated in parallel (on a
+/// cluster, split over the ranks) round by round ([`draw_in_rounds`]).
 pub(crate) fn candidate_log_weights<F: ChainFamily>(
     family: &F,
     count: usize,
     seed: u64,
-) -> Vec<f64> {
-    evaluate_split(count * family.members(), 1, |j| {
-        vec![family.candidate_log_weight(j / count, &family.candidate(seed, j as u64))]
+    cut: &StartupCut,
+    lit: impl Fn(&[Vec<f64>]) -> bool,
+) -> CandidateWeights {
+    let members = family.members();
+    draw_in_rounds(members, count, cut, lit, |range, log_w| {
+        let n = range.len();
+        let w = evaluate_split(n * members, 1, |k| {
+            let (d, i) = (k / n, range.start + k % n);
+            let index = (d * count + i) as u64;
+            vec![family.candidate_log_weight(d, &family.candidate(seed, index))]
+        });
+        for (d, row) in log_w.iter_mut().enumerate() {
+            row.extend_from_slice(&w[d * n..(d + 1) * n]);
+        }
     })
 }
 
-/// For a family whose members share one evaluation
-/// ([`ChainFamily::member_log_density`]): `ln q_d(x_i) − ln p₀(x_i)` of the
-/// same `count` candidates (indices `offset..offset + count`) for every
-/// member `d` of `group` (outer index), each traced once with the group's
-/// first member's target. `None` when the family does not share.
-pub(crate) fn shared_candidate_log_weights<F: ChainFamily>(
+/// Whether the members of `group` share one evaluation
+/// ([`ChainFamily::member_log_density`]), probed on its first candidate.
+pub(crate) fn shares_evaluation<F: ChainFamily>(
     family: &F,
-    group: Range<usize>,
-    count: usize,
+    group: &Range<usize>,
     seed: u64,
     offset: usize,
-) -> Option<Vec<Vec<f64>>> {
+) -> bool {
     let first = group.start;
     let probe = family
         .target(first)
         .evaluate(&family.candidate(seed, offset as u64));
-    family.member_log_density(first, &probe.payload)?;
+    family.member_log_density(first, &probe.payload).is_some()
+}
+
+/// For a family whose members share one evaluation: `ln q_d(x_i) − ln
+/// p₀(x_i)` of candidates `offset + range` for every member `d` of
+/// `group`, each traced once with the group's first member's target,
+/// appended to the members' rows of `log_w`.
+pub(crate) fn shared_candidate_log_weights<F: ChainFamily>(
+    family: &F,
+    (group, offset): (Range<usize>, usize),
+    range: Range<usize>,
+    seed: u64,
+    log_w: &mut [Vec<f64>],
+) {
+    let first = group.start;
     let g = group.len();
-    let per_candidate = evaluate_split(count, g, |i| {
-        let x = family.candidate(seed, (offset + i) as u64);
+    let per_candidate = evaluate_split(range.len(), g, |i| {
+        let x = family.candidate(seed, (offset + range.start + i) as u64);
         let e = family.target(first).evaluate(&x);
         let reference = family.reference_log_density(&x);
         group
@@ -53,11 +161,9 @@ pub(crate) fn shared_candidate_log_weights<F: ChainFamily>(
             .map(|d| family.member_log_density(d, &e.payload).unwrap_or(f64::NAN) - reference)
             .collect()
     });
-    Some(
-        (0..g)
-            .map(|d| per_candidate.iter().skip(d).step_by(g).copied().collect())
-            .collect(),
-    )
+    for (m, d) in group.enumerate() {
+        log_w[d].extend(per_candidate.iter().skip(m).step_by(g));
+    }
 }
 
 /// The `mcmc-core` bootstrap over candidate indices `offset..offset +
@@ -121,7 +227,57 @@ pub(crate) fn allocate_chains(chains: usize, b: &[f64]) -> Vec<usize> {
 
 #[cfg(test)]
 mod tests {
-    use super::allocate_chains;
+    use super::{STARTUP_ROUND, StartupCut, allocate_chains, draw_in_rounds};
+    use crate::deadline::Deadline;
+    use std::sync::atomic::AtomicBool;
+    use std::time::{Duration, Instant};
+
+    /// Two members; candidate `i` of each carries light from index
+    /// `first_lit` on (weight 0 before it, `ln 1` after).
+    fn draw(count: usize, cut: &StartupCut, first_lit: usize) -> (usize, Vec<Vec<f64>>) {
+        let lit = |w: &[Vec<f64>]| w.iter().any(|row| row.iter().any(|x| x.is_finite()));
+        let r = draw_in_rounds(2, count, cut, lit, |range, log_w| {
+            for row in log_w.iter_mut() {
+                row.extend(range.clone().map(|i| match i >= first_lit {
+                    true => 0.0,
+                    false => f64::NEG_INFINITY,
+                }));
+            }
+        });
+        assert!(r.log_w.iter().all(|row| row.len() == r.drawn));
+        (r.drawn, r.log_w)
+    }
+
+    #[test]
+    fn a_due_cut_ends_the_start_up_after_the_first_lit_round() {
+        let count = 10 * STARTUP_ROUND + 7;
+        let passed = Deadline::new(Instant::now(), Some(Duration::ZERO));
+        let stop = AtomicBool::new(false);
+        // Uncut: every candidate, in index order, for each member.
+        let (drawn, whole) = draw(count, &StartupCut::NEVER, 0);
+        assert_eq!(drawn, count);
+        // Due from the start: one round, when it carries light ...
+        let due = StartupCut::new(passed, &stop, false);
+        let (drawn, cut) = draw(count, &due, 0);
+        assert_eq!(drawn, STARTUP_ROUND);
+        assert_eq!(cut[1][..], whole[1][..drawn], "a prefix of the uncut draws");
+        // ... and otherwise the rounds up to the first that does (a cut
+        // start-up must still be able to start the chains).
+        let (drawn, _) = draw(count, &due, 3 * STARTUP_ROUND + 5);
+        assert_eq!(drawn, 4 * STARTUP_ROUND);
+        // Never lit: all of them (the driver then reports a black scene).
+        assert_eq!(draw(count, &due, usize::MAX).0, count);
+        // Ctrl-C cuts like the deadline; a checkpointed run is never cut.
+        let stopped = AtomicBool::new(true);
+        let ctrl_c = StartupCut::new(Deadline::NEVER, &stopped, false);
+        assert_eq!(draw(count, &ctrl_c, 0).0, STARTUP_ROUND);
+        let checkpointed = StartupCut::new(passed, &stopped, true);
+        assert_eq!(draw(count, &checkpointed, 0).0, count);
+        assert_eq!(
+            draw(count, &StartupCut::new(Deadline::NEVER, &stop, false), 0).0,
+            count
+        );
+    }
 
     #[test]
     fn chains_follow_the_shares_and_every_positive_member_gets_one() {

@@ -28,7 +28,7 @@ use super::multi_chain_perturbation::{MultiChainPerturbation, multi_chain};
 use super::proposal_clock::{ProposalClock, Timed};
 use super::state::{Path, PathTarget};
 use super::walk::{ChainSource, camera_walk, camera_walks_reach_emitters, light_walk};
-use crate::markov::{CANDIDATE_STREAM, ChainFamily, MltError, Search};
+use crate::markov::{CANDIDATE_STREAM, ChainFamily, MltError, Search, StartupCut};
 use crate::pss::PathSample;
 use crate::scene::Scene;
 use mcmc_core::kernel::{Kernel, Mixture};
@@ -562,9 +562,9 @@ impl<'s> ChainFamily for PathFamily<'s> {
         Path::from_words(self.scene, input)
             .filter(|p| (self.min_segments..=max).contains(&p.segments()))
     }
-    fn search(&self, _member: usize, seed: u64) -> Option<Search> {
+    fn search(&self, _member: usize, seed: u64, cut: &StartupCut) -> Option<Search> {
         (self.bdpt_startup > 0)
-            .then(|| self.bdpt_search(seed, self.bdpt_startup))
+            .then(|| self.bdpt_search(seed, self.bdpt_startup, cut))
             .flatten()
     }
 }
