@@ -63,6 +63,12 @@ fn interrupt_at(
     (status, stderr)
 }
 
+/// `args` followed by the flags every render here shares: two threads,
+/// the outputs `i.exr`, `i.png` and `i.json`, no progress bar.
+fn to_i_exr<'a>(args: &[&'a str]) -> Vec<&'a str> {
+    [args, &["--threads", "2", "--out", "i.exr", "--quiet"]].concat()
+}
+
 /// Asserts what every interrupted run leaves behind.
 fn assert_partial_outputs(dir: &Path, status: std::process::ExitStatus, stderr: &str) {
     assert_eq!(
@@ -129,19 +135,7 @@ fn ctrl_c_stops_pt_and_writes_a_normalised_partial_render() {
     let dir = scratch("sigint-pt");
     write(&dir, "s.xml", &cli_support::floor_scene(W, H));
     let (status, stderr) = interrupt(
-        &[
-            "render",
-            "s.xml",
-            "--integrator",
-            "pt",
-            "--spp",
-            HUGE,
-            "--threads",
-            "2",
-            "--out",
-            "i.exr",
-            "--quiet",
-        ],
+        &to_i_exr(&["render", "s.xml", "--integrator", "pt", "--spp", HUGE]),
         &dir,
         Duration::from_millis(2000),
     );
@@ -199,7 +193,7 @@ fn ctrl_c_stops_pssmlt_and_writes_a_normalised_partial_render() {
     let dir = scratch("sigint-pssmlt");
     write(&dir, "s.xml", &cli_support::floor_scene(W, H));
     let (status, stderr) = interrupt(
-        &[
+        &to_i_exr(&[
             "render",
             "s.xml",
             "--integrator",
@@ -210,12 +204,7 @@ fn ctrl_c_stops_pssmlt_and_writes_a_normalised_partial_render() {
             "20000",
             "--chains",
             "64",
-            "--threads",
-            "2",
-            "--out",
-            "i.exr",
-            "--quiet",
-        ],
+        ]),
         &dir,
         Duration::from_millis(2500),
     );
@@ -263,7 +252,7 @@ fn ctrl_c_ends_the_start_up_of_a_markov_render() {
     std::fs::copy(scene, dir.join("s.xml")).expect("the Cornell box copies");
     let candidates = 20_000_000u64;
     let (status, stderr) = interrupt(
-        &[
+        &to_i_exr(&[
             "render",
             "s.xml",
             "-D",
@@ -274,12 +263,7 @@ fn ctrl_c_ends_the_start_up_of_a_markov_render() {
             "pssmlt",
             "--bootstrap",
             &candidates.to_string(),
-            "--threads",
-            "2",
-            "--out",
-            "i.exr",
-            "--quiet",
-        ],
+        ]),
         &dir,
         Duration::from_millis(2500),
     );
@@ -352,7 +336,7 @@ fn a_second_ctrl_c_exits_at_once_without_writing() {
     // during the bootstrap.
     let start = std::time::Instant::now();
     let (status, stderr) = interrupt_at(
-        &[
+        &to_i_exr(&[
             "render",
             cornell.to_str().unwrap(),
             "-D",
@@ -363,12 +347,7 @@ fn a_second_ctrl_c_exits_at_once_without_writing() {
             "4000000",
             "--checkpoint",
             "i.ckpt",
-            "--threads",
-            "2",
-            "--out",
-            "i.exr",
-            "--quiet",
-        ],
+        ]),
         &dir,
         &[Duration::from_millis(500), Duration::from_millis(200)],
     );
