@@ -1436,10 +1436,13 @@ fn smcmc_with_an_mmlt_shift_agrees_with_pt_on_the_glossy_glass_box() {
         env_u64("SMCMC_ITERATIONS", 1536),
     );
     let iterations = iterations.to_string();
-    let sets = [
+    // `SMCMC_SETS` ("alpha=2,init=global"): more settings, for studies.
+    let extra = std::env::var("SMCMC_SETS").unwrap_or_default();
+    let mut sets = vec![
         ("mutations_per_pixel", iterations.as_str()),
         ("shift", shift.as_str()),
     ];
+    sets.extend(extra.split(',').filter_map(|kv| kv.split_once('=')));
     assert_agrees_on_the_glossy_glass_box(&shift, &sets, runs, 83_000);
 }
 
