@@ -79,8 +79,8 @@ use mcmc_core::startup::{Bootstrap, RunningNormalization};
 use mcmc_core::stats::ChainStatistics;
 use mcmc_core::target::Target;
 use serde::Serialize;
-pub(crate) use startup::STARTUP_ROUND;
 pub use startup::StartupCut;
+pub(crate) use startup::draw_in_rounds;
 use startup::{
     RESAMPLE_STREAM, allocate_chains, candidate_log_weights, index_bootstrap,
     shared_candidate_log_weights, shares_evaluation,
@@ -801,12 +801,20 @@ fn start_up<F: ChainFamily>(
                 }))
     };
     let weights = if shared {
-        startup::draw_in_rounds(members, count, cut, lit, |range, log_w| {
-            for g in &groups {
-                let group = (g.clone(), g.start * count);
-                shared_candidate_log_weights(family, group, range.clone(), seed, log_w);
-            }
-        })
+        let mut log_w = vec![Vec::new(); members];
+        let drawn = draw_in_rounds(
+            &mut log_w,
+            count,
+            cut,
+            |w| lit(w),
+            |range, log_w| {
+                for g in &groups {
+                    let group = (g.clone(), g.start * count);
+                    shared_candidate_log_weights(family, group, range.clone(), seed, log_w);
+                }
+            },
+        );
+        startup::CandidateWeights { log_w, drawn }
     } else {
         candidate_log_weights(family, count, seed, cut, lit)
     };

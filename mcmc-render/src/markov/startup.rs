@@ -69,31 +69,31 @@ pub(crate) struct CandidateWeights {
     pub drawn: usize,
 }
 
-/// Draws the start-up's candidates in rounds of [`STARTUP_ROUND`] per
-/// member, `round(lo..hi)` appending candidates `lo..hi` of every member
-/// to its row, until `count` are drawn or the `cut` is due after a round
-/// in which the candidates are `lit` (a run cut earlier could not start).
-/// Uncut, the weights are those of one draw of all `count`: each depends
-/// on its index alone.
-pub(crate) fn draw_in_rounds(
-    members: usize,
+/// Makes a start-up's `count` draws (per member) in rounds of
+/// [`STARTUP_ROUND`], `round(lo..hi, draws)` adding draws `lo..hi` to
+/// `draws`, until all are made or the `cut` is due after a round whose
+/// `draws` are `lit` (can start the chains; a run cut earlier could not).
+/// Returns the number made. Uncut, the draws are those of one pass over
+/// all `count`: each depends on its index alone. The driver's bootstrap
+/// and `mept`'s BDPT start-up both draw through it.
+pub(crate) fn draw_in_rounds<S>(
+    draws: &mut S,
     count: usize,
     cut: &StartupCut,
-    lit: impl Fn(&[Vec<f64>]) -> bool,
-    mut round: impl FnMut(Range<usize>, &mut [Vec<f64>]),
-) -> CandidateWeights {
-    let mut log_w = vec![Vec::new(); members];
+    lit: impl Fn(&S) -> bool,
+    mut round: impl FnMut(Range<usize>, &mut S),
+) -> usize {
     let mut drawn = 0;
     while drawn < count {
         let end = (drawn + STARTUP_ROUND).min(count);
-        round(drawn..end, &mut log_w);
+        round(drawn..end, draws);
         drawn = end;
         // `due` first: it is collective, every rank asks it each round.
-        if drawn < count && cut.due() && lit(&log_w) {
+        if drawn < count && cut.due() && lit(draws) {
             break;
         }
     }
-    CandidateWeights { log_w, drawn }
+    drawn
 }
 
 /// Stream offset of the resampling of chain starts (apart from the chains'
@@ -111,17 +111,25 @@ pub(crate) fn candidate_log_weights<F: ChainFamily>(
     lit: impl Fn(&[Vec<f64>]) -> bool,
 ) -> CandidateWeights {
     let members = family.members();
-    draw_in_rounds(members, count, cut, lit, |range, log_w| {
-        let n = range.len();
-        let w = evaluate_split(n * members, 1, |k| {
-            let (d, i) = (k / n, range.start + k % n);
-            let index = (d * count + i) as u64;
-            vec![family.candidate_log_weight(d, &family.candidate(seed, index))]
-        });
-        for (d, row) in log_w.iter_mut().enumerate() {
-            row.extend_from_slice(&w[d * n..(d + 1) * n]);
-        }
-    })
+    let mut log_w = vec![Vec::new(); members];
+    let drawn = draw_in_rounds(
+        &mut log_w,
+        count,
+        cut,
+        |w| lit(w),
+        |range, log_w| {
+            let n = range.len();
+            let w = evaluate_split(n * members, 1, |k| {
+                let (d, i) = (k / n, range.start + k % n);
+                let index = (d * count + i) as u64;
+                vec![family.candidate_log_weight(d, &family.candidate(seed, index))]
+            });
+            for (d, row) in log_w.iter_mut().enumerate() {
+                row.extend_from_slice(&w[d * n..(d + 1) * n]);
+            }
+        },
+    );
+    CandidateWeights { log_w, drawn }
 }
 
 /// Whether the members of `group` share one evaluation
@@ -236,16 +244,23 @@ mod tests {
     /// `first_lit` on (weight 0 before it, `ln 1` after).
     fn draw(count: usize, cut: &StartupCut, first_lit: usize) -> (usize, Vec<Vec<f64>>) {
         let lit = |w: &[Vec<f64>]| w.iter().any(|row| row.iter().any(|x| x.is_finite()));
-        let r = draw_in_rounds(2, count, cut, lit, |range, log_w| {
-            for row in log_w.iter_mut() {
-                row.extend(range.clone().map(|i| match i >= first_lit {
-                    true => 0.0,
-                    false => f64::NEG_INFINITY,
-                }));
-            }
-        });
-        assert!(r.log_w.iter().all(|row| row.len() == r.drawn));
-        (r.drawn, r.log_w)
+        let mut log_w = vec![Vec::new(); 2];
+        let drawn = draw_in_rounds(
+            &mut log_w,
+            count,
+            cut,
+            |w| lit(w),
+            |range, log_w| {
+                for row in log_w.iter_mut() {
+                    row.extend(range.clone().map(|i| match i >= first_lit {
+                        true => 0.0,
+                        false => f64::NEG_INFINITY,
+                    }));
+                }
+            },
+        );
+        assert!(log_w.iter().all(|row| row.len() == drawn));
+        (drawn, log_w)
     }
 
     #[test]

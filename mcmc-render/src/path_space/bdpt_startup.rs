@@ -39,7 +39,7 @@ use super::family::PathFamily;
 use super::state::Path;
 use super::walk::{ChainSource, camera_walk, light_walk};
 use crate::integrators::path_vertex::{Vertex, VertexKind};
-use crate::markov::{CANDIDATE_STREAM, STARTUP_ROUND, Search, StartupCut};
+use crate::markov::{CANDIDATE_STREAM, Search, StartupCut, draw_in_rounds};
 use mcmc_core::rng::stream_rng;
 use rayon::prelude::*;
 
@@ -156,21 +156,20 @@ impl<'s> PathFamily<'s> {
 
     /// The search of `draws` BDPT draws (module docs), or `None` when the
     /// depth is unbounded or longer than [`MAX_SEARCH_SEGMENTS`]. It
-    /// stops short at the start-up's `cut`, after a round of
-    /// [`STARTUP_ROUND`] draws in which some draw carried light; its
-    /// `draws` are then those made (a prefix: each depends on its index
-    /// alone, so uncut it is the whole search).
+    /// stops short at the start-up's `cut` once some draw carried light
+    /// ([`draw_in_rounds`]); its `draws` are then those made (a prefix:
+    /// each depends on its index alone, so uncut it is the whole search).
     pub fn bdpt_search(&self, seed: u64, draws: u64, cut: &StartupCut) -> Option<Search> {
         let max = self.max_segments.filter(|&m| m <= MAX_SEARCH_SEGMENTS)?;
         let mut search = Search {
             replaces_bootstrap: true,
             ..Search::default()
         };
-        while search.draws < draws {
-            let end = (search.draws + STARTUP_ROUND as u64).min(draws);
-            let per: Vec<(Vec<(u64, f64)>, f64)> = (search.draws..end)
+        let lit = |s: &Search| !s.per_draw.is_empty();
+        let made = draw_in_rounds(&mut search, draws as usize, cut, lit, |range, search| {
+            let per: Vec<(Vec<(u64, f64)>, f64)> = range
                 .into_par_iter()
-                .map(|j| self.search_draw(seed, j, max))
+                .map(|j| self.search_draw(seed, j as u64, max))
                 .collect();
             for (weighted, total) in per {
                 if total.is_finite() {
@@ -178,12 +177,8 @@ impl<'s> PathFamily<'s> {
                 }
                 search.weighted.extend(weighted);
             }
-            search.draws = end;
-            // `due` first: it is collective, every rank asks it each round.
-            if end < draws && cut.due() && !search.per_draw.is_empty() {
-                break;
-            }
-        }
+        });
+        search.draws = made as u64;
         Some(search)
     }
 }
