@@ -801,20 +801,12 @@ fn start_up<F: ChainFamily>(
                 }))
     };
     let weights = if shared {
-        let mut log_w = vec![Vec::new(); members];
-        let drawn = draw_in_rounds(
-            &mut log_w,
-            count,
-            cut,
-            |w| lit(w),
-            |range, log_w| {
-                for g in &groups {
-                    let group = (g.clone(), g.start * count);
-                    shared_candidate_log_weights(family, group, range.clone(), seed, log_w);
-                }
-            },
-        );
-        startup::CandidateWeights { log_w, drawn }
+        startup::weights_in_rounds(members, count, cut, lit, |range, log_w| {
+            for g in &groups {
+                let group = (g.clone(), g.start * count);
+                shared_candidate_log_weights(family, group, range.clone(), seed, log_w);
+            }
+        })
     } else {
         candidate_log_weights(family, count, seed, cut, lit)
     };

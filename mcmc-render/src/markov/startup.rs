@@ -96,6 +96,20 @@ pub(crate) fn draw_in_rounds<S>(
     drawn
 }
 
+/// [`draw_in_rounds`] of importance weights, one row per member of
+/// `members`.
+pub(crate) fn weights_in_rounds(
+    members: usize,
+    count: usize,
+    cut: &StartupCut,
+    lit: impl Fn(&[Vec<f64>]) -> bool,
+    round: impl FnMut(Range<usize>, &mut Vec<Vec<f64>>),
+) -> CandidateWeights {
+    let mut log_w = vec![Vec::new(); members];
+    let drawn = draw_in_rounds(&mut log_w, count, cut, |w| lit(w), round);
+    CandidateWeights { log_w, drawn }
+}
+
 /// Stream offset of the resampling of chain starts (apart from the chains'
 /// own streams and [`super::CANDIDATE_STREAM`]).
 pub(crate) const RESAMPLE_STREAM: u64 = 1 << 41;
@@ -111,25 +125,17 @@ pub(crate) fn candidate_log_weights<F: ChainFamily>(
     lit: impl Fn(&[Vec<f64>]) -> bool,
 ) -> CandidateWeights {
     let members = family.members();
-    let mut log_w = vec![Vec::new(); members];
-    let drawn = draw_in_rounds(
-        &mut log_w,
-        count,
-        cut,
-        |w| lit(w),
-        |range, log_w| {
-            let n = range.len();
-            let w = evaluate_split(n * members, 1, |k| {
-                let (d, i) = (k / n, range.start + k % n);
-                let index = (d * count + i) as u64;
-                vec![family.candidate_log_weight(d, &family.candidate(seed, index))]
-            });
-            for (d, row) in log_w.iter_mut().enumerate() {
-                row.extend_from_slice(&w[d * n..(d + 1) * n]);
-            }
-        },
-    );
-    CandidateWeights { log_w, drawn }
+    weights_in_rounds(members, count, cut, lit, |range, log_w| {
+        let n = range.len();
+        let w = evaluate_split(n * members, 1, |k| {
+            let (d, i) = (k / n, range.start + k % n);
+            let index = (d * count + i) as u64;
+            vec![family.candidate_log_weight(d, &family.candidate(seed, index))]
+        });
+        for (d, row) in log_w.iter_mut().enumerate() {
+            row.extend_from_slice(&w[d * n..(d + 1) * n]);
+        }
+    })
 }
 
 /// Whether the members of `group` share one evaluation
@@ -235,7 +241,7 @@ pub(crate) fn allocate_chains(chains: usize, b: &[f64]) -> Vec<usize> {
 
 #[cfg(test)]
 mod tests {
-    use super::{STARTUP_ROUND, StartupCut, allocate_chains, draw_in_rounds};
+    use super::{STARTUP_ROUND, StartupCut, allocate_chains, weights_in_rounds};
     use crate::deadline::Deadline;
     use std::sync::atomic::AtomicBool;
     use std::time::{Duration, Instant};
@@ -244,23 +250,16 @@ mod tests {
     /// `first_lit` on (weight 0 before it, `ln 1` after).
     fn draw(count: usize, cut: &StartupCut, first_lit: usize) -> (usize, Vec<Vec<f64>>) {
         let lit = |w: &[Vec<f64>]| w.iter().any(|row| row.iter().any(|x| x.is_finite()));
-        let mut log_w = vec![Vec::new(); 2];
-        let drawn = draw_in_rounds(
-            &mut log_w,
-            count,
-            cut,
-            |w| lit(w),
-            |range, log_w| {
-                for row in log_w.iter_mut() {
-                    row.extend(range.clone().map(|i| match i >= first_lit {
-                        true => 0.0,
-                        false => f64::NEG_INFINITY,
-                    }));
-                }
-            },
-        );
-        assert!(log_w.iter().all(|row| row.len() == drawn));
-        (drawn, log_w)
+        let r = weights_in_rounds(2, count, cut, lit, |range, log_w| {
+            for row in log_w.iter_mut() {
+                row.extend(range.clone().map(|i| match i >= first_lit {
+                    true => 0.0,
+                    false => f64::NEG_INFINITY,
+                }));
+            }
+        });
+        assert!(r.log_w.iter().all(|row| row.len() == r.drawn));
+        (r.drawn, r.log_w)
     }
 
     #[test]
