@@ -319,6 +319,17 @@ const WATCHDOG: Duration = Duration::from_secs(300);
 /// hours.
 const PAST_THE_BUDGET: f64 = 5.0;
 
+/// The Cornell box's size flags of the Markov start-up tests: 16×16.
+const BOX_16: [&str; 4] = ["-D", "width=16", "-D", "height=16"];
+
+/// A scratch directory `name` holding the repo's Cornell box as `s.xml`.
+fn cornell_box_in(name: &str) -> std::path::PathBuf {
+    let dir = scratch(name);
+    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/cornell-box.xml");
+    std::fs::copy(scene, dir.join("s.xml")).expect("the Cornell box copies");
+    dir
+}
+
 /// Renders `s.xml` in `dir` with `--time budget` and `args` (settings),
 /// fails the test if the run outlives [`WATCHDOG`], fails, writes no image
 /// or its clock shows more than [`PAST_THE_BUDGET`] past the budget, and
@@ -355,6 +366,38 @@ fn render_within_budget(dir: &std::path::Path, budget: f64, args: &[&str]) -> se
         "{args:?}: {seconds} s for a budget of {budget} s"
     );
     stats
+}
+
+/// A RELT replica that no bootstrap path reaches (the specific one, L0,
+/// on the box with direct light only) does not hold the start-up past
+/// `--time`: the cut start-up ends without it, RELT drops it, and the
+/// run without it gets what is left of the budget (before session 32 the
+/// start-up made all its draws — minutes at this bootstrap — and the
+/// second run restarted the budget).
+#[test]
+fn a_relt_replica_without_light_does_not_hold_the_start_up_past_the_budget() {
+    let dir = cornell_box_in("limits-relt-dropped");
+    let args = ["-D", "max_depth=2", "--integrator", "relt"];
+    let stats = render_within_budget(
+        &dir,
+        BUDGET,
+        &[&BOX_16[..], &args, &["--set", "bootstrap=20000000"]].concat(),
+    );
+    assert_eq!(stats["dropped_replicas"], serde_json::json!(["specific"]));
+    // The first run's start-up reached its share of the budget
+    // (`STARTUP_SHARE`: its 20 million draws take seconds), and the second
+    // runs on the first's clock, so its start-up's share was past before
+    // it began: it stopped after its first round of draws
+    // (`STARTUP_ROUND`), once every replica it kept was lit (a restarted
+    // budget would draw for another 0.25 s, ≈ 50 rounds).
+    assert_eq!(stats["bootstrap_candidates"], 4096, "{stats}");
+    // Its clock counts both runs, and its chains ran.
+    let seconds = stats["seconds"].as_f64().expect("seconds");
+    assert!(seconds >= BUDGET, "{seconds} s");
+    assert!(
+        stats["mutations"].as_u64().expect("mutations") > 0,
+        "{stats}"
+    );
 }
 
 /// Work sized by a setting stops at `--time` (issue 23, item 3): `mlt`'s
@@ -478,9 +521,7 @@ fn mcmc_vcm_chain_pairs_stop_at_the_time_budget() {
 /// of 2 draws, owed after the chains' first round).
 #[test]
 fn relt_start_up_phases_sized_by_a_setting_stop_at_the_time_budget() {
-    let dir = scratch("limits-relt-start-up");
-    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/cornell-box.xml");
-    std::fs::copy(scene, dir.join("s.xml")).expect("the Cornell box copies");
+    let dir = cornell_box_in("limits-relt-start-up");
     for (phase, setting) in [
         ("search", "l0_search=1000000000000"),
         ("annealing", "annealing_sweeps=1000000000"),
@@ -557,9 +598,7 @@ fn relt_start_up_phases_sized_by_a_setting_stop_at_the_time_budget() {
 /// the run writes its image.
 #[test]
 fn markov_start_ups_sized_by_a_setting_stop_at_the_time_budget() {
-    let dir = scratch("limits-markov-start-up");
-    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/cornell-box.xml");
-    std::fs::copy(scene, dir.join("s.xml")).expect("the Cornell box copies");
+    let dir = cornell_box_in("limits-markov-start-up");
     // `STARTUP_ROUND` in `markov/startup.rs`: the start-up draws in rounds.
     const ROUND: u64 = 4096;
     for (integrator, candidates) in [
@@ -572,15 +611,10 @@ fn markov_start_ups_sized_by_a_setting_stop_at_the_time_budget() {
             &dir,
             BUDGET,
             &[
-                "-D",
-                "width=16",
-                "-D",
-                "height=16",
-                "--integrator",
-                integrator,
-                "--set",
-                &bootstrap,
-            ],
+                &BOX_16[..],
+                &["--integrator", integrator, "--set", &bootstrap],
+            ]
+            .concat(),
         );
         // `mept`'s draws are its BDPT start-up's (its driver bootstrap is
         // one candidate).
@@ -595,5 +629,10 @@ fn markov_start_ups_sized_by_a_setting_stop_at_the_time_budget() {
             drawn < candidates && drawn.is_multiple_of(ROUND),
             "{integrator}: {drawn} of {candidates}"
         );
+        // The start-up stops at half the budget (`STARTUP_SHARE`), so the
+        // chains run and the image is not black (at the whole budget they
+        // had made no mutation).
+        let mutations = stats["mutations"].as_u64().expect("mutations");
+        assert!(mutations > 0, "{integrator}: no mutation in {stats}");
     }
 }

@@ -141,7 +141,7 @@ pub(crate) fn command(args: ConvergenceArgs) -> Result<(), Failure> {
             .filter(|n| !records.iter().any(|r| &r.integrator == *n))
         {
             err!(
-                "warning: {name} has no record: its start-up (bootstrap) outlasted --time {}",
+                "warning: {name} has no record: its start-up or first unit of work outlasted --time {}",
                 args.time
             );
         }

@@ -51,6 +51,7 @@ use mcmc_core::target::{Evaluation, Target};
 use rayon::prelude::*;
 use serde_json::json;
 use std::sync::atomic::AtomicBool;
+use std::time::Instant;
 
 crate::choice! {
     /// The exchange move between replicas.
@@ -457,6 +458,11 @@ impl<'a> ChainFamily for ReltFamily<'a> {
     fn checkpointable(&self, _mutation: &()) -> bool {
         true
     }
+    /// Every replica but the uniform one (member 0) can be dropped when
+    /// no bootstrap path reaches it (spec seed002 §5).
+    fn droppable(&self, member: usize) -> bool {
+        member > 0
+    }
     fn exchange_move(&self) -> Option<Box<dyn ExchangeMove<TorusPoint, PathSample>>> {
         let m = self.members();
         if let Some(make) = self.custom_exchange {
@@ -607,7 +613,7 @@ impl IntegratorSettings for Relt {
             rr_depth: self.depth.rr_depth,
             heuristic: MisHeuristic::Power,
         };
-        let settings = self.chain.chain_settings((), run);
+        let mut settings = self.chain.chain_settings((), run);
         // The driver stops the start-up's search at the budget (not with a
         // checkpoint: `markov::StartupCut`), then the annealing and the
         // chains.
@@ -615,11 +621,15 @@ impl IntegratorSettings for Relt {
         let mut dropped = Vec::new();
         let result = loop {
             let family = ReltFamily::new(scene, bdpt, &replicas, self);
+            let attempt = Instant::now();
             match markov::run(scene, &family, &settings, stop, observer) {
                 // A replica no bootstrap path reached cannot start: drop
-                // it (spec seed002 §5) and run the others.
-                Err(MltError::EmptyMember { member }) if member > 0 => {
+                // it (spec seed002 §5) and run the others, on the first
+                // run's clock: its budget and `seconds` count both runs
+                // (the budget had restarted: up to 2× --time).
+                Err(MltError::EmptyMember { member }) if family.droppable(member) => {
                     dropped.push(replicas.remove(member).name);
+                    settings.clock_started.get_or_insert(attempt);
                 }
                 other => break other?,
             }

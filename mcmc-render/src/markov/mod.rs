@@ -203,6 +203,7 @@ impl ChainParams {
             preview_every: run.snapshot_every,
             depth_allocation_exponent: self.depth_allocation,
             checkpoint: run.checkpoint.clone(),
+            clock_started: None,
         }
     }
 }
@@ -265,6 +266,14 @@ pub trait ChainFamily: Sync {
     /// one group of all members.
     fn replica_groups(&self) -> Vec<Range<usize>> {
         std::iter::once(0..self.members()).collect()
+    }
+    /// Whether the run can go on without member `member` when the
+    /// bootstrap finds it no light: its caller then drops it on
+    /// [`MltError::EmptyMember`] and runs the others (relt's replicas
+    /// beyond the uniform one). A start-up cut by the deadline or Ctrl-C
+    /// does not wait for such a member's light. Default: no.
+    fn droppable(&self, _member: usize) -> bool {
+        false
     }
     /// The weight of member `member`'s image in the final image: 1 (the
     /// default) for members whose targets split the image (the depths of
@@ -649,6 +658,11 @@ pub struct ChainSettings<M> {
     /// Save the tasks to, and resume them from, a checkpoint (families that
     /// are [`ChainFamily::checkpointable`]).
     pub checkpoint: Option<crate::checkpoint::Checkpoint>,
+    /// When the run's clock started, if before [`run`] is called: a
+    /// caller's earlier attempt at the same render (relt's run before it
+    /// dropped a replica). The time budget, its start-up share and
+    /// `seconds` count from it; `None` (the default): from the call.
+    pub clock_started: Option<Instant>,
 }
 
 impl<M: Default> Default for ChainSettings<M> {
@@ -666,6 +680,7 @@ impl<M: Default> Default for ChainSettings<M> {
             preview_every: RunSettings::DEFAULT_SNAPSHOT_EVERY,
             depth_allocation_exponent: 1.0,
             checkpoint: None,
+            clock_started: None,
         }
     }
 }
@@ -788,7 +803,8 @@ fn start_up<F: ChainFamily>(
         .all(|g| shares_evaluation(family, g, seed, g.start * count));
     // A cut start-up must still be able to start the run (the checks
     // after it): light in some member and, with an exchange move, in
-    // every member of a group that needs it.
+    // every member of a group that needs it (a droppable member's want of
+    // light ends the run for its caller to drop it).
     let lit = |log_w: &[Vec<f64>]| {
         let positive: Vec<bool> = log_w
             .iter()
@@ -797,7 +813,8 @@ fn start_up<F: ChainFamily>(
         positive.contains(&true)
             && (!exchange
                 || groups.iter().all(|g| {
-                    !(groups.len() == 1 || positive[g.start]) || g.clone().all(|m| positive[m])
+                    !(groups.len() == 1 || positive[g.start])
+                        || g.clone().all(|m| positive[m] || family.droppable(m))
                 }))
     };
     let weights = if shared {
@@ -914,7 +931,7 @@ pub fn run<F: ChainFamily>(
         )));
     }
     check_memory(scene, family, settings)?;
-    let start = Instant::now();
+    let start = settings.clock_started.unwrap_or_else(Instant::now);
     let deadline = Deadline::new(start, settings.time_budget);
     let out_of_time = || deadline.passed();
     let (width, height) = (scene.film.width, scene.film.height);
@@ -923,9 +940,13 @@ pub fn run<F: ChainFamily>(
     // Start-up bias elimination, per member.
     let seed = settings.seed;
     let count = settings.bootstrap;
-    // The start-up stops at the deadline or on Ctrl-C (not when
-    // checkpointed) once it can start the chains, which then stop too.
-    let cut = StartupCut::new(deadline, stop, settings.checkpoint.is_some());
+    // The start-up stops at its share of the budget or on Ctrl-C (not
+    // when checkpointed) once it can start the chains, which get the rest.
+    let startup_end = Deadline::new(
+        start,
+        settings.time_budget.map(|b| b.mul_f64(STARTUP_SHARE)),
+    );
+    let cut = StartupCut::new(startup_end, stop, settings.checkpoint.is_some());
     let Startup {
         shared,
         boots,
@@ -972,7 +993,7 @@ pub fn run<F: ChainFamily>(
             &boots[0],
             (
                 a,
-                annealing_deadline(deadline, settings.checkpoint.is_some()),
+                annealing_deadline(startup_end, settings.checkpoint.is_some()),
             ),
             seed,
         )?),
@@ -1339,8 +1360,16 @@ pub fn run<F: ChainFamily>(
     })
 }
 
+/// The share of a time budget past which a start-up sized by a setting
+/// (the bootstrap's draws, a family's search, the population annealing)
+/// stops once it can start the chains: they get at least the rest. (At
+/// the whole budget, a large `bootstrap` under a short `--time` left the
+/// chains no time and the image black.)
+pub const STARTUP_SHARE: f64 = 0.5;
+
 /// The deadline of a run's start-up beyond the bootstrap (the population
-/// annealing's sweeps, a family's own search): the run's `deadline`,
+/// annealing's sweeps, a family's own search): `deadline` (the driver
+/// passes its start-up's, at [`STARTUP_SHARE`] of the budget),
 /// unless the run is `checkpointed` — a resumed run makes the start-up
 /// again, and its `b̂` and starts must be the saved run's — in which case
 /// the start-up runs to its end whatever the time budget (which goes on
