@@ -46,9 +46,7 @@ use mcmc_render::smcmc::mmlt_shift::MmltShift;
 use mcmc_render::smcmc::random_replay::{RandomReplay, ReplayTracer};
 use mcmc_render::smcmc::rbdpt_shift::RbdptShift;
 use mcmc_render::smcmc::solver::AlignmentProblem;
-use mcmc_render::smcmc::{
-    MAX_TILE_PIXELS, TileImportance, TileShape, TileShift, TileTarget, Tiling,
-};
+use mcmc_render::smcmc::{MAX_TILE_PIXELS, TileShape, TileShift, TileTarget, Tiling};
 use rayon::prelude::*;
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -1000,7 +998,6 @@ fn assert_reuse_is_exact<S: TileShift>(scene: &Scene, shift: &S, shape: TileShap
         shift,
         pixels: tiling.slot_pixels(s),
         slots,
-        importance: TileImportance::Luminance,
     };
     let name = shift.name();
     let (mut shared, mut lit, mut differing) = (0, 0, 0);
@@ -1875,7 +1872,6 @@ fn stationary_large_acceptance<S: TileShift>(
                         shift,
                         pixels: tiling.slot_pixels(s),
                         slots: tiling.slots(),
-                        importance: TileImportance::Luminance,
                     };
                     let (mut tile, mut own) = (Vec::new(), Vec::new());
                     for i in 0..per_tile {

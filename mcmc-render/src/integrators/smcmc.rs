@@ -80,8 +80,8 @@ use crate::smcmc::mmlt_shift::MmltShift;
 use crate::smcmc::random_replay::RandomReplay;
 use crate::smcmc::rbdpt_shift::RbdptShift;
 use crate::smcmc::{
-    FilterSplat, MAX_TILE_PIXELS, TileImportance, TileShape, TileShift, TileSums, TileTarget,
-    TileValues, Tiling, accumulate, develop,
+    FilterSplat, MAX_TILE_PIXELS, TileShape, TileShift, TileSums, TileTarget, TileValues, Tiling,
+    accumulate, develop,
 };
 use mcmc_core::chain::Chain;
 use mcmc_core::kernel::{Kernel, Mixture};
@@ -183,8 +183,6 @@ crate::settings! {
         pub exchange_every: u32 = 2, check check::positive_count;
         /// Weight α of the large-step estimate in the tile alignment (Eq. 3.38); 0.3 since session 28 (Gruson's code: 0.05), measured better on three scenes.
         pub alpha: f64 = 0.3, check check::positive;
-        /// What a tile's target sums over its pixels and the alignment solves on: luminance, or rgb_sum (R + G + B, Gruson's `sum`).
-        pub importance: TileImportance = TileImportance::Luminance;
         /// Jacobi sweeps of the tile alignment (the thesis's 200).
         pub solver_iterations: usize = DEFAULT_SOLVER_ITERATIONS;
         /// Uniform candidates per tile at start-up (the start state is resampled from them).
@@ -344,8 +342,6 @@ struct Sampler<'a, S> {
     shift: &'a S,
     tiling: Tiling,
     mutation: Mutation,
-    /// What a tile's target sums over its pixels.
-    importance: TileImportance,
     /// The scene's filter, unless it is the box.
     filter: Option<FilterSplat>,
 }
@@ -357,7 +353,6 @@ impl<S: TileShift> Sampler<'_, S> {
             shift: self.shift,
             pixels: self.tiling.slot_pixels(s),
             slots: self.tiling.slots(),
-            importance: self.importance,
         }
     }
 
@@ -1171,7 +1166,6 @@ impl Smcmc {
             shift,
             tiling,
             mutation: *mutation,
-            importance: self.importance,
             filter: FilterSplat::new(scene),
         };
         // Checked before every tile step, exchange pair and start-up
@@ -1262,7 +1256,6 @@ impl Smcmc {
             develop(
                 &sampler.tiling,
                 sums,
-                self.importance,
                 self.alpha,
                 (self.solver_iterations, &|i| {
                     i < DEFAULT_SOLVER_ITERATIONS || !halt()

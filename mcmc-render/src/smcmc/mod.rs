@@ -129,8 +129,6 @@ pub struct TileTarget<'a, S> {
     pub pixels: [Option<(u32, u32)>; MAX_TILE_PIXELS],
     /// Slots in use.
     pub slots: usize,
-    /// What `π̃_s` sums over the slots.
-    pub importance: TileImportance,
 }
 
 impl<S: TileShift> TileTarget<'_, S> {
@@ -168,7 +166,7 @@ impl<S: TileShift> TileTarget<'_, S> {
             .offset_coordinates()
             .map(|i| to_unit_f32(state.coordinate(i)));
         let finite = v.f.iter().all(|c| c.is_finite());
-        v.total = v.f.iter().map(|&c| self.importance.of_rgb(c)).sum();
+        v.total = v.f.iter().map(|c| f64::from(c.luminance())).sum();
         let log_density = if !finite || !v.total.is_finite() {
             f64::NAN
         } else if v.total > 0.0 {
@@ -200,38 +198,6 @@ pub fn accumulate(acc: &mut [[f64; 3]; MAX_TILE_PIXELS], values: &TileValues, we
 /// Luminance of an accumulated RGB triple (the weights of [`Rgb::luminance`]).
 pub fn luminance(c: [f64; 3]) -> f64 {
     0.212_671 * c[0] + 0.715_160 * c[1] + 0.072_169 * c[2]
-}
-
-crate::choice! {
-    /// The scalar importance of a pixel value that a tile's target sums
-    /// over its slots (`π̃_s = Σ_q imp f_q`) and the alignment solves on.
-    pub enum TileImportance {
-        /// Luminance (the renderer's other Metropolis targets).
-        Luminance = "luminance",
-        /// R + G + B (Gruson's code offers it as `sum`): a channel's share
-        /// `f_c/π̃` is at most 1, where under luminance blue's is up to
-        /// 1/0.072 ≈ 14 on a path of little luminance.
-        RgbSum = "rgb_sum",
-    }
-}
-
-impl TileImportance {
-    /// The importance of an accumulated RGB triple.
-    pub fn of(self, c: [f64; 3]) -> f64 {
-        match self {
-            TileImportance::Luminance => luminance(c),
-            TileImportance::RgbSum => c[0] + c[1] + c[2],
-        }
-    }
-
-    /// The importance of one pixel value (luminance as [`Rgb::luminance`]
-    /// computes it).
-    pub fn of_rgb(self, c: Rgb) -> f64 {
-        match self {
-            TileImportance::Luminance => f64::from(c.luminance()),
-            TileImportance::RgbSum => f64::from(c.r) + f64::from(c.g) + f64::from(c.b),
-        }
-    }
 }
 
 /// How a non-box reconstruction filter spreads a slot's value over the
@@ -378,7 +344,7 @@ impl Default for TileSums {
 pub struct Developed {
     /// The image, row-major.
     pub image: Vec<Rgb>,
-    /// The per-pixel sample density: `Σ_{s∈N(j)} imp(g_s(j))`, the number
+    /// The per-pixel sample density: `Σ_{s∈N(j)} lum(g_s(j))`, the number
     /// of chain samples that fell in pixel `j` in expectation (each
     /// transition of tile `s` puts a share `lum f_j/π̃_s` of one sample
     /// on pixel `j`).
@@ -388,7 +354,7 @@ pub struct Developed {
 }
 
 /// Develops the image from every tile's sums: `Ĩ`, `b⁰`, the alignment
-/// (on the tiles' `importance`) with weight `alpha` and `iterations` Jacobi sweeps (fewer where
+/// with weight `alpha` and `iterations` Jacobi sweeps (fewer where
 /// `more_sweeps(i)` is false before sweep `i`: see
 /// [`solver::AlignmentProblem::solve_while`]), then `Î(j)` (under
 /// `filter`, from the spread sums: see the module's "Reconstruction
@@ -396,7 +362,6 @@ pub struct Developed {
 pub fn develop(
     tiling: &Tiling,
     tiles: &[TileSums],
-    importance: TileImportance,
     alpha: f64,
     (iterations, more_sweeps): (usize, &dyn Fn(usize) -> bool),
     filter: Option<&FilterSplat>,
@@ -420,13 +385,13 @@ pub fn develop(
             }
         })
         .collect();
-    let i_lum: Vec<f64> = i_tilde.iter().map(|&c| importance.of(c)).collect();
+    let i_lum: Vec<f64> = i_tilde.iter().map(|&c| luminance(c)).collect();
     let active: Vec<bool> = tiles.iter().map(|t| t.active && t.samples > 0).collect();
     let mut g = vec![0.0; pixels * slots];
     for (s, t) in tiles.iter().enumerate() {
         if active[s] {
             for k in 0..slots {
-                g[s * slots + k] = importance.of(t.g[k]) / t.samples as f64;
+                g[s * slots + k] = luminance(t.g[k]) / t.samples as f64;
             }
         }
     }
@@ -446,7 +411,7 @@ pub fn develop(
     for (j, i_t) in i_tilde.iter().enumerate() {
         let (mut sum, mut n, mut count) = ([0.0; 3], 0u32, 0.0);
         for (s, k) in tiling.covering(j) {
-            count += importance.of(tiles[s].g[k]);
+            count += luminance(tiles[s].g[k]);
             if active[s] {
                 let w = alignment.b[s] / tiles[s].samples as f64;
                 for (acc, v) in sum.iter_mut().zip(tiles[s].g[k]) {
