@@ -20,7 +20,9 @@
 //! `Ĩ(j)`). Every large-step proposal (and every start-up candidate) is a
 //! uniform sample: its `f_q` feed the per-pixel estimate
 //! `Ĩ(j) = Σ_{s∈N(j)} Σ f_j / Σ_{s∈N(j)} n_s^large` that anchors the
-//! alignment and gives `b⁰_s = Σ_{q∈N_s} lum Ĩ(q)`.
+//! alignment and gives `b⁰_s = Σ_{q∈N_s} lum Ĩ(q)`. The alignment solves
+//! once per colour channel by default, each from `b⁰` ([`AlignmentChannels`]:
+//! one solve on luminance moved energy between colours).
 //!
 //! # Reconstruction filter
 //!
