@@ -177,7 +177,7 @@ pub struct Fit {
 
 impl Fit {
     /// Draws as chains × draws × d (the layout of
-    /// [`summarize`](crate::diagnostics::summarize)).
+    /// [`crate::diagnostics::summarize`]).
     pub fn draws(&self) -> Vec<Vec<Vec<f64>>> {
         self.chains.iter().map(|c| c.draws.clone()).collect()
     }
@@ -253,7 +253,7 @@ where
 /// tied to `settings` (all of them), the dimension and
 /// `checkpointing.fingerprint`; a resume evaluates each chain's state once
 /// and refuses a log density other than the recorded one (another target).
-/// Errors as [`sample_nuts`], and [`CoreError::Checkpoint`] (one line) for
+/// Errors as [`sample_nuts`], and [`crate::CoreError::Checkpoint`] (one line) for
 /// a file of another run, of another format version, damaged or cut.
 ///
 /// ```

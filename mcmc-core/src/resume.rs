@@ -3,7 +3,7 @@
 //! every so often and when it stops, and continued from that file with the
 //! bits of the run that was never stopped.
 //!
-//! [`run_chains`](crate::runner::run_chains) runs an opaque closure per
+//! [`crate::runner::run_chains`] runs an opaque closure per
 //! chain, which cannot be saved; [`run_resumable`] runs chains that can
 //! write what their future depends on (position, generator, kernel and
 //! adaptation state, results so far) as words and read it back. Chain `c`

@@ -329,7 +329,7 @@ pub fn load(path: &Path, fingerprint: u64, size: (u32, u32)) -> Result<Option<Pr
 /// one sample and one splat accumulator per pixel in every film, at most
 /// [`MAX_MORE_FILMS`] films after the first, every accumulator
 /// finite, at most one pass per sample per pixel and counts within
-/// [`MAX_COUNT`]. What it returns makes films ([`Progress::film`],
+/// `MAX_COUNT`. What it returns makes films ([`Progress::film`],
 /// [`Progress::more_film`]).
 pub fn progress_from_bytes(
     bytes: &[u8],

@@ -132,7 +132,7 @@ pub fn roulette(q: f32, continued: bool, xi: f64) -> Option<f32> {
 }
 
 /// Inverse of the raster position of MMLT's and the path-space walks'
-/// camera sample (`p = u · (w, h)`, [`crate::pss::raster_of`]).
+/// camera sample (`p = u · (w, h)`, `crate::pss::raster_of`).
 pub fn raster_to_square(scene: &Scene, raster: Vec2) -> (f32, f32) {
     let (w, h) = (scene.film.width as f64, scene.film.height as f64);
     (

@@ -132,7 +132,7 @@ impl RoughPlastic {
     /// A rough plastic of roughness `alpha` (isotropic; clamped like every
     /// microfacet roughness), relative index `eta` (int/ext, positive, not 1).
     /// Precomputes the coating's tables (about 1.1M sampler calls, once
-    /// per distinct coating: [`coating_tables`]).
+    /// per distinct coating: `coating_tables`).
     pub fn new(
         kind: MicrofacetKind,
         alpha: f32,

@@ -546,8 +546,8 @@ const HEADER: &str = "integrator,seconds,samples,rel_mse,rmse";
 /// ([`Corrected`]: `mse_*` are squared RMSEs over all channels).
 const CORRECTED_COLUMNS: &str = "rel_mse_floor,rel_mse_corrected,mse_floor,mse_corrected";
 
-/// Writes the records as CSV: [`HEADER`]'s columns, and
-/// [`CORRECTED_COLUMNS`] when any record has corrected errors (NaN in a
+/// Writes the records as CSV: `HEADER`'s columns, and
+/// `CORRECTED_COLUMNS` when any record has corrected errors (NaN in a
 /// record without).
 pub fn write_csv(path: &Path, records: &[Record]) -> Result<(), String> {
     let extended = records.iter().any(|r| r.corrected.is_some());

@@ -322,10 +322,10 @@ impl<'s> ChainFamily for FusedFamily<'s> {
         true
     }
     /// A converted state: the depth the cache was traced for
-    /// ([`UNTRACED`] if none), the point ([`TorusPoint::to_words`]), and
+    /// (`UNTRACED` if none), the point ([`TorusPoint::to_words`]), and
     /// for a traced state its `ln π` (which the re-trace on resume must
     /// reproduce). An unconverted one (lazy conversion, its point stale):
-    /// [`UNCONVERTED`], the depth, the technique's `s`, the path
+    /// `UNCONVERTED`, the depth, the technique's `s`, the path
     /// ([`Path::to_words`], every field bit for bit) and its `ln π`; the
     /// stale point is not saved (nothing reads it: a primary-sample move
     /// converts the path first).

@@ -4,11 +4,11 @@
 //!
 //! # One iteration (Fig. 6.8)
 //! 1. **Camera pass.** One stratified camera subpath per pixel (the
-//!    `N` pixels in [`TILE`]² tiles), every vertex kept with its MIS
+//!    `N` pixels in `TILE`² tiles), every vertex kept with its MIS
 //!    quantities ([`CameraSet`]); at each vertex the path-tracing techniques
 //!    (emitter found, next-event estimation with a fresh light sample) are
 //!    evaluated at once, independent of the light subpaths
-//!    ([`Vcm::path_tracing_at`], `vcm`'s code). A hash grid over the
+//!    (`Vcm::path_tracing_at`, `vcm`'s code). A hash grid over the
 //!    connectible camera vertices serves the merges.
 //! 2. **Restart.** `candidates` independent light subpaths (uniform
 //!    primary-sample points, each with a uniformly chosen camera subpath)
@@ -2606,7 +2606,7 @@ crate::settings! {
     }
 }
 
-/// Heap bytes of one chain pair beyond its two images: the [`Unit`], its
+/// Heap bytes of one chain pair beyond its two images: the `Unit`, its
 /// two chains (state with its lazily drawn coordinates, the adaptive
 /// kernel, statistics) and their current states' contributions `C^Ω`.
 /// An estimate of the same kind as `markov`'s bytes per chain, set from

@@ -1,7 +1,7 @@
 //! Integrators, one file each, in one [`registry`].
 //!
 //! Each file declares its settings struct (plain data with documented
-//! defaults, see [`crate::settings`]) and implements
+//! defaults, see [`crate::settings!`]) and implements
 //! [`registry::IntegratorSettings`] for it: a name, a one-line description
 //! and how to render with those settings. Two drivers do the rendering:
 //!

@@ -51,7 +51,7 @@
 //! On a cluster ([`crate::cluster`], `mpirun` with the feature `mpi`) the
 //! tasks are dealt out to the ranks and reduced on rank 0 in the same task
 //! order, so the image is also bit-identical for any number of ranks (see
-//! [`distribute`]).
+//! `distribute`).
 
 pub mod checkpoint;
 mod distribute;

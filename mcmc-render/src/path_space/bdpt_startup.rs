@@ -157,7 +157,7 @@ impl<'s> PathFamily<'s> {
     /// The search of `draws` BDPT draws (module docs), or `None` when the
     /// depth is unbounded or longer than [`MAX_SEARCH_SEGMENTS`]. It
     /// stops short at the start-up's `cut` once some draw carried light
-    /// ([`draw_in_rounds`]); its `draws` are then those made (a prefix:
+    /// (`draw_in_rounds`); its `draws` are then those made (a prefix:
     /// each depends on its index alone, so uncut it is the whole search).
     pub fn bdpt_search(&self, seed: u64, draws: u64, cut: &StartupCut) -> Option<Search> {
         let max = self.max_segments.filter(|&m| m <= MAX_SEARCH_SEGMENTS)?;

@@ -4,7 +4,7 @@
 //! camera numbers, the sub-pixel offset moved to the pixel) and the full
 //! BDPT sum over the techniques with `t ≥ 2` camera vertices, whose MIS
 //! weights are renormalised over those techniques only
-//! ([`mis_weight_among`] with `min_camera = 2`). Light tracing (`t = 1`)
+//! (`mis_weight_among` with `min_camera = 2`). Light tracing (`t = 1`)
 //! is left out because its samples land on other pixels than the tile's
 //! (each tile has its own normalisation, §14.11), so paths that only
 //! `t = 1` can sample (a caustic seen through a specular surface, the

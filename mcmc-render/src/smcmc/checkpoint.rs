@@ -8,7 +8,7 @@
 //! uninterrupted run (the tiles' streams and sums carry on as they were;
 //! the exchange rounds follow the iteration count).
 //!
-//! The file: [`MAGIC`], the inputs' fingerprint, the [`Header`]'s words,
+//! The file: `MAGIC`, the inputs' fingerprint, the [`Header`]'s words,
 //! every tile's words in tile order ([`TileRecord`]), then an FNV-1a
 //! checksum of all before it (a flipped bit, a cut or a file written over
 //! is refused before anything in it is read). The start-up (global
@@ -103,7 +103,7 @@ impl TileRecord {
     /// counts, `g`, `large` and the spread sums (their length first) as
     /// f64 bits, then 0 for no chain, or 1 and the chain's state (its
     /// word count first), `ln π̃`, values (f32 bits, the total, the
-    /// offset), stream, statistics ([`stats_words`]) and kernel words
+    /// offset), stream, statistics (`stats_words`) and kernel words
     /// (their count first).
     pub fn words(&self, out: &mut Vec<u64>) {
         let s = &self.sums;

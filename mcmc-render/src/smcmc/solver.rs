@@ -4,7 +4,7 @@
 //! neighbouring tiles agree on the pixels they share (`b_s G_s(j) ≈
 //! b_t G_t(j)`) and each tile stays attached to `Ĩ` with weight `α`.
 //!
-//! The sweeps are the [EXT] Jacobi-type update of Gruson's reference code
+//! The sweeps are the \[EXT\] Jacobi-type update of Gruson's reference code
 //! (spec §8.4) with unit pair weights (its 20 outer L1 reweighting passes
 //! are not done): with `v_s = G_s(j)` at a pixel `j` that tile `s` shares
 //! with tile `t`, `Ḡ_s`, `Ĩ̄_s` the means of `G_s` and `Ĩ` over the pixels
