@@ -372,7 +372,7 @@ fn render_within_budget(dir: &std::path::Path, budget: f64, args: &[&str]) -> se
 /// on the box with direct light only) does not hold the start-up past
 /// `--time`: the cut start-up ends without it, RELT drops it, and the
 /// run without it gets what is left of the budget (before session 32 the
-/// start-up made all its draws — minutes at this bootstrap — and the
+/// start-up made all its draws — ≈ 25 s at this bootstrap — and the
 /// second run restarted the budget).
 #[test]
 fn a_relt_replica_without_light_does_not_hold_the_start_up_past_the_budget() {

@@ -174,6 +174,17 @@ fn env_u64(name: &str, default: u64) -> u64 {
         .unwrap_or(default)
 }
 
+/// `SMCMC_SETS` ("alpha=2,init=global"): extra settings of a study, as
+/// read by [`extra_sets`].
+fn smcmc_sets() -> String {
+    std::env::var("SMCMC_SETS").unwrap_or_default()
+}
+
+/// The `key=value` pairs of `extra` ([`smcmc_sets`]).
+fn extra_sets(extra: &str) -> impl Iterator<Item = (&str, &str)> {
+    extra.split(',').filter_map(|kv| kv.split_once('='))
+}
+
 const RES: u32 = 16;
 const DEPTH: u32 = 5;
 
@@ -808,9 +819,8 @@ fn smcmc_with_an_mmlt_shift_agrees_with_pt_on_the_cornell_box() {
         ("mutations_per_pixel", iterations.as_str()),
         ("shift", shift.as_str()),
     ];
-    // `SMCMC_SETS` ("alignment_channels=rgb"): more settings, for studies.
-    let extra = std::env::var("SMCMC_SETS").unwrap_or_default();
-    sets.extend(extra.split(',').filter_map(|kv| kv.split_once('=')));
+    let extra = smcmc_sets();
+    sets.extend(extra_sets(&extra));
     let reps: Vec<[f64; 3]> = (0..runs)
         .map(|k| {
             let r = smcmc(cornell(), &sets, 40_000 + k);
@@ -1447,13 +1457,12 @@ fn smcmc_with_an_mmlt_shift_agrees_with_pt_on_the_glossy_glass_box() {
         env_u64("SMCMC_ITERATIONS", 1536),
     );
     let iterations = iterations.to_string();
-    // `SMCMC_SETS` ("alpha=2,init=global"): more settings, for studies.
-    let extra = std::env::var("SMCMC_SETS").unwrap_or_default();
+    let extra = smcmc_sets();
     let mut sets = vec![
         ("mutations_per_pixel", iterations.as_str()),
         ("shift", shift.as_str()),
     ];
-    sets.extend(extra.split(',').filter_map(|kv| kv.split_once('=')));
+    sets.extend(extra_sets(&extra));
     assert_agrees_on_the_glossy_glass_box(&shift, &sets, runs, 83_000);
 }
 
@@ -1730,7 +1739,7 @@ fn i_minus_r_over_many_seeds() {
     let (runs, iterations) = (env_u64("SMCMC_RUNS", 80), env_u64("SMCMC_ITERATIONS", 256));
     let pt_runs = env_u64("PT_RUNS", 192);
     let (smcmc_seed0, pt_seed0) = (env_u64("SMCMC_SEED0", 60_000), env_u64("PT_SEED0", 70_000));
-    let extra = std::env::var("SMCMC_SETS").unwrap_or_default();
+    let extra = smcmc_sets();
     let boxed = std::env::var("SMCMC_FILTER").is_ok_and(|f| f == "box");
     let box_scene;
     let scene: &Scene = if boxed {
@@ -1748,7 +1757,7 @@ fn i_minus_r_over_many_seeds() {
         .collect();
     let iterations = iterations.to_string();
     let mut sets = vec![("mutations_per_pixel", iterations.as_str())];
-    sets.extend(extra.split(',').filter_map(|kv| kv.split_once('=')));
+    sets.extend(extra_sets(&extra));
     let test: Vec<Vec<Rgb>> = (0..runs)
         .map(|k| smcmc(scene, &sets, smcmc_seed0 + k).image)
         .collect();

@@ -523,23 +523,18 @@ fn spread_image(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::{Rng, SeedableRng};
-    use rand_xoshiro::Xoshiro256PlusPlus;
-
-    fn unit(rng: &mut Xoshiro256PlusPlus) -> f64 {
-        (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
+    use mcmc_core::rng::{stream_rng, uniform};
 
     /// Tile sums of a 7×5 image with random histograms and large-step sums
     /// whose colour at every slot is `colour(slot value)`.
     fn sums(tiling: &Tiling, colour: impl Fn(f64, usize) -> [f64; 3]) -> Vec<TileSums> {
-        let mut rng = Xoshiro256PlusPlus::seed_from_u64(7);
+        let mut rng = stream_rng(7, 0);
         (0..tiling.tiles())
             .map(|s| {
                 let mut t = TileSums::new(None, tiling.slots());
                 for (k, _) in tiling.pixels(s) {
-                    t.g[k] = colour(0.5 + 3.5 * unit(&mut rng), s);
-                    t.large[k] = colour(0.5 + 3.5 * unit(&mut rng), s);
+                    t.g[k] = colour(0.5 + 3.5 * uniform(&mut rng), s);
+                    t.large[k] = colour(0.5 + 3.5 * uniform(&mut rng), s);
                 }
                 (t.samples, t.large_samples, t.active) = (100, 10, true);
                 t
