@@ -364,8 +364,34 @@ pub struct Developed {
     /// transition of tile `s` puts a share `lum f_j/π̃_s` of one sample
     /// on pixel `j`).
     pub samples: Vec<Rgb>,
-    /// The alignment.
-    pub alignment: solver::Alignment,
+    /// `b_s` per colour channel and tile (the same for the three under
+    /// [`AlignmentChannels::Luminance`]).
+    pub b: [Vec<f64>; 3],
+    /// The alignment's sweeps and residuals.
+    pub alignment: AlignmentSummary,
+}
+
+/// What a develop's alignment did: its sweeps and, for the lane furthest
+/// from converged, its residuals (see [`solver::Alignment`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AlignmentSummary {
+    /// Sweeps run.
+    pub iterations: usize,
+    /// `‖r(b⁰)‖/‖c‖` of the worst lane.
+    pub initial_residual: f64,
+    /// `‖r(b)‖/‖c‖` of the worst lane after the sweeps.
+    pub residual: f64,
+}
+
+impl<const N: usize> From<&solver::Alignment<N>> for AlignmentSummary {
+    fn from(a: &solver::Alignment<N>) -> Self {
+        let worst = a.worst_lane();
+        AlignmentSummary {
+            iterations: a.iterations,
+            initial_residual: a.initial_residual[worst],
+            residual: a.residual[worst],
+        }
+    }
 }
 
 /// Develops the image from every tile's sums: `Ĩ`, `b⁰`, the alignment
@@ -382,7 +408,6 @@ pub fn develop(
     (iterations, more_sweeps): (usize, &dyn Fn(usize) -> bool),
     filter: Option<&FilterSplat>,
 ) -> Developed {
-    let slots = tiling.slots();
     let pixels = tiling.tiles();
     // Ĩ(j) from every uniform sample of the tiles that contain j.
     let i_tilde: Vec<[f64; 3]> = (0..pixels)
@@ -408,34 +433,37 @@ pub fn develop(
     let b0: Vec<f64> = (0..pixels)
         .map(|s| tiling.pixels(s).map(|(_, j)| i_lum[j]).sum())
         .collect();
-    // The alignment of the tiles' histograms and `Ĩ` of one scalar of
-    // their RGB values, from `b⁰`.
-    let align = |scalar: &dyn Fn([f64; 3]) -> f64| {
-        let i_scalar: Vec<f64> = i_tilde.iter().map(|&c| scalar(c)).collect();
-        let mut g = vec![0.0; pixels * slots];
-        for (s, t) in tiles.iter().enumerate() {
-            if active[s] {
-                for k in 0..slots {
-                    g[s * slots + k] = scalar(t.g[k]) / t.samples as f64;
-                }
-            }
+    // The alignment of the tiles' histograms and `Ĩ` in `N` lanes, each
+    // a scalar of their RGB values, from `b⁰`.
+    let sweeps = (iterations, more_sweeps);
+    let (b, alignment): ([Vec<f64>; 3], AlignmentSummary) = match channels {
+        AlignmentChannels::Luminance => {
+            let a = align(
+                tiling,
+                tiles,
+                &active,
+                (&i_tilde, &b0),
+                alpha,
+                sweeps,
+                |v| [luminance(v)],
+            );
+            let lane = a.lane(0);
+            ([lane.clone(), lane.clone(), lane], (&a).into())
         }
-        let problem = solver::AlignmentProblem {
-            tiling,
-            g: &g,
-            active: &active,
-            i_tilde: &i_scalar,
-            alpha,
-        };
-        problem.solve_while(&b0, iterations, more_sweeps)
+        AlignmentChannels::Rgb => {
+            let a = align(
+                tiling,
+                tiles,
+                &active,
+                (&i_tilde, &b0),
+                alpha,
+                sweeps,
+                |v| v,
+            );
+            (std::array::from_fn(|c| a.lane(c)), (&a).into())
+        }
     };
-    let alignments: Vec<solver::Alignment> = match channels {
-        AlignmentChannels::Luminance => vec![align(&luminance)],
-        AlignmentChannels::Rgb => (0..3).map(|c| align(&|v: [f64; 3]| v[c])).collect(),
-    };
-    // `b_s` of each channel.
-    let b: [&[f64]; 3] =
-        std::array::from_fn(|c| alignments[c.min(alignments.len() - 1)].b.as_slice());
+    let b: [&[f64]; 3] = std::array::from_fn(|c| b[c].as_slice());
     let mut image = Vec::with_capacity(pixels);
     let mut samples = Vec::with_capacity(pixels);
     for (j, i_t) in i_tilde.iter().enumerate() {
@@ -460,15 +488,45 @@ pub fn develop(
     if let Some(fs) = filter {
         image = spread_image(tiling, tiles, &active, b, &i_tilde, fs);
     }
-    // The report: the channel whose solve is furthest from converged.
-    let alignment = (alignments.into_iter())
-        .max_by(|x, y| x.residual.total_cmp(&y.residual))
-        .expect("one alignment at least");
     Developed {
         image,
         samples,
+        b: b.map(<[f64]>::to_vec),
         alignment,
     }
+}
+
+/// The alignment of the tiles' histograms `G_s` and of `Ĩ` in the `N`
+/// lanes `lanes(rgb)` of their RGB values, every lane from `b⁰`, with
+/// weight `alpha` and `(iterations, more)` sweeps.
+fn align<const N: usize>(
+    tiling: &Tiling,
+    tiles: &[TileSums],
+    active: &[bool],
+    (i_tilde, b0): (&[[f64; 3]], &[f64]),
+    alpha: f64,
+    (iterations, more): (usize, &dyn Fn(usize) -> bool),
+    lanes: impl Fn([f64; 3]) -> [f64; N],
+) -> solver::Alignment<N> {
+    let slots = tiling.slots();
+    let i_lanes: Vec<[f64; N]> = i_tilde.iter().map(|&c| lanes(c)).collect();
+    let mut g = vec![[0.0; N]; tiles.len() * slots];
+    for (s, t) in tiles.iter().enumerate() {
+        if active[s] {
+            for k in 0..slots {
+                g[s * slots + k] = lanes(t.g[k]).map(|v| v / t.samples as f64);
+            }
+        }
+    }
+    let problem = solver::AlignmentProblem {
+        tiling,
+        g: &g,
+        active,
+        i_tilde: &i_lanes,
+        alpha,
+    };
+    let b0: Vec<[f64; N]> = b0.iter().map(|&b| [b; N]).collect();
+    problem.solve_while(&b0, iterations, more)
 }
 
 /// `Î(j) = Σ_q (1/n_q) Σ_{s∈N(q)} b_s F_s(q→j)` over the source pixels
@@ -560,8 +618,10 @@ mod tests {
             lum.alignment.iterations == 50
                 && lum.alignment.residual < lum.alignment.initial_residual
         );
-        for (a, b) in lum.alignment.b.iter().zip(&rgb.alignment.b) {
-            assert!((a - b).abs() <= 1e-12 * a.abs(), "{a} {b}");
+        for c in 0..3 {
+            for (a, b) in lum.b[c].iter().zip(&rgb.b[c]) {
+                assert!((a - b).abs() <= 1e-12 * a.abs(), "{a} {b}");
+            }
         }
         for (a, b) in lum.image.iter().zip(&rgb.image) {
             for (x, y) in [(a.r, b.r), (a.g, b.g), (a.b, b.b)] {
