@@ -99,8 +99,9 @@ impl KernelKind {
 #[derive(Clone, Debug, Parser)]
 #[command(name = "mixture", version, about)]
 pub struct Args {
-    /// The mixture: {"components":[{"weight":w,"mean":[..],"cov":[[..]]} or
-    /// {"weight":w,"mean":[..],"sigma":s}], "bounds":[[lo,hi],..] (optional)}.
+    /// The mixture: `{"components":[{"weight":w,"mean":[..],"cov":[[..]]}` or
+    /// `{"weight":w,"mean":[..],"sigma":s}], "bounds":[[lo,hi],..]}` (bounds
+    /// optional).
     #[arg(long, value_name = "FILE.json")]
     pub target: PathBuf,
 

@@ -281,6 +281,64 @@ fn ctrl_c_ends_the_start_up_of_a_markov_render() {
     assert!(img.iter().all(|p| p.is_finite()));
 }
 
+/// Ctrl-C during the start-up leaves the chains no mutation; the image is
+/// then the start-up candidates' own independent estimate (`Σ f/p₀ / N`),
+/// not a black film. With the box filter every splat lands in one pixel,
+/// so the image's mean luminance is exactly the candidates' `b*` (the mean
+/// of `I/p₀` over the same draws) up to f32 accumulation, for PSSMLT (one
+/// member) and MMLT (`b* = Σ_d b_d`, one film for all depths): a black
+/// image, one normalised by the requested candidates, or one filming the
+/// candidates a target leaves out would all miss it by far more than
+/// 1e-3. And PSSMLT's agrees with a path-traced render within the
+/// candidates' and the path tracer's noise (Student's t, `T_SIGMAS`).
+#[test]
+fn ctrl_c_during_the_start_up_writes_the_candidates_image() {
+    let dir = scratch("sigint-start-up-image");
+    write(&dir, "s.xml", &cli_support::floor_scene(W, H));
+    let reference = pt_means(&dir, 256, 1000..1001)[0];
+    let sigma2 = per_sample_variance(&pt_means(&dir, 2, 2000..2008), 2);
+    // 20 million candidates take ≈ 5 s (PSSMLT) and ≈ 16 s (MMLT) on two
+    // cores here: the signal after 1 s lands in the start-up.
+    for integrator in ["pssmlt", "mmlt"] {
+        let (status, stderr) = interrupt(
+            &to_i_exr(&[
+                "render",
+                "s.xml",
+                "--integrator",
+                integrator,
+                "--bootstrap",
+                "20000000",
+                "--mutations-per-pixel",
+                HUGE,
+            ]),
+            &dir,
+            Duration::from_millis(1000),
+        );
+        assert_partial_outputs(&dir, status, &stderr);
+        let j = json(&dir.join("i.json"));
+        assert_eq!(j["mutations"], 0, "{integrator}: {stderr}");
+        assert_eq!(j["image_from_start_up"], true, "{integrator}");
+        let drawn = j["bootstrap_candidates"].as_u64().unwrap();
+        assert!(drawn < 20_000_000, "{integrator}: {drawn}");
+        let (_, _, img) = exr(&dir.join("i.exr"));
+        assert!(img.iter().all(|p| p.is_finite()));
+        let mean = mean_luminance(&img);
+        let b = j["b_bootstrap"].as_f64().unwrap();
+        assert!(
+            (mean - b).abs() <= 1e-3 * b,
+            "{integrator}: image mean {mean} vs b* {b} from {drawn} candidates"
+        );
+        if integrator == "pssmlt" {
+            let se_b = j["b_bootstrap_standard_error"].as_f64().unwrap();
+            let sd = (se_b * se_b + sigma2 / 256.0).sqrt();
+            assert!(
+                (mean - reference).abs() <= T_SIGMAS * sd,
+                "start-up image mean {mean} vs pt {reference} (sd {sd})"
+            );
+        }
+    }
+}
+
 #[test]
 fn ctrl_c_ends_a_convergence_study_with_what_it_has() {
     let dir = scratch("sigint-convergence");

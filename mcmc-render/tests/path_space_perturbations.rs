@@ -960,7 +960,7 @@ fn reference<'s>(
     let mut kept = Vec::new();
     for _ in 0..m {
         let x = family.draw_candidate(&mut rng);
-        let lw = family.candidate_log_weight(0, &x);
+        let lw = family.weighed_candidate(0, &x).0;
         if lw.is_finite() && set(&x) {
             kept.push((x, lw));
         }

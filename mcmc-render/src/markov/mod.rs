@@ -239,9 +239,12 @@ pub trait ChainFamily: Sync {
     /// `ln p₀(x)`, the reference density of independent draws (0 on
     /// primary sample space).
     fn reference_log_density(&self, state: &Self::State) -> f64;
-    /// The importance weight `ln I_d(x) − ln p₀(x)` of a candidate.
-    fn candidate_log_weight(&self, member: usize, state: &Self::State) -> f64 {
-        self.target(member).evaluate(state).log_density - self.reference_log_density(state)
+    /// The importance weight `ln I_d(x) − ln p₀(x)` of a candidate and
+    /// its payload, whose splats over `p₀(x)` are an independent estimate
+    /// of the member's image (the start-up image, [`MltResult::image`]).
+    fn weighed_candidate(&self, member: usize, state: &Self::State) -> (f64, PathSample) {
+        let e = self.target(member).evaluate(state);
+        (e.log_density - self.reference_log_density(state), e.payload)
     }
     /// Numbers that reproduce a state (the NaN dump for `--replay`), if
     /// the space has them.
@@ -698,6 +701,13 @@ pub struct MltResult {
     pub scale: f64,
     /// The standard error of [`MltResult::scale`] (members independent).
     pub scale_standard_error: f64,
+    /// When the chains made no mutation (a stop during the start-up), the
+    /// start-up candidates' independent estimate of the image, `Σ_d
+    /// (1/N) Σ_j f(x_dj)/p₀(x_dj)` over the `N` candidates drawn per member
+    /// (per replica group where members share an evaluation, with the
+    /// members' class factors: see `startup::image_factors`); `None`
+    /// otherwise (and on a cluster's ranks other than 0).
+    pub startup_image: Option<Vec<Rgb>>,
     /// Bootstrap `b* = Σ_d b_d` and its standard error.
     pub bootstrap_b: (f64, f64),
     /// Running `⟨b⟩ = Σ_d ⟨b_d⟩` (bootstrap and large steps) and its
@@ -755,9 +765,14 @@ impl MltResult {
         (layer, if median > 0.0 { max / median } else { f64::NAN })
     }
 
-    /// The developed image, row-major: the sum of the members' images.
+    /// The developed image, row-major: the sum of the members' images,
+    /// or, when the chains made no mutation (stopped during the
+    /// start-up), the start-up's image ([`MltResult::startup_image`]).
     pub fn image(&self) -> Vec<Rgb> {
-        sum_images(self.families.iter().map(FamilyResult::image))
+        match &self.startup_image {
+            Some(image) => image.clone(),
+            None => sum_images(self.families.iter().map(FamilyResult::image)),
+        }
     }
 }
 
@@ -788,6 +803,7 @@ fn start_up<F: ChainFamily>(
     count: usize,
     seed: u64,
     cut: &StartupCut,
+    mut image: Option<&mut Film>,
 ) -> Result<Startup, MltError> {
     let members = family.members();
     let exchange = family.exchange_move().is_some();
@@ -821,11 +837,12 @@ fn start_up<F: ChainFamily>(
         startup::weights_in_rounds(members, count, cut, lit, |range, log_w| {
             for g in &groups {
                 let group = (g.clone(), g.start * count);
-                shared_candidate_log_weights(family, group, range.clone(), seed, log_w);
+                let film = image.as_deref_mut();
+                shared_candidate_log_weights(family, group, range.clone(), seed, (log_w, film));
             }
         })
     } else {
-        candidate_log_weights(family, count, seed, cut, lit)
+        candidate_log_weights(family, count, seed, cut, lit, image)
     };
     let mut boots: Vec<Bootstrap<usize, ()>> = Vec::with_capacity(members);
     let mut invalid = 0;
@@ -875,7 +892,7 @@ pub fn bootstrap<F: ChainFamily>(
             "the bootstrap needs at least one candidate".into(),
         ));
     }
-    let log_w = candidate_log_weights(family, count, seed, &StartupCut::NEVER, |_| false)
+    let log_w = candidate_log_weights(family, count, seed, &StartupCut::NEVER, |_| false, None)
         .log_w
         .concat();
     Ok((index_bootstrap(&log_w, 0)?, log_w))
@@ -947,13 +964,18 @@ pub fn run<F: ChainFamily>(
         settings.time_budget.map(|b| b.mul_f64(STARTUP_SHARE)),
     );
     let cut = StartupCut::new(startup_end, stop, settings.checkpoint.is_some());
+    let filter = Arc::new(Filter::new(scene.film.filter, width, height));
+    // The candidates' own image, written if the chains never move (a stop
+    // during the start-up); only the rank that writes the image films it.
+    let mut startup_film =
+        crate::cluster::is_root().then(|| Film::new_splat_only(width, height, filter.clone()));
     let Startup {
         shared,
         boots,
         running: boot_running,
         invalid,
         drawn,
-    } = start_up(family, count, seed, &cut)?;
+    } = start_up(family, count, seed, &cut, startup_film.as_mut())?;
     // Both read the other members' densities off a member's payload.
     let ladder_only = match settings.normalization {
         Normalization::Ratios => Some("ratios"),
@@ -1015,6 +1037,8 @@ pub fn run<F: ChainFamily>(
     for (d, search) in member_searches.iter().enumerate() {
         if let Some(search) = search {
             if search.replaces_bootstrap {
+                // Its bootstrap (a token candidate) is no image either.
+                startup_film = None;
                 boot_running[d] = search.running();
             } else {
                 boot_running[d].merge(&search.running());
@@ -1099,7 +1123,6 @@ pub fn run<F: ChainFamily>(
     let bootstrap_seconds = start.elapsed().as_secs_f64();
 
     let total = settings.mutations_per_pixel.map(|m| m * pixels);
-    let filter = Arc::new(Filter::new(scene.film.filter, width, height));
     let new_film = || Film::new(width, height, filter.clone());
     // On a cluster this rank runs only the tasks dealt to it, and builds
     // only their chains: a chain's start is evaluated when it is built,
@@ -1328,6 +1351,9 @@ pub fn run<F: ChainFamily>(
         families,
         mutations,
         mutations_per_pixel: mutations as f64 / pixels as f64,
+        startup_image: startup_film
+            .filter(|_| mutations == 0)
+            .map(|film| develop(&film, drawn as u64, 1.0)),
         bootstrap_b: (b_star, b_star_se),
         running_b,
         chain_stats: chain_stats.unwrap_or_else(|| ChainStatistics::new(Vec::new())),

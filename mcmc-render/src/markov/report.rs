@@ -41,6 +41,8 @@ pub fn rendered(
     let statistics = json!({
         "bootstrap_seconds": result.bootstrap_seconds,
         "bootstrap_candidates": result.bootstrap_candidates,
+        // Stopped before the chains moved: the image is the candidates'.
+        "image_from_start_up": result.startup_image.is_some(),
         "mutations": result.mutations,
         "mutations_per_second": mutations_per_second,
         "mutations_per_pixel": result.mutations_per_pixel,
@@ -133,10 +135,13 @@ pub fn rendered(
             result.bootstrap_seconds,
             result.scale,
             result.scale_standard_error,
-            if result.interrupted {
-                ", stopped early"
-            } else {
-                ""
+            match (result.interrupted, &result.startup_image) {
+                (true, Some(_)) => format!(
+                    ", stopped early: the image is the start-up's {} independent candidates per member",
+                    result.bootstrap_candidates
+                ),
+                (true, None) => ", stopped early".into(),
+                (false, _) => String::new(),
             },
         ),
     }

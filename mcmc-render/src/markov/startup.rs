@@ -3,8 +3,12 @@
 //! and the allocation of chains to members.
 
 use super::{ChainFamily, MltError};
-use crate::cluster::{any_rank, evaluate_split};
+use crate::cluster::{any_rank, evaluate_split_records};
+use crate::color::Rgb;
 use crate::deadline::Deadline;
+use crate::film::Film;
+use crate::pss::{PATH_CLASSES, PathSample};
+use glam::Vec2;
 use mcmc_core::rng::stream_rng;
 use mcmc_core::startup::Bootstrap;
 use mcmc_core::target::Target;
@@ -116,26 +120,107 @@ pub(crate) const RESAMPLE_STREAM: u64 = 1 << 41;
 
 /// `ln I(x_j) − ln p₀(x_j)` of the `count` candidates of every member
 /// (member `d`'s are indices `d·count..`), evaluated in parallel (on a
-/// cluster, split over the ranks) round by round ([`draw_in_rounds`]).
+/// cluster, split over the ranks) round by round ([`draw_in_rounds`]);
+/// with an `image`, the candidates' image splats are filmed into it
+/// ([`candidate_image`]).
 pub(crate) fn candidate_log_weights<F: ChainFamily>(
     family: &F,
     count: usize,
     seed: u64,
     cut: &StartupCut,
     lit: impl Fn(&[Vec<f64>]) -> bool,
+    mut image: Option<&mut Film>,
 ) -> CandidateWeights {
     let members = family.members();
+    let filming = image.is_some();
     weights_in_rounds(members, count, cut, lit, |range, log_w| {
         let n = range.len();
-        let w = evaluate_split(n * members, 1, |k| {
+        let records = evaluate_split_records(n * members, |k| {
             let (d, i) = (k / n, range.start + k % n);
-            let index = (d * count + i) as u64;
-            vec![family.candidate_log_weight(d, &family.candidate(seed, index))]
+            let x = family.candidate(seed, (d * count + i) as u64);
+            let (lw, payload) = family.weighed_candidate(d, &x);
+            let mut record = vec![lw];
+            if filming {
+                let reference = family.reference_log_density(&x);
+                let factors = image_factors(family, d..d + 1, &payload, |_| lw + reference);
+                push_image_splats(&mut record, &payload, -reference, &factors);
+            }
+            record
         });
-        for (d, row) in log_w.iter_mut().enumerate() {
-            row.extend_from_slice(&w[d * n..(d + 1) * n]);
+        for (k, record) in records.iter().enumerate() {
+            log_w[k / n].push(record[0]);
+            if let Some(film) = image.as_deref_mut() {
+                film_splats(film, &record[1..]);
+            }
         }
     })
+}
+
+/// Per path class, the factor `m_c(x)` of a candidate's splats in the
+/// start-up's independent image `Σ_c m_c(x) f_c(x) / p₀(x)`, for the
+/// members `members` that share the candidate's evaluation (one member
+/// unless shared): `Σ_d w_d · g_{d,c}(x) · q_d(x)` over the members with
+/// `q_d(x) > 0`, with `w_d` the member's image weight and `g_{d,c}` its
+/// class factor ([`ChainFamily::class_weights`]; `1/q_d` when it has
+/// none), which is
+/// what the members' chains film of class `c` in expectation. MIS
+/// factors sum to 1 over the members for any `b̂`, so `b̂ = 1` serves.
+fn image_factors<F: ChainFamily>(
+    family: &F,
+    members: Range<usize>,
+    payload: &PathSample,
+    log_q: impl Fn(usize) -> f64,
+) -> [f64; PATH_CLASSES] {
+    let ones = vec![1.0; family.members()];
+    let mut factors = [0.0; PATH_CLASSES];
+    for d in members {
+        let (w, log_q) = (family.image_weight(d), log_q(d));
+        // A path the member's target leaves out (`q_d = 0`: `mlt`'s
+        // specular chains, which a pass renders) or an invalid one is not
+        // in its image, whatever splats its payload carries.
+        if w == 0.0 || !log_q.is_finite() {
+            continue;
+        }
+        match family.class_weights(d, payload, &ones) {
+            None => factors.iter_mut().for_each(|m| *m += w),
+            Some(g) => {
+                let q = log_q.exp();
+                for (m, g) in factors.iter_mut().zip(g) {
+                    *m += w * g * q;
+                }
+            }
+        }
+    }
+    factors
+}
+
+/// Appends to `record` the splats of `payload` weighted by `factors[class]
+/// / p₀` (`ln p₀ = −log_inverse_p0`), five numbers each (raster x, y and
+/// RGB), those with a zero or non-finite weight left out.
+fn push_image_splats(
+    record: &mut Vec<f64>,
+    payload: &PathSample,
+    log_inverse_p0: f64,
+    factors: &[f64; PATH_CLASSES],
+) {
+    let inverse_p0 = log_inverse_p0.exp();
+    for sp in &payload.splats {
+        let w = factors[usize::from(sp.class)] * inverse_p0;
+        if w > 0.0 && w.is_finite() {
+            let l = [sp.l.r, sp.l.g, sp.l.b].map(|c| f64::from(c) * w);
+            if l.iter().all(|c| c.is_finite()) {
+                record.extend([f64::from(sp.p.x), f64::from(sp.p.y), l[0], l[1], l[2]]);
+            }
+        }
+    }
+}
+
+/// Films splats written by [`push_image_splats`].
+fn film_splats(film: &mut Film, numbers: &[f64]) {
+    for s in numbers.chunks_exact(5) {
+        let p = Vec2::new(s[0] as f32, s[1] as f32);
+        film.splat(p, Rgb::new(s[2] as f32, s[3] as f32, s[4] as f32));
+    }
 }
 
 /// Whether the members of `group` share one evaluation
@@ -156,27 +241,39 @@ pub(crate) fn shares_evaluation<F: ChainFamily>(
 /// For a family whose members share one evaluation: `ln q_d(x_i) − ln
 /// p₀(x_i)` of candidates `offset + range` for every member `d` of
 /// `group`, each traced once with the group's first member's target,
-/// appended to the members' rows of `log_w`.
+/// appended to the members' rows of `log_w`; with an `image`, the
+/// candidates' image splats are filmed into it ([`image_factors`]).
 pub(crate) fn shared_candidate_log_weights<F: ChainFamily>(
     family: &F,
     (group, offset): (Range<usize>, usize),
     range: Range<usize>,
     seed: u64,
-    log_w: &mut [Vec<f64>],
+    (log_w, image): (&mut [Vec<f64>], Option<&mut Film>),
 ) {
     let first = group.start;
     let g = group.len();
-    let per_candidate = evaluate_split(range.len(), g, |i| {
+    let filming = image.is_some();
+    let records = evaluate_split_records(range.len(), |i| {
         let x = family.candidate(seed, (offset + range.start + i) as u64);
         let e = family.target(first).evaluate(&x);
         let reference = family.reference_log_density(&x);
-        group
-            .clone()
-            .map(|d| family.member_log_density(d, &e.payload).unwrap_or(f64::NAN) - reference)
-            .collect()
+        let log_q = |d| family.member_log_density(d, &e.payload).unwrap_or(f64::NAN);
+        let mut record: Vec<f64> = group.clone().map(|d| log_q(d) - reference).collect();
+        if filming {
+            let factors = image_factors(family, group.clone(), &e.payload, log_q);
+            push_image_splats(&mut record, &e.payload, -reference, &factors);
+        }
+        record
     });
-    for (m, d) in group.enumerate() {
-        log_w[d].extend(per_candidate.iter().skip(m).step_by(g));
+    for record in &records {
+        for (m, d) in group.clone().enumerate() {
+            log_w[d].push(record[m]);
+        }
+    }
+    if let Some(film) = image {
+        for record in &records {
+            film_splats(film, &record[g..]);
+        }
     }
 }
 

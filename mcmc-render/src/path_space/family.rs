@@ -531,18 +531,18 @@ impl<'s> ChainFamily for PathFamily<'s> {
     fn reference_log_density(&self, state: &Path<'s>) -> f64 {
         self.log_candidate_density(state)
     }
-    fn candidate_log_weight(&self, _member: usize, state: &Path<'s>) -> f64 {
-        let log_i = self.target.log_density(state);
-        if log_i == f64::NEG_INFINITY {
-            return f64::NEG_INFINITY;
+    fn weighed_candidate(&self, _member: usize, state: &Path<'s>) -> (f64, PathSample) {
+        let e = mcmc_core::target::Target::evaluate(&self.target, state);
+        if e.log_density == f64::NEG_INFINITY {
+            return (f64::NEG_INFINITY, e.payload);
         }
         let log_p = self.log_candidate_density(state);
         if !log_p.is_finite() {
             // A drawn path whose density rounds to zero: an invalid
             // candidate (counted), not an infinite weight.
-            return f64::NAN;
+            return (f64::NAN, e.payload);
         }
-        log_i - log_p
+        (e.log_density - log_p, e.payload)
     }
     fn coordinates(&self, _state: &Path<'s>) -> Option<Vec<f64>> {
         None
