@@ -368,6 +368,42 @@ fn render_within_budget(dir: &std::path::Path, budget: f64, args: &[&str]) -> se
     stats
 }
 
+/// `smcmc`'s global start-up (`init=global`) with a bootstrap of 20
+/// million states (≈ 5 s here) stops at half of `--time` as the Markov
+/// driver's does, so the tiles still run: before session 33 its bootstrap
+/// was drawn at once, uncut, a `--time 2` run took 13 s, and the tiles
+/// made no mutation (black image).
+#[test]
+fn smcmc_global_start_up_stops_at_the_time_budget() {
+    let dir = cornell_box_in("limits-smcmc-global");
+    let stats = render_within_budget(
+        &dir,
+        BUDGET,
+        &[
+            &BOX_16[..],
+            &[
+                "--integrator",
+                "smcmc",
+                "--set",
+                "init=global",
+                "--set",
+                "init_bootstrap=20000000",
+            ],
+        ]
+        .concat(),
+    );
+    let drawn = stats["global_init"]["drawn_bootstrap"]
+        .as_u64()
+        .expect("drawn_bootstrap");
+    // Rounds of 4096 (`STARTUP_ROUND` in `markov/startup.rs`).
+    assert!(
+        drawn < 20_000_000 && drawn.is_multiple_of(4096),
+        "{drawn} of 20 000 000"
+    );
+    let mutations = stats["mutations"].as_u64().expect("mutations");
+    assert!(mutations > 0, "no tile step in {stats}");
+}
+
 /// A RELT replica that no bootstrap path reaches (the specific one, L0,
 /// on the box with direct light only) does not hold the start-up past
 /// `--time`: the cut start-up ends without it, RELT drops it, and the

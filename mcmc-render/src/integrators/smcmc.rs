@@ -1181,8 +1181,17 @@ impl Smcmc {
         // resumed run makes the global start-up again for its statistics,
         // and a run whose tiles started short would be saved as such); a
         // stop still cuts it, and then nothing is saved.
+        // The start-up stops at its share of the budget, as the Markov
+        // driver's (`markov::STARTUP_SHARE`), so that the tiles get the
+        // rest: at the whole budget a large `init_bootstrap` left them none
+        // and the image black (session 33).
         let checkpointed = run.checkpoint.is_some();
-        let startup_halt = || stop.load(Ordering::Relaxed) || (!checkpointed && deadline.passed());
+        let startup_deadline = Deadline::new(
+            start,
+            (run.time_budget).map(|b| b.mul_f64(crate::markov::STARTUP_SHARE)),
+        );
+        let startup_halt =
+            || stop.load(Ordering::Relaxed) || (!checkpointed && startup_deadline.passed());
         if self.init == SmcmcInit::Global {
             // The global start-up keeps one weight per bootstrap state and
             // one walk per chain (10^15 states aborted on an 8 PB
@@ -1422,6 +1431,7 @@ impl Smcmc {
                 "chains": self.init_chains,
                 "mutations": v.mutations,
                 "lit_bootstrap": v.lit_bootstrap,
+                "drawn_bootstrap": v.drawn_bootstrap,
                 "visited_pixels": v.visited as f64 / n as f64,
                 "acceptance": v.stats.as_ref().map(|s| s.acceptance_rate()),
             })),

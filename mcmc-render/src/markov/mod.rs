@@ -79,6 +79,7 @@ use mcmc_core::startup::{Bootstrap, RunningNormalization};
 use mcmc_core::stats::ChainStatistics;
 use mcmc_core::target::Target;
 use serde::Serialize;
+pub(crate) use startup::STARTUP_ROUND;
 pub use startup::StartupCut;
 pub(crate) use startup::draw_in_rounds;
 use startup::{
