@@ -482,6 +482,10 @@ fn erpt_work_sized_by_a_setting_stops_at_the_time_budget() {
     );
     let walks = stats["luminance_samples"].as_u64().expect("walks");
     assert!(walks < 1_000_000_000_000_000, "{walks} walks");
+    // The estimate stops at half the budget (`STARTUP_SHARE`), so passes
+    // run (at the whole budget none did and the image was black).
+    let passes = stats["passes"].as_u64().expect("passes");
+    assert!(passes > 0, "no pass after the luminance estimate: {stats}");
     let stats = render_within_budget(
         &dir,
         BUDGET,

@@ -293,6 +293,16 @@ impl IntegratorSettings for Erpt {
         // Whether any rank is stopped: every rank then stops at the same
         // point (collective; without a cluster, `time_up` itself).
         let any_time_up = || crate::cluster::any_rank(time_up());
+        // The luminance estimate is the start-up: it stops at the Markov
+        // driver's share of the budget (`markov::STARTUP_SHARE`), so the
+        // passes get the rest (at the whole budget a large
+        // `luminance_samples` left them none, session 33).
+        let lum_deadline = Deadline::new(
+            start,
+            (run.time_budget).map(|b| b.mul_f64(crate::markov::STARTUP_SHARE)),
+        );
+        let lum_time_up =
+            || crate::cluster::any_rank(stop.load(Ordering::Relaxed) || lum_deadline.passed());
         let cluster = crate::cluster::current();
         let filter = Arc::new(Filter::new(scene.film.filter, w, h));
         let names = self
@@ -324,7 +334,7 @@ impl IntegratorSettings for Erpt {
             None => estimate_luminance(
                 self.luminance_samples,
                 splitmix64(run.seed ^ 0x4c55_4d49),
-                &any_time_up,
+                &lum_time_up,
                 |mut rng| {
                     let (mut camera, mut light) = (Vec::new(), Vec::new());
                     let raster = in_pixel(
