@@ -707,7 +707,7 @@ pub struct MltResult {
     /// (1/N) Σ_j f(x_dj)/p₀(x_dj)` over the `N` candidates drawn per member
     /// (per replica group where members share an evaluation, with the
     /// members' class factors: see `startup::image_factors`); `None`
-    /// otherwise (and on a cluster's ranks other than 0).
+    /// otherwise.
     pub startup_image: Option<Vec<Rgb>>,
     /// Bootstrap `b* = Σ_d b_d` and its standard error.
     pub bootstrap_b: (f64, f64),
@@ -967,9 +967,11 @@ pub fn run<F: ChainFamily>(
     let cut = StartupCut::new(startup_end, stop, settings.checkpoint.is_some());
     let filter = Arc::new(Filter::new(scene.film.filter, width, height));
     // The candidates' own image, written if the chains never move (a stop
-    // during the start-up); only the rank that writes the image films it.
-    let mut startup_film =
-        crate::cluster::is_root().then(|| Film::new_splat_only(width, height, filter.clone()));
+    // during the start-up). Every rank of a cluster films it: the ranks
+    // evaluate blocks of candidates, and what they send must not depend
+    // on the rank (a rank that left its splats out sent rank 0 records
+    // without them).
+    let mut startup_film = Some(Film::new_splat_only(width, height, filter.clone()));
     let Startup {
         shared,
         boots,
