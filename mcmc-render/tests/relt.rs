@@ -467,14 +467,11 @@ fn a_replica_the_bootstrap_never_reached_is_dropped() {
 fn a_run_stopped_in_its_start_up_writes_the_candidates_image() {
     let scene = repo_scene_tilted("cornell-box.xml", 16, 5);
     let stop = AtomicBool::new(true);
-    let mut settings = Relt::default();
+    let mut settings = small_settings();
     settings.chain.bootstrap = 4096;
-    settings.chain.chains = 64;
-    settings.chain.mutations_per_pixel = Some(16);
-    settings.depth.max_depth = 5;
     // Without the L0 search, and a small annealing population: neither
     // makes the start-up image, and they took most of the test's time.
-    settings.l0_search = 0;
+    (settings.l0_search, settings.l0_search_rate) = (0, 0.0);
     settings.annealing_particles = 1000;
     let reps: Vec<[f64; 3]> = (0..200)
         .map(|i| {

@@ -435,31 +435,23 @@ pub fn develop(
         .collect();
     // The alignment of the tiles' histograms and `Ĩ` in `N` lanes, each
     // a scalar of their RGB values, from `b⁰`.
-    let sweeps = (iterations, more_sweeps);
+    let inputs = AlignInputs {
+        tiling,
+        tiles,
+        active: &active,
+        i_tilde: &i_tilde,
+        b0: &b0,
+        alpha,
+        sweeps: (iterations, more_sweeps),
+    };
     let (b, alignment): ([Vec<f64>; 3], AlignmentSummary) = match channels {
         AlignmentChannels::Luminance => {
-            let a = align(
-                tiling,
-                tiles,
-                &active,
-                (&i_tilde, &b0),
-                alpha,
-                sweeps,
-                |v| [luminance(v)],
-            );
+            let a = inputs.align(|v| [luminance(v)]);
             let lane = a.lane(0);
             ([lane.clone(), lane.clone(), lane], (&a).into())
         }
         AlignmentChannels::Rgb => {
-            let a = align(
-                tiling,
-                tiles,
-                &active,
-                (&i_tilde, &b0),
-                alpha,
-                sweeps,
-                |v| v,
-            );
+            let a = inputs.align(|v| v);
             (std::array::from_fn(|c| a.lane(c)), (&a).into())
         }
     };
@@ -496,37 +488,43 @@ pub fn develop(
     }
 }
 
-/// The alignment of the tiles' histograms `G_s` and of `Ĩ` in the `N`
-/// lanes `lanes(rgb)` of their RGB values, every lane from `b⁰`, with
-/// weight `alpha` and `(iterations, more)` sweeps.
-fn align<const N: usize>(
-    tiling: &Tiling,
-    tiles: &[TileSums],
-    active: &[bool],
-    (i_tilde, b0): (&[[f64; 3]], &[f64]),
+/// What a develop's alignment starts from: the tiles, which take part,
+/// `Ĩ`, `b⁰`, the weight `alpha` and `(iterations, more)` sweeps.
+struct AlignInputs<'a> {
+    tiling: &'a Tiling,
+    tiles: &'a [TileSums],
+    active: &'a [bool],
+    i_tilde: &'a [[f64; 3]],
+    b0: &'a [f64],
     alpha: f64,
-    (iterations, more): (usize, &dyn Fn(usize) -> bool),
-    lanes: impl Fn([f64; 3]) -> [f64; N],
-) -> solver::Alignment<N> {
-    let slots = tiling.slots();
-    let i_lanes: Vec<[f64; N]> = i_tilde.iter().map(|&c| lanes(c)).collect();
-    let mut g = vec![[0.0; N]; tiles.len() * slots];
-    for (s, t) in tiles.iter().enumerate() {
-        if active[s] {
-            for k in 0..slots {
-                g[s * slots + k] = lanes(t.g[k]).map(|v| v / t.samples as f64);
+    sweeps: (usize, &'a dyn Fn(usize) -> bool),
+}
+
+impl AlignInputs<'_> {
+    /// The alignment of the tiles' histograms `G_s` and of `Ĩ` in the `N`
+    /// lanes `lanes(rgb)` of their RGB values, every lane from `b⁰`.
+    fn align<const N: usize>(&self, lanes: impl Fn([f64; 3]) -> [f64; N]) -> solver::Alignment<N> {
+        let slots = self.tiling.slots();
+        let i_lanes: Vec<[f64; N]> = self.i_tilde.iter().map(|&c| lanes(c)).collect();
+        let mut g = vec![[0.0; N]; self.tiles.len() * slots];
+        for (s, t) in self.tiles.iter().enumerate() {
+            if self.active[s] {
+                for k in 0..slots {
+                    g[s * slots + k] = lanes(t.g[k]).map(|v| v / t.samples as f64);
+                }
             }
         }
+        let problem = solver::AlignmentProblem {
+            tiling: self.tiling,
+            g: &g,
+            active: self.active,
+            i_tilde: &i_lanes,
+            alpha: self.alpha,
+        };
+        let b0: Vec<[f64; N]> = self.b0.iter().map(|&b| [b; N]).collect();
+        let (iterations, more) = self.sweeps;
+        problem.solve_while(&b0, iterations, more)
     }
-    let problem = solver::AlignmentProblem {
-        tiling,
-        g: &g,
-        active,
-        i_tilde: &i_lanes,
-        alpha,
-    };
-    let b0: Vec<[f64; N]> = b0.iter().map(|&b| [b; N]).collect();
-    problem.solve_while(&b0, iterations, more)
 }
 
 /// `Î(j) = Σ_q (1/n_q) Σ_{s∈N(q)} b_s F_s(q→j)` over the source pixels
