@@ -122,7 +122,7 @@ pub(crate) const RESAMPLE_STREAM: u64 = 1 << 41;
 /// (member `d`'s are indices `d·count..`), evaluated in parallel (on a
 /// cluster, split over the ranks) round by round ([`draw_in_rounds`]);
 /// with an `image`, the candidates' image splats are filmed into it
-/// ([`candidate_image`]).
+/// (weighted by `image_factors`).
 pub(crate) fn candidate_log_weights<F: ChainFamily>(
     family: &F,
     count: usize,
@@ -162,9 +162,9 @@ pub(crate) fn candidate_log_weights<F: ChainFamily>(
 /// unless shared): `Σ_d w_d · g_{d,c}(x) · q_d(x)` over the members with
 /// `q_d(x) > 0`, with `w_d` the member's image weight and `g_{d,c}` its
 /// class factor ([`ChainFamily::class_weights`]; `1/q_d` when it has
-/// none), which is
-/// what the members' chains film of class `c` in expectation. MIS
-/// factors sum to 1 over the members for any `b̂`, so `b̂ = 1` serves.
+/// none), which is what the members' chains film of class `c` in
+/// expectation. MIS factors sum to 1 over the members for any `b̂`, so
+/// `b̂ = 1` serves.
 fn image_factors<F: ChainFamily>(
     family: &F,
     members: Range<usize>,
