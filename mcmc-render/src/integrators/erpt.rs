@@ -297,10 +297,7 @@ impl IntegratorSettings for Erpt {
         // driver's share of the budget (`markov::STARTUP_SHARE`), so the
         // passes get the rest (at the whole budget a large
         // `luminance_samples` left them none, session 33).
-        let lum_deadline = Deadline::new(
-            start,
-            (run.time_budget).map(|b| b.mul_f64(crate::markov::STARTUP_SHARE)),
-        );
+        let lum_deadline = crate::markov::startup_end(start, run.time_budget);
         let lum_time_up =
             || crate::cluster::any_rank(stop.load(Ordering::Relaxed) || lum_deadline.passed());
         let cluster = crate::cluster::current();

@@ -1186,10 +1186,7 @@ impl Smcmc {
         // rest: at the whole budget a large `init_bootstrap` left them none
         // and the image black (session 33).
         let checkpointed = run.checkpoint.is_some();
-        let startup_deadline = Deadline::new(
-            start,
-            (run.time_budget).map(|b| b.mul_f64(crate::markov::STARTUP_SHARE)),
-        );
+        let startup_deadline = crate::markov::startup_end(start, run.time_budget);
         let startup_halt =
             || stop.load(Ordering::Relaxed) || (!checkpointed && startup_deadline.passed());
         if self.init == SmcmcInit::Global {

@@ -960,10 +960,7 @@ pub fn run<F: ChainFamily>(
     let count = settings.bootstrap;
     // The start-up stops at its share of the budget or on Ctrl-C (not
     // when checkpointed) once it can start the chains, which get the rest.
-    let startup_end = Deadline::new(
-        start,
-        settings.time_budget.map(|b| b.mul_f64(STARTUP_SHARE)),
-    );
+    let startup_end = startup_end(start, settings.time_budget);
     let cut = StartupCut::new(startup_end, stop, settings.checkpoint.is_some());
     let filter = Arc::new(Filter::new(scene.film.filter, width, height));
     // The candidates' own image, written if the chains never move (a stop
@@ -1395,6 +1392,13 @@ pub fn run<F: ChainFamily>(
 /// the whole budget, a large `bootstrap` under a short `--time` left the
 /// chains no time and the image black.)
 pub const STARTUP_SHARE: f64 = 0.5;
+
+/// The end of a start-up that began its run at `start` under the time
+/// budget `budget`: [`STARTUP_SHARE`] of the budget (never without one).
+/// The Markov driver's, `smcmc`'s and `erpt`'s start-ups end there.
+pub fn startup_end(start: Instant, budget: Option<Duration>) -> Deadline {
+    Deadline::new(start, budget.map(|b| b.mul_f64(STARTUP_SHARE)))
+}
 
 /// The deadline of a run's start-up beyond the bootstrap (the population
 /// annealing's sweeps, a family's own search): `deadline` (the driver

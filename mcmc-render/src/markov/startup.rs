@@ -133,6 +133,7 @@ pub(crate) fn candidate_log_weights<F: ChainFamily>(
 ) -> CandidateWeights {
     let members = family.members();
     let filming = image.is_some();
+    let ones = vec![1.0; members];
     weights_in_rounds(members, count, cut, lit, |range, log_w| {
         let n = range.len();
         let records = evaluate_split_records(n * members, |k| {
@@ -142,7 +143,8 @@ pub(crate) fn candidate_log_weights<F: ChainFamily>(
             let mut record = vec![lw];
             if filming {
                 let reference = family.reference_log_density(&x);
-                let factors = image_factors(family, d..d + 1, &payload, |_| lw + reference);
+                let factors =
+                    image_factors(family, (d..d + 1, &ones), &payload, |_| lw + reference);
                 push_image_splats(&mut record, &payload, -reference, &factors);
             }
             record
@@ -164,14 +166,13 @@ pub(crate) fn candidate_log_weights<F: ChainFamily>(
 /// class factor ([`ChainFamily::class_weights`]; `1/q_d` when it has
 /// none), which is what the members' chains film of class `c` in
 /// expectation. MIS factors sum to 1 over the members for any `b̂`, so
-/// `b̂ = 1` serves.
+/// `ones` (`b̂ = 1` for every member of the family) serves.
 fn image_factors<F: ChainFamily>(
     family: &F,
-    members: Range<usize>,
+    (members, ones): (Range<usize>, &[f64]),
     payload: &PathSample,
     log_q: impl Fn(usize) -> f64,
 ) -> [f64; PATH_CLASSES] {
-    let ones = vec![1.0; family.members()];
     let mut factors = [0.0; PATH_CLASSES];
     for d in members {
         let (w, log_q) = (family.image_weight(d), log_q(d));
@@ -181,7 +182,7 @@ fn image_factors<F: ChainFamily>(
         if w == 0.0 || !log_q.is_finite() {
             continue;
         }
-        match family.class_weights(d, payload, &ones) {
+        match family.class_weights(d, payload, ones) {
             None => factors.iter_mut().for_each(|m| *m += w),
             Some(g) => {
                 let q = log_q.exp();
@@ -253,6 +254,7 @@ pub(crate) fn shared_candidate_log_weights<F: ChainFamily>(
     let first = group.start;
     let g = group.len();
     let filming = image.is_some();
+    let ones = vec![1.0; family.members()];
     let records = evaluate_split_records(range.len(), |i| {
         let x = family.candidate(seed, (offset + range.start + i) as u64);
         let e = family.target(first).evaluate(&x);
@@ -260,7 +262,7 @@ pub(crate) fn shared_candidate_log_weights<F: ChainFamily>(
         let log_q = |d| family.member_log_density(d, &e.payload).unwrap_or(f64::NAN);
         let mut record: Vec<f64> = group.clone().map(|d| log_q(d) - reference).collect();
         if filming {
-            let factors = image_factors(family, group.clone(), &e.payload, log_q);
+            let factors = image_factors(family, (group.clone(), &ones), &e.payload, log_q);
             push_image_splats(&mut record, &e.payload, -reference, &factors);
         }
         record

@@ -444,7 +444,7 @@ pub fn develop(
         alpha,
         sweeps: (iterations, more_sweeps),
     };
-    let (b, alignment): ([Vec<f64>; 3], AlignmentSummary) = match channels {
+    let (b_lanes, alignment): ([Vec<f64>; 3], AlignmentSummary) = match channels {
         AlignmentChannels::Luminance => {
             let a = inputs.align(|v| [luminance(v)]);
             let lane = a.lane(0);
@@ -455,7 +455,7 @@ pub fn develop(
             (std::array::from_fn(|c| a.lane(c)), (&a).into())
         }
     };
-    let b: [&[f64]; 3] = std::array::from_fn(|c| b[c].as_slice());
+    let b: [&[f64]; 3] = std::array::from_fn(|c| b_lanes[c].as_slice());
     let mut image = Vec::with_capacity(pixels);
     let mut samples = Vec::with_capacity(pixels);
     for (j, i_t) in i_tilde.iter().enumerate() {
@@ -483,7 +483,7 @@ pub fn develop(
     Developed {
         image,
         samples,
-        b: b.map(<[f64]>::to_vec),
+        b: b_lanes,
         alignment,
     }
 }
