@@ -169,15 +169,20 @@ pub fn run(args: RenderArgs) -> Result<(), Failure> {
         });
         match crate::distributed::agree_on_inputs(inputs) {
             Ok(v) => v,
-            // Rank 0 reports another rank's failure; that rank reports its own.
-            Err((_, false)) if !crate::cluster::is_root() => {
+            // Rank 0 reports another rank's failure; that rank reports its
+            // own. Printed before MPI ends: once a rank exits non-zero,
+            // `mpirun` kills the others, and a message printed after
+            // `MPI_Finalize` (as `main` prints) could be lost (stop 50).
+            Err((e, own)) => {
+                if own || crate::cluster::is_root() {
+                    err!("error: {e}");
+                }
                 drop(session);
                 std::process::exit(1);
             }
-            Err((e, _)) => return Err(e.into()),
         }
     };
-    Ok(render_job(&Job {
+    let rendered = render_job(&Job {
         scene: &scene,
         scene_name: &args.scene.display().to_string(),
         integrator: integrator.as_ref(),
@@ -191,7 +196,15 @@ pub fn run(args: RenderArgs) -> Result<(), Failure> {
         threads,
         out: &args.out,
         quiet: args.quiet,
-    })?)
+    });
+    // As above: the error is printed while every rank is still running.
+    #[cfg(feature = "mpi")]
+    if let Err(e) = &rendered {
+        err!("error: {e}");
+        drop(session);
+        std::process::exit(1);
+    }
+    Ok(rendered?)
 }
 
 /// What makes the image (scene file text, defines, integrator, its
