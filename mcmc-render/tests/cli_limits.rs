@@ -552,6 +552,40 @@ fn mcmc_vcm_chain_pairs_stop_at_the_time_budget() {
     assert_eq!(stats["iterations"], 0, "{stats}");
 }
 
+/// `mcmc-vcm`'s start-up sized by `candidates` (the pilot that fixes the
+/// MIS scale, the first iteration's restart pool; 2·10^7 each, ≈ 20 s
+/// here) stops drawing at half of `--time` (the pilot at a quarter), so
+/// the first iteration ends within the budget: before session 34 the pool
+/// was drawn until the deadline, the iteration in flight was dropped and
+/// the image was black. A budget of 2 s, not [`BUDGET`]: a round of
+/// candidates takes tens of milliseconds, and the first iteration must
+/// fit after two of them on a loaded machine.
+#[test]
+fn mcmc_vcm_start_up_stops_at_the_time_budget() {
+    let dir = cornell_box_in("limits-mcmc-vcm-start-up");
+    let stats = render_within_budget(
+        &dir,
+        2.0,
+        &[
+            &BOX_16[..],
+            &["--integrator", "mcmc-vcm", "--set", "candidates=20000000"],
+        ]
+        .concat(),
+    );
+    // Cut between rounds of 16 blocks × 4096 (`CANDIDATE_ROUND`).
+    for phase in ["pilot_drawn", "first_pool_drawn"] {
+        let drawn = stats[phase]
+            .as_u64()
+            .unwrap_or_else(|| panic!("{phase}: {stats}"));
+        assert!(
+            drawn < 20_000_000 && drawn.is_multiple_of(16 * 4096),
+            "{phase}: {drawn} of 20 000 000"
+        );
+    }
+    let iterations = stats["iterations"].as_u64().expect("iterations");
+    assert!(iterations > 0, "no iteration in {stats}");
+}
+
 /// `relt`'s start-up phases sized by a setting (`l0_search` draws,
 /// `annealing_sweeps` per particle) stop at `--time` like the chains,
 /// and the JSON says how much of them was done. One run per phase, so

@@ -230,6 +230,10 @@ const TILE: u32 = 32;
 const CANDIDATE_BLOCKS: usize = 16;
 /// Light subpaths between two checks of the stop flag.
 const STOP_CHECK: usize = 256;
+/// Candidates per block in a round of [`McmcVcm::trace_candidates`]: the
+/// pool can be cut between rounds (16 × 4096 candidates, tens of
+/// milliseconds on two cores).
+const CANDIDATE_ROUND: usize = 4096;
 /// Fresh light subpaths per candidate tried for the visibility chains'
 /// restart when the pool's one visible candidate went to the contribution
 /// chains ([`Restart::Weighted`]): a pool with one visible candidate
@@ -609,6 +613,14 @@ struct Candidate {
     /// `lum C^Ω` with the tracing density's weights (`k = 1`), for
     /// `con_estimate = transfer`; `luminance` otherwise.
     unscaled: f64,
+}
+
+/// One block of restart candidates being traced: its stream, the
+/// indices still to draw, the candidates drawn.
+struct CandidateBlock {
+    rng: ChainRng,
+    range: std::ops::Range<usize>,
+    out: Vec<Candidate>,
 }
 
 /// An iteration's restart pool as the chain pairs' restarts see it: the
@@ -1391,6 +1403,14 @@ impl McmcVcm {
     /// `count` independent light subpaths of iteration `it` in fixed
     /// blocks, each with a uniformly chosen camera subpath; the visible
     /// ones evaluated with `unscaled`'s weights too when given.
+    ///
+    /// The blocks advance in lock-step rounds of [`CANDIDATE_ROUND`]
+    /// each, and after every round `cut` (collective on a cluster: every
+    /// rank calls it once per round) may end the pool there: a pool cut
+    /// between rounds is the same on every rank and for any thread count,
+    /// and importance resampling from fewer candidates is still exact.
+    /// `abort` (a stop: the iteration is dropped) ends a block's round
+    /// early.
     #[allow(clippy::too_many_arguments)]
     fn trace_candidates(
         &self,
@@ -1401,41 +1421,55 @@ impl McmcVcm {
         stream: u64,
         count: usize,
         abort: &(dyn Fn() -> bool + Sync),
+        cut: &dyn Fn() -> bool,
     ) -> Vec<Candidate> {
         let n = it.cameras.len();
-        let blocks: Vec<Vec<Candidate>> = (0..CANDIDATE_BLOCKS)
-            .into_par_iter()
+        let mut blocks: Vec<CandidateBlock> = (0..CANDIDATE_BLOCKS)
             .map(|b| {
-                let mut rng = stream_rng(seed, stream + b as u64);
                 let range = count * b / CANDIDATE_BLOCKS..count * (b + 1) / CANDIDATE_BLOCKS;
-                let mut out = Vec::with_capacity(range.len());
+                CandidateBlock {
+                    rng: stream_rng(seed, stream + b as u64),
+                    out: Vec::with_capacity(range.len()),
+                    range,
+                }
+            })
+            .collect();
+        loop {
+            blocks.par_iter_mut().for_each(|block| {
                 let mut c = LightContribution::default();
-                for i in range {
+                let (rng, round_end) = (&mut block.rng, block.range.start + CANDIDATE_ROUND);
+                for i in block.range.start..round_end.min(block.range.end) {
                     if i % STOP_CHECK == 0 && abort() {
                         break;
                     }
-                    let point_rng = child_rng(&mut rng);
+                    let point_rng = child_rng(rng);
                     let point = TorusPoint::fresh(point_rng.clone());
-                    let camera = ((uniform(&mut rng) * n as f64) as usize).min(n - 1);
+                    let camera = ((uniform(rng) * n as f64) as usize).min(n - 1);
                     light_contribution(scene, it, &mut PssSource::new(&point, 1), camera, &mut c);
                     // An invalid candidate counts as black and is never chosen.
                     let luminance = if c.finite { c.luminance } else { 0.0 };
-                    out.push(Candidate {
+                    block.out.push(Candidate {
                         rng: point_rng,
                         camera,
                         luminance,
                         unscaled: unscaled_luminance(scene, unscaled, &point, camera, luminance),
                     });
+                    block.range.start = i + 1;
                 }
-                out
-            })
-            .collect();
+            });
+            // (`cut` first: it is collective, and a rank whose blocks an
+            // abort left unfinished must not call it once more than the
+            // others.)
+            if cut() || blocks.iter().all(|b| b.range.is_empty()) {
+                break;
+            }
+        }
         // Joined into a vector of the exact size, each block freed once
         // copied (collecting the flattened blocks grew the vector by
         // doubling: up to 3× the candidates' bytes at the peak).
-        let mut pool = Vec::with_capacity(blocks.iter().map(Vec::len).sum());
+        let mut pool = Vec::with_capacity(blocks.iter().map(|b| b.out.len()).sum());
         for block in blocks {
-            pool.extend(block);
+            pool.extend(block.out);
         }
         pool
     }
@@ -1559,6 +1593,20 @@ impl McmcVcm {
         // collective; in one process the flag itself).
         let cluster = crate::cluster::current();
         let any_abort = || crate::cluster::any_rank(abort());
+        // A start-up sized by `candidates` (the pilot, the first
+        // iteration's pool) stops drawing at the Markov driver's share of
+        // the budget (`markov::STARTUP_SHARE`; the pilot at half of it),
+        // so that the first iteration ends in time: with 2·10^7 candidates
+        // under `--time 2` the iteration in flight was dropped and the
+        // image black (session 34). Never when checkpointed: a resumed
+        // run must redo what the uninterrupted one did.
+        let checkpointed = run.checkpoint.is_some();
+        let pilot_end = Deadline::new(
+            start,
+            (run.time_budget).map(|b| b.mul_f64(crate::markov::STARTUP_SHARE / 2.0)),
+        );
+        let startup_end = crate::markov::startup_end(start, run.time_budget);
+        let (mut pilot_drawn, mut first_pool_drawn) = (None, None);
         let mut busy = 0.0f64;
         while target.is_none_or(|t| iterations < t) && vcm.max_depth > 0 && pixels > 0 {
             if any_abort() {
@@ -1587,7 +1635,9 @@ impl McmcVcm {
                     STREAM_PILOT,
                     self.candidates,
                     &abort,
+                    &|| crate::cluster::any_rank(abort() || (!checkpointed && pilot_end.passed())),
                 );
+                pilot_drawn = Some(c.len());
                 // A pilot cut short on one rank would give it another
                 // scale: the ranks agree before using it.
                 if any_abort() {
@@ -1625,7 +1675,14 @@ impl McmcVcm {
                 STREAM_CANDIDATES ^ (iterations << 24),
                 if independent { 0 } else { self.candidates },
                 &abort,
+                &|| {
+                    let first = iterations == 0 && !checkpointed;
+                    crate::cluster::any_rank(abort() || (first && startup_end.passed()))
+                },
             );
+            if iterations == 0 {
+                first_pool_drawn = Some(pool.len());
+            }
             if any_abort() {
                 interrupted = true;
                 break;
@@ -1767,6 +1824,14 @@ impl McmcVcm {
             interrupted,
             pixels,
         );
+        // How much of the start-up was drawn (less than `candidates` when
+        // cut by the budget; null when not drawn in this run).
+        rendered
+            .statistics
+            .insert("pilot_drawn".into(), pilot_drawn.into());
+        rendered
+            .statistics
+            .insert("first_pool_drawn".into(), first_pool_drawn.into());
         if let Some(c) = &run.checkpoint {
             rendered.statistics.insert(
                 "checkpoint".into(),
