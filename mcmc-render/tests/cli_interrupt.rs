@@ -339,6 +339,61 @@ fn ctrl_c_during_the_start_up_writes_the_candidates_image() {
     }
 }
 
+/// Ctrl-C during `smcmc`'s start-up (the tiles' uniform candidates)
+/// leaves the tiles no step; the image is then `Ĩ`, the candidates' own
+/// estimate, over the whole film: the candidates go round the tiles
+/// (`START_ROUND` = 8 each at a time), so every tile has about as many.
+/// Drawn tile after tile, as before session 34, a Ctrl-C at 3 s had left
+/// 99% of a 64×48 film black. The image mean agrees with a path-traced
+/// render within Student's t (`T_SIGMAS`, 7 dof): a tile's draw is a
+/// path-traced sample of its pixels (box filter), so the mean of an
+/// image whose tiles all have at least `d` draws has variance at most
+/// `σ²/d`, with `σ²` the path tracer's per-sample variance.
+#[test]
+fn ctrl_c_during_the_smcmc_start_up_writes_the_candidates_image() {
+    let dir = scratch("sigint-smcmc-start-up");
+    write(&dir, "s.xml", &cli_support::floor_scene(W, H));
+    // 4096 samples per pixel, as many as the start-up draws in 1 s: the
+    // reference's noise does not hide a 1% bias (the control below).
+    let reference = pt_means(&dir, 4096, 1000..1001)[0];
+    let sigma2 = per_sample_variance(&pt_means(&dir, 2, 2000..2008), 2);
+    let (status, stderr) = interrupt(
+        &to_i_exr(&[
+            "render",
+            "s.xml",
+            "--integrator",
+            "smcmc",
+            "--set",
+            &format!("init_candidates={HUGE}"),
+        ]),
+        &dir,
+        Duration::from_millis(1000),
+    );
+    assert_partial_outputs(&dir, status, &stderr);
+    let j = json(&dir.join("i.json"));
+    assert_eq!(j["mutations"], 0, "{stderr}");
+    assert_eq!(j["image_from_start_up"], true);
+    let draws = &j["large_step_samples_per_tile"];
+    let (least, most) = (draws[0].as_u64().unwrap(), draws[1].as_u64().unwrap());
+    assert!(least > 0 && most - least <= 8, "draws per tile {draws}");
+    let (_, _, img) = exr(&dir.join("i.exr"));
+    assert!(img.iter().all(|p| p.is_finite()));
+    let mean = mean_luminance(&img);
+    let sd = (sigma2 / least as f64 + sigma2 / 4096.0).sqrt();
+    eprintln!("smcmc start-up image mean {mean}, pt {reference}, sd {sd}, draws {draws}");
+    assert!(
+        (mean - reference).abs() <= T_SIGMAS * sd,
+        "start-up image mean {mean} vs pt {reference} (sd {sd}, draws per tile {draws})"
+    );
+    // Control: the same image 1% brighter or darker must fail.
+    for biased in [1.01 * mean, 0.99 * mean] {
+        assert!(
+            (biased - reference).abs() > T_SIGMAS * sd,
+            "a 1% bias passes: {biased} vs {reference} (sd {sd})"
+        );
+    }
+}
+
 #[test]
 fn ctrl_c_ends_a_convergence_study_with_what_it_has() {
     let dir = scratch("sigint-convergence");

@@ -326,6 +326,10 @@ impl AddAssign for ExchangeCounts {
 
 /// Stream offset of the tiles' seeds.
 const TILE_STREAM: u64 = 1 << 44;
+/// Start-up draws per tile in one round over the tiles
+/// (`Sampler::start_tiles`): a round of a 64×48 film is about 25 000 path
+/// samples, tens of milliseconds on two cores.
+const START_ROUND: usize = 8;
 /// Stream offset from which the online guided iterations' seeds are
 /// derived (apart from the tiles' own).
 const GUIDE_ONLINE_STREAM: u64 = 1 << 46;
@@ -394,15 +398,93 @@ impl<S: TileShift> Sampler<'_, S> {
         x
     }
 
-    /// Tile `s` started from the first state of the global start-up
-    /// `visits` (its own pixel first, then the others in slot order) that
-    /// carries light in the tile; failing that, with `candidates` uniform
-    /// draws, started from one resampled `∝ π̃_s` if any carries light.
-    fn new_tile(
+    /// Tiles `tiles` started: each from the first state of the global
+    /// start-up `visits` (its own pixel first, then the others in slot
+    /// order) that carries light in the tile; failing that, with
+    /// `candidates` uniform draws, started from one resampled `∝ π̃_s` if
+    /// any carries light.
+    ///
+    /// The draws go round the tiles, [`START_ROUND`] per tile at a time,
+    /// so a stop (`halt`) leaves every tile with about as many as the
+    /// others: the image of a run stopped in its start-up is then `Ĩ` from
+    /// the draws made, over the whole film (drawn tile after tile, a
+    /// Ctrl-C at 3 s had left 99% of it black, session 34). A tile keeps
+    /// its draws' weights only, 8 B each, and evaluates the one it picks
+    /// again (a draw is its stream's: the same state); so the pick, and the
+    /// image of an uncut run, are those of drawing the tile's candidates
+    /// at once.
+    fn start_tiles(
+        &self,
+        seed: u64,
+        tiles: Range<usize>,
+        candidates: usize,
+        visits: Option<&Visits>,
+        halt: &(dyn Fn() -> bool + Sync),
+    ) -> Vec<Tile> {
+        let mut started: Vec<(usize, Tile, Vec<f64>)> = tiles
+            .into_par_iter()
+            .map(|s| (s, self.visited_tile(seed, s, visits, halt), Vec::new()))
+            .collect();
+        let weight = |x: &Sample<TorusPoint, TileValues>| {
+            if x.log_density.is_finite() {
+                x.payload.total
+            } else {
+                0.0
+            }
+        };
+        // A stop during start-up leaves the remaining candidates undrawn.
+        let mut drawn = 0;
+        while drawn < candidates && !halt() {
+            let round = START_ROUND.min(candidates - drawn);
+            started
+                .par_iter_mut()
+                .filter(|(_, tile, _)| tile.chain.is_none())
+                .for_each(|(s, tile, weights)| {
+                    for _ in 0..round {
+                        if halt() {
+                            break;
+                        }
+                        weights.push(weight(&self.draw(*s, tile)));
+                    }
+                });
+            drawn += round;
+        }
+        started
+            .into_par_iter()
+            .map(|(s, mut tile, weights)| {
+                let total: f64 = weights.iter().sum();
+                if tile.chain.is_none() && total > 0.0 {
+                    let mut rng: ChainRng = stream_rng(tile.seed, u64::MAX);
+                    let mut u = uniform(&mut rng) * total;
+                    let mut pick = None;
+                    for (k, &w) in weights.iter().enumerate() {
+                        if w > 0.0 {
+                            pick = Some(k);
+                            if u < w {
+                                break;
+                            }
+                            u -= w;
+                        }
+                    }
+                    // Draw `k` of the tile's candidates was its stream
+                    // `1 + k` (`draw`; `visited_tile` draws none).
+                    let k = pick.expect("a candidate carries light") as u64;
+                    let point = TorusPoint::fresh(stream_rng(tile.seed, 1 + k));
+                    let start = Sample::evaluate(&self.target(s), point);
+                    tile.chain = Some(self.start_chain(&tile, start));
+                    tile.sums.active = true;
+                }
+                tile
+            })
+            .collect()
+    }
+
+    /// Tile `s` with no draw yet, started from the first state of the
+    /// global start-up `visits` that carries light in it, if any.
+    fn visited_tile(
         &self,
         seed: u64,
         s: usize,
-        candidates: usize,
         visits: Option<&Visits>,
         halt: &dyn Fn() -> bool,
     ) -> Tile {
@@ -427,36 +509,6 @@ impl<S: TileShift> Sampler<'_, S> {
                     }
                 }
             }
-        }
-        // A stop during start-up leaves the remaining candidates undrawn.
-        let draws: Vec<_> = (0..candidates)
-            .map_while(|_| (!halt()).then(|| self.draw(s, &mut tile)))
-            .collect();
-        let weight = |x: &Sample<TorusPoint, TileValues>| {
-            if x.log_density.is_finite() {
-                x.payload.total
-            } else {
-                0.0
-            }
-        };
-        let total: f64 = draws.iter().map(weight).sum();
-        if total > 0.0 {
-            let mut rng: ChainRng = stream_rng(tile.seed, u64::MAX);
-            let mut u = uniform(&mut rng) * total;
-            let mut pick = None;
-            for x in draws {
-                let w = weight(&x);
-                if w > 0.0 {
-                    pick = Some(x);
-                    if u < w {
-                        break;
-                    }
-                    u -= w;
-                }
-            }
-            let start = pick.expect("a candidate carries light");
-            tile.chain = Some(self.start_chain(&tile, start));
-            tile.sums.active = true;
         }
         tile
     }
@@ -1237,12 +1289,8 @@ impl Smcmc {
                 (counters, tiles)
             }
             None => {
-                let tiles: Vec<Tile> = (own_tiles.into_par_iter())
-                    .map(|s| {
-                        let (n, v) = (self.init_candidates, visits.as_ref());
-                        sampler.new_tile(run.seed, s, n, v, &startup_halt)
-                    })
-                    .collect();
+                let (n, v) = (self.init_candidates, visits.as_ref());
+                let tiles = sampler.start_tiles(run.seed, own_tiles, n, v, &startup_halt);
                 let started = tiles.iter().filter(|t| t.chain.is_some()).count() as u64;
                 (
                     resume::Counters {
@@ -1460,6 +1508,16 @@ impl Smcmc {
                 "residual": developed.alignment.residual,
             },
             "large_step_samples": large_samples,
+            // The uniform draws of the least and the most drawn tile: the
+            // start-up draws round the tiles, so a stop in it leaves them
+            // at most `START_ROUND` apart.
+            "large_step_samples_per_tile": [
+                results.sums.iter().map(|t| t.large_samples).min().unwrap_or(0),
+                results.sums.iter().map(|t| t.large_samples).max().unwrap_or(0),
+            ],
+            // No tile stepped (a stop in the start-up): the image is `Ĩ`,
+            // the start-up draws' own estimate.
+            "image_from_start_up": mutations == 0,
             "seconds_in": {
                 "start": start_seconds,
                 "steps": profile[0],

@@ -545,19 +545,12 @@ fn spread_image(
     let (w, h) = (tiling.width, tiling.height);
     let cells = fs.cells();
     let mut out = vec![[0.0f64; 3]; tiling.tiles()];
-    let mut centre = vec![[0.0f64; 3]; cells];
     for (q, &[r, g, bl]) in i_tilde.iter().enumerate() {
         let n = tiling.covering(q).filter(|&(s, _)| active[s]).count();
         if n == 0 {
-            centre.iter_mut().for_each(|c| *c = [0.0; 3]);
-            let (qx, qy) = ((q % w as usize) as u32, (q / w as usize) as u32);
-            let f = Rgb::new(r as f32, g as f32, bl as f32);
-            fs.add(&mut centre, (qx, qy), [0.5, 0.5], f, 1.0);
-            fs.around(q, w, h, |j, c| {
-                for (o, v) in out[j].iter_mut().zip(centre[c]) {
-                    *o += v;
-                }
-            });
+            for (o, v) in out[q].iter_mut().zip([r, g, bl]) {
+                *o += v;
+            }
             continue;
         }
         for (s, k) in tiling.covering(q).filter(|&(s, _)| active[s]) {
