@@ -394,6 +394,46 @@ fn ctrl_c_during_the_smcmc_start_up_writes_the_candidates_image() {
     }
 }
 
+/// Ctrl-C during RELT's population annealing (10^9 sweeps per particle)
+/// cuts its sweeps as the time budget does: before session 34 only the
+/// deadline did, and the run went on for more than 10 minutes after the
+/// signal. The chains then make no mutation and the image is the
+/// start-up's (`image_from_start_up`).
+#[test]
+fn ctrl_c_cuts_relts_population_annealing() {
+    let dir = scratch("sigint-relt-annealing");
+    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/cornell-box.xml");
+    std::fs::copy(scene, dir.join("s.xml")).expect("the Cornell box copies");
+    let (status, stderr) = interrupt(
+        &to_i_exr(&[
+            "render",
+            "s.xml",
+            "-D",
+            "width=16",
+            "-D",
+            "height=16",
+            "--integrator",
+            "relt",
+            "--set",
+            "annealing_particles=200",
+            "--set",
+            "annealing_sweeps=1000000000",
+        ]),
+        &dir,
+        Duration::from_millis(1500),
+    );
+    assert_partial_outputs(&dir, status, &stderr);
+    let j = json(&dir.join("i.json"));
+    assert_eq!(j["mutations"], 0, "{stderr}");
+    assert_eq!(j["image_from_start_up"], true);
+    let steps: u64 = (j["annealing"].as_array())
+        .unwrap_or_else(|| panic!("no annealing in {j}"))
+        .iter()
+        .map(|a| a["steps"].as_u64().expect("steps"))
+        .sum();
+    assert!(steps < 200 * 1_000_000_000, "{steps} annealing steps");
+}
+
 #[test]
 fn ctrl_c_ends_a_convergence_study_with_what_it_has() {
     let dir = scratch("sigint-convergence");

@@ -514,13 +514,14 @@ pub struct SearchSummary {
 const ANNEALING_STREAM: u64 = 1 << 43;
 
 /// Population annealing over `family`'s members from `count` particles
-/// resampled from member 0's bootstrap; its MH sweeps stop at the run's
-/// `deadline` (the chains get what is left).
+/// resampled from member 0's bootstrap; its MH sweeps stop once `cut`
+/// says so ([`annealing_cut`]: the start-up's deadline or a stop; the
+/// chains get what is left).
 fn anneal_members<F: ChainFamily>(
     family: &F,
     mutation: &F::Mutation,
     boot: &Bootstrap<usize, ()>,
-    (settings, deadline): (Annealing, Deadline),
+    (settings, cut): (Annealing, &(dyn Fn() -> bool + Sync)),
     seed: u64,
 ) -> Result<PopulationAnnealing<F::State, PathSample>, MltError> {
     for d in 0..family.members() {
@@ -546,7 +547,7 @@ fn anneal_members<F: ChainFamily>(
         |k| MetropolisHastings::new(family.kernel(mutation, k).expect("checked above")),
         settings.sweeps,
         splitmix64(seed ^ splitmix64(ANNEALING_STREAM)),
-        &|| deadline.passed(),
+        cut,
     )?)
 }
 
@@ -1015,7 +1016,7 @@ pub fn run<F: ChainFamily>(
             &boots[0],
             (
                 a,
-                annealing_deadline(startup_end, settings.checkpoint.is_some()),
+                &annealing_cut(startup_end, stop, settings.checkpoint.is_some()),
             ),
             seed,
         )?),
@@ -1415,22 +1416,32 @@ pub fn startup_deadline(deadline: Deadline, checkpointed: bool) -> Deadline {
     }
 }
 
-/// The deadline of the population annealing's sweeps: the start-up's
-/// ([`startup_deadline`]), except on a cluster of several ranks, where
-/// every rank anneals and all must end with the same particles: there
-/// the ranks agree when the annealing starts (collective) whether any
-/// has passed it — then no sweep runs — and otherwise it runs to its end
-/// (a particle checks the deadline before each step, in parallel, where
-/// the ranks cannot agree).
-fn annealing_deadline(deadline: Deadline, checkpointed: bool) -> Deadline {
+/// When the population annealing's sweeps stop: at the start-up's
+/// deadline ([`startup_deadline`]) or on a stop (Ctrl-C; neither when
+/// `checkpointed`: the resume must redo the same annealing). On a cluster
+/// of several ranks every rank anneals and all must end with the same
+/// particles: there the ranks agree when the annealing starts
+/// (collective) whether any has passed the deadline or been stopped —
+/// then no sweep runs — and otherwise it runs to its end (a particle
+/// checks before each step, in parallel, where the ranks cannot agree).
+/// Before session 34 a stop did not cut it: with `annealing_sweeps` at
+/// 10^9 a Ctrl-C went unanswered for more than 10 minutes.
+fn annealing_cut(
+    deadline: Deadline,
+    stop: &AtomicBool,
+    checkpointed: bool,
+) -> impl Fn() -> bool + Sync + '_ {
     let deadline = startup_deadline(deadline, checkpointed);
-    match crate::cluster::current() {
-        Some(c) if c.size() > 1 => match c.any(deadline.passed()) {
-            true => Deadline::new(Instant::now(), Some(Duration::ZERO)),
-            false => Deadline::NEVER,
+    let stop = (!checkpointed).then_some(stop);
+    let stopped = move || stop.is_some_and(|s| s.load(Ordering::Relaxed));
+    let (deadline, local_stop) = match crate::cluster::current() {
+        Some(c) if c.size() > 1 => match c.any(deadline.passed() || stopped()) {
+            true => (Deadline::new(Instant::now(), Some(Duration::ZERO)), false),
+            false => (Deadline::NEVER, false),
         },
-        _ => deadline,
-    }
+        _ => (deadline, true),
+    };
+    move || deadline.passed() || (local_stop && stopped())
 }
 
 /// Least time between two checkpoints of a run (besides the one at its
