@@ -339,6 +339,59 @@ fn ctrl_c_during_the_start_up_writes_the_candidates_image() {
     }
 }
 
+/// Ctrl-C during `mept`'s BDPT start-up (`bdpt_startup`: a search that
+/// replaces the bootstrap) writes the search's own image, every technique
+/// of each draw weighted by the balance heuristic, `Σ f/Σ_s p_s` over the
+/// draws made: before session 34 the image was the passes' alone (black
+/// here, without them). With the box filter and no pass its mean
+/// luminance is the search's `b` to 1e-3, and it agrees with a path-traced
+/// render within `b`'s and the path tracer's noise (Student's t,
+/// `T_SIGMAS`).
+#[test]
+fn ctrl_c_during_the_bdpt_start_up_writes_the_searchs_image() {
+    let dir = scratch("sigint-bdpt-start-up-image");
+    write(&dir, "s.xml", &cli_support::floor_scene(W, H));
+    let reference = pt_means(&dir, 256, 1000..1001)[0];
+    let sigma2 = per_sample_variance(&pt_means(&dir, 2, 2000..2008), 2);
+    let (status, stderr) = interrupt(
+        &to_i_exr(&[
+            "render",
+            "s.xml",
+            "--integrator",
+            "mept",
+            "--set",
+            "specular_samples=-1",
+            "--bootstrap",
+            "100000000",
+            "--mutations-per-pixel",
+            HUGE,
+        ]),
+        &dir,
+        Duration::from_millis(1000),
+    );
+    assert_partial_outputs(&dir, status, &stderr);
+    let j = json(&dir.join("i.json"));
+    assert_eq!(j["mutations"], 0, "{stderr}");
+    assert_eq!(j["image_from_start_up"], true);
+    let draws = j["searches"][0]["draws"].as_u64().expect("search draws");
+    assert!(draws < 100_000_000, "{draws}");
+    let (_, _, img) = exr(&dir.join("i.exr"));
+    assert!(img.iter().all(|p| p.is_finite()));
+    let mean = mean_luminance(&img);
+    let b = j["b_bootstrap"].as_f64().unwrap();
+    assert!(
+        (mean - b).abs() <= 1e-3 * b,
+        "image mean {mean} vs the search's b {b} from {draws} draws"
+    );
+    let se_b = j["b_bootstrap_standard_error"].as_f64().unwrap();
+    let sd = (se_b * se_b + sigma2 / 256.0).sqrt();
+    eprintln!("mept start-up image mean {mean}, b {b}, pt {reference}, sd {sd}, draws {draws}");
+    assert!(
+        (mean - reference).abs() <= T_SIGMAS * sd,
+        "start-up image mean {mean} vs pt {reference} (sd {sd})"
+    );
+}
+
 /// Ctrl-C during `smcmc`'s start-up (the tiles' uniform candidates)
 /// leaves the tiles no step; the image is then `Ĩ`, the candidates' own
 /// estimate, over the whole film: the candidates go round the tiles

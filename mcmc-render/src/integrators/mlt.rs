@@ -396,8 +396,9 @@ fn specular_chains_pass(
 
 /// Bytes a BDPT start-up keeps per draw, at least: its entry (the weighted
 /// techniques' vector and the draw's total, 32 B), the total kept for `b̂`
-/// (8 B) and one weighted technique of the start states (16 B).
-const BDPT_STARTUP_BYTES_PER_DRAW: u128 = 56;
+/// (8 B), one weighted technique of the start states (16 B) and its image
+/// splat (20 B, `Search::image_splats`).
+const BDPT_STARTUP_BYTES_PER_DRAW: u128 = 76;
 
 /// Renders `scene` with path-space MLT as `settings` say, timing each
 /// mutation type's proposals into `clock`.

@@ -69,6 +69,7 @@ use crate::pss::{PATH_CLASSES, PathSample};
 use crate::scene::Scene;
 pub use estimator::{DepthAcceptance, FamilyResult, develop};
 use estimator::{MemberTotals, Weights, sum_images};
+use glam::Vec2;
 use mcmc_core::chain::Chain;
 use mcmc_core::kernel::Kernel;
 use mcmc_core::mh::MetropolisHastings;
@@ -430,6 +431,12 @@ pub struct Search {
     /// The search replaces the member's bootstrap (its running estimate
     /// and its starts) instead of joining it.
     pub replaces_bootstrap: bool,
+    /// The draws' own image splats, `(x, y, r, g, b)` at raster `(x, y)`,
+    /// summed over the draws (a BDPT draw's techniques weighted by the
+    /// balance heuristic): divided by `draws`, an independent estimate of
+    /// the member's image, written when a search that replaces the
+    /// bootstrap is stopped before the chains move (empty: none).
+    pub image_splats: Vec<[f32; 5]>,
 }
 
 /// Stream offset of the resampling of searched starts.
@@ -1033,13 +1040,22 @@ pub fn run<F: ChainFamily>(
     // `b̂` (or all of them, for a search that replaces the bootstrap),
     // before the check for a black scene.
     let mut boot_running = boot_running;
-    let member_searches: Vec<Option<Search>> =
+    let mut member_searches: Vec<Option<Search>> =
         (0..members).map(|d| family.search(d, seed, &cut)).collect();
-    for (d, search) in member_searches.iter().enumerate() {
+    let mut startup_draws = drawn as u64;
+    for (d, search) in member_searches.iter_mut().enumerate() {
         if let Some(search) = search {
             if search.replaces_bootstrap {
-                // Its bootstrap (a token candidate) is no image either.
-                startup_film = None;
+                // Its bootstrap (a token candidate) is no image; the
+                // search's own draws are, for a family of one member.
+                startup_film = (members == 1 && !search.image_splats.is_empty()).then(|| {
+                    let mut film = Film::new_splat_only(width, height, filter.clone());
+                    for [x, y, r, g, b] in std::mem::take(&mut search.image_splats) {
+                        film.splat(Vec2::new(x, y), Rgb::new(r, g, b));
+                    }
+                    film
+                });
+                startup_draws = search.draws;
                 boot_running[d] = search.running();
             } else {
                 boot_running[d].merge(&search.running());
@@ -1354,7 +1370,7 @@ pub fn run<F: ChainFamily>(
         mutations_per_pixel: mutations as f64 / pixels as f64,
         startup_image: startup_film
             .filter(|_| mutations == 0)
-            .map(|film| develop(&film, drawn as u64, 1.0)),
+            .map(|film| develop(&film, startup_draws, 1.0)),
         bootstrap_b: (b_star, b_star_se),
         running_b,
         chain_stats: chain_stats.unwrap_or_else(|| ChainStatistics::new(Vec::new())),
@@ -1473,7 +1489,8 @@ fn check_memory<F: ChainFamily>(
 ) -> Result<(), MltError> {
     let members = family.members() as u128;
     let (w, h) = (scene.film.width, scene.film.height);
-    let films = (settings.tasks as u64 + 2) * family.members() as u64;
+    // (+ 1: the start-up's own film, the image if the chains never move.)
+    let films = (settings.tasks as u64 + 2) * family.members() as u64 + 1;
     let particles = family.annealing().map_or(0, |a| a.particles);
     let bytes = settings.bootstrap as u128 * members * BYTES_PER_CANDIDATE
         + settings.chains as u128 * BYTES_PER_CHAIN

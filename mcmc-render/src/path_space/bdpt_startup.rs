@@ -50,6 +50,10 @@ pub const SEARCH_INDEX: u64 = 1 << 39;
 /// Longest path the search handles (`s` and `t` take 6 bits each).
 pub const MAX_SEARCH_SEGMENTS: usize = 62;
 
+/// One draw of the search: its splits' `(index, ln w)`, `ln` of its total
+/// and its image splats `(x, y, r, g, b)`.
+type SearchDraw = (Vec<(u64, f64)>, f64, Vec<[f32; 5]>);
+
 /// The index of split `(s, t)` of draw `j`.
 fn index(j: u64, s: usize, t: usize) -> u64 {
     SEARCH_INDEX + (j << 12) + ((s as u64) << 6) + t as u64
@@ -121,12 +125,14 @@ impl<'s> PathFamily<'s> {
             .unwrap_or_else(|| Path::new(self.scene))
     }
 
-    /// `ln w` of every split of draw `j` that carries light, and `ln` of
-    /// the draw's total (−∞ for none; NaN weights count as zero, as the
-    /// running normalisation counts them).
-    fn search_draw(&self, seed: u64, j: u64, max: usize) -> (Vec<(u64, f64)>, f64) {
+    /// `ln w` of every split of draw `j` that carries light, `ln` of the
+    /// draw's total (−∞ for none; NaN weights count as zero, as the
+    /// running normalisation counts them), and the splits' image splats
+    /// `f(x)/Σ_s p_s(x)` ([`Search::image_splats`]).
+    fn search_draw(&self, seed: u64, j: u64, max: usize) -> SearchDraw {
         let (light, camera) = walks(self, seed, j, max);
         let mut weighted = Vec::new();
+        let mut splats = Vec::new();
         for k in self.min_segments..=max {
             for s in self.s_min()..=k {
                 let t = k + 1 - s;
@@ -139,9 +145,14 @@ impl<'s> PathFamily<'s> {
                     // normalisation counts it.
                     continue;
                 }
-                let log_w = log_i - self.log_technique_sum(&path);
+                let log_sum = self.log_technique_sum(&path);
+                let log_w = log_i - log_sum;
                 if log_w.is_finite() {
                     weighted.push((index(j, s, t), log_w));
+                    let l = path.contribution * (-log_sum).exp() as f32;
+                    if l.is_finite() {
+                        splats.push([path.raster.x, path.raster.y, l.r, l.g, l.b]);
+                    }
                 }
             }
         }
@@ -151,7 +162,7 @@ impl<'s> PathFamily<'s> {
         } else {
             mcmc_core::math::log_sum_exp(&terms)
         };
-        (weighted, total)
+        (weighted, total, splats)
     }
 
     /// The search of `draws` BDPT draws (module docs), or `None` when the
@@ -167,15 +178,16 @@ impl<'s> PathFamily<'s> {
         };
         let lit = |s: &Search| !s.per_draw.is_empty();
         let made = draw_in_rounds(&mut search, draws as usize, cut, lit, |range, search| {
-            let per: Vec<(Vec<(u64, f64)>, f64)> = range
+            let per: Vec<SearchDraw> = range
                 .into_par_iter()
                 .map(|j| self.search_draw(seed, j as u64, max))
                 .collect();
-            for (weighted, total) in per {
+            for (weighted, total, splats) in per {
                 if total.is_finite() {
                     search.per_draw.push(total);
                 }
                 search.weighted.extend(weighted);
+                search.image_splats.extend(splats);
             }
         });
         search.draws = made as u64;
