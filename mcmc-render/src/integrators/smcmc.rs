@@ -1241,6 +1241,18 @@ impl Smcmc {
         let startup_deadline = crate::markov::startup_end(start, run.time_budget);
         let startup_halt =
             || stop.load(Ordering::Relaxed) || (!checkpointed && startup_deadline.passed());
+        // The tiles' start-up keeps every draw's weight until its tile
+        // picks a start (`Sampler::start_tiles`): 8 B per candidate and
+        // tile (a tile the global start-up starts draws none).
+        let tiles = scene.film.width as u128 * scene.film.height as u128;
+        crate::resources::check_memory(
+            &format!(
+                "smcmc: a start-up of {} candidates for each of {tiles} tiles",
+                self.init_candidates
+            ),
+            tiles * self.init_candidates as u128 * 8,
+        )
+        .map_err(RenderError::Invalid)?;
         if self.init == SmcmcInit::Global {
             // The global start-up keeps one weight per bootstrap state and
             // one walk per chain (10^15 states aborted on an 8 PB
