@@ -432,9 +432,9 @@ pub struct Search {
     /// and its starts) instead of joining it.
     pub replaces_bootstrap: bool,
     /// The draws' own image splats, `(x, y, r, g, b)` at raster `(x, y)`,
-    /// summed over the draws (a BDPT draw's techniques weighted by the
-    /// balance heuristic): divided by `draws`, an independent estimate of
-    /// the member's image, written when a search that replaces the
+    /// in draw order (a BDPT draw's techniques weighted by the balance
+    /// heuristic): filmed and divided by `draws`, an independent estimate
+    /// of the member's image, written when a search that replaces the
     /// bootstrap is stopped before the chains move (empty: none).
     pub image_splats: Vec<[f32; 5]>,
 }

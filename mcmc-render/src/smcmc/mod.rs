@@ -529,11 +529,12 @@ impl AlignInputs<'_> {
 
 /// `Î(j) = Σ_q (1/n_q) Σ_{s∈N(q)} b_s F_s(q→j)` over the source pixels
 /// `q` (sequentially, in pixel order: the same bits on any thread count).
-/// A source pixel none of whose tiles runs falls back on `Ĩ(q)` spread
-/// from its centre, as the box image falls back on `Ĩ`; such a pixel's
-/// uniform samples were all black (a tile starts at its first lit one), so
-/// the fallback is zero unless a stop came between a tile's start and its
-/// first step.
+/// A source pixel none of whose tiles runs falls back on `Ĩ(q)` itself,
+/// unspread, as the box image does (spread from the pixel's centre through
+/// the filter it lost energy: −1.5% on a stopped 64×48 box, session 34).
+/// In a run that stepped, such a pixel's uniform samples were all black (a
+/// tile starts at its first lit one), so the fallback is zero; it is the
+/// image of a run stopped before any tile stepped.
 fn spread_image(
     tiling: &Tiling,
     tiles: &[TileSums],
@@ -545,10 +546,11 @@ fn spread_image(
     let (w, h) = (tiling.width, tiling.height);
     let cells = fs.cells();
     let mut out = vec![[0.0f64; 3]; tiling.tiles()];
-    for (q, &[r, g, bl]) in i_tilde.iter().enumerate() {
+    for (q, &i_q) in i_tilde.iter().enumerate() {
         let n = tiling.covering(q).filter(|&(s, _)| active[s]).count();
         if n == 0 {
-            for (o, v) in out[q].iter_mut().zip([r, g, bl]) {
+            // Added: active neighbours' spreads may have reached `q`.
+            for (o, v) in out[q].iter_mut().zip(i_q) {
                 *o += v;
             }
             continue;
