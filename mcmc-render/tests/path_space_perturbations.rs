@@ -1255,6 +1255,7 @@ fn independent_proposal_keeps_exact_start_states_exact() {
     let independent = || IndependentPath {
         min_segments: 1,
         max_segments: Some(4),
+        camera_walks: false,
     };
     assert_stationary_with_control(
         "independent",

@@ -96,6 +96,10 @@ crate::settings! {
         pub specular_samples: i64 = 16, check check_pass_samples;
         /// The specular-chain pass (when it runs) also path traces the other unconnectable paths, `L S+ (D S+)* E` (seen and lit only through mirrors and glass: no edge joins two non-Dirac vertices, so only a camera walk that hits the emitter draws them), and the chains leave them out. On by default since session 29 (docs/path-space.md, Sessions 23, 28 and 29); a scene without Dirac lobes has no such paths and renders as with false.
         pub unconnectable_pass: bool = true;
+        /// Chains of their own for the unconnectable paths through a non-Dirac vertex, `L S+ (D S+)* E` (a second member with its own b, refined by path tracing as the chains run; path_space::unconnectable_chains), instead of the pass or the common chains; needs the specular-chain pass (which keeps `L S* E`) and a scene with Dirac lobes, and takes precedence over unconnectable_pass.
+        pub unconnectable_chains: bool = false;
+        /// Path-traced draws per chain mutation that refine the unconnectable chains' b while they run (unconnectable_chains only; 0: the start-up's draws alone).
+        pub unconnectable_search_rate: f64 = 1.0, check check::non_negative;
         /// With a time budget, the specular-chain pass runs for this share of it (at least specular_samples spp), so that its noise falls with the budget like the chains'; 0: specular_samples spp alone (the only rule without a time budget); -1 (default): 0.2 when the pass takes the unconnectable paths of a scene with Dirac lobes, else 0.05.
         pub specular_time_share: f64 = -1.0, check time_share;
         /// Smallest film offset of the lens perturbation (pixels; -1 with lens_perturbation_max = -1: Mitsuba's 0.1).
@@ -191,7 +195,17 @@ impl Mlt {
     /// which the plain pass takes, so its walks through diffuse vertices
     /// would only cost time.
     pub fn unconnectable_in(&self, scene: &Scene) -> bool {
-        self.unconnectable_pass && self.specular_pass().is_some() && scene.has_dirac_lobes()
+        self.unconnectable_pass
+            && !self.unconnectable_chains
+            && self.specular_pass().is_some()
+            && scene.has_dirac_lobes()
+    }
+
+    /// Whether the unconnectable paths through a non-Dirac vertex have
+    /// chains of their own on `scene` (`unconnectable_chains`, with the
+    /// specular-chain pass keeping `L S* E`, on a scene with Dirac lobes).
+    pub fn unconnectable_chains_in(&self, scene: &Scene) -> bool {
+        self.unconnectable_chains && self.specular_pass().is_some() && scene.has_dirac_lobes()
     }
 
     /// The specular-chain pass's share of a time budget on `scene`:
@@ -344,6 +358,7 @@ impl IntegratorSettings for Mlt {
             // What the defaults resolved to on this scene.
             if let Some(stats) = out.statistics.get_mut("specular_pass") {
                 stats["unconnectable"] = self.unconnectable_in(scene).into();
+                stats["unconnectable_chains"] = self.unconnectable_chains_in(scene).into();
                 stats["time_share"] = self.specular_share_in(scene).into();
             }
         }
@@ -416,6 +431,9 @@ pub fn render_mlt(
         family = family.without_specular_chains();
         if settings.unconnectable_in(scene) {
             family = family.without_unconnectable();
+        }
+        if settings.unconnectable_chains_in(scene) {
+            family = family.with_unconnectable_chains(settings.unconnectable_search_rate);
         }
     }
     let mut chain = settings.chain.chain_settings(settings.mutations(), run);

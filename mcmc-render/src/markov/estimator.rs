@@ -98,6 +98,10 @@ pub(crate) struct MemberTotals<'a> {
     pub image_weights: &'a [f64],
     pub mis: bool,
     pub normalization: Normalization,
+    /// Per member, whether its running estimate holds only draws made for
+    /// `b` ([`ChainFamily::running_is_search_only`]): the bootstrap
+    /// normalisation then takes that estimate.
+    pub search_only: Vec<bool>,
     /// Per member `d`, one [`RatioSum`] of `q_{d+1}/q_d` per task that ran
     /// member `d`'s chains.
     pub ratios: Vec<Vec<RatioSum>>,
@@ -194,6 +198,7 @@ impl MemberTotals<'_> {
             image_weights,
             mis,
             normalization,
+            search_only,
             ratios,
             filmed,
         } = self;
@@ -222,6 +227,7 @@ impl MemberTotals<'_> {
                     (1.0, 0.0)
                 } else {
                     match (normalization, filmed) {
+                        (Normalization::Bootstrap, _) if search_only[d] => running_b,
                         (Normalization::Bootstrap, _) => bootstrap_b[d],
                         (Normalization::Filmed, Some(((b, b_se), (r, r_se)))) if r > 0.0 => {
                             (b / r, b / r * (b_se / b).hypot(r_se / r))
@@ -376,7 +382,7 @@ pub(crate) fn observe<F: ChainFamily>(
 ) {
     let independent = family.is_independent(t.component);
     if let Some(y) = t.proposal {
-        if independent {
+        if independent && !family.running_is_search_only(w.member) {
             // ln I(y) − ln p₀(y); NaN counts as zero.
             sink.running
                 .add(y.log_density - family.reference_log_density(&y.state));

@@ -389,6 +389,15 @@ pub trait ChainFamily: Sync {
     fn continued_search(&self, _member: usize) -> Option<ContinuedSearch> {
         None
     }
+    /// Whether member `member`'s running estimate of `b_d` takes only the
+    /// draws made for it (its start-up, its search and its continued
+    /// search), not its chains' independent proposals (whose density need
+    /// not be the reference measure's then): the bootstrap normalisation
+    /// then takes the running estimate, a start-up that went on while the
+    /// chains ran (`mlt`'s unconnectable chains). Default: no.
+    fn running_is_search_only(&self, _member: usize) -> bool {
+        false
+    }
     /// One unit of the member's continued search: the candidates `first ..
     /// first + unit` ([`ContinuedSearch::unit`]); returns `ln w` of those
     /// with a weight `w > 0` (the others weigh 0), such that the sum of
@@ -1218,6 +1227,9 @@ pub fn run<F: ChainFamily>(
             image_weights: &image_weights,
             mis: settings.mis_large_steps,
             normalization: settings.normalization,
+            search_only: (0..members)
+                .map(|d| family.running_is_search_only(d))
+                .collect(),
             ratios: vec![Vec::new(); members],
             filmed: vec![Vec::new(); members],
         };

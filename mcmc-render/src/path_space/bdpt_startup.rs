@@ -52,7 +52,7 @@ pub const MAX_SEARCH_SEGMENTS: usize = 62;
 
 /// One draw of the search: its splits' `(index, ln w)`, `ln` of its total
 /// and its image splats `(x, y, r, g, b)`.
-type SearchDraw = (Vec<(u64, f64)>, f64, Vec<[f32; 5]>);
+pub(super) type SearchDraw = (Vec<(u64, f64)>, f64, Vec<[f32; 5]>);
 
 /// The index of split `(s, t)` of draw `j`.
 fn index(j: u64, s: usize, t: usize) -> u64 {
@@ -60,13 +60,22 @@ fn index(j: u64, s: usize, t: usize) -> u64 {
 }
 
 /// The two walks of draw `j`: the camera walk of `max + 1` vertices, then
-/// the light walk of `max` vertices, from the draw's own stream.
-fn walks(family: &PathFamily<'_>, seed: u64, j: u64, max: usize) -> (Vec<Vertex>, Vec<Vertex>) {
+/// the light walk of `max` vertices, from the draw's own stream. Without
+/// `light_walk` (member 1's draws, which use only the camera walk), the
+/// light walk is empty: the camera walk is the same either way.
+fn walks(
+    family: &PathFamily<'_>,
+    (seed, j): (u64, u64),
+    max: usize,
+    with_light_walk: bool,
+) -> (Vec<Vertex>, Vec<Vertex>) {
     let mut rng = stream_rng(seed, CANDIDATE_STREAM + SEARCH_INDEX + j);
     let mut source = ChainSource::new(&mut rng);
     let (mut light, mut camera) = (Vec::new(), Vec::new());
     camera_walk(family.scene, &mut source, max + 1, &mut camera);
-    light_walk(family.scene, &mut source, max, &mut light);
+    if with_light_walk {
+        light_walk(family.scene, &mut source, max, &mut light);
+    }
     (light, camera)
 }
 
@@ -120,26 +129,35 @@ impl<'s> PathFamily<'s> {
         let i = index - SEARCH_INDEX;
         let (j, s, t) = (i >> 12, ((i >> 6) & 63) as usize, (i & 63) as usize);
         let max = self.max_segments.unwrap_or(0);
-        let (light, camera) = walks(self, seed, j, max);
+        let (light, camera) = walks(self, (seed, j), max, s > 0);
         self.live_split_path(&light, &camera, s, t)
             .unwrap_or_else(|| Path::new(self.scene))
     }
 
-    /// `ln w` of every split of draw `j` that carries light, `ln` of the
-    /// draw's total (−∞ for none; NaN weights count as zero, as the
-    /// running normalisation counts them), and the splits' image splats
-    /// `f(x)/Σ_s p_s(x)` ([`Search::image_splats`]).
-    fn search_draw(&self, seed: u64, j: u64, max: usize) -> SearchDraw {
-        let (light, camera) = walks(self, seed, j, max);
+    /// `ln w` of every split of draw `j` that carries light under member
+    /// `member`'s target, `ln` of the draw's total (−∞ for none; NaN
+    /// weights count as zero, as the running normalisation counts them),
+    /// and the splits' image splats `f(x)/Σ_s p_s(x)`
+    /// ([`Search::image_splats`]). Member 1's paths (the unconnectable
+    /// ones, [`PathFamily::with_unconnectable_chains`]) are drawn by the
+    /// camera walk alone, `s = 0`.
+    pub(super) fn search_draw(
+        &self,
+        member: usize,
+        (seed, j): (u64, u64),
+        max: usize,
+    ) -> SearchDraw {
+        let (light, camera) = walks(self, (seed, j), max, member != 1);
         let mut weighted = Vec::new();
         let mut splats = Vec::new();
         for k in self.min_segments..=max {
-            for s in self.s_min()..=k {
+            let last_s = if member == 1 { self.s_min() } else { k };
+            for s in self.s_min()..=last_s {
                 let t = k + 1 - s;
                 let Some(path) = self.live_split_path(&light, &camera, s, t) else {
                     continue;
                 };
-                let log_i = self.target_log_density(&path);
+                let log_i = self.target_log_density(member, &path);
                 if !log_i.is_finite() {
                     // Zero, or NaN: counted as zero, as the running
                     // normalisation counts it.
@@ -165,12 +183,19 @@ impl<'s> PathFamily<'s> {
         (weighted, total, splats)
     }
 
-    /// The search of `draws` BDPT draws (module docs), or `None` when the
-    /// depth is unbounded or longer than [`MAX_SEARCH_SEGMENTS`]. It
+    /// Member `member`'s search of `draws` BDPT draws (module docs), or
+    /// `None` when the depth is unbounded or longer than
+    /// [`MAX_SEARCH_SEGMENTS`]. It
     /// stops short at the start-up's `cut` once some draw carried light
     /// (`draw_in_rounds`); its `draws` are then those made (a prefix:
     /// each depends on its index alone, so uncut it is the whole search).
-    pub fn bdpt_search(&self, seed: u64, draws: u64, cut: &StartupCut) -> Option<Search> {
+    pub fn bdpt_search(
+        &self,
+        member: usize,
+        seed: u64,
+        draws: u64,
+        cut: &StartupCut,
+    ) -> Option<Search> {
         let max = self.max_segments.filter(|&m| m <= MAX_SEARCH_SEGMENTS)?;
         let mut search = Search {
             replaces_bootstrap: true,
@@ -180,7 +205,7 @@ impl<'s> PathFamily<'s> {
         let made = draw_in_rounds(&mut search, draws as usize, cut, lit, |range, search| {
             let per: Vec<SearchDraw> = range
                 .into_par_iter()
-                .map(|j| self.search_draw(seed, j as u64, max))
+                .map(|j| self.search_draw(member, (seed, j as u64), max))
                 .collect();
             for (weighted, total, splats) in per {
                 if total.is_finite() {

@@ -1,5 +1,6 @@
-//! Path space on the Markov-chain driver: one target (`I = lum f`), the
-//! mutation mixture, and start-up candidates drawn by bidirectional
+//! Path space on the Markov-chain driver: one target (`I = lum f`), or two
+//! with the unconnectable paths apart ([`super::unconnectable_chains`]),
+//! the mutation mixture, and start-up candidates drawn by bidirectional
 //! techniques.
 //!
 //! # Start-up candidates and their reference density
@@ -28,7 +29,7 @@ use super::multi_chain_perturbation::{MultiChainPerturbation, multi_chain};
 use super::proposal_clock::{ProposalClock, Timed};
 use super::state::{Path, PathTarget};
 use super::walk::{ChainSource, camera_walk, camera_walks_reach_emitters, light_walk};
-use crate::markov::{CANDIDATE_STREAM, ChainFamily, MltError, Search, StartupCut};
+use crate::markov::{CANDIDATE_STREAM, ChainFamily, ContinuedSearch, MltError, Search, StartupCut};
 use crate::pss::PathSample;
 use crate::scene::Scene;
 use mcmc_core::kernel::{Kernel, Mixture};
@@ -198,6 +199,19 @@ impl PathMutations {
         max_segments: Option<usize>,
         clock: Option<&Arc<ProposalClock>>,
     ) -> Result<Mixture<Path<'s>, PathSample>, String> {
+        self.kernel_with(min_segments, max_segments, clock, false)
+    }
+
+    /// [`PathMutations::kernel_timed`], its independent proposal drawing
+    /// by the camera walk alone when `camera_walks`
+    /// ([`IndependentPath::camera_walks`]).
+    fn kernel_with<'s>(
+        &self,
+        min_segments: usize,
+        max_segments: Option<usize>,
+        clock: Option<&Arc<ProposalClock>>,
+        camera_walks: bool,
+    ) -> Result<Mixture<Path<'s>, PathSample>, String> {
         self.check_weights()?;
         let bidirectional = part(
             Bidirectional::new(min_segments, max_segments, self.fixed_length),
@@ -207,6 +221,7 @@ impl PathMutations {
             IndependentPath {
                 min_segments,
                 max_segments,
+                camera_walks,
             },
             clock,
         );
@@ -315,7 +330,9 @@ where
     }
 }
 
-/// Path space over one scene as a [`ChainFamily`] with one member.
+/// Path space over one scene as a [`ChainFamily`]: one member, or two with
+/// [`PathFamily::with_unconnectable_chains`] (member 1 then samples the
+/// unconnectable paths through a non-Dirac vertex, member 0 the rest).
 pub struct PathFamily<'s> {
     /// The scene.
     pub scene: &'s Scene,
@@ -327,6 +344,9 @@ pub struct PathFamily<'s> {
     hittable_emitters: bool,
     clock: Option<Arc<ProposalClock>>,
     bdpt_startup: u64,
+    /// The second member's target and its continued search's draws per
+    /// mutation ([`PathFamily::with_unconnectable_chains`]).
+    unconnectable: Option<(PathTarget, f64)>,
 }
 
 impl<'s> PathFamily<'s> {
@@ -346,6 +366,7 @@ impl<'s> PathFamily<'s> {
             hittable_emitters: camera_walks_reach_emitters(scene),
             clock: None,
             bdpt_startup: 0,
+            unconnectable: None,
         }
     }
 
@@ -395,6 +416,36 @@ impl<'s> PathFamily<'s> {
         }
     }
 
+    /// The family with a second member whose chains sample the
+    /// unconnectable paths through a non-Dirac vertex, `L S+ (D S+)* E`
+    /// ([`PathTarget::only_unconnectable`]), and member 0 without them:
+    /// see [`super::unconnectable_chains`]. `search_rate` is the number of
+    /// path-traced draws per chain mutation that refine member 1's `b`
+    /// while the chains run. Unchanged when no camera walk can hit an
+    /// emitter (there are no such paths then), or when the depth is
+    /// unbounded or longer than [`super::bdpt_startup::MAX_SEARCH_SEGMENTS`]
+    /// (the draws are the BDPT search's).
+    pub fn with_unconnectable_chains(self, search_rate: f64) -> Self {
+        let bounded = self
+            .max_segments
+            .is_some_and(|m| m <= super::bdpt_startup::MAX_SEARCH_SEGMENTS);
+        if !self.hittable_emitters || !bounded {
+            return self;
+        }
+        let only = PathTarget {
+            only_unconnectable: true,
+            ..PathTarget::default()
+        };
+        PathFamily {
+            target: PathTarget {
+                without_unconnectable_through_non_dirac: true,
+                ..self.target
+            },
+            unconnectable: Some((only, search_rate)),
+            ..self
+        }
+    }
+
     /// The family with its chains' proposals timed into `clock` per
     /// mutation type ([`ProposalClock`]).
     pub fn timed(self, clock: Arc<ProposalClock>) -> Self {
@@ -425,20 +476,8 @@ impl<'s> PathFamily<'s> {
     /// candidate that failed has zero contribution.
     pub fn draw_candidate(&self, rng: &mut ChainRng) -> Path<'s> {
         let mut path = Path::new(self.scene);
-        let min = self.min_segments;
-        let k = match self.max_segments {
-            Some(m) if m < min => return path,
-            Some(m) => {
-                let count = m + 1 - min;
-                min + ((uniform(rng) * count as f64) as usize).min(count - 1)
-            }
-            None => {
-                let mut k = min;
-                while k < min + 1100 && uniform(rng) < 0.5 {
-                    k += 1;
-                }
-                k
-            }
+        let Some(k) = self.draw_length(rng) else {
+            return path;
         };
         let s_min = self.s_min();
         if s_min > k {
@@ -464,9 +503,70 @@ impl<'s> PathFamily<'s> {
         path
     }
 
-    /// `ln I(x)` of the family's target.
-    pub(super) fn target_log_density(&self, path: &Path<'_>) -> f64 {
-        self.target.log_density(path)
+    /// A candidate's length `k` drawn with `rng` (`P(k)`:
+    /// [`PathFamily::length_probability`]), `None` when no length is allowed.
+    fn draw_length(&self, rng: &mut ChainRng) -> Option<usize> {
+        let min = self.min_segments;
+        match self.max_segments {
+            Some(m) if m < min => None,
+            Some(m) => {
+                let count = m + 1 - min;
+                Some(min + ((uniform(rng) * count as f64) as usize).min(count - 1))
+            }
+            None => {
+                let mut k = min;
+                while k < min + 1100 && uniform(rng) < 0.5 {
+                    k += 1;
+                }
+                Some(k)
+            }
+        }
+    }
+
+    /// Draws a candidate as [`PathFamily::draw_candidate`] does with the
+    /// split `s = 0`: a length `k`, then a camera walk of `k + 1` vertices
+    /// that must end on an emitter. Needs walks that can hit emitters.
+    pub fn draw_camera_candidate(&self, rng: &mut ChainRng) -> Path<'s> {
+        let mut path = Path::new(self.scene);
+        let Some(k) = self.draw_length(rng) else {
+            return path;
+        };
+        let mut camera = Vec::new();
+        let mut source = ChainSource::new(rng);
+        if camera_walk(self.scene, &mut source, k + 1, &mut camera) != k + 1 {
+            return path;
+        }
+        path.assign_subpaths(&[], &camera);
+        path
+    }
+
+    /// `ln` of [`PathFamily::draw_camera_candidate`]'s density at `x`:
+    /// `ln P(k) + ln p_0(x)`.
+    pub fn log_camera_candidate_density(&self, path: &Path<'_>) -> f64 {
+        let k = path.segments();
+        if path.len() < 2 {
+            return f64::NEG_INFINITY;
+        }
+        self.length_probability(k).ln() + path.log_regrowth_density(0, k, 0)
+    }
+
+    /// `ln I(x)` of member `member`'s target.
+    pub(super) fn target_log_density(&self, member: usize, path: &Path<'_>) -> f64 {
+        self.member_target(member).log_density(path)
+    }
+
+    /// The target of member `member` (1: the unconnectable paths).
+    fn member_target(&self, member: usize) -> &PathTarget {
+        match (member, &self.unconnectable) {
+            (1, Some((only, _))) => only,
+            _ => &self.target,
+        }
+    }
+
+    /// The continued search's draws per mutation of member 1, if the
+    /// family has that member.
+    pub(super) fn unconnectable_search_rate(&self) -> Option<f64> {
+        self.unconnectable.map(|(_, rate)| rate)
     }
 
     /// `ln Σ_s p_s(x)`: the densities of every start-up technique that
@@ -502,16 +602,25 @@ impl<'s> ChainFamily for PathFamily<'s> {
     type Kernel = Mixture<Path<'s>, PathSample>;
 
     fn members(&self) -> usize {
-        1
+        1 + usize::from(self.unconnectable.is_some())
     }
-    fn target(&self, _member: usize) -> &PathTarget {
-        &self.target
+    fn target(&self, member: usize) -> &PathTarget {
+        self.member_target(member)
     }
-    fn kernel(&self, mutation: &PathMutations, _member: usize) -> Result<Self::Kernel, MltError> {
+    fn kernel(&self, mutation: &PathMutations, member: usize) -> Result<Self::Kernel, MltError> {
         // Long chains must be ergodic (check), unlike erpt's short ones.
         mutation.check().map_err(MltError::Setting)?;
+        // Member 1's paths are drawn by the camera walk alone, so its
+        // independent proposal draws by it (#s times as often as a
+        // candidate of a random technique).
+        let camera_walks = member == 1 && self.unconnectable.is_some();
         mutation
-            .kernel_timed(self.min_segments, self.max_segments, self.clock.as_ref())
+            .kernel_with(
+                self.min_segments,
+                self.max_segments,
+                self.clock.as_ref(),
+                camera_walks,
+            )
             .map_err(MltError::Setting)
     }
     fn independent_probability(&self, mutation: &PathMutations) -> f64 {
@@ -531,8 +640,8 @@ impl<'s> ChainFamily for PathFamily<'s> {
     fn reference_log_density(&self, state: &Path<'s>) -> f64 {
         self.log_candidate_density(state)
     }
-    fn weighed_candidate(&self, _member: usize, state: &Path<'s>) -> (f64, PathSample) {
-        let e = mcmc_core::target::Target::evaluate(&self.target, state);
+    fn weighed_candidate(&self, member: usize, state: &Path<'s>) -> (f64, PathSample) {
+        let e = mcmc_core::target::Target::evaluate(self.member_target(member), state);
         if e.log_density == f64::NEG_INFINITY {
             return (f64::NEG_INFINITY, e.payload);
         }
@@ -562,9 +671,28 @@ impl<'s> ChainFamily for PathFamily<'s> {
         Path::from_words(self.scene, input)
             .filter(|p| (self.min_segments..=max).contains(&p.segments()))
     }
-    fn search(&self, _member: usize, seed: u64, cut: &StartupCut) -> Option<Search> {
+    fn search(&self, member: usize, seed: u64, cut: &StartupCut) -> Option<Search> {
         (self.bdpt_startup > 0)
-            .then(|| self.bdpt_search(seed, self.bdpt_startup, cut))
+            .then(|| self.bdpt_search(member, seed, self.bdpt_startup, cut))
             .flatten()
+    }
+    fn continued_search(&self, member: usize) -> Option<ContinuedSearch> {
+        (member == 1)
+            .then(|| self.unconnectable_search_rate())
+            .flatten()
+            .filter(|&rate| rate > 0.0)
+            .map(|per_mutation| ContinuedSearch {
+                per_mutation,
+                unit: super::unconnectable_chains::SEARCH_UNIT,
+                first_index: super::unconnectable_chains::FIRST_CONTINUED_DRAW,
+            })
+    }
+    fn running_is_search_only(&self, member: usize) -> bool {
+        // Member 1's independent proposals draw by the camera walk alone
+        // (`kernel`), not from the reference measure.
+        member == 1 && self.unconnectable.is_some()
+    }
+    fn search_unit(&self, _member: usize, seed: u64, first: u64) -> Vec<f64> {
+        self.unconnectable_draws(seed, first)
     }
 }

@@ -20,6 +20,10 @@ pub struct IndependentPath {
     pub min_segments: usize,
     /// Longest path in segments (`None`: unbounded).
     pub max_segments: Option<usize>,
+    /// Draw by the camera walk alone ([`PathFamily::draw_camera_candidate`]),
+    /// the only technique that draws the unconnectable paths: the
+    /// independent proposal of `mlt`'s unconnectable chains.
+    pub camera_walks: bool,
 }
 
 impl<'s> Kernel<Path<'s>, PathSample> for IndependentPath {
@@ -30,12 +34,18 @@ impl<'s> Kernel<Path<'s>, PathSample> for IndependentPath {
         rng: &mut ChainRng,
     ) -> Proposal {
         let family = PathFamily::between(current.state.scene, self.min_segments, self.max_segments);
-        proposal.state = family.draw_candidate(rng);
+        let log_density = |path: &Path<'_>| match self.camera_walks {
+            true => family.log_camera_candidate_density(path),
+            false => family.log_candidate_density(path),
+        };
+        proposal.state = match self.camera_walks {
+            true => family.draw_camera_candidate(rng),
+            false => family.draw_candidate(rng),
+        };
         // A draw that carries nothing is still a proposal: the running
         // normalisation must count it as a zero (the target rejects it).
         let ratio = if proposal.state.luminance() > 0.0 {
-            family.log_candidate_density(&current.state)
-                - family.log_candidate_density(&proposal.state)
+            log_density(&current.state) - log_density(&proposal.state)
         } else {
             0.0
         };

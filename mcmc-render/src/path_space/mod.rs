@@ -61,6 +61,7 @@ pub mod proposal_clock;
 pub mod retrace;
 pub mod specular_pass;
 pub mod state;
+pub mod unconnectable_chains;
 pub mod walk;
 
 pub use bidirectional::Bidirectional;

@@ -707,13 +707,24 @@ pub struct PathTarget {
     /// superset of the specular chains), which the specular-chain pass
     /// then traces through diffuse vertices too.
     pub without_unconnectable: bool,
+    /// Leave out the unconnectable paths through a non-Dirac vertex
+    /// (`L S+ (D S+)* E`: [`Path::is_unconnectable`] but not
+    /// [`Path::is_specular_chain`]), which `mlt`'s unconnectable chains
+    /// sample instead.
+    pub without_unconnectable_through_non_dirac: bool,
+    /// Keep only the unconnectable paths through a non-Dirac vertex: the
+    /// target of `mlt`'s unconnectable chains.
+    pub only_unconnectable: bool,
 }
 
 impl PathTarget {
     /// `ln I(x)` as [`Path::log_density`], `−∞` on a left-out path.
     pub fn log_density(&self, path: &Path<'_>) -> f64 {
+        let through_non_dirac = || path.is_unconnectable() && !path.is_specular_chain();
         if (self.without_specular_chains && path.is_specular_chain())
             || (self.without_unconnectable && path.is_unconnectable())
+            || (self.without_unconnectable_through_non_dirac && through_non_dirac())
+            || (self.only_unconnectable && !through_non_dirac())
         {
             f64::NEG_INFINITY
         } else {
