@@ -608,3 +608,45 @@ fn unconnectable_chains_agree_with_path_tracing_on_their_class() {
         "×1.05 passed: {control:?}"
     );
 }
+
+/// A stop during the start-up of the two-member family (Ctrl-C before the
+/// chains move) writes both members' start-up estimates: each search's
+/// image splats, scaled to the first search's draws (a cut may leave them
+/// with different counts), so the image's mean luminance is `b̂₀ + b̂₁`
+/// (box filter) to float rounding. Control: member 0's `b̂` alone, which
+/// the image must exceed by member 1's share (≈ 8% of it on caustic-sds).
+#[test]
+fn a_stopped_start_up_with_unconnectable_chains_films_both_members() {
+    let scene = repo_scene("caustic-sds.xml", RES);
+    let family = PathFamily::new(&scene, Some(8))
+        .with_bdpt_startup(1_000_000)
+        .with_unconnectable_chains(1.0);
+    let settings = ChainSettings {
+        mutation: mept_mutations(),
+        bootstrap: 1,
+        chains: 64,
+        mutations_per_pixel: Some(8),
+        seed: 5,
+        normalization: Normalization::Bootstrap,
+        ..ChainSettings::default()
+    };
+    let stop = AtomicBool::new(true);
+    let r = mcmc_render::markov::run(&scene, &family, &settings, &stop, &NoObserver)
+        .expect("a stopped start-up still gives an image");
+    assert_eq!(r.mutations, 0);
+    let image = r.startup_image.as_ref().expect("the start-up's image");
+    let mean = image.iter().map(|p| f64::from(p.luminance())).sum::<f64>() / image.len() as f64;
+    let b: Vec<f64> = r.families.iter().map(|f| f.bootstrap_b.0).collect();
+    let draws: Vec<u64> = r.searches.iter().flatten().map(|s| s.draws).collect();
+    eprintln!("mean {mean}, b̂ {b:?}, draws {draws:?}");
+    assert!(draws.iter().all(|&d| d < 1_000_000), "not cut: {draws:?}");
+    assert!(b[1] > 0.0, "member 1 found no light: {b:?}");
+    assert!(
+        (mean - (b[0] + b[1])).abs() <= 1e-5 * mean,
+        "{mean} vs {b:?}"
+    );
+    assert!(
+        mean - b[0] > 0.02 * mean,
+        "member 1 left out: {mean} vs {b:?}"
+    );
+}

@@ -1052,19 +1052,27 @@ pub fn run<F: ChainFamily>(
     let mut member_searches: Vec<Option<Search>> =
         (0..members).map(|d| family.search(d, seed, &cut)).collect();
     let mut startup_draws = drawn as u64;
+    // Whether a search that replaces its member's bootstrap has filmed.
+    let mut searched_film = false;
     for (d, search) in member_searches.iter_mut().enumerate() {
         if let Some(search) = search {
             if search.replaces_bootstrap {
                 // Its bootstrap (a token candidate) is no image; the
-                // search's own draws are, for a family of one member.
-                startup_film = (members == 1 && !search.image_splats.is_empty()).then(|| {
-                    let mut film = Film::new_splat_only(width, height, filter.clone());
+                // search's own draws are. The members' searches are summed
+                // on one film, each scaled to the first one's draws (a
+                // cut may leave them with different counts): the film over
+                // those draws is the sum of the members' estimates.
+                if !searched_film {
+                    startup_film = Some(Film::new_splat_only(width, height, filter.clone()));
+                    startup_draws = search.draws;
+                    searched_film = true;
+                }
+                let scale = startup_draws as f32 / search.draws.max(1) as f32;
+                if let Some(film) = startup_film.as_mut() {
                     for [x, y, r, g, b] in std::mem::take(&mut search.image_splats) {
-                        film.splat(Vec2::new(x, y), Rgb::new(r, g, b));
+                        film.splat(Vec2::new(x, y), Rgb::new(r, g, b) * scale);
                     }
-                    film
-                });
-                startup_draws = search.draws;
+                }
                 boot_running[d] = search.running();
             } else {
                 boot_running[d].merge(&search.running());
