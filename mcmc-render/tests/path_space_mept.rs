@@ -526,7 +526,7 @@ fn the_specular_pass_takes_its_share_of_a_time_budget() {
 fn unconnectable_class() -> Replicates {
     use mcmc_render::path_space::specular_pass::SpecularChains;
     let sizes: Vec<u64> = std::env::var("UNCONNECTABLE_REPS")
-        .unwrap_or_else(|_| "128,32768,384,128,1024".into())
+        .unwrap_or_else(|_| "128,32768,512,128,1024".into())
         .split(',')
         .map(|v| v.parse().expect("UNCONNECTABLE_REPS: five integers"))
         .collect();
