@@ -96,9 +96,9 @@ crate::settings! {
         pub specular_samples: i64 = 16, check check_pass_samples;
         /// The specular-chain pass (when it runs) also path traces the other unconnectable paths, `L S+ (D S+)* E` (seen and lit only through mirrors and glass: no edge joins two non-Dirac vertices, so only a camera walk that hits the emitter draws them), and the chains leave them out. On by default since session 29 (docs/path-space.md, Sessions 23, 28 and 29); a scene without Dirac lobes has no such paths and renders as with false.
         pub unconnectable_pass: bool = true;
-        /// Chains of their own for the unconnectable paths through a non-Dirac vertex, `L S+ (D S+)* E` (a second member with its own b, refined by path tracing as the chains run; path_space::unconnectable_chains), instead of the pass or the common chains; needs the specular-chain pass (which keeps `L S* E`) and a scene with Dirac lobes, and takes precedence over unconnectable_pass.
+        /// Chains of their own for the unconnectable paths through a non-Dirac vertex, `L S+ (D S+)* E` (a second member with its own b, refined by camera-walk draws as the chains run; path_space::unconnectable_chains; off by default: measured on caustic-sds, ring and mirror-balls only, docs/path-space.md Session 35), instead of the pass or the common chains; needs the specular-chain pass (which keeps `L S* E`) and a scene with Dirac lobes, and takes precedence over unconnectable_pass.
         pub unconnectable_chains: bool = false;
-        /// Path-traced draws per chain mutation that refine the unconnectable chains' b while they run (unconnectable_chains only; 0: the start-up's draws alone).
+        /// Camera-walk draws (weighted as the BDPT start-up's) per mutation of the unconnectable chains that refine their b while they run (unconnectable_chains only; 0: the start-up's draws alone).
         pub unconnectable_search_rate: f64 = 1.0, check check::non_negative;
         /// With a time budget, the specular-chain pass runs for this share of it (at least specular_samples spp), so that its noise falls with the budget like the chains'; 0: specular_samples spp alone (the only rule without a time budget); -1 (default): 0.2 when the pass takes the unconnectable paths of a scene with Dirac lobes, else 0.05.
         pub specular_time_share: f64 = -1.0, check time_share;

@@ -420,7 +420,7 @@ impl<'s> PathFamily<'s> {
     /// unconnectable paths through a non-Dirac vertex, `L S+ (D S+)* E`
     /// ([`PathTarget::only_unconnectable`]), and member 0 without them:
     /// see [`super::unconnectable_chains`]. `search_rate` is the number of
-    /// path-traced draws per chain mutation that refine member 1's `b`
+    /// camera-walk draws per member-1 mutation that refine its `b`
     /// while the chains run. Unchanged when no camera walk can hit an
     /// emitter (there are no such paths then), or when the depth is
     /// unbounded or longer than [`super::bdpt_startup::MAX_SEARCH_SEGMENTS`]

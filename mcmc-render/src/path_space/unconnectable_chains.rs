@@ -33,10 +33,10 @@
 //! the class, `#s` times as often as a random technique), and do not enter
 //! its `b` ([`crate::markov::ChainFamily::running_is_search_only`]).
 //!
-//! Off by default: on caustic-sds it cut `mept`'s error at 60 s ≈ 4–6×
-//! (docs/path-space.md, "Session 35"), but the class's `b` is still
-//! path tracing's estimate (6–7% standard error there at 60 s), and one
-//! scene was measured.
+//! Off by default: at 60 s it cut `mept`'s error on caustic-sds 4.3–6.7×
+//! and on mirror-balls by 0.76×, but made the ring 1.7× worse, and on
+//! caustic-sds the chains rarely leave the bright caustic for the class's
+//! other paths (docs/path-space.md, "Session 35").
 
 use super::family::PathFamily;
 
