@@ -34,7 +34,7 @@
 //! its `b` ([`crate::markov::ChainFamily::running_is_search_only`]).
 //!
 //! Off by default: at 60 s it cut `mept`'s error on caustic-sds 4.3–6.7×
-//! and on mirror-balls by 0.76×, but made the ring 1.7× worse, and on
+//! and mirror-balls' to 0.76×, but made the ring's 1.7× worse, and on
 //! caustic-sds the chains rarely leave the bright caustic for the class's
 //! other paths (docs/path-space.md, "Session 35").
 
