@@ -581,11 +581,14 @@ fn unconnectable_class() -> Replicates {
 /// ×1.10 control must fail. 10%, not 1%: the class is ≈ 8% of caustic-sds's
 /// image and heavy-tailed for both estimates. Sizing (session 35): 64 PT
 /// replicates of 16 384 spp against 96 of 128 chains × 1024 mutations per
-/// pixel gave rel −1.5% (every channel) with σ 4.2% of the class mean,
-/// too wide for 10% at 5σ; the defaults are 4× both.
-/// Ignored for its
-/// run time (`cargo test --release -p mcmc-render --test path_space_mept
-/// -- --ignored unconnectable_chains_agree --nocapture`).
+/// pixel gave rel −1.5% (every channel) with σ 4.2% of the class mean;
+/// 128 × 32 768 spp against 384 replicates −1.0%, σ 2.08% (5σ = 10.4%:
+/// the chains' spread is 38% per replicate); 512 replicates (the default)
+/// −1.43%, σ 1.82% (5σ = 9.1%), the ×1.10 control 4.26σ out (2989 s at
+/// nice 19 beside CI). Those runs' assertions still read 5% by mistake,
+/// so they failed; the figures were checked against the 10% rule by hand.
+/// Ignored for its run time (`cargo test --release -p mcmc-render --test
+/// path_space_mept -- --ignored unconnectable_chains_agree --nocapture`).
 #[test]
 #[ignore]
 fn unconnectable_chains_agree_with_path_tracing_on_their_class() {
@@ -599,13 +602,13 @@ fn unconnectable_chains_agree_with_path_tracing_on_their_class() {
         a.sigma,
         a.se
     );
-    assert!(a.resolves(5.0, 0.05), "5σ ≥ 5%: {a:?}");
-    assert!(a.failures(4.0, 0.05).is_empty(), "{a:?}");
-    let biased: Vec<[f64; 3]> = chains.iter().map(|m| m.map(|v| v * 1.05)).collect();
+    assert!(a.resolves(5.0, 0.10), "5σ ≥ 10%: {a:?}");
+    assert!(a.failures(4.0, 0.10).is_empty(), "{a:?}");
+    let biased: Vec<[f64; 3]> = chains.iter().map(|m| m.map(|v| v * 1.10)).collect();
     let control = MeanAgreement::new(&pt, &biased);
     assert!(
-        !control.failures(4.0, 0.05).is_empty(),
-        "×1.05 passed: {control:?}"
+        !control.failures(4.0, 0.10).is_empty(),
+        "×1.10 passed: {control:?}"
     );
 }
 
