@@ -555,6 +555,12 @@ impl<'s> PathFamily<'s> {
         self.member_target(member).log_density(path)
     }
 
+    /// Whether `member` is the unconnectable paths' member
+    /// ([`PathFamily::with_unconnectable_chains`]).
+    fn is_unconnectable_member(&self, member: usize) -> bool {
+        member == 1 && self.unconnectable.is_some()
+    }
+
     /// The target of member `member` (1: the unconnectable paths).
     fn member_target(&self, member: usize) -> &PathTarget {
         match (member, &self.unconnectable) {
@@ -613,7 +619,7 @@ impl<'s> ChainFamily for PathFamily<'s> {
         // Member 1's paths are drawn by the camera walk alone, so its
         // independent proposal draws by it (#s times as often as a
         // candidate of a random technique).
-        let camera_walks = member == 1 && self.unconnectable.is_some();
+        let camera_walks = self.is_unconnectable_member(member);
         mutation
             .kernel_with(
                 self.min_segments,
@@ -690,7 +696,7 @@ impl<'s> ChainFamily for PathFamily<'s> {
     fn running_is_search_only(&self, member: usize) -> bool {
         // Member 1's independent proposals draw by the camera walk alone
         // (`kernel`), not from the reference measure.
-        member == 1 && self.unconnectable.is_some()
+        self.is_unconnectable_member(member)
     }
     fn search_unit(&self, _member: usize, seed: u64, first: u64) -> Vec<f64> {
         self.unconnectable_draws(seed, first)
